@@ -1,0 +1,55 @@
+//! The arm that presses the finger on the rod.
+
+use crate::error::DeviceError;
+use async_trait::async_trait;
+use softtouch_schemas::{ArmPose, TimestampNs, Wrench};
+
+/// What the arm reports about itself.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ArmState {
+    /// When the state was read.
+    pub t: TimestampNs,
+    /// Measured pose of the finger in the base frame.
+    pub base_from_finger: ArmPose,
+    /// External wrench the arm estimates at its end effector, where it has one.
+    pub external_wrench: Option<Wrench>,
+    /// In a reflex (or other error) state: needs [`Arm::recover`] before moving.
+    pub faulted: bool,
+}
+
+/// A robot arm moving the finger through Cartesian poses.
+///
+/// Callers check every target against the workspace before calling [`Arm::move_to`];
+/// drivers check again and refuse with [`DeviceError::InvalidCommand`].
+#[async_trait]
+pub trait Arm: Send {
+    /// Move to `target` (pose of the finger in the base frame) at up to `speed_m_s`,
+    /// returning the state once it is reached. A reflex during the move returns
+    /// [`DeviceError::Fault`] and leaves the arm faulted.
+    async fn move_to(&mut self, target: &ArmPose, speed_m_s: f64) -> Result<ArmState, DeviceError>;
+
+    /// Read the current state.
+    async fn state(&mut self) -> Result<ArmState, DeviceError>;
+
+    /// Clear a reflex or error so the arm can move again (automatic error recovery).
+    async fn recover(&mut self) -> Result<(), DeviceError>;
+
+    /// Stop any motion now.
+    async fn stop(&mut self) -> Result<(), DeviceError>;
+}
+
+#[async_trait]
+impl<T: Arm + ?Sized> Arm for Box<T> {
+    async fn move_to(&mut self, target: &ArmPose, speed_m_s: f64) -> Result<ArmState, DeviceError> {
+        (**self).move_to(target, speed_m_s).await
+    }
+    async fn state(&mut self) -> Result<ArmState, DeviceError> {
+        (**self).state().await
+    }
+    async fn recover(&mut self) -> Result<(), DeviceError> {
+        (**self).recover().await
+    }
+    async fn stop(&mut self) -> Result<(), DeviceError> {
+        (**self).stop().await
+    }
+}

@@ -1,0 +1,37 @@
+//! The camera inside the finger.
+
+use crate::error::DeviceError;
+use async_trait::async_trait;
+use softtouch_schemas::{FrameMeta, TimestampNs};
+
+/// One frame: its metadata and its pixels, encoded as `meta.format` says.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Frame {
+    /// Time, counter, size and encoding.
+    pub meta: FrameMeta,
+    /// The pixels (raw RGB8 rows, or an encoded PNG/JPEG).
+    pub data: Vec<u8>,
+}
+
+/// A camera streaming at a fixed rate.
+#[async_trait]
+pub trait Camera: Send {
+    /// The first frame exposed at or after `t`, waiting for it if need be; frames
+    /// exposed earlier are discarded. A frame lost on the way is skipped (its sequence
+    /// number shows the gap), and [`DeviceError::Timeout`] comes back if none arrives
+    /// within `timeout_ms` of `t`.
+    async fn frame_after(&mut self, t: TimestampNs, timeout_ms: u64) -> Result<Frame, DeviceError>;
+
+    /// Frames known dropped since the camera was opened.
+    fn dropped_frames(&self) -> u64;
+}
+
+#[async_trait]
+impl<T: Camera + ?Sized> Camera for Box<T> {
+    async fn frame_after(&mut self, t: TimestampNs, timeout_ms: u64) -> Result<Frame, DeviceError> {
+        (**self).frame_after(t, timeout_ms).await
+    }
+    fn dropped_frames(&self) -> u64 {
+        (**self).dropped_frames()
+    }
+}

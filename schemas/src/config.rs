@@ -1,0 +1,200 @@
+//! Loading TOML configs with validation.
+//!
+//! Errors name the file, the field (as a path such as `procedure.settle_s` or
+//! `effects[2].probability`), the line where the parser knows it, and what was
+//! expected. Unknown fields are rejected by every config type.
+
+use serde::de::DeserializeOwned;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// Where a config's text came from, for error messages and provenance.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ConfigSource {
+    /// A file the user gave.
+    File(PathBuf),
+    /// One of the embedded defaults, by name.
+    Embedded(&'static str),
+}
+
+impl fmt::Display for ConfigSource {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::File(p) => write!(f, "{}", p.display()),
+            Self::Embedded(name) => write!(f, "<embedded default {name}>"),
+        }
+    }
+}
+
+/// One thing wrong with a config.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    /// Path of the field, e.g. `procedure.settle_s`; empty for the whole file.
+    pub field: String,
+    /// 1-based line in the file, where known.
+    pub line: Option<usize>,
+    /// What is wrong and what was expected.
+    pub message: String,
+}
+
+/// A config that could not be read, parsed or validated; lists every problem found.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub struct ConfigError {
+    /// The file (or embedded default) at fault.
+    pub file: ConfigSource,
+    /// Everything wrong with it (at least one).
+    pub problems: Vec<Problem>,
+}
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, p) in self.problems.iter().enumerate() {
+            if i > 0 {
+                writeln!(f)?;
+            }
+            write!(f, "{}", self.file)?;
+            if let Some(line) = p.line {
+                write!(f, ":{line}")?;
+            }
+            if p.field.is_empty() {
+                write!(f, ": {}", p.message)?;
+            } else {
+                write!(f, ": field `{}`: {}", p.field, p.message)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Range and consistency checks a config runs after parsing.
+pub trait Validate {
+    /// Record every problem found in `check`.
+    fn validate(&self, check: &mut Check);
+}
+
+/// Collects validation problems with their field paths.
+#[derive(Debug, Default)]
+pub struct Check {
+    problems: Vec<Problem>,
+}
+
+impl Check {
+    /// Record a problem with `field`.
+    pub fn fail(&mut self, field: impl Into<String>, message: impl Into<String>) {
+        self.problems.push(Problem { field: field.into(), line: None, message: message.into() });
+    }
+
+    /// `v` must be finite and `> 0`.
+    pub fn positive(&mut self, field: &str, v: f64, unit: &str) {
+        if !(v.is_finite() && v > 0.0) {
+            self.fail(field, format!("expected a finite value > 0 {unit}, found {v}"));
+        }
+    }
+
+    /// `v` must be finite and `>= 0`.
+    pub fn non_negative(&mut self, field: &str, v: f64, unit: &str) {
+        if !(v.is_finite() && v >= 0.0) {
+            self.fail(field, format!("expected a finite value >= 0 {unit}, found {v}"));
+        }
+    }
+
+    /// `v` must lie in `[lo, hi]`.
+    pub fn within(&mut self, field: &str, v: f64, lo: f64, hi: f64, unit: &str) {
+        if !(v.is_finite() && v >= lo && v <= hi) {
+            self.fail(field, format!("expected a value in [{lo}, {hi}] {unit}, found {v}"));
+        }
+    }
+
+    /// `r` must be a finite range with `min <= max`.
+    pub fn range(&mut self, field: &str, r: &crate::Range, unit: &str) {
+        if !r.is_valid() {
+            self.fail(
+                field,
+                format!(
+                    "expected [min, max] with finite min <= max in {unit}, found [{}, {}]",
+                    r.min, r.max
+                ),
+            );
+        }
+    }
+
+    /// Problems found so far.
+    #[must_use]
+    pub fn problems(&self) -> &[Problem] {
+        &self.problems
+    }
+
+    /// Turn the collected problems into a result for `source`.
+    pub fn finish(self, source: &ConfigSource) -> Result<(), ConfigError> {
+        if self.problems.is_empty() {
+            Ok(())
+        } else {
+            Err(ConfigError { file: source.clone(), problems: self.problems })
+        }
+    }
+}
+
+/// Parse and validate a config from TOML text.
+pub fn parse_toml<T>(text: &str, source: &ConfigSource) -> Result<T, ConfigError>
+where
+    T: DeserializeOwned + Validate,
+{
+    let fail = |field: String, err: &toml::de::Error| {
+        let line = err.span().map(|span| line_of(text, span.start));
+        ConfigError {
+            file: source.clone(),
+            problems: vec![Problem { field, line, message: err.message().trim().to_owned() }],
+        }
+    };
+    let de = toml::Deserializer::parse(text).map_err(|e| fail(String::new(), &e))?;
+    let value: T = serde_path_to_error::deserialize(de).map_err(|e| {
+        let field = field_path(e.path());
+        fail(field, e.inner())
+    })?;
+    let mut check = Check::default();
+    value.validate(&mut check);
+    check.finish(source)?;
+    Ok(value)
+}
+
+/// Read, parse and validate a config file.
+pub fn load_toml<T>(path: &Path) -> Result<T, ConfigError>
+where
+    T: DeserializeOwned + Validate,
+{
+    let source = ConfigSource::File(path.to_owned());
+    let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
+        file: source.clone(),
+        problems: vec![Problem { field: String::new(), line: None, message: format!("cannot read: {e}") }],
+    })?;
+    parse_toml(&text, &source)
+}
+
+/// Serialise a config as TOML (for `config show` and provenance).
+pub fn to_toml<T: serde::Serialize>(value: &T) -> String {
+    // Our config types are plain structs of numbers, strings, arrays and tables: they
+    // always serialise. Fall back to a TOML comment rather than panic if one day not.
+    toml::to_string_pretty(value).unwrap_or_else(|e| format!("# cannot serialise config: {e}\n"))
+}
+
+fn field_path(path: &serde_path_to_error::Path) -> String {
+    let s = path.to_string();
+    if s == "." { String::new() } else { s }
+}
+
+fn line_of(text: &str, byte: usize) -> usize {
+    let end = byte.min(text.len());
+    text.as_bytes()[..end].iter().filter(|&&b| b == b'\n').count() + 1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn line_numbers_are_one_based_and_clamped() {
+        assert_eq!(line_of("a\nb\nc", 0), 1);
+        assert_eq!(line_of("a\nb\nc", 2), 2);
+        assert_eq!(line_of("a\nb\nc", 999), 3);
+    }
+}

@@ -1,0 +1,53 @@
+//! The embedded defaults: an all-simulated rig and the paper's on-land scene, so the
+//! main job runs with no files at all.
+
+use crate::config::{ConfigSource, parse_toml};
+use crate::rig::RigConfig;
+use crate::scene::SceneSpec;
+
+/// The default rig, as TOML with comments (what `softtouch config show rig` prints).
+pub const RIG_TOML: &str = include_str!("../defaults/rig.toml");
+/// The default scene, as TOML with comments.
+pub const SCENE_TOML: &str = include_str!("../defaults/scene.toml");
+
+/// The all-simulated rig.
+#[must_use]
+pub fn rig() -> RigConfig {
+    // The embedded text is checked by this crate's tests; failing here is a build bug.
+    #[allow(clippy::expect_used)]
+    parse_toml(RIG_TOML, &ConfigSource::Embedded("rig")).expect("embedded default rig is valid")
+}
+
+/// The on-land scene with the paper's pose ranges and five rod shapes.
+#[must_use]
+pub fn scene() -> SceneSpec {
+    #[allow(clippy::expect_used)]
+    parse_toml(SCENE_TOML, &ConfigSource::Embedded("scene")).expect("embedded default scene is valid")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{Check, to_toml};
+
+    #[test]
+    fn the_default_scene_fits_the_default_rig_and_has_the_papers_ranges() {
+        let (rig, scene) = (rig(), scene());
+        let mut check = Check::default();
+        scene.validate_against(&rig, &mut check);
+        assert!(check.problems().is_empty(), "{:?}", check.problems());
+        assert_eq!([scene.poses.x_m.min, scene.poses.x_m.max], [0.0, 0.05]);
+        assert_eq!([scene.poses.z_m.min, scene.poses.z_m.max], [-0.05, 0.05]);
+        assert_eq!(scene.poses.theta_rad.max, std::f64::consts::PI);
+        assert!(scene.rods.len() >= 3);
+    }
+
+    #[test]
+    fn printed_configs_parse_back_to_the_same_value() {
+        let rig2: RigConfig = parse_toml(&to_toml(&rig()), &ConfigSource::Embedded("rig")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(rig2, rig());
+        let scene2: SceneSpec =
+            parse_toml(&to_toml(&scene()), &ConfigSource::Embedded("scene")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(scene2, scene());
+    }
+}

@@ -1,0 +1,294 @@
+//! The rig config: which driver drives each device, where the arm may go, the force
+//! limits, and the timings of the collection procedure.
+
+use crate::config::{Check, Validate};
+use crate::geometry::{ArmPose, ContactPose, Range};
+use serde::{Deserialize, Serialize};
+
+/// A whole rig.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RigConfig {
+    /// The arm that presses the finger on the rod.
+    pub arm: ArmDevice,
+    /// The force/torque sensor under the finger (the labels).
+    pub force_sensor: ForceSensorDevice,
+    /// The camera inside the finger.
+    pub camera: CameraDevice,
+    /// The gripper for grasp trials.
+    pub gripper: GripperDevice,
+    /// Where the arm may go.
+    pub workspace: WorkspaceBounds,
+    /// Force limits and the sensor's range.
+    pub limits: ForceLimits,
+    /// Timings of one sample.
+    pub procedure: Procedure,
+}
+
+/// The arm's driver.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "driver", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ArmDevice {
+    /// The simulated arm.
+    Sim {
+        /// Contact force above which the simulated arm raises a reflex, N.
+        reflex_force_n: f64,
+    },
+    /// A Franka Emika Panda over FCI (franka-rs).
+    Franka {
+        /// The robot's address, e.g. `172.16.0.2`.
+        address: String,
+        /// Upper force threshold of the collision behaviour, N: above it the robot
+        /// reflex-stops. The library's defaults are below what pressing reaches.
+        reflex_force_n: f64,
+    },
+}
+
+/// The force/torque sensor's driver.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "driver", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ForceSensorDevice {
+    /// The simulated sensor.
+    Sim {
+        /// Readings per second (up to 7000).
+        rate_hz: f64,
+    },
+    /// ATI Net F/T over UDP RDT.
+    NetFt {
+        /// The sensor's IP address (RDT on UDP 49152, calibration on TCP 49151).
+        address: String,
+        /// Readings per second as configured on the sensor (up to 7000).
+        rate_hz: f64,
+        /// Counts per N; read from the sensor when absent.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        counts_per_force: Option<f64>,
+        /// Counts per N·m; read from the sensor when absent.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        counts_per_torque: Option<f64>,
+    },
+    /// ATI serial F/T controller (ASCII protocol).
+    AtiSerial {
+        /// Serial port, e.g. `/dev/ttyUSB0`.
+        port: String,
+        /// Baud rate (new boxes default to 9600; 38400 is common).
+        baud: u32,
+        /// Counts per N (the serial box reports counts only).
+        counts_per_force: f64,
+        /// Counts per N·m.
+        counts_per_torque: f64,
+    },
+}
+
+/// The in-finger camera's driver.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "driver", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum CameraDevice {
+    /// The simulated camera rendering the scene.
+    Sim {
+        /// Frames per second.
+        fps: f64,
+    },
+    /// A V4L2 camera.
+    V4l {
+        /// Device path, e.g. `/dev/video0`.
+        device: String,
+    },
+}
+
+/// The gripper's driver.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "driver", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum GripperDevice {
+    /// The simulated Hand-E.
+    Sim {},
+    /// A Robotiq Hand-E over Modbus RTU (115200 8N1).
+    HandE {
+        /// Serial port, e.g. `/dev/ttyUSB1`.
+        port: String,
+        /// Modbus slave id (9 from the factory).
+        slave_id: u8,
+    },
+}
+
+/// Where the arm may go. Every command is checked against these before it is sent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorkspaceBounds {
+    /// Allowed contact offsets along the approach axis, m.
+    pub x_m: Range,
+    /// Allowed contact offsets along the rod axis, m.
+    pub z_m: Range,
+    /// Allowed rotations about the rod axis, rad.
+    pub theta_rad: Range,
+    /// Where the rod stands in the arm's base frame.
+    pub base_from_rod: ArmPose,
+    /// Safe pose between samples, in the rod frame (clear of the rod).
+    pub home: ContactPose,
+    /// Box the flange must stay in, arm base frame, m: `[x, y, z]` ranges.
+    pub reach_in_base_m: [Range; 3],
+}
+
+impl WorkspaceBounds {
+    /// The contact pose lies inside the contact bounds.
+    #[must_use]
+    pub fn contains_contact(&self, p: &ContactPose) -> bool {
+        self.x_m.contains(p.x_m) && self.z_m.contains(p.z_m) && self.theta_rad.contains(p.theta_rad)
+    }
+
+    /// The arm pose lies inside the reach box.
+    #[must_use]
+    pub fn contains_arm(&self, p: &ArmPose) -> bool {
+        p.is_valid() && (0..3).all(|i| self.reach_in_base_m[i].contains(p.translation_m[i]))
+    }
+}
+
+/// Force limits, and the range of the sensor (readings at it are saturated).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ForceLimits {
+    /// Abort an approach when the contact force exceeds this, N.
+    pub max_force_n: f64,
+    /// Abort an approach when any torque exceeds this, N·m.
+    pub max_torque_nm: f64,
+    /// The sensor's calibrated range per force axis, N (Nano17 SI-25: 25, 25, 35).
+    pub sensor_range_force_n: [f64; 3],
+    /// The sensor's calibrated range per torque axis, N·m (Nano17 SI-25: 0.25).
+    pub sensor_range_torque_nm: [f64; 3],
+}
+
+/// Timings and retry policy of one sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Procedure {
+    /// Approach speed, m/s.
+    pub approach_speed_m_s: f64,
+    /// Wait after reaching the pose before recording, s.
+    pub settle_s: f64,
+    /// Length of the force/torque window around the frame's time, s.
+    pub ft_window_s: f64,
+    /// Fewest readings a window may hold and still be a label.
+    pub min_window_readings: u32,
+    /// Retreat speed, m/s.
+    pub retreat_speed_m_s: f64,
+    /// Longest wait for a frame, s.
+    pub frame_timeout_s: f64,
+    /// Tries per sample before it is stored as rejected.
+    pub max_attempts: u32,
+    /// Consecutive failed samples that trigger a safe stop.
+    pub max_consecutive_failures: u32,
+}
+
+/// The Franka's translational velocity limit (FCI), m/s.
+pub const FRANKA_MAX_SPEED_M_S: f64 = 1.7;
+
+impl Validate for RigConfig {
+    fn validate(&self, c: &mut Check) {
+        match &self.arm {
+            ArmDevice::Sim { reflex_force_n } => c.positive("arm.reflex_force_n", *reflex_force_n, "N"),
+            ArmDevice::Franka { address, reflex_force_n } => {
+                non_empty(c, "arm.address", address);
+                c.positive("arm.reflex_force_n", *reflex_force_n, "N");
+            }
+        }
+        match &self.force_sensor {
+            ForceSensorDevice::Sim { rate_hz } => c.within("force_sensor.rate_hz", *rate_hz, 1.0, 7000.0, "Hz"),
+            ForceSensorDevice::NetFt { address, rate_hz, counts_per_force, counts_per_torque } => {
+                non_empty(c, "force_sensor.address", address);
+                c.within("force_sensor.rate_hz", *rate_hz, 1.0, 7000.0, "Hz");
+                if let Some(v) = counts_per_force {
+                    c.positive("force_sensor.counts_per_force", *v, "counts/N");
+                }
+                if let Some(v) = counts_per_torque {
+                    c.positive("force_sensor.counts_per_torque", *v, "counts/N·m");
+                }
+            }
+            ForceSensorDevice::AtiSerial { port, baud, counts_per_force, counts_per_torque } => {
+                non_empty(c, "force_sensor.port", port);
+                if *baud == 0 {
+                    c.fail("force_sensor.baud", "expected a baud rate > 0 (9600 or 38400 typical)");
+                }
+                c.positive("force_sensor.counts_per_force", *counts_per_force, "counts/N");
+                c.positive("force_sensor.counts_per_torque", *counts_per_torque, "counts/N·m");
+            }
+        }
+        match &self.camera {
+            CameraDevice::Sim { fps } => c.within("camera.fps", *fps, 1.0, 1000.0, "frames/s"),
+            CameraDevice::V4l { device } => non_empty(c, "camera.device", device),
+        }
+        match &self.gripper {
+            GripperDevice::Sim {} => {}
+            GripperDevice::HandE { port, slave_id } => {
+                non_empty(c, "gripper.port", port);
+                if !(1..=247).contains(slave_id) {
+                    c.fail("gripper.slave_id", format!("expected a Modbus slave id in [1, 247], found {slave_id}"));
+                }
+            }
+        }
+
+        let w = &self.workspace;
+        c.range("workspace.x_m", &w.x_m, "m");
+        c.range("workspace.z_m", &w.z_m, "m");
+        c.range("workspace.theta_rad", &w.theta_rad, "rad");
+        for (i, axis) in ["x", "y", "z"].iter().enumerate() {
+            c.range(&format!("workspace.reach_in_base_m[{i}] ({axis})"), &w.reach_in_base_m[i], "m");
+        }
+        if !w.base_from_rod.is_valid() {
+            c.fail("workspace.base_from_rod", "expected finite translation and a non-zero quaternion");
+        } else if !w.home.is_finite() {
+            c.fail("workspace.home", "expected finite x_m, z_m, theta_rad");
+        } else {
+            let home = ArmPose::from_contact(&w.base_from_rod, &w.home);
+            if !w.contains_arm(&home) {
+                c.fail(
+                    "workspace.home",
+                    format!("home maps to {:?} m in the base frame, outside workspace.reach_in_base_m", home.translation_m),
+                );
+            }
+            // Every corner of the contact box must be reachable.
+            if c.problems().is_empty() {
+                for x in [w.x_m.min, w.x_m.max] {
+                    for z in [w.z_m.min, w.z_m.max] {
+                        let corner = ContactPose { x_m: x, z_m: z, theta_rad: 0.0 };
+                        let p = ArmPose::from_contact(&w.base_from_rod, &corner);
+                        if !w.contains_arm(&p) {
+                            c.fail(
+                                "workspace.reach_in_base_m",
+                                format!("contact corner (x={x} m, z={z} m) maps to {:?} m, outside the reach box", p.translation_m),
+                            );
+                        }
+                    }
+                }
+            }
+        }
+
+        let l = &self.limits;
+        c.positive("limits.max_force_n", l.max_force_n, "N");
+        c.positive("limits.max_torque_nm", l.max_torque_nm, "N·m");
+        for i in 0..3 {
+            c.positive(&format!("limits.sensor_range_force_n[{i}]"), l.sensor_range_force_n[i], "N");
+            c.positive(&format!("limits.sensor_range_torque_nm[{i}]"), l.sensor_range_torque_nm[i], "N·m");
+        }
+
+        let p = &self.procedure;
+        c.within("procedure.approach_speed_m_s", p.approach_speed_m_s, 1e-4, FRANKA_MAX_SPEED_M_S, "m/s");
+        c.within("procedure.retreat_speed_m_s", p.retreat_speed_m_s, 1e-4, FRANKA_MAX_SPEED_M_S, "m/s");
+        c.non_negative("procedure.settle_s", p.settle_s, "s");
+        c.within("procedure.ft_window_s", p.ft_window_s, 1e-4, 10.0, "s");
+        c.positive("procedure.frame_timeout_s", p.frame_timeout_s, "s");
+        if p.min_window_readings == 0 {
+            c.fail("procedure.min_window_readings", "expected at least 1 reading");
+        }
+        if p.max_attempts == 0 {
+            c.fail("procedure.max_attempts", "expected at least 1 attempt");
+        }
+        if p.max_consecutive_failures == 0 {
+            c.fail("procedure.max_consecutive_failures", "expected at least 1");
+        }
+    }
+}
+
+fn non_empty(c: &mut Check, field: &str, v: &str) {
+    if v.trim().is_empty() {
+        c.fail(field, "expected a non-empty string");
+    }
+}

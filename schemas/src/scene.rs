@@ -1,0 +1,368 @@
+//! The scene spec: medium, rods, the contact poses to sample, and the declared effects.
+//!
+//! Only the effects a scene lists are simulated; medium `water` switches none on by
+//! itself.
+
+use crate::config::{Check, Validate};
+use crate::geometry::Range;
+use crate::rig::RigConfig;
+use serde::{Deserialize, Serialize};
+use std::collections::HashSet;
+use std::fmt;
+
+/// A scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneSpec {
+    /// Short name, stored with every run.
+    pub name: String,
+    /// What surrounds the finger.
+    pub medium: Medium,
+    /// Ranges the contact poses are drawn from.
+    pub poses: PoseRanges,
+    /// Rods the finger is pressed on (at least one).
+    pub rods: Vec<RodSpec>,
+    /// Effects to simulate, with their parameters. Empty: an ideal scene.
+    #[serde(default)]
+    pub effects: Vec<Effect>,
+}
+
+/// What surrounds the finger.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Medium {
+    /// On land.
+    Air,
+    /// Underwater.
+    Water,
+}
+
+impl Medium {
+    /// Name as stored.
+    #[must_use]
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            Self::Air => "air",
+            Self::Water => "water",
+        }
+    }
+}
+
+impl fmt::Display for Medium {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for Medium {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "air" => Ok(Self::Air),
+            "water" => Ok(Self::Water),
+            other => Err(format!("unknown medium `{other}`, expected air or water")),
+        }
+    }
+}
+
+/// Ranges of the contact pose `(x, z, θ)`; uniform draws (Method S1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseRanges {
+    /// Along the approach axis, m (paper: [0, 0.05]).
+    pub x_m: Range,
+    /// Along the rod axis, m (paper: [−0.05, 0.05]).
+    pub z_m: Range,
+    /// About the rod axis, rad (paper: [−π, π]).
+    pub theta_rad: Range,
+}
+
+/// Cross-section of a rod.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RodShape {
+    /// Round.
+    Circle,
+    /// Square.
+    Square,
+    /// Equilateral triangle.
+    Triangle,
+    /// Regular hexagon.
+    Hexagon,
+    /// Ellipse; `aspect` sets height over width.
+    Oval,
+}
+
+/// One rod.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RodSpec {
+    /// Name, unique in the scene, stored with every sample.
+    pub name: String,
+    /// Cross-section.
+    pub shape: RodShape,
+    /// Width of the cross-section across the approach axis, m (diameter, side, or
+    /// across-flats).
+    pub size_m: f64,
+    /// Height over width of the cross-section (ovals; 1 for the others).
+    #[serde(default = "one")]
+    pub aspect: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// A declared effect and its parameters. The simulator applies exactly these.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Effect {
+    /// Apparent magnification through water at a flat port (Snell's law).
+    Refraction {
+        /// Refractive index of the medium outside the camera (water ≈ 1.333).
+        index: f64,
+    },
+    /// Wavelength-dependent colour attenuation over the light path.
+    ColourAttenuation {
+        /// Attenuation per metre for R, G, B (water: red fades first).
+        per_m_rgb: [f64; 3],
+    },
+    /// Turbidity: backscatter veiling light.
+    Turbidity {
+        /// Fraction of veiling light in [0, 1].
+        backscatter: f64,
+        /// Colour of the veiling light, RGB 0–255.
+        colour_rgb: [u8; 3],
+    },
+    /// Moving caustic light patterns.
+    Caustics {
+        /// Peak added brightness in [0, 1].
+        strength: f64,
+        /// Spatial period of the pattern, px.
+        period_px: f64,
+    },
+    /// Bubbles or particles drifting through the view.
+    Bubbles {
+        /// Mean count per frame.
+        per_frame: f64,
+        /// Largest radius, px.
+        max_radius_px: f64,
+    },
+    /// Sensor noise, Gaussian per pixel and channel.
+    CameraNoise {
+        /// Standard deviation in 0–255 intensity units.
+        sigma: f64,
+    },
+    /// Exposure gain (1 = nominal).
+    Exposure {
+        /// Multiplier on pixel intensities.
+        gain: f64,
+    },
+    /// Objects in the background seen through the finger.
+    BackgroundClutter {
+        /// How many shapes.
+        objects: u32,
+    },
+    /// White noise on each force/torque reading.
+    FtNoise {
+        /// Standard deviation per force axis, N.
+        force_sigma_n: f64,
+        /// Standard deviation per torque axis, N·m.
+        torque_sigma_nm: f64,
+    },
+    /// Slow drift of the force/torque zero.
+    FtDrift {
+        /// Force drift rate, N per hour.
+        force_n_per_h: f64,
+        /// Torque drift rate, N·m per hour.
+        torque_nm_per_h: f64,
+    },
+    /// Constant offset from buoyancy and pressure on the finger.
+    BuoyancyOffset {
+        /// Force offset in the sensor frame, N.
+        force_n: [f64; 3],
+        /// Torque offset in the sensor frame, N·m.
+        torque_nm: [f64; 3],
+    },
+    /// Fluid drag on a held object while the gripper moves or the fluid flows.
+    FluidDrag {
+        /// Drag coefficient times area times density / 2, N·s²/m².
+        coefficient: f64,
+        /// Flow speed of the fluid, m/s.
+        flow_m_s: f64,
+    },
+    /// Camera frames lost.
+    FrameDrops {
+        /// Probability each frame is dropped.
+        probability: f64,
+    },
+    /// Force/torque datagrams lost.
+    FtPacketLoss {
+        /// Probability each reading is lost.
+        probability: f64,
+    },
+    /// Delivery latency of the streams.
+    Latency {
+        /// Camera latency, ms.
+        camera_ms: f64,
+        /// Force/torque latency, ms.
+        ft_ms: f64,
+    },
+    /// Reflex faults of the arm.
+    ArmReflex {
+        /// Probability that a move ends in a reflex fault.
+        probability: f64,
+    },
+}
+
+impl Effect {
+    /// The effect's `kind` as written in the scene file.
+    #[must_use]
+    pub const fn kind(&self) -> &'static str {
+        match self {
+            Self::Refraction { .. } => "refraction",
+            Self::ColourAttenuation { .. } => "colour_attenuation",
+            Self::Turbidity { .. } => "turbidity",
+            Self::Caustics { .. } => "caustics",
+            Self::Bubbles { .. } => "bubbles",
+            Self::CameraNoise { .. } => "camera_noise",
+            Self::Exposure { .. } => "exposure",
+            Self::BackgroundClutter { .. } => "background_clutter",
+            Self::FtNoise { .. } => "ft_noise",
+            Self::FtDrift { .. } => "ft_drift",
+            Self::BuoyancyOffset { .. } => "buoyancy_offset",
+            Self::FluidDrag { .. } => "fluid_drag",
+            Self::FrameDrops { .. } => "frame_drops",
+            Self::FtPacketLoss { .. } => "ft_packet_loss",
+            Self::Latency { .. } => "latency",
+            Self::ArmReflex { .. } => "arm_reflex",
+        }
+    }
+
+    fn validate(&self, c: &mut Check, at: &str) {
+        let f = |name: &str| format!("{at}.{name}");
+        match self {
+            Self::Refraction { index } => c.within(&f("index"), *index, 1.0, 3.0, ""),
+            Self::ColourAttenuation { per_m_rgb } => {
+                for (i, v) in per_m_rgb.iter().enumerate() {
+                    c.within(&f(&format!("per_m_rgb[{i}]")), *v, 0.0, 100.0, "1/m");
+                }
+            }
+            Self::Turbidity { backscatter, .. } => c.within(&f("backscatter"), *backscatter, 0.0, 1.0, ""),
+            Self::Caustics { strength, period_px } => {
+                c.within(&f("strength"), *strength, 0.0, 1.0, "");
+                c.within(&f("period_px"), *period_px, 2.0, 10_000.0, "px");
+            }
+            Self::Bubbles { per_frame, max_radius_px } => {
+                c.within(&f("per_frame"), *per_frame, 0.0, 1000.0, "");
+                c.within(&f("max_radius_px"), *max_radius_px, 0.5, 200.0, "px");
+            }
+            Self::CameraNoise { sigma } => c.within(&f("sigma"), *sigma, 0.0, 255.0, ""),
+            Self::Exposure { gain } => c.within(&f("gain"), *gain, 0.01, 100.0, ""),
+            Self::BackgroundClutter { objects } => {
+                if *objects > 10_000 {
+                    c.fail(f("objects"), format!("expected at most 10000, found {objects}"));
+                }
+            }
+            Self::FtNoise { force_sigma_n, torque_sigma_nm } => {
+                c.non_negative(&f("force_sigma_n"), *force_sigma_n, "N");
+                c.non_negative(&f("torque_sigma_nm"), *torque_sigma_nm, "N·m");
+            }
+            Self::FtDrift { force_n_per_h, torque_nm_per_h } => {
+                c.within(&f("force_n_per_h"), *force_n_per_h, -1e3, 1e3, "N/h");
+                c.within(&f("torque_nm_per_h"), *torque_nm_per_h, -1e2, 1e2, "N·m/h");
+            }
+            Self::BuoyancyOffset { force_n, torque_nm } => {
+                for i in 0..3 {
+                    c.within(&f(&format!("force_n[{i}]")), force_n[i], -100.0, 100.0, "N");
+                    c.within(&f(&format!("torque_nm[{i}]")), torque_nm[i], -10.0, 10.0, "N·m");
+                }
+            }
+            Self::FluidDrag { coefficient, flow_m_s } => {
+                c.non_negative(&f("coefficient"), *coefficient, "N·s²/m²");
+                c.within(&f("flow_m_s"), *flow_m_s, -10.0, 10.0, "m/s");
+            }
+            Self::FrameDrops { probability }
+            | Self::FtPacketLoss { probability }
+            | Self::ArmReflex { probability } => c.within(&f("probability"), *probability, 0.0, 1.0, ""),
+            Self::Latency { camera_ms, ft_ms } => {
+                c.within(&f("camera_ms"), *camera_ms, 0.0, 10_000.0, "ms");
+                c.within(&f("ft_ms"), *ft_ms, 0.0, 10_000.0, "ms");
+            }
+        }
+    }
+}
+
+impl SceneSpec {
+    /// The first declared effect of the given kind, if any.
+    #[must_use]
+    pub fn effect(&self, kind: &str) -> Option<&Effect> {
+        self.effects.iter().find(|e| e.kind() == kind)
+    }
+
+    /// The rod with this name.
+    #[must_use]
+    pub fn rod(&self, name: &str) -> Option<&RodSpec> {
+        self.rods.iter().find(|r| r.name == name)
+    }
+
+    /// Checks that need the rig too: the pose ranges must lie inside its workspace.
+    pub fn validate_against(&self, rig: &RigConfig, c: &mut Check) {
+        let w = &rig.workspace;
+        for (field, scene, bound) in [
+            ("poses.x_m", &self.poses.x_m, &w.x_m),
+            ("poses.z_m", &self.poses.z_m, &w.z_m),
+            ("poses.theta_rad", &self.poses.theta_rad, &w.theta_rad),
+        ] {
+            if !bound.contains_range(scene) {
+                c.fail(
+                    field,
+                    format!(
+                        "range [{}, {}] lies outside the rig's workspace [{}, {}]",
+                        scene.min, scene.max, bound.min, bound.max
+                    ),
+                );
+            }
+        }
+    }
+}
+
+impl Validate for SceneSpec {
+    fn validate(&self, c: &mut Check) {
+        if self.name.trim().is_empty() {
+            c.fail("name", "expected a non-empty name");
+        }
+        c.range("poses.x_m", &self.poses.x_m, "m");
+        c.range("poses.z_m", &self.poses.z_m, "m");
+        c.range("poses.theta_rad", &self.poses.theta_rad, "rad");
+        let pi = std::f64::consts::PI;
+        if self.poses.theta_rad.is_valid() && !Range::new(-pi, pi).contains_range(&self.poses.theta_rad) {
+            c.fail("poses.theta_rad", "expected a range inside [-π, π]");
+        }
+        if self.rods.is_empty() {
+            c.fail("rods", "expected at least one rod ([[rods]] table)");
+        }
+        let mut names = HashSet::new();
+        for (i, rod) in self.rods.iter().enumerate() {
+            if rod.name.trim().is_empty() {
+                c.fail(format!("rods[{i}].name"), "expected a non-empty name");
+            }
+            if !names.insert(rod.name.as_str()) {
+                c.fail(format!("rods[{i}].name"), format!("rod name `{}` is used twice", rod.name));
+            }
+            c.within(&format!("rods[{i}].size_m"), rod.size_m, 1e-3, 0.05, "m");
+            c.within(&format!("rods[{i}].aspect"), rod.aspect, 0.2, 5.0, "");
+            if rod.shape != RodShape::Oval && (rod.aspect - 1.0).abs() > f64::EPSILON {
+                c.fail(format!("rods[{i}].aspect"), "only an oval rod takes an aspect other than 1");
+            }
+        }
+        let mut kinds = HashSet::new();
+        for (i, e) in self.effects.iter().enumerate() {
+            let at = format!("effects[{i}]");
+            if !kinds.insert(e.kind()) {
+                c.fail(format!("{at}.kind"), format!("effect `{}` is declared twice", e.kind()));
+            }
+            e.validate(c, &at);
+        }
+    }
+}
