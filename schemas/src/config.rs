@@ -81,27 +81,40 @@ pub struct Check {
 impl Check {
     /// Record a problem with `field`.
     pub fn fail(&mut self, field: impl Into<String>, message: impl Into<String>) {
-        self.problems.push(Problem { field: field.into(), line: None, message: message.into() });
+        self.problems.push(Problem {
+            field: field.into(),
+            line: None,
+            message: message.into(),
+        });
     }
 
     /// `v` must be finite and `> 0`.
     pub fn positive(&mut self, field: &str, v: f64, unit: &str) {
         if !(v.is_finite() && v > 0.0) {
-            self.fail(field, format!("expected a finite value > 0 {unit}, found {v}"));
+            self.fail(
+                field,
+                format!("expected a finite value > 0 {unit}, found {v}"),
+            );
         }
     }
 
     /// `v` must be finite and `>= 0`.
     pub fn non_negative(&mut self, field: &str, v: f64, unit: &str) {
         if !(v.is_finite() && v >= 0.0) {
-            self.fail(field, format!("expected a finite value >= 0 {unit}, found {v}"));
+            self.fail(
+                field,
+                format!("expected a finite value >= 0 {unit}, found {v}"),
+            );
         }
     }
 
     /// `v` must lie in `[lo, hi]`.
     pub fn within(&mut self, field: &str, v: f64, lo: f64, hi: f64, unit: &str) {
         if !(v.is_finite() && v >= lo && v <= hi) {
-            self.fail(field, format!("expected a value in [{lo}, {hi}] {unit}, found {v}"));
+            self.fail(
+                field,
+                format!("expected a value in [{lo}, {hi}] {unit}, found {v}"),
+            );
         }
     }
 
@@ -129,7 +142,10 @@ impl Check {
         if self.problems.is_empty() {
             Ok(())
         } else {
-            Err(ConfigError { file: source.clone(), problems: self.problems })
+            Err(ConfigError {
+                file: source.clone(),
+                problems: self.problems,
+            })
         }
     }
 }
@@ -143,7 +159,11 @@ where
         let line = err.span().map(|span| line_of(text, span.start));
         ConfigError {
             file: source.clone(),
-            problems: vec![Problem { field, line, message: err.message().trim().to_owned() }],
+            problems: vec![Problem {
+                field,
+                line,
+                message: err.message().trim().to_owned(),
+            }],
         }
     };
     let de = toml::Deserializer::parse(text).map_err(|e| fail(String::new(), &e))?;
@@ -165,7 +185,11 @@ where
     let source = ConfigSource::File(path.to_owned());
     let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
         file: source.clone(),
-        problems: vec![Problem { field: String::new(), line: None, message: format!("cannot read: {e}") }],
+        problems: vec![Problem {
+            field: String::new(),
+            line: None,
+            message: format!("cannot read: {e}"),
+        }],
     })?;
     parse_toml(&text, &source)
 }
@@ -184,7 +208,11 @@ fn field_path(path: &serde_path_to_error::Path) -> String {
 
 fn line_of(text: &str, byte: usize) -> usize {
     let end = byte.min(text.len());
-    text.as_bytes()[..end].iter().filter(|&&b| b == b'\n').count() + 1
+    text.as_bytes()[..end]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+        + 1
 }
 
 #[cfg(test)]

@@ -22,7 +22,8 @@ pub fn rig() -> RigConfig {
 #[must_use]
 pub fn scene() -> SceneSpec {
     #[allow(clippy::expect_used)]
-    parse_toml(SCENE_TOML, &ConfigSource::Embedded("scene")).expect("embedded default scene is valid")
+    parse_toml(SCENE_TOML, &ConfigSource::Embedded("scene"))
+        .expect("embedded default scene is valid")
 }
 
 #[cfg(test)]
@@ -44,10 +45,11 @@ mod tests {
 
     #[test]
     fn printed_configs_parse_back_to_the_same_value() {
-        let rig2: RigConfig = parse_toml(&to_toml(&rig()), &ConfigSource::Embedded("rig")).unwrap_or_else(|e| panic!("{e}"));
+        let rig2: RigConfig = parse_toml(&to_toml(&rig()), &ConfigSource::Embedded("rig"))
+            .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(rig2, rig());
-        let scene2: SceneSpec =
-            parse_toml(&to_toml(&scene()), &ConfigSource::Embedded("scene")).unwrap_or_else(|e| panic!("{e}"));
+        let scene2: SceneSpec = parse_toml(&to_toml(&scene()), &ConfigSource::Embedded("scene"))
+            .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(scene2, scene());
     }
 }

@@ -98,13 +98,19 @@ impl Default for ArmPose {
 
 impl ArmPose {
     /// No translation, no rotation.
-    pub const IDENTITY: Self = Self { translation_m: [0.0; 3], rotation_wxyz: [1.0, 0.0, 0.0, 0.0] };
+    pub const IDENTITY: Self = Self {
+        translation_m: [0.0; 3],
+        rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
+    };
 
     /// A pose from a translation and a rotation of `yaw_rad` about the z axis.
     #[must_use]
     pub fn from_translation_yaw(translation_m: [f64; 3], yaw_rad: f64) -> Self {
         let (s, c) = (yaw_rad * 0.5).sin_cos();
-        Self { translation_m, rotation_wxyz: [c, 0.0, 0.0, s] }
+        Self {
+            translation_m,
+            rotation_wxyz: [c, 0.0, 0.0, s],
+        }
     }
 
     /// The pose of the finger for a contact pose, given where the rod stands:
@@ -156,12 +162,20 @@ impl ArmPose {
     #[must_use]
     pub fn is_valid(&self) -> bool {
         let n2: f64 = self.rotation_wxyz.iter().map(|c| c * c).sum();
-        self.translation_m.iter().chain(&self.rotation_wxyz).all(|v| v.is_finite()) && n2 > 1e-12
+        self.translation_m
+            .iter()
+            .chain(&self.rotation_wxyz)
+            .all(|v| v.is_finite())
+            && n2 > 1e-12
     }
 }
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
@@ -196,7 +210,10 @@ mod tests {
 
     #[test]
     fn a_degenerate_quaternion_rotates_like_the_identity() {
-        let p = ArmPose { translation_m: [0.0; 3], rotation_wxyz: [0.0; 4] };
+        let p = ArmPose {
+            translation_m: [0.0; 3],
+            rotation_wxyz: [0.0; 4],
+        };
         assert_eq!(p.rotate([1.0, 2.0, 3.0]), [1.0, 2.0, 3.0]);
         assert!(!p.is_valid());
     }

@@ -184,15 +184,27 @@ pub const FRANKA_MAX_SPEED_M_S: f64 = 1.7;
 impl Validate for RigConfig {
     fn validate(&self, c: &mut Check) {
         match &self.arm {
-            ArmDevice::Sim { reflex_force_n } => c.positive("arm.reflex_force_n", *reflex_force_n, "N"),
-            ArmDevice::Franka { address, reflex_force_n } => {
+            ArmDevice::Sim { reflex_force_n } => {
+                c.positive("arm.reflex_force_n", *reflex_force_n, "N")
+            }
+            ArmDevice::Franka {
+                address,
+                reflex_force_n,
+            } => {
                 non_empty(c, "arm.address", address);
                 c.positive("arm.reflex_force_n", *reflex_force_n, "N");
             }
         }
         match &self.force_sensor {
-            ForceSensorDevice::Sim { rate_hz } => c.within("force_sensor.rate_hz", *rate_hz, 1.0, 7000.0, "Hz"),
-            ForceSensorDevice::NetFt { address, rate_hz, counts_per_force, counts_per_torque } => {
+            ForceSensorDevice::Sim { rate_hz } => {
+                c.within("force_sensor.rate_hz", *rate_hz, 1.0, 7000.0, "Hz")
+            }
+            ForceSensorDevice::NetFt {
+                address,
+                rate_hz,
+                counts_per_force,
+                counts_per_torque,
+            } => {
                 non_empty(c, "force_sensor.address", address);
                 c.within("force_sensor.rate_hz", *rate_hz, 1.0, 7000.0, "Hz");
                 if let Some(v) = counts_per_force {
@@ -202,13 +214,29 @@ impl Validate for RigConfig {
                     c.positive("force_sensor.counts_per_torque", *v, "counts/N·m");
                 }
             }
-            ForceSensorDevice::AtiSerial { port, baud, counts_per_force, counts_per_torque } => {
+            ForceSensorDevice::AtiSerial {
+                port,
+                baud,
+                counts_per_force,
+                counts_per_torque,
+            } => {
                 non_empty(c, "force_sensor.port", port);
                 if *baud == 0 {
-                    c.fail("force_sensor.baud", "expected a baud rate > 0 (9600 or 38400 typical)");
+                    c.fail(
+                        "force_sensor.baud",
+                        "expected a baud rate > 0 (9600 or 38400 typical)",
+                    );
                 }
-                c.positive("force_sensor.counts_per_force", *counts_per_force, "counts/N");
-                c.positive("force_sensor.counts_per_torque", *counts_per_torque, "counts/N·m");
+                c.positive(
+                    "force_sensor.counts_per_force",
+                    *counts_per_force,
+                    "counts/N",
+                );
+                c.positive(
+                    "force_sensor.counts_per_torque",
+                    *counts_per_torque,
+                    "counts/N·m",
+                );
             }
         }
         match &self.camera {
@@ -220,7 +248,10 @@ impl Validate for RigConfig {
             GripperDevice::HandE { port, slave_id } => {
                 non_empty(c, "gripper.port", port);
                 if !(1..=247).contains(slave_id) {
-                    c.fail("gripper.slave_id", format!("expected a Modbus slave id in [1, 247], found {slave_id}"));
+                    c.fail(
+                        "gripper.slave_id",
+                        format!("expected a Modbus slave id in [1, 247], found {slave_id}"),
+                    );
                 }
             }
         }
@@ -230,10 +261,17 @@ impl Validate for RigConfig {
         c.range("workspace.z_m", &w.z_m, "m");
         c.range("workspace.theta_rad", &w.theta_rad, "rad");
         for (i, axis) in ["x", "y", "z"].iter().enumerate() {
-            c.range(&format!("workspace.reach_in_base_m[{i}] ({axis})"), &w.reach_in_base_m[i], "m");
+            c.range(
+                &format!("workspace.reach_in_base_m[{i}] ({axis})"),
+                &w.reach_in_base_m[i],
+                "m",
+            );
         }
         if !w.base_from_rod.is_valid() {
-            c.fail("workspace.base_from_rod", "expected finite translation and a non-zero quaternion");
+            c.fail(
+                "workspace.base_from_rod",
+                "expected finite translation and a non-zero quaternion",
+            );
         } else if !w.home.is_finite() {
             c.fail("workspace.home", "expected finite x_m, z_m, theta_rad");
         } else {
@@ -241,14 +279,21 @@ impl Validate for RigConfig {
             if !w.contains_arm(&home) {
                 c.fail(
                     "workspace.home",
-                    format!("home maps to {:?} m in the base frame, outside workspace.reach_in_base_m", home.translation_m),
+                    format!(
+                        "home maps to {:?} m in the base frame, outside workspace.reach_in_base_m",
+                        home.translation_m
+                    ),
                 );
             }
             // Every corner of the contact box must be reachable.
             if c.problems().is_empty() {
                 for x in [w.x_m.min, w.x_m.max] {
                     for z in [w.z_m.min, w.z_m.max] {
-                        let corner = ContactPose { x_m: x, z_m: z, theta_rad: 0.0 };
+                        let corner = ContactPose {
+                            x_m: x,
+                            z_m: z,
+                            theta_rad: 0.0,
+                        };
                         let p = ArmPose::from_contact(&w.base_from_rod, &corner);
                         if !w.contains_arm(&p) {
                             c.fail(
@@ -265,18 +310,41 @@ impl Validate for RigConfig {
         c.positive("limits.max_force_n", l.max_force_n, "N");
         c.positive("limits.max_torque_nm", l.max_torque_nm, "N·m");
         for i in 0..3 {
-            c.positive(&format!("limits.sensor_range_force_n[{i}]"), l.sensor_range_force_n[i], "N");
-            c.positive(&format!("limits.sensor_range_torque_nm[{i}]"), l.sensor_range_torque_nm[i], "N·m");
+            c.positive(
+                &format!("limits.sensor_range_force_n[{i}]"),
+                l.sensor_range_force_n[i],
+                "N",
+            );
+            c.positive(
+                &format!("limits.sensor_range_torque_nm[{i}]"),
+                l.sensor_range_torque_nm[i],
+                "N·m",
+            );
         }
 
         let p = &self.procedure;
-        c.within("procedure.approach_speed_m_s", p.approach_speed_m_s, 1e-4, FRANKA_MAX_SPEED_M_S, "m/s");
-        c.within("procedure.retreat_speed_m_s", p.retreat_speed_m_s, 1e-4, FRANKA_MAX_SPEED_M_S, "m/s");
+        c.within(
+            "procedure.approach_speed_m_s",
+            p.approach_speed_m_s,
+            1e-4,
+            FRANKA_MAX_SPEED_M_S,
+            "m/s",
+        );
+        c.within(
+            "procedure.retreat_speed_m_s",
+            p.retreat_speed_m_s,
+            1e-4,
+            FRANKA_MAX_SPEED_M_S,
+            "m/s",
+        );
         c.non_negative("procedure.settle_s", p.settle_s, "s");
         c.within("procedure.ft_window_s", p.ft_window_s, 1e-4, 10.0, "s");
         c.positive("procedure.frame_timeout_s", p.frame_timeout_s, "s");
         if p.min_window_readings == 0 {
-            c.fail("procedure.min_window_readings", "expected at least 1 reading");
+            c.fail(
+                "procedure.min_window_readings",
+                "expected at least 1 reading",
+            );
         }
         if p.max_attempts == 0 {
             c.fail("procedure.max_attempts", "expected at least 1 attempt");

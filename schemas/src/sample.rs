@@ -39,7 +39,9 @@ impl FromStr for FrameFormat {
             "png" => Ok(Self::Png),
             "jpeg" => Ok(Self::Jpeg),
             "rgb8" => Ok(Self::Rgb8),
-            other => Err(format!("unknown frame format `{other}`, expected png, jpeg or rgb8")),
+            other => Err(format!(
+                "unknown frame format `{other}`, expected png, jpeg or rgb8"
+            )),
         }
     }
 }

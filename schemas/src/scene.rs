@@ -248,12 +248,20 @@ impl Effect {
                     c.within(&f(&format!("per_m_rgb[{i}]")), *v, 0.0, 100.0, "1/m");
                 }
             }
-            Self::Turbidity { backscatter, .. } => c.within(&f("backscatter"), *backscatter, 0.0, 1.0, ""),
-            Self::Caustics { strength, period_px } => {
+            Self::Turbidity { backscatter, .. } => {
+                c.within(&f("backscatter"), *backscatter, 0.0, 1.0, "")
+            }
+            Self::Caustics {
+                strength,
+                period_px,
+            } => {
                 c.within(&f("strength"), *strength, 0.0, 1.0, "");
                 c.within(&f("period_px"), *period_px, 2.0, 10_000.0, "px");
             }
-            Self::Bubbles { per_frame, max_radius_px } => {
+            Self::Bubbles {
+                per_frame,
+                max_radius_px,
+            } => {
                 c.within(&f("per_frame"), *per_frame, 0.0, 1000.0, "");
                 c.within(&f("max_radius_px"), *max_radius_px, 0.5, 200.0, "px");
             }
@@ -261,30 +269,50 @@ impl Effect {
             Self::Exposure { gain } => c.within(&f("gain"), *gain, 0.01, 100.0, ""),
             Self::BackgroundClutter { objects } => {
                 if *objects > 10_000 {
-                    c.fail(f("objects"), format!("expected at most 10000, found {objects}"));
+                    c.fail(
+                        f("objects"),
+                        format!("expected at most 10000, found {objects}"),
+                    );
                 }
             }
-            Self::FtNoise { force_sigma_n, torque_sigma_nm } => {
+            Self::FtNoise {
+                force_sigma_n,
+                torque_sigma_nm,
+            } => {
                 c.non_negative(&f("force_sigma_n"), *force_sigma_n, "N");
                 c.non_negative(&f("torque_sigma_nm"), *torque_sigma_nm, "N·m");
             }
-            Self::FtDrift { force_n_per_h, torque_nm_per_h } => {
+            Self::FtDrift {
+                force_n_per_h,
+                torque_nm_per_h,
+            } => {
                 c.within(&f("force_n_per_h"), *force_n_per_h, -1e3, 1e3, "N/h");
                 c.within(&f("torque_nm_per_h"), *torque_nm_per_h, -1e2, 1e2, "N·m/h");
             }
             Self::BuoyancyOffset { force_n, torque_nm } => {
                 for i in 0..3 {
                     c.within(&f(&format!("force_n[{i}]")), force_n[i], -100.0, 100.0, "N");
-                    c.within(&f(&format!("torque_nm[{i}]")), torque_nm[i], -10.0, 10.0, "N·m");
+                    c.within(
+                        &f(&format!("torque_nm[{i}]")),
+                        torque_nm[i],
+                        -10.0,
+                        10.0,
+                        "N·m",
+                    );
                 }
             }
-            Self::FluidDrag { coefficient, flow_m_s } => {
+            Self::FluidDrag {
+                coefficient,
+                flow_m_s,
+            } => {
                 c.non_negative(&f("coefficient"), *coefficient, "N·s²/m²");
                 c.within(&f("flow_m_s"), *flow_m_s, -10.0, 10.0, "m/s");
             }
             Self::FrameDrops { probability }
             | Self::FtPacketLoss { probability }
-            | Self::ArmReflex { probability } => c.within(&f("probability"), *probability, 0.0, 1.0, ""),
+            | Self::ArmReflex { probability } => {
+                c.within(&f("probability"), *probability, 0.0, 1.0, "")
+            }
             Self::Latency { camera_ms, ft_ms } => {
                 c.within(&f("camera_ms"), *camera_ms, 0.0, 10_000.0, "ms");
                 c.within(&f("ft_ms"), *ft_ms, 0.0, 10_000.0, "ms");
@@ -336,7 +364,9 @@ impl Validate for SceneSpec {
         c.range("poses.z_m", &self.poses.z_m, "m");
         c.range("poses.theta_rad", &self.poses.theta_rad, "rad");
         let pi = std::f64::consts::PI;
-        if self.poses.theta_rad.is_valid() && !Range::new(-pi, pi).contains_range(&self.poses.theta_rad) {
+        if self.poses.theta_rad.is_valid()
+            && !Range::new(-pi, pi).contains_range(&self.poses.theta_rad)
+        {
             c.fail("poses.theta_rad", "expected a range inside [-π, π]");
         }
         if self.rods.is_empty() {
@@ -348,19 +378,28 @@ impl Validate for SceneSpec {
                 c.fail(format!("rods[{i}].name"), "expected a non-empty name");
             }
             if !names.insert(rod.name.as_str()) {
-                c.fail(format!("rods[{i}].name"), format!("rod name `{}` is used twice", rod.name));
+                c.fail(
+                    format!("rods[{i}].name"),
+                    format!("rod name `{}` is used twice", rod.name),
+                );
             }
             c.within(&format!("rods[{i}].size_m"), rod.size_m, 1e-3, 0.05, "m");
             c.within(&format!("rods[{i}].aspect"), rod.aspect, 0.2, 5.0, "");
             if rod.shape != RodShape::Oval && (rod.aspect - 1.0).abs() > f64::EPSILON {
-                c.fail(format!("rods[{i}].aspect"), "only an oval rod takes an aspect other than 1");
+                c.fail(
+                    format!("rods[{i}].aspect"),
+                    "only an oval rod takes an aspect other than 1",
+                );
             }
         }
         let mut kinds = HashSet::new();
         for (i, e) in self.effects.iter().enumerate() {
             let at = format!("effects[{i}]");
             if !kinds.insert(e.kind()) {
-                c.fail(format!("{at}.kind"), format!("effect `{}` is declared twice", e.kind()));
+                c.fail(
+                    format!("{at}.kind"),
+                    format!("effect `{}` is declared twice", e.kind()),
+                );
             }
             e.validate(c, &at);
         }

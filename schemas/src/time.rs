@@ -7,12 +7,16 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 
 /// Nanoseconds since the epoch of one monotonic clock (not wall time).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default, Serialize, Deserialize,
+)]
 #[serde(transparent)]
 pub struct TimestampNs(pub u64);
 
 /// A span of time in nanoseconds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default, Serialize, Deserialize,
+)]
 #[serde(transparent)]
 pub struct DurationNs(pub u64);
 
@@ -113,7 +117,13 @@ mod tests {
 
     #[test]
     fn timestamps_saturate_instead_of_wrapping() {
-        assert_eq!(TimestampNs(u64::MAX).saturating_add(DurationNs(5)), TimestampNs(u64::MAX));
-        assert_eq!(TimestampNs(3).saturating_sub(DurationNs(5)), TimestampNs::ZERO);
+        assert_eq!(
+            TimestampNs(u64::MAX).saturating_add(DurationNs(5)),
+            TimestampNs(u64::MAX)
+        );
+        assert_eq!(
+            TimestampNs(3).saturating_sub(DurationNs(5)),
+            TimestampNs::ZERO
+        );
     }
 }

@@ -19,12 +19,18 @@ pub const AXES: [&str; 6] = ["fx", "fy", "fz", "tx", "ty", "tz"];
 
 impl Wrench {
     /// No force, no torque.
-    pub const ZERO: Self = Self { force_n: [0.0; 3], torque_nm: [0.0; 3] };
+    pub const ZERO: Self = Self {
+        force_n: [0.0; 3],
+        torque_nm: [0.0; 3],
+    };
 
     /// From six values in SI order `[Fx, Fy, Fz, Tx, Ty, Tz]` (N, N·m).
     #[must_use]
     pub const fn from_array(v: [f64; 6]) -> Self {
-        Self { force_n: [v[0], v[1], v[2]], torque_nm: [v[3], v[4], v[5]] }
+        Self {
+            force_n: [v[0], v[1], v[2]],
+            torque_nm: [v[3], v[4], v[5]],
+        }
     }
 
     /// As six values in SI order `[Fx, Fy, Fz, Tx, Ty, Tz]` (N, N·m).
@@ -154,7 +160,10 @@ mod tests {
     fn display_uses_newton_millimetres_for_torque() {
         let w = Wrench::from_array([1.0, -2.0, 3.0, 0.1, -0.2, 0.3]);
         let s = w.to_string();
-        assert!(s.contains("+100.0") && s.contains("-200.0") && s.contains("N·mm"), "{s}");
+        assert!(
+            s.contains("+100.0") && s.contains("-200.0") && s.contains("N·mm"),
+            "{s}"
+        );
     }
 
     #[test]

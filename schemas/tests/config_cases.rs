@@ -6,7 +6,9 @@ use softtouch_schemas::{ConfigSource, RigConfig, SceneSpec, defaults};
 use std::path::{Path, PathBuf};
 
 fn cases(kind: &str) -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/cases").join(kind);
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/cases")
+        .join(kind);
     let mut files: Vec<_> = std::fs::read_dir(&dir)
         .unwrap_or_else(|e| panic!("cannot list {}: {e}", dir.display()))
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -30,16 +32,27 @@ fn expectation(path: &Path) -> String {
 fn mismatch(path: &Path, message: &str) -> Option<String> {
     let expect = expectation(path);
     if !message.contains(&expect) {
-        return Some(format!("{}:\n  expected an error containing: {expect}\n  got: {message}", path.display()));
+        return Some(format!(
+            "{}:\n  expected an error containing: {expect}\n  got: {message}",
+            path.display()
+        ));
     }
     if !message.contains(&path.display().to_string()) {
-        return Some(format!("{}: error does not name the file: {message}", path.display()));
+        return Some(format!(
+            "{}: error does not name the file: {message}",
+            path.display()
+        ));
     }
     None
 }
 
 fn report(failures: &[String]) {
-    assert!(failures.is_empty(), "{} case(s) failed:\n{}", failures.len(), failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "{} case(s) failed:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
 }
 
 #[test]

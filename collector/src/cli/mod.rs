@@ -1,0 +1,128 @@
+//! The `softtouch` command line.
+//!
+//! Exit codes: 0 success; 1 runtime failure (a device, the database, I/O); 2 bad input
+//! (arguments, config or scene files, a missing database or run).
+
+pub mod config;
+pub mod db;
+pub mod runs;
+
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+/// Exit code for success.
+pub const EXIT_OK: u8 = 0;
+/// Exit code for a runtime failure.
+pub const EXIT_RUNTIME: u8 = 1;
+/// Exit code for bad input.
+pub const EXIT_BAD_INPUT: u8 = 2;
+
+const EXIT_CODES: &str = "Exit codes: 0 success, 1 runtime failure (device, database, I/O), 2 bad input \
+(arguments, config or scene file, missing database or run).";
+
+/// softtouch: collect visuo-tactile data with a robot, curate it, and train a soft
+/// finger to read force and torque from its camera.
+#[derive(Debug, Parser)]
+#[command(
+    name = "softtouch",
+    version,
+    about = "softtouch: collect visuo-tactile data with a robot, curate it, and train a soft finger to read force and torque from its camera.",
+    after_help = EXIT_CODES
+)]
+pub struct Cli {
+    /// The SQLite database.
+    #[arg(
+        long,
+        global = true,
+        default_value = "softtouch.db",
+        env = "SOFTTOUCH_DB"
+    )]
+    pub db: PathBuf,
+
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The verbs.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Show or check rig and scene configs.
+    #[command(subcommand)]
+    Config(config::ConfigCommand),
+    /// Manage the database.
+    #[command(subcommand)]
+    Db(db::DbCommand),
+    /// List runs with their sample counts and status.
+    #[command(after_help = "Example:\n  softtouch runs\n  softtouch --db lab.db runs")]
+    Runs,
+}
+
+/// A failed command, with its class for the exit code.
+#[derive(Debug)]
+pub enum Failure {
+    /// The user's input is wrong (exit 2).
+    BadInput(anyhow::Error),
+    /// Something failed while running (exit 1).
+    Runtime(anyhow::Error),
+}
+
+impl Failure {
+    /// The process exit code.
+    #[must_use]
+    pub const fn exit_code(&self) -> u8 {
+        match self {
+            Self::BadInput(_) => EXIT_BAD_INPUT,
+            Self::Runtime(_) => EXIT_RUNTIME,
+        }
+    }
+
+    /// The error to print.
+    #[must_use]
+    pub const fn error(&self) -> &anyhow::Error {
+        match self {
+            Self::BadInput(e) | Self::Runtime(e) => e,
+        }
+    }
+}
+
+impl From<softtouch_schemas::ConfigError> for Failure {
+    fn from(e: softtouch_schemas::ConfigError) -> Self {
+        Self::BadInput(e.into())
+    }
+}
+
+impl From<crate::store::StoreError> for Failure {
+    fn from(e: crate::store::StoreError) -> Self {
+        match e {
+            crate::store::StoreError::NoSuchRun(_) => Self::BadInput(e.into()),
+            other => Self::Runtime(other.into()),
+        }
+    }
+}
+
+/// Run a parsed command line; output goes to `out`.
+pub async fn run(cli: Cli, out: &mut dyn std::io::Write) -> Result<(), Failure> {
+    match cli.command {
+        Command::Config(cmd) => config::run(cmd, out),
+        Command::Db(cmd) => db::run(cmd, &cli.db, out).await,
+        Command::Runs => runs::run(&cli.db, out).await,
+    }
+}
+
+/// Open an existing database (never creates one: a typo in `--db` should not leave an
+/// empty database behind).
+pub(crate) async fn open_existing(path: &std::path::Path) -> Result<crate::store::Store, Failure> {
+    if !path.exists() {
+        return Err(Failure::BadInput(anyhow::anyhow!(
+            "no database at {}: create it with `softtouch db init` (or pass --db PATH)",
+            path.display()
+        )));
+    }
+    Ok(crate::store::Store::open(path).await?)
+}
+
+/// Write to the output, treating a closed pipe (`softtouch runs | head`) as a runtime failure.
+pub(crate) fn io_failure(e: std::io::Error) -> Failure {
+    Failure::Runtime(anyhow::Error::new(e).context("cannot write output"))
+}

@@ -1,0 +1,333 @@
+use super::*;
+use softtouch_schemas::{ContactPose, FrameFormat, FtStatus, TimestampNs, Wrench};
+
+pub(crate) fn sample(index: u64) -> Sample {
+    Sample {
+        index,
+        rod: "circle-10".into(),
+        medium: Medium::Air,
+        commanded: ContactPose {
+            x_m: 0.01,
+            z_m: -0.02,
+            theta_rad: 0.5,
+        },
+        measured: Some(ContactPose {
+            x_m: 0.0101,
+            z_m: -0.0199,
+            theta_rad: 0.5001,
+        }),
+        wrench_mean_in_sensor: Wrench::from_array([1.0, -2.0, 3.0, 0.1, -0.2, 0.3]),
+        wrench_std_in_sensor: Wrench::from_array([0.01; 6]),
+        reading_count: 2,
+        frame_t: TimestampNs(1_000_000),
+        window_start: TimestampNs(975_000),
+        window_end: TimestampNs(1_025_000),
+        sync_skew_ns: -500,
+        status: SampleStatus::Ok,
+        attempts: 1,
+    }
+}
+
+pub(crate) fn window() -> Vec<FtReading> {
+    (0..2u32)
+        .map(|i| FtReading {
+            t: TimestampNs(990_000 + u64::from(i) * 1_000),
+            rdt_sequence: i + 1,
+            ft_sequence: 70_000 + i,
+            status: FtStatus::OK,
+            wrench_in_sensor: Wrench::from_array([1.0, -2.0, 3.0, 0.1, -0.2, f64::from(i)]),
+        })
+        .collect()
+}
+
+fn meta() -> FrameMeta {
+    FrameMeta {
+        t: TimestampNs(1_000_000),
+        sequence: 120,
+        width: 2,
+        height: 1,
+        format: FrameFormat::Rgb8,
+    }
+}
+
+async fn store_in(dir: &tempfile::TempDir) -> Store {
+    Store::open(&dir.path().join("test.db"))
+        .await
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+async fn new_run(store: &Store) -> RunId {
+    store
+        .create_run(&NewRun {
+            seed: u64::MAX,
+            samples_planned: 10,
+            scene_name: "on-land",
+            medium: Medium::Air,
+            rig_toml: "[arm]",
+            scene_toml: "name = 'on-land'",
+        })
+        .await
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[tokio::test]
+async fn a_new_database_is_migrated_in_wal_mode_with_foreign_keys_on() -> Result<(), StoreError> {
+    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
+        what: "tempdir",
+        why: e.to_string(),
+    })?;
+    let store = store_in(&dir).await;
+    let mode: String = sqlx::query_scalar("PRAGMA journal_mode")
+        .fetch_one(store.pool())
+        .await
+        .map_err(query_err("t"))?;
+    let fk: i64 = sqlx::query_scalar("PRAGMA foreign_keys")
+        .fetch_one(store.pool())
+        .await
+        .map_err(query_err("t"))?;
+    assert_eq!(mode, "wal");
+    assert_eq!(fk, 1);
+    assert!(Store::schema_version() >= 20_261_121_000_000);
+    assert_eq!(store.integrity_check().await?, "ok");
+    Ok(())
+}
+
+#[tokio::test]
+async fn a_sample_is_written_with_its_frame_and_window_and_a_second_write_changes_nothing()
+-> Result<(), StoreError> {
+    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
+        what: "tempdir",
+        why: e.to_string(),
+    })?;
+    let store = store_in(&dir).await;
+    let run = new_run(&store).await;
+    let frame = FrameRecord {
+        meta: meta(),
+        data: &[1, 2, 3, 4, 5, 6],
+    };
+    assert_eq!(
+        store
+            .append_sample(run, &sample(0), frame, &window())
+            .await?,
+        Appended::Inserted
+    );
+
+    let mut changed = sample(0);
+    changed.rod = "square-10".into();
+    assert_eq!(
+        store.append_sample(run, &changed, frame, &window()).await?,
+        Appended::AlreadyPresent
+    );
+
+    assert_eq!(
+        store.row_counts(run).await?,
+        RowCounts {
+            samples: 1,
+            frames: 1,
+            windows: 1
+        }
+    );
+    let rod: String = sqlx::query_scalar("SELECT rod FROM samples")
+        .fetch_one(store.pool())
+        .await
+        .map_err(query_err("t"))?;
+    assert_eq!(rod, "circle-10", "the first write stands");
+    let blob: Vec<u8> = sqlx::query_scalar("SELECT data FROM ft_windows")
+        .fetch_one(store.pool())
+        .await
+        .map_err(query_err("t"))?;
+    assert_eq!(decode_window(&blob), Some(window()));
+    assert_eq!(store.next_index(run).await?, 1);
+    Ok(())
+}
+
+#[tokio::test]
+async fn a_transaction_that_fails_midway_leaves_nothing_half_written() -> Result<(), StoreError> {
+    // Given a store with one good sample
+    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
+        what: "tempdir",
+        why: e.to_string(),
+    })?;
+    let store = store_in(&dir).await;
+    let run = new_run(&store).await;
+    store
+        .append_sample(
+            run,
+            &sample(0),
+            FrameRecord {
+                meta: meta(),
+                data: &[1],
+            },
+            &window(),
+        )
+        .await?;
+
+    // When the second sample's row goes in but its frame is refused (empty pixels
+    // violate the frames table's CHECK), after the sample INSERT succeeded
+    let err = store
+        .append_sample(
+            run,
+            &sample(1),
+            FrameRecord {
+                meta: meta(),
+                data: &[],
+            },
+            &window(),
+        )
+        .await
+        .err();
+
+    // Then the error says where it failed, and nothing of sample 1 is stored
+    let msg = err.map(|e| e.to_string()).unwrap_or_default();
+    assert!(msg.contains("inserting a frame"), "{msg}");
+    assert_eq!(
+        store.row_counts(run).await?,
+        RowCounts {
+            samples: 1,
+            frames: 1,
+            windows: 1
+        }
+    );
+    assert_eq!(store.next_index(run).await?, 1);
+
+    // And the same index can then be written whole
+    let appended = store
+        .append_sample(
+            run,
+            &sample(1),
+            FrameRecord {
+                meta: meta(),
+                data: &[9],
+            },
+            &window(),
+        )
+        .await?;
+    assert_eq!(appended, Appended::Inserted);
+    assert_eq!(
+        store.row_counts(run).await?,
+        RowCounts {
+            samples: 2,
+            frames: 2,
+            windows: 2
+        }
+    );
+    Ok(())
+}
+
+#[tokio::test]
+async fn runs_list_counts_ok_rejected_retries_and_faults() -> Result<(), StoreError> {
+    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
+        what: "tempdir",
+        why: e.to_string(),
+    })?;
+    let store = store_in(&dir).await;
+    let run = new_run(&store).await;
+    let frame = FrameRecord {
+        meta: meta(),
+        data: &[1],
+    };
+    store
+        .append_sample(run, &sample(0), frame, &window())
+        .await?;
+    let mut rejected = sample(1);
+    rejected.status = SampleStatus::Rejected(RejectReason::SensorFault);
+    rejected.attempts = 3;
+    store
+        .append_sample(run, &rejected, frame, &window())
+        .await?;
+    store
+        .log_event(
+            run,
+            Some(1),
+            Some(TimestampNs(5)),
+            EventLevel::Warn,
+            "sensor_fault",
+            "status 0x00020000",
+        )
+        .await?;
+    store
+        .log_event(run, None, None, EventLevel::Info, "started", "run started")
+        .await?;
+    store.set_run_status(run, RunStatus::Completed).await?;
+
+    let runs = store.runs().await?;
+    assert_eq!(runs.len(), 1);
+    let r = &runs[0];
+    assert_eq!(
+        (
+            r.status.as_str(),
+            r.ok,
+            r.rejected,
+            r.retried,
+            r.events,
+            r.faults
+        ),
+        ("completed", 1, 1, 2, 2, 1)
+    );
+    assert_eq!(r.seed, -1, "u64::MAX is stored as its bit pattern");
+    let events = store.events(run, 1).await?;
+    assert_eq!(events.len(), 1);
+    assert_eq!(events[0].kind, "started");
+    assert!(matches!(
+        store.set_run_status(99, RunStatus::Failed).await,
+        Err(StoreError::NoSuchRun(99))
+    ));
+    Ok(())
+}
+
+#[tokio::test]
+async fn a_store_dropped_without_closing_reopens_intact() -> Result<(), StoreError> {
+    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
+        what: "tempdir",
+        why: e.to_string(),
+    })?;
+    let run = {
+        let store = store_in(&dir).await;
+        let run = new_run(&store).await;
+        for i in 0..20 {
+            store
+                .append_sample(
+                    run,
+                    &sample(i),
+                    FrameRecord {
+                        meta: meta(),
+                        data: &[1, 2],
+                    },
+                    &window(),
+                )
+                .await?;
+        }
+        run
+        // dropped here without close(): the WAL is not checkpointed
+    };
+    let store = store_in(&dir).await;
+    assert_eq!(store.integrity_check().await?, "ok");
+    assert_eq!(
+        store.row_counts(run).await?,
+        RowCounts {
+            samples: 20,
+            frames: 20,
+            windows: 20
+        }
+    );
+    Ok(())
+}
+
+#[test]
+fn a_window_blob_of_the_wrong_length_is_refused_not_misread() {
+    let blob = encode_window(&window());
+    assert_eq!(decode_window(&blob), Some(window()));
+    assert_eq!(decode_window(&blob[..blob.len() - 1]), None);
+    assert_eq!(decode_window(&[]), Some(vec![]));
+}
+
+#[test]
+fn stored_statuses_parse_back_or_fail_clearly() {
+    assert_eq!(parse_status("ok", None), Ok(SampleStatus::Ok));
+    assert_eq!(
+        parse_status("rejected", Some("saturated")),
+        Ok(SampleStatus::Rejected(RejectReason::Saturated))
+    );
+    assert!(parse_status("ok", Some("saturated")).is_err());
+    assert!(parse_status("rejected", Some("bogus")).is_err());
+}

@@ -1,0 +1,240 @@
+//! End-to-end tests of the `softtouch` CLI: the binary as a user runs it.
+
+use softtouch_collector::store::{FrameRecord, NewRun, RunStatus, Store};
+use softtouch_schemas::{
+    ConfigSource, ContactPose, FrameFormat, FrameMeta, Medium, RigConfig, Sample, SampleStatus,
+    SceneSpec, TimestampNs, Wrench, config::parse_toml, defaults,
+};
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn softtouch(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_softtouch"))
+        .args(args)
+        .current_dir(dir)
+        .env_remove("SOFTTOUCH_DB")
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run softtouch: {e}"))
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn tempdir() -> tempfile::TempDir {
+    tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn help_lists_only_working_verbs_and_each_verb_has_an_example() {
+    let dir = tempdir();
+    let out = softtouch(dir.path(), &["--help"]);
+    assert!(out.status.success());
+    let help = text(&out.stdout);
+    for verb in ["config", "db", "runs"] {
+        assert!(help.contains(verb), "{help}");
+    }
+    assert!(
+        help.contains("Exit codes: 0 success, 1 runtime failure"),
+        "{help}"
+    );
+    for verb in [
+        &["config", "show"][..],
+        &["config", "check"],
+        &["db", "init"],
+        &["runs"],
+    ] {
+        let mut args = verb.to_vec();
+        args.push("--help");
+        let out = softtouch(dir.path(), &args);
+        assert!(out.status.success(), "{verb:?}");
+        assert!(
+            text(&out.stdout).contains("softtouch "),
+            "{verb:?} help has no example:\n{}",
+            text(&out.stdout)
+        );
+    }
+}
+
+#[test]
+fn config_show_prints_defaults_that_parse_back_to_the_defaults() {
+    let dir = tempdir();
+    let out = softtouch(dir.path(), &["config", "show", "rig"]);
+    assert!(out.status.success());
+    let rig: RigConfig = parse_toml(&text(&out.stdout), &ConfigSource::Embedded("stdout"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(rig, defaults::rig());
+
+    let out = softtouch(dir.path(), &["config", "show", "scene"]);
+    let scene: SceneSpec = parse_toml(&text(&out.stdout), &ConfigSource::Embedded("stdout"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(scene, defaults::scene());
+}
+
+#[test]
+fn an_edited_config_file_is_shown_resolved() {
+    let dir = tempdir();
+    let edited = defaults::RIG_TOML.replace("settle_s = 0.2", "settle_s = 0.75");
+    std::fs::write(dir.path().join("rig.toml"), edited).unwrap_or_else(|e| panic!("{e}"));
+    let out = softtouch(dir.path(), &["config", "show", "rig", "--rig", "rig.toml"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("settle_s = 0.75"));
+}
+
+#[test]
+fn a_malformed_config_exits_2_naming_file_line_and_field() {
+    let dir = tempdir();
+    let bad = defaults::RIG_TOML.replace("settle_s = 0.2", "settle = 0.2");
+    std::fs::write(dir.path().join("rig.toml"), bad).unwrap_or_else(|e| panic!("{e}"));
+    let out = softtouch(dir.path(), &["config", "check", "--rig", "rig.toml"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = text(&out.stderr);
+    assert!(err.contains("rig.toml:"), "{err}");
+    assert!(
+        err.contains("field `procedure.settle`: unknown field `settle`, expected one of"),
+        "{err}"
+    );
+    assert!(out.stdout.is_empty());
+}
+
+#[test]
+fn a_scene_outside_the_rigs_workspace_exits_2() {
+    let dir = tempdir();
+    let scene = defaults::SCENE_TOML.replace("x_m = [0.0, 0.05]", "x_m = [0.0, 0.09]");
+    std::fs::write(dir.path().join("scene.toml"), scene).unwrap_or_else(|e| panic!("{e}"));
+    let out = softtouch(dir.path(), &["config", "check", "--scene", "scene.toml"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr)
+            .contains("field `poses.x_m`: range [0, 0.09] lies outside the rig's workspace")
+    );
+
+    let out = softtouch(dir.path(), &["config", "check"]);
+    assert!(out.status.success());
+    assert!(text(&out.stdout).starts_with("ok: rig <embedded default rig>"));
+}
+
+#[test]
+fn a_missing_config_file_exits_2() {
+    let dir = tempdir();
+    let out = softtouch(dir.path(), &["config", "show", "--rig", "nope.toml"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("nope.toml: cannot read"),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+#[test]
+fn unknown_verbs_and_flags_exit_2() {
+    let dir = tempdir();
+    assert_eq!(softtouch(dir.path(), &["fly"]).status.code(), Some(2));
+    assert_eq!(
+        softtouch(dir.path(), &["runs", "--bogus"]).status.code(),
+        Some(2)
+    );
+}
+
+#[test]
+fn runs_without_a_database_exits_2_and_creates_nothing() {
+    let dir = tempdir();
+    let out = softtouch(dir.path(), &["runs"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("softtouch db init"));
+    assert!(!dir.path().join("softtouch.db").exists());
+}
+
+#[test]
+fn db_init_creates_the_database_in_the_working_directory_and_runs_lists_it() {
+    let dir = tempdir();
+    let out = softtouch(dir.path(), &["db", "init"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("integrity ok"));
+    assert!(dir.path().join("softtouch.db").exists());
+    let out = softtouch(dir.path(), &["runs"]);
+    assert!(out.status.success());
+    assert!(text(&out.stdout).starts_with("no runs"));
+    // init is idempotent
+    assert!(softtouch(dir.path(), &["db", "init"]).status.success());
+}
+
+#[test]
+fn runs_shows_each_runs_status_and_counts() {
+    let dir = tempdir();
+    let db = dir.path().join("lab.db");
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap_or_else(|e| panic!("{e}"));
+    rt.block_on(async {
+        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
+        let run = store
+            .create_run(&NewRun {
+                seed: 42,
+                samples_planned: 3,
+                scene_name: "on-land",
+                medium: Medium::Air,
+                rig_toml: defaults::RIG_TOML,
+                scene_toml: defaults::SCENE_TOML,
+            })
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        for index in 0..2 {
+            let sample = Sample {
+                index,
+                rod: "circle-10".into(),
+                medium: Medium::Air,
+                commanded: ContactPose {
+                    x_m: 0.01,
+                    z_m: 0.0,
+                    theta_rad: 0.0,
+                },
+                measured: None,
+                wrench_mean_in_sensor: Wrench::ZERO,
+                wrench_std_in_sensor: Wrench::ZERO,
+                reading_count: 0,
+                frame_t: TimestampNs(0),
+                window_start: TimestampNs(0),
+                window_end: TimestampNs(0),
+                sync_skew_ns: 0,
+                status: SampleStatus::Ok,
+                attempts: 1 + u32::try_from(index).unwrap_or(0),
+            };
+            let meta = FrameMeta {
+                t: TimestampNs(0),
+                sequence: index,
+                width: 1,
+                height: 1,
+                format: FrameFormat::Rgb8,
+            };
+            store
+                .append_sample(
+                    run,
+                    &sample,
+                    FrameRecord {
+                        meta,
+                        data: &[0, 0, 0],
+                    },
+                    &[],
+                )
+                .await
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        store
+            .set_run_status(run, RunStatus::Stopped)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        store.close().await;
+    });
+    let out = softtouch(dir.path(), &["--db", "lab.db", "runs"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let table = text(&out.stdout);
+    let row = table.lines().nth(1).unwrap_or_default();
+    let cols: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(
+        &cols[..9],
+        ["1", "stopped", "on-land", "air", "42", "3", "2", "0", "1"],
+        "{table}"
+    );
+}
