@@ -24,7 +24,9 @@ impl TokioClock {
     /// A clock whose epoch is now. Must be called inside a tokio runtime.
     #[must_use]
     pub fn new() -> Self {
-        Self { epoch: tokio::time::Instant::now() }
+        Self {
+            epoch: tokio::time::Instant::now(),
+        }
     }
 
     /// The tokio instant at a timestamp of this clock (for `sleep_until`).

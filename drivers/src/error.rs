@@ -62,6 +62,9 @@ impl DeviceError {
     /// The link failed, timed out or carried garbage.
     #[must_use]
     pub const fn is_link(&self) -> bool {
-        matches!(self, Self::Link { .. } | Self::Timeout { .. } | Self::Protocol { .. })
+        matches!(
+            self,
+            Self::Link { .. } | Self::Timeout { .. } | Self::Protocol { .. }
+        )
     }
 }

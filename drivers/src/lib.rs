@@ -8,6 +8,8 @@
 //! - [`error`]: [`DeviceError`], which keeps "the device refused or reported a fault"
 //!   apart from "the link failed".
 //! - [`arm`], [`force`], [`camera`], [`gripper`]: the device traits and their data.
+//! - [`sim`]: the simulated scene (finger, contact, lattice, renderer, effects) and the
+//!   simulated twin of every device.
 //!
 //! Traits are async (tokio) and object-safe, so the CLI can build a rig of boxed
 //! devices from the rig config, real and simulated alike.
@@ -18,6 +20,7 @@ pub mod clock;
 pub mod error;
 pub mod force;
 pub mod gripper;
+pub mod sim;
 
 pub use arm::{Arm, ArmState};
 pub use camera::{Camera, Frame};

@@ -15,6 +15,8 @@ pub enum ConfigSource {
     File(PathBuf),
     /// One of the embedded defaults, by name.
     Embedded(&'static str),
+    /// Text stored elsewhere, e.g. a run's config in the database.
+    Stored(String),
 }
 
 impl fmt::Display for ConfigSource {
@@ -22,6 +24,7 @@ impl fmt::Display for ConfigSource {
         match self {
             Self::File(p) => write!(f, "{}", p.display()),
             Self::Embedded(name) => write!(f, "<embedded default {name}>"),
+            Self::Stored(what) => write!(f, "<{what}>"),
         }
     }
 }

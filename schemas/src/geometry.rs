@@ -71,6 +71,19 @@ pub struct ContactPose {
 }
 
 impl ContactPose {
+    /// The contact pose a measured finger pose corresponds to: the inverse of
+    /// [`ArmPose::from_contact`]. The offset across the approach axis (y in the rod
+    /// frame) and any tilt are not part of a contact pose and are dropped.
+    #[must_use]
+    pub fn from_arm(base_from_rod: &ArmPose, base_from_finger: &ArmPose) -> Self {
+        let rod_from_finger = base_from_rod.inverse().compose(base_from_finger);
+        Self {
+            x_m: rod_from_finger.translation_m[0],
+            z_m: rod_from_finger.translation_m[2],
+            theta_rad: rod_from_finger.yaw_rad(),
+        }
+    }
+
     /// All three coordinates are finite.
     #[must_use]
     pub fn is_finite(&self) -> bool {
@@ -120,6 +133,21 @@ impl ArmPose {
         let rod_from_finger =
             Self::from_translation_yaw([contact.x_m, 0.0, contact.z_m], contact.theta_rad);
         base_from_rod.compose(&rod_from_finger)
+    }
+
+    /// The inverse pose: `other_from_self` for `self = self_from_other`.
+    #[must_use]
+    pub fn inverse(&self) -> Self {
+        let [w, x, y, z] = quat_normalize(self.rotation_wxyz);
+        let inv = Self {
+            translation_m: [0.0; 3],
+            rotation_wxyz: [w, -x, -y, -z],
+        };
+        let t = inv.rotate(self.translation_m);
+        Self {
+            translation_m: [-t[0], -t[1], -t[2]],
+            rotation_wxyz: inv.rotation_wxyz,
+        }
     }
 
     /// `self · other`: apply `other`, then `self`.
@@ -241,6 +269,17 @@ mod tests {
             let dx = p.translation_m[0] - 0.5;
             let dy = p.translation_m[1] - 0.1;
             prop_assert!(close((dx * dx + dy * dy).sqrt(), x));
+        }
+
+        #[test]
+        fn a_contact_pose_survives_the_trip_through_the_arm_frame(
+            x in -0.05..0.05f64, z in -0.05..0.05f64, theta in -3.14..3.14f64,
+            rod_yaw in -3.0..3.0f64, rx in -1.0..1.0f64,
+        ) {
+            let rod = ArmPose::from_translation_yaw([rx, 0.1, 0.3], rod_yaw);
+            let c = ContactPose { x_m: x, z_m: z, theta_rad: theta };
+            let back = ContactPose::from_arm(&rod, &ArmPose::from_contact(&rod, &c));
+            prop_assert!(close(back.x_m, x) && close(back.z_m, z) && close(back.theta_rad, theta), "{back:?}");
         }
     }
 }

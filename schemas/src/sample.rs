@@ -77,6 +77,8 @@ pub enum RejectReason {
     FrameTimeout,
     /// The arm faulted (reflex) and retries ran out.
     ArmFault,
+    /// The approach was aborted: contact force or torque over the rig's limit.
+    ForceLimit,
 }
 
 impl RejectReason {
@@ -90,6 +92,7 @@ impl RejectReason {
             Self::Saturated => "saturated",
             Self::FrameTimeout => "frame_timeout",
             Self::ArmFault => "arm_fault",
+            Self::ForceLimit => "force_limit",
         }
     }
 }
@@ -110,6 +113,7 @@ impl FromStr for RejectReason {
             Self::Saturated,
             Self::FrameTimeout,
             Self::ArmFault,
+            Self::ForceLimit,
         ]
         .into_iter()
         .find(|r| r.as_str() == s)

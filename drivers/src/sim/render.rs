@@ -1,0 +1,399 @@
+//! The in-finger camera's view: a pinhole camera under the finger's base looking
+//! along the finger, lit by the finger's LEDs, seeing the lattice beams (drawn as
+//! thick anti-aliased lines, far to near) against a precomputed background seen
+//! through the translucent finger.
+//!
+//! Cost model: everything that does not change between frames (background, clutter,
+//! skin tint, per-effect tables) is computed once in [`Renderer::new`]; a frame is a
+//! copy of the background, ~1000 short line rasterisations, and one pass per declared
+//! per-pixel effect. Effects the scene does not declare are skipped by one branch.
+
+use super::contact::FingerGeometry;
+use super::effects::ImageEffects;
+use super::lattice::{BeamKind, Deformed, Lattice};
+use super::rng;
+use rand::RngExt;
+use rand_distr::{Distribution, StandardNormal};
+
+/// Frame width, px.
+pub const WIDTH: u32 = 640;
+/// Frame height, px.
+pub const HEIGHT: u32 = 480;
+const W: usize = WIDTH as usize;
+const H: usize = HEIGHT as usize;
+
+/// Focal length of the in-finger camera, px.
+const FOCAL_PX: f64 = 720.0;
+/// Distance of the camera under the finger's base, m.
+const CAMERA_BELOW_BASE_M: f64 = 0.040;
+/// Distance of the background seen through the finger, m.
+const BACKGROUND_M: f64 = 0.25;
+/// Distance at which the LEDs light a beam at nominal brightness, m.
+const LED_REF_M: f64 = 0.035;
+/// Scale of the veiling light's growth with distance (turbidity), m.
+const TURBIDITY_M: f64 = 0.08;
+/// Size of the camera-noise table (a power of two).
+const NOISE_TABLE: usize = 1 << 18;
+
+/// The finger's material colour (orange silicone), far from any background colour:
+/// a colour threshold keeps pixels with R > 150 and R − B > 90.
+pub const FINGER_RGB: [u8; 3] = [255, 140, 36];
+
+/// Precomputed state of the renderer of one scene.
+#[derive(Debug, Clone)]
+pub(crate) struct Renderer {
+    effects: ImageEffects,
+    seed: u64,
+    focal: f64,
+    z_cam: f64,
+    background: Vec<u8>,
+    caustic: Option<(Vec<u8>, usize, f32)>,
+    noise: Option<Vec<i16>>,
+    exposure: Option<[u8; 256]>,
+}
+
+/// Per-channel colour in 0–255, as floats.
+type Rgb = [f32; 3];
+
+impl Renderer {
+    pub(crate) fn new(finger: &FingerGeometry, effects: &ImageEffects, seed: u64) -> Self {
+        let focal = FOCAL_PX * effects.refraction_index.unwrap_or(1.0);
+        let z_cam = finger.base_height_m - CAMERA_BELOW_BASE_M;
+        let mut r = Self {
+            effects: effects.clone(),
+            seed,
+            focal,
+            z_cam,
+            background: Vec::new(),
+            caustic: None,
+            noise: None,
+            exposure: None,
+        };
+        r.background = r.make_background(finger);
+        if let Some((strength, period)) = effects.caustics {
+            let p = (period.round() as usize).clamp(2, 1024);
+            let mut tile = vec![0u8; p * p];
+            let k = std::f64::consts::TAU / p as f64;
+            for y in 0..p {
+                for x in 0..p {
+                    let (fx, fy) = (x as f64 * k, y as f64 * k);
+                    let a = 0.5 + 0.5 * (fx + 0.9 * (fy + 0.5).sin()).cos();
+                    let b = 0.5 + 0.5 * (fy + 0.9 * (fx * 1.0 + 1.3).sin()).cos();
+                    tile[y * p + x] = ((a * b).powi(3) * strength * 255.0)
+                        .round()
+                        .clamp(0.0, 255.0) as u8;
+                }
+            }
+            r.caustic = Some((tile, p, period as f32));
+        }
+        if let Some(sigma) = effects.noise_sigma {
+            let mut g = rng::stream(seed, "camera-noise-table");
+            let table = (0..NOISE_TABLE)
+                .map(|_| {
+                    let z: f64 = StandardNormal.sample(&mut g);
+                    (z * sigma).round().clamp(-255.0, 255.0) as i16
+                })
+                .collect();
+            r.noise = Some(table);
+        }
+        if let Some(gain) = effects.exposure_gain {
+            let mut lut = [0u8; 256];
+            for (i, v) in lut.iter_mut().enumerate() {
+                *v = (i as f64 * gain).round().clamp(0.0, 255.0) as u8;
+            }
+            r.exposure = Some(lut);
+        }
+        r
+    }
+
+    /// Colour after the light path `d` (m) through the medium, for declared effects.
+    fn medium(&self, mut c: Rgb, d: f64) -> Rgb {
+        if let Some(k) = self.effects.attenuation_per_m {
+            // LED → object → camera: twice the distance.
+            for i in 0..3 {
+                c[i] *= (-k[i] * 2.0 * d).exp() as f32;
+            }
+        }
+        if let Some((b, veil)) = self.effects.turbidity {
+            let v = (b * (1.0 - (-d / TURBIDITY_M).exp())) as f32;
+            for i in 0..3 {
+                c[i] = c[i] * (1.0 - v) + f32::from(veil[i]) * v;
+            }
+        }
+        c
+    }
+
+    fn make_background(&self, finger: &FingerGeometry) -> Vec<u8> {
+        let mut bg = vec![0u8; W * H * 3];
+        let mag = self.focal / FOCAL_PX;
+        // A dim lab scene: vertical gradient with soft bands (computed once).
+        let mut row_col = vec![[0f32; 3]; H];
+        for (y, rc) in row_col.iter_mut().enumerate() {
+            let v = ((y as f64 - H as f64 / 2.0) / mag + H as f64 / 2.0) / H as f64;
+            *rc = [
+                (30.0 + 18.0 * v) as f32,
+                (44.0 + 22.0 * v) as f32,
+                (62.0 + 30.0 * v) as f32,
+            ];
+        }
+        let mut col_mod = vec![0f32; W];
+        for (x, m) in col_mod.iter_mut().enumerate() {
+            let u = ((x as f64 - W as f64 / 2.0) / mag + W as f64 / 2.0) / W as f64;
+            *m = (0.9 + 0.1 * (u * 9.0).sin() * (u * 2.3).cos()) as f32;
+        }
+        let mut shapes: Vec<(f32, f32, f32, f32, bool, Rgb)> = Vec::new();
+        if let Some(n) = self.effects.clutter_objects {
+            let mut g = rng::stream(self.seed, "background-clutter");
+            // Blues, greens, greys, purples: never the finger's orange.
+            let palette: [Rgb; 6] = [
+                [40.0, 70.0, 140.0],
+                [50.0, 110.0, 70.0],
+                [95.0, 95.0, 100.0],
+                [80.0, 50.0, 120.0],
+                [20.0, 25.0, 30.0],
+                [60.0, 120.0, 130.0],
+            ];
+            for _ in 0..n {
+                let cx = g.random_range(0.0..W as f32);
+                let cy = g.random_range(0.0..H as f32);
+                let hw = g.random_range(10.0..80.0f32);
+                let hh = g.random_range(10.0..80.0f32);
+                let round = g.random_bool(0.5);
+                let c = palette[g.random_range(0..palette.len())];
+                shapes.push((cx, cy, hw, hh, round, c));
+            }
+        }
+        let (a0, b0, _, _) = finger.semi_axes(finger.base_height_m);
+        let d0 = finger.base_height_m - self.z_cam;
+        let (ea, eb) = ((self.focal * a0 / d0) as f32, (self.focal * b0 / d0) as f32);
+        let (cx, cy) = (W as f32 / 2.0, H as f32 / 2.0);
+        let skin = self.medium(FINGER_RGB.map(f32::from), 0.02);
+        for y in 0..H {
+            for x in 0..W {
+                let mut c = row_col[y].map(|v| v * col_mod[x]);
+                let (bx, by) = (
+                    (x as f32 - cx) / mag as f32 + cx,
+                    (y as f32 - cy) / mag as f32 + cy,
+                );
+                for &(sx, sy, hw, hh, round, sc) in &shapes {
+                    let (dx, dy) = ((bx - sx) / hw, (by - sy) / hh);
+                    let inside = if round {
+                        dx * dx + dy * dy <= 1.0
+                    } else {
+                        dx.abs() <= 1.0 && dy.abs() <= 1.0
+                    };
+                    if inside {
+                        c = sc;
+                    }
+                }
+                c = self.medium(c, BACKGROUND_M);
+                // Seen through the translucent skin inside the base ring.
+                let (ex, ey) = ((x as f32 + 0.5 - cx) / eb, (y as f32 + 0.5 - cy) / ea);
+                let e = ex * ex + ey * ey;
+                let tint = if e < 1.0 { 0.22 * (1.0 - e * e) } else { 0.0 };
+                let o = (y * W + x) * 3;
+                for i in 0..3 {
+                    bg[o + i] = (c[i] * (1.0 - tint) + skin[i] * tint)
+                        .round()
+                        .clamp(0.0, 255.0) as u8;
+                }
+            }
+        }
+        bg
+    }
+
+    pub(crate) fn background_copy(&self) -> Vec<u8> {
+        self.background.clone()
+    }
+
+    fn project(&self, p: [f64; 3]) -> Option<(f32, f32, f64)> {
+        let d = p[2] - self.z_cam;
+        if d.is_nan() || d <= 1e-4 {
+            return None;
+        }
+        let u = W as f64 / 2.0 + self.focal * p[1] / d;
+        let v = H as f64 / 2.0 + self.focal * p[0] / d;
+        Some((u as f32, v as f32, d))
+    }
+
+    /// The finger at rest or deformed, with the per-frame effects of frame
+    /// `frame_index` exposed at `t_s` seconds. Raw RGB8, 640×480.
+    pub(crate) fn render(
+        &self,
+        lattice: &Lattice,
+        deformed: &Deformed,
+        frame_index: u64,
+        t_s: f64,
+    ) -> Vec<u8> {
+        let mut img = self.background.clone();
+        self.draw_lattice(&mut img, lattice, deformed);
+        self.apply_effects(&mut img, frame_index, t_s);
+        img
+    }
+
+    pub(crate) fn draw_lattice(&self, img: &mut [u8], lattice: &Lattice, deformed: &Deformed) {
+        let base = FINGER_RGB.map(f32::from);
+        for &(i, j, kind) in &lattice.beams {
+            let (Some(a), Some(b)) = (
+                self.project(deformed.nodes[i]),
+                self.project(deformed.nodes[j]),
+            ) else {
+                continue;
+            };
+            // The cell walls of the metamaterial: rings, longitudinal and surface
+            // diagonal beams. Spokes and inner diagonals carry load but are hidden
+            // (they would only clutter the view), and so are the clamped base's.
+            let (radius_m, shade) = match kind {
+                BeamKind::Ring => (0.0008, 1.0),
+                BeamKind::Longitudinal => (0.0006, 0.9),
+                BeamKind::Diagonal => (0.0003, 0.75),
+                BeamKind::Spoke | BeamKind::CrossDiagonal => continue,
+            };
+            let d = 0.5 * (a.2 + b.2);
+            let half_w = ((self.focal * radius_m / d) as f32).clamp(0.5, 3.0);
+            let light = ((LED_REF_M / d).powf(0.7).clamp(0.45, 1.2) * shade) as f32;
+            let c = self.medium(base.map(|v| (v * light).min(255.0)), d);
+            draw_line(img, (a.0, a.1), (b.0, b.1), half_w, c);
+        }
+    }
+
+    pub(crate) fn apply_effects(&self, img: &mut [u8], frame_index: u64, t_s: f64) {
+        if let Some((tile, p, period)) = &self.caustic {
+            let shift = (t_s * 0.5 * f64::from(*period)) as usize;
+            let (ox, oy) = (shift % p, (shift * 7 / 10) % p);
+            for y in 0..H {
+                let row = &tile[((y + oy) % p) * p..((y + oy) % p + 1) * p];
+                let mut tx = ox;
+                for px in img[y * W * 3..(y + 1) * W * 3].chunks_exact_mut(3) {
+                    let add = row[tx];
+                    for c in px.iter_mut() {
+                        *c = c.saturating_add(add);
+                    }
+                    tx += 1;
+                    if tx == *p {
+                        tx = 0;
+                    }
+                }
+            }
+        }
+        if let Some((per_frame, max_r)) = self.effects.bubbles {
+            let slots = per_frame.ceil() as u64;
+            let frac = per_frame - per_frame.floor();
+            for slot in 0..slots {
+                let mut g = rng::indexed(self.seed, "bubbles", slot);
+                let alive = slot + 1 < slots || frac == 0.0 || g.random_bool(frac.clamp(0.0, 1.0));
+                let u0 = g.random_range(0.0..W as f64);
+                let v0 = g.random_range(0.0..H as f64);
+                let r = g.random_range(0.3..=1.0) * max_r;
+                let speed = g.random_range(40.0..160.0);
+                if !alive {
+                    continue;
+                }
+                let span = H as f64 + 4.0 * max_r;
+                let v = (v0 - speed * t_s).rem_euclid(span) - 2.0 * max_r;
+                let u = u0 + 6.0 * (t_s * 2.0 + slot as f64).sin();
+                draw_bubble(img, u as f32, v as f32, r as f32);
+            }
+        }
+        if let Some(lut) = &self.exposure {
+            for v in img.iter_mut() {
+                *v = lut[usize::from(*v)];
+            }
+        }
+        if let Some(table) = &self.noise {
+            let mut g = rng::indexed(self.seed, "camera-noise", frame_index);
+            let mut idx: usize = g.random_range(0..NOISE_TABLE);
+            let stride: usize = g.random_range(0..NOISE_TABLE / 2) * 2 + 1;
+            for v in img.iter_mut() {
+                let n = table[idx & (NOISE_TABLE - 1)];
+                *v = (i16::from(*v) + n).clamp(0, 255) as u8;
+                idx = idx.wrapping_add(stride);
+            }
+        }
+    }
+}
+
+/// Blend `c` into pixel `(x, y)` with coverage `a`.
+#[inline]
+fn blend(img: &mut [u8], x: i32, y: i32, c: Rgb, a: f32) {
+    if x < 0 || y < 0 || x >= W as i32 || y >= H as i32 || a <= 0.0 {
+        return;
+    }
+    let o = (y as usize * W + x as usize) * 3;
+    for i in 0..3 {
+        let p = f32::from(img[o + i]);
+        // `as u8` saturates; +0.5 rounds.
+        img[o + i] = (p + (c[i] - p) * a + 0.5) as u8;
+    }
+}
+
+/// A thick anti-aliased segment: walks the major axis and, for each column, covers
+/// the pixels of the band around the line by their perpendicular distance to it
+/// (exact distance to the segment only past its ends). No trigonometry per pixel.
+fn draw_line(img: &mut [u8], p0: (f32, f32), p1: (f32, f32), half_w: f32, c: Rgb) {
+    let (dx, dy) = (p1.0 - p0.0, p1.1 - p0.1);
+    let x_major = dx.abs() >= dy.abs();
+    // Swap axes so the walk is always along the major axis ("a").
+    let (a0, b0, a1, b1) = if x_major {
+        (p0.0, p0.1, p1.0, p1.1)
+    } else {
+        (p0.1, p0.0, p1.1, p1.0)
+    };
+    let (da, db) = (a1 - a0, b1 - b0);
+    let len2 = da * da + db * db;
+    let slope = if da.abs() > 1e-6 { db / da } else { 0.0 };
+    let norm = (1.0 + slope * slope).sqrt();
+    let inv_norm = 1.0 / norm;
+    let reach = half_w + 1.0;
+    let across = reach * norm + 0.5;
+    let (amin, amax) = (a0.min(a1), a0.max(a1));
+    let limit_a = if x_major { W as i32 } else { H as i32 };
+    let limit_b = if x_major { H as i32 } else { W as i32 };
+    let lo = ((amin - reach).floor() as i32).max(0);
+    let hi = ((amax + reach).ceil() as i32).min(limit_a - 1);
+    let edge = half_w + 0.5;
+    for ia in lo..=hi {
+        let ac = ia as f32 + 0.5;
+        let inside = ac >= amin && ac <= amax;
+        let bc = b0 + (ac.clamp(amin, amax) - a0) * slope;
+        let blo = ((bc - across).floor() as i32).max(0);
+        let bhi = ((bc + across).ceil() as i32).min(limit_b - 1);
+        for ib in blo..=bhi {
+            let pb = ib as f32 + 0.5;
+            let d = if inside {
+                (pb - bc).abs() * inv_norm
+            } else {
+                let t = if len2 > 1e-12 {
+                    (((ac - a0) * da + (pb - b0) * db) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let (ea, eb) = (a0 + t * da - ac, b0 + t * db - pb);
+                (ea * ea + eb * eb).sqrt()
+            };
+            let cov = (edge - d).clamp(0.0, 1.0);
+            if cov > 0.0 {
+                let (x, y) = if x_major { (ia, ib) } else { (ib, ia) };
+                blend(img, x, y, c, cov);
+            }
+        }
+    }
+}
+
+/// A bubble: a bright anti-aliased rim with a faint fill.
+fn draw_bubble(img: &mut [u8], cx: f32, cy: f32, r: f32) {
+    let rim = [235.0, 245.0, 255.0];
+    let lo_x = (cx - r - 2.0).floor() as i32;
+    let hi_x = (cx + r + 2.0).ceil() as i32;
+    let lo_y = (cy - r - 2.0).floor() as i32;
+    let hi_y = (cy + r + 2.0).ceil() as i32;
+    for y in lo_y..=hi_y {
+        for x in lo_x..=hi_x {
+            let (ddx, ddy) = (x as f32 + 0.5 - cx, y as f32 + 0.5 - cy);
+            let d = (ddx * ddx + ddy * ddy).sqrt();
+            let ring = (1.2 - (d - r).abs()).clamp(0.0, 1.0) * 0.8;
+            let fill = if d < r { 0.12 } else { 0.0 };
+            blend(img, x, y, rim, ring.max(fill));
+        }
+    }
+}
