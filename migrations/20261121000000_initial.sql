@@ -7,6 +7,8 @@ CREATE TABLE runs (
     status           TEXT    NOT NULL CHECK (status IN ('running', 'completed', 'stopped', 'failed')),
     seed             INTEGER NOT NULL,
     samples_planned  INTEGER NOT NULL CHECK (samples_planned >= 0),
+    rod_schedule     TEXT    NOT NULL,  -- rod names, comma-separated, taken in blocks
+    rod_block        INTEGER NOT NULL CHECK (rod_block >= 1),  -- samples per rod block
     scene_name       TEXT    NOT NULL,
     medium           TEXT    NOT NULL CHECK (medium IN ('air', 'water')),
     rig_toml         TEXT    NOT NULL,  -- resolved rig config, replayable

@@ -173,6 +173,8 @@ fn runs_shows_each_runs_status_and_counts() {
             .create_run(&NewRun {
                 seed: 42,
                 samples_planned: 3,
+                rod_schedule: &["circle-10".to_owned()],
+                rod_block: 3,
                 scene_name: "on-land",
                 medium: Medium::Air,
                 rig_toml: defaults::RIG_TOML,
@@ -212,10 +214,10 @@ fn runs_shows_each_runs_status_and_counts() {
                 .append_sample(
                     run,
                     &sample,
-                    FrameRecord {
+                    Some(FrameRecord {
                         meta,
                         data: &[0, 0, 0],
-                    },
+                    }),
                     &[],
                 )
                 .await
@@ -236,5 +238,84 @@ fn runs_shows_each_runs_status_and_counts() {
         &cols[..9],
         ["1", "stopped", "on-land", "air", "42", "3", "2", "0", "1"],
         "{table}"
+    );
+}
+
+#[test]
+fn sim_netft_serves_the_simulated_sensor_to_a_real_net_ft_client() {
+    use softtouch_drivers::netft::client::{NetFtClient, NetFtConfig, Scaling};
+    use softtouch_drivers::{Clock, ForceSensor as _, TokioClock};
+    use std::io::BufRead as _;
+    use std::sync::Arc;
+
+    let dir = tempdir();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_softtouch"))
+        .args([
+            "sim",
+            "netft",
+            "--bind",
+            "127.0.0.1:0",
+            "--pose",
+            "0.04,0.0,0.3",
+            "--rate-hz",
+            "2000",
+        ])
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mut line = String::new();
+    let stdout = child.stdout.take().unwrap_or_else(|| panic!("no stdout"));
+    std::io::BufReader::new(stdout)
+        .read_line(&mut line)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let addr = |scheme: &str| -> std::net::SocketAddr {
+        let start = line
+            .find(scheme)
+            .unwrap_or_else(|| panic!("no {scheme} in {line}"))
+            + scheme.len();
+        let rest = &line[start..];
+        let end = rest.find([',', ';', ' ']).unwrap_or(rest.len());
+        rest[..end]
+            .parse()
+            .unwrap_or_else(|e| panic!("{e}: {line}"))
+    };
+    let (rdt, cal) = (addr("udp://"), addr("tcp://"));
+
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let readings = rt.block_on(async {
+        let clock: Arc<dyn Clock> = Arc::new(TokioClock::new());
+        let mut config = NetFtConfig::new(rdt, 2000.0);
+        config.scaling = Scaling::CalibrationRequest(cal);
+        let mut client = NetFtClient::connect(config, clock)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        client.start().await.unwrap_or_else(|e| panic!("{e}"));
+        let mut out = Vec::new();
+        while out.len() < 400 {
+            client
+                .read(&mut out)
+                .await
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        let _ = client.stop().await;
+        out
+    });
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(readings.iter().all(|r| r.status.is_ok()));
+    let force = readings[0].wrench_in_sensor.force_norm_n();
+    assert!(
+        force > 0.5 && force < 20.0,
+        "the finger is pressed: {force} N"
+    );
+    assert!(
+        readings
+            .windows(2)
+            .all(|w| w[1].rdt_sequence == w[0].rdt_sequence.wrapping_add(1))
     );
 }

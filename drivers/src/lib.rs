@@ -8,6 +8,13 @@
 //! - [`error`]: [`DeviceError`], which keeps "the device refused or reported a fault"
 //!   apart from "the link failed".
 //! - [`arm`], [`force`], [`camera`], [`gripper`]: the device traits and their data.
+//! - Real drivers, each speaking its wire protocol over an injected transport:
+//!   [`netft`] (ATI Net F/T RDT over UDP, with a simulated server), [`ati_serial`]
+//!   (ATI serial F/T controller, ASCII, with a simulated controller), [`hande`]
+//!   (Robotiq Hand-E, Modbus RTU through tokio-modbus, with a simulated Hand-E),
+//!   [`franka`] (Panda through franka-rs on its own thread), `v4l_camera` (V4L2,
+//!   behind feature `v4l`, which needs libclang to build).
+//! - [`select`]: a rig of boxed devices from the rig config, real or simulated.
 //! - [`sim`]: the simulated scene (finger, contact, lattice, renderer, effects) and the
 //!   simulated twin of every device.
 //!
@@ -15,12 +22,19 @@
 //! devices from the rig config, real and simulated alike.
 
 pub mod arm;
+pub mod ati_serial;
 pub mod camera;
 pub mod clock;
 pub mod error;
 pub mod force;
+pub mod franka;
 pub mod gripper;
+pub mod hande;
+pub mod netft;
+pub mod select;
 pub mod sim;
+#[cfg(feature = "v4l")]
+pub mod v4l_camera;
 
 pub use arm::{Arm, ArmState};
 pub use camera::{Camera, Frame};

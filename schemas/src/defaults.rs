@@ -27,6 +27,7 @@ pub fn scene() -> SceneSpec {
 }
 
 #[cfg(test)]
+#[allow(clippy::float_cmp)] // exact values are the point of these tests
 mod tests {
     use super::*;
     use crate::config::{Check, to_toml};

@@ -228,6 +228,7 @@ fn quat_normalize(q: [f64; 4]) -> [f64; 4] {
 }
 
 #[cfg(test)]
+#[allow(clippy::float_cmp)] // exact values are the point of these tests
 mod tests {
     use super::*;
     use proptest::prelude::*;
@@ -273,7 +274,7 @@ mod tests {
 
         #[test]
         fn a_contact_pose_survives_the_trip_through_the_arm_frame(
-            x in -0.05..0.05f64, z in -0.05..0.05f64, theta in -3.14..3.14f64,
+            x in -0.05..0.05f64, z in -0.05..0.05f64, theta in -3.1..3.1f64,
             rod_yaw in -3.0..3.0f64, rx in -1.0..1.0f64,
         ) {
             let rod = ArmPose::from_translation_yaw([rx, 0.1, 0.3], rod_yaw);

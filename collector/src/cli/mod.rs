@@ -3,9 +3,13 @@
 //! Exit codes: 0 success; 1 runtime failure (a device, the database, I/O); 2 bad input
 //! (arguments, config or scene files, a missing database or run).
 
+pub mod bench;
+pub mod collect;
 pub mod config;
+pub mod dataset;
 pub mod db;
 pub mod runs;
+pub mod sim;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -53,9 +57,27 @@ pub enum Command {
     /// Manage the database.
     #[command(subcommand)]
     Db(db::DbCommand),
+    /// Curate datasets: create (filters, 7:1:2 splits), list, stats, export, import.
+    #[command(subcommand)]
+    Dataset(dataset::DatasetCommand),
     /// List runs with their sample counts and status.
     #[command(after_help = "Example:\n  softtouch runs\n  softtouch --db lab.db runs")]
     Runs,
+    /// Collect samples: press the finger on rods at random poses, record frames and
+    /// force/torque, store each sample as it is taken.
+    Collect(collect::CollectArgs),
+    /// Show runs in detail: counts, rate and the latest events.
+    #[command(after_help = "Examples:\n  softtouch status\n  softtouch status 3")]
+    Status {
+        /// Only this run (with more of its events).
+        run: Option<i64>,
+    },
+    /// Look at the simulated scene.
+    #[command(subcommand)]
+    Sim(sim::SimCommand),
+    /// Measure: what accuracy costs in time, where the time goes, store ingest.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
 }
 
 /// A failed command, with its class for the exit code.
@@ -106,7 +128,12 @@ pub async fn run(cli: Cli, out: &mut dyn std::io::Write) -> Result<(), Failure> 
     match cli.command {
         Command::Config(cmd) => config::run(cmd, out),
         Command::Db(cmd) => db::run(cmd, &cli.db, out).await,
+        Command::Dataset(cmd) => dataset::run(cmd, &cli.db, out).await,
         Command::Runs => runs::run(&cli.db, out).await,
+        Command::Collect(args) => collect::run_collect(args, &cli.db, out).await,
+        Command::Status { run } => collect::run_status(&cli.db, run, out).await,
+        Command::Sim(cmd) => sim::run(cmd, out).await,
+        Command::Bench(cmd) => bench::run(cmd, out).await,
     }
 }
 

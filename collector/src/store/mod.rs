@@ -6,7 +6,10 @@
 //! that is already there changes nothing. Queries are built at run time (no
 //! `DATABASE_URL` needed to compile).
 
+mod sync;
 mod window;
+
+pub use sync::{LabelRow, OwnedNewRun, SyncStore, WriterStats, encode_for_store};
 
 pub use window::{WINDOW_ENCODING, decode_window, encode_window};
 
@@ -126,6 +129,10 @@ pub struct NewRun<'a> {
     pub seed: u64,
     /// Samples planned.
     pub samples_planned: u64,
+    /// Rod names in the order they are used.
+    pub rod_schedule: &'a [String],
+    /// Samples per rod block.
+    pub rod_block: u64,
     /// Scene name.
     pub scene_name: &'a str,
     /// Medium.
@@ -183,6 +190,8 @@ pub struct RunSummary {
     pub created_at: String,
     /// Last change (UTC).
     pub updated_at: String,
+    /// Hours from creation to the last change.
+    pub hours: f64,
 }
 
 /// An event as stored.
@@ -287,9 +296,9 @@ impl Store {
     /// Record a new run (status `running`) and return its id.
     pub async fn create_run(&self, run: &NewRun<'_>) -> Result<RunId, StoreError> {
         let sql = concat!(
-            "INSERT INTO runs (status, seed, samples_planned, scene_name, medium, rig_toml, scene_toml,
-                               software_version, schema_version, created_at, updated_at)
-             VALUES ('running', ?, ?, ?, ?, ?, ?, ?, ?, ",
+            "INSERT INTO runs (status, seed, samples_planned, rod_schedule, rod_block, scene_name, medium,
+                               rig_toml, scene_toml, software_version, schema_version, created_at, updated_at)
+             VALUES ('running', ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ",
             now_sql!(),
             ", ",
             now_sql!(),
@@ -300,6 +309,8 @@ impl Store {
         let result = sqlx::query(sql)
             .bind(seed)
             .bind(to_i64("samples_planned", run.samples_planned)?)
+            .bind(run.rod_schedule.join(","))
+            .bind(to_i64("rod_block", run.rod_block)?)
             .bind(run.scene_name)
             .bind(run.medium.as_str())
             .bind(run.rig_toml)
@@ -342,7 +353,7 @@ impl Store {
         &self,
         run_id: RunId,
         sample: &Sample,
-        frame: FrameRecord<'_>,
+        frame: Option<FrameRecord<'_>>,
         window: &[FtReading],
     ) -> Result<Appended, StoreError> {
         let index = to_i64("sample index", sample.index)?;
@@ -410,21 +421,24 @@ impl Store {
             return Ok(Appended::AlreadyPresent);
         }
 
-        sqlx::query(
-            "INSERT INTO frames (run_id, sample_index, format, width, height, sequence, t_ns, data)
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-        )
-        .bind(run_id)
-        .bind(index)
-        .bind(frame.meta.format.as_str())
-        .bind(i64::from(frame.meta.width))
-        .bind(i64::from(frame.meta.height))
-        .bind(to_i64("frame sequence", frame.meta.sequence)?)
-        .bind(to_i64("frame time", frame.meta.t.0)?)
-        .bind(frame.data)
-        .execute(&mut *tx)
-        .await
-        .map_err(query_err("inserting a frame"))?;
+        // A sample rejected before any frame came (frame timeout, arm fault) has none.
+        if let Some(frame) = frame {
+            sqlx::query(
+                "INSERT INTO frames (run_id, sample_index, format, width, height, sequence, t_ns, data)
+                 VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+            )
+            .bind(run_id)
+            .bind(index)
+            .bind(frame.meta.format.as_str())
+            .bind(i64::from(frame.meta.width))
+            .bind(i64::from(frame.meta.height))
+            .bind(to_i64("frame sequence", frame.meta.sequence)?)
+            .bind(to_i64("frame time", frame.meta.t.0)?)
+            .bind(frame.data)
+            .execute(&mut *tx)
+            .await
+            .map_err(query_err("inserting a frame"))?;
+        }
 
         sqlx::query(
             "INSERT INTO ft_windows (run_id, sample_index, encoding, reading_count, data) VALUES (?, ?, ?, ?, ?)",
@@ -493,7 +507,8 @@ impl Store {
                     COALESCE(s.ok, 0) AS ok, COALESCE(s.rejected, 0) AS rejected,
                     COALESCE(s.retried, 0) AS retried,
                     COALESCE(e.events, 0) AS events, COALESCE(e.faults, 0) AS faults,
-                    r.created_at, r.updated_at
+                    r.created_at, r.updated_at,
+                    (julianday(r.updated_at) - julianday(r.created_at)) * 24.0 AS hours
              FROM runs r
              LEFT JOIN (SELECT run_id,
                                SUM(status = 'ok') AS ok,
@@ -560,6 +575,50 @@ impl Store {
             .await
             .map_err(query_err("checking integrity"))?;
         Ok(rows.join("; "))
+    }
+}
+
+/// What a run recorded about itself: enough to resume or replay it.
+#[derive(Debug, Clone, PartialEq, FromRow)]
+pub struct RunRecord {
+    /// The run.
+    pub run_id: RunId,
+    /// Status.
+    pub status: String,
+    /// Seed, as the bit pattern of a u64.
+    pub seed: i64,
+    /// Samples planned.
+    pub samples_planned: i64,
+    /// Rod names, comma-separated.
+    pub rod_schedule: String,
+    /// Samples per rod block.
+    pub rod_block: i64,
+    /// Resolved rig config.
+    pub rig_toml: String,
+    /// Resolved scene.
+    pub scene_toml: String,
+}
+
+impl RunRecord {
+    /// The seed as given.
+    #[must_use]
+    pub fn seed_u64(&self) -> u64 {
+        u64::from_ne_bytes(self.seed.to_ne_bytes())
+    }
+}
+
+impl Store {
+    /// The run's provenance, for resume.
+    pub async fn run_record(&self, run_id: RunId) -> Result<RunRecord, StoreError> {
+        sqlx::query_as::<_, RunRecord>(
+            "SELECT run_id, status, seed, samples_planned, rod_schedule, rod_block, rig_toml, scene_toml
+             FROM runs WHERE run_id = ?",
+        )
+        .bind(run_id)
+        .fetch_optional(&self.pool)
+        .await
+        .map_err(query_err("reading a run"))?
+        .ok_or(StoreError::NoSuchRun(run_id))
     }
 }
 

@@ -61,6 +61,8 @@ async fn new_run(store: &Store) -> RunId {
         .create_run(&NewRun {
             seed: u64::MAX,
             samples_planned: 10,
+            rod_schedule: &["circle-10".to_owned()],
+            rod_block: 10,
             scene_name: "on-land",
             medium: Medium::Air,
             rig_toml: "[arm]",
@@ -101,10 +103,10 @@ async fn a_sample_is_written_with_its_frame_and_window_and_a_second_write_change
     })?;
     let store = store_in(&dir).await;
     let run = new_run(&store).await;
-    let frame = FrameRecord {
+    let frame = Some(FrameRecord {
         meta: meta(),
         data: &[1, 2, 3, 4, 5, 6],
-    };
+    });
     assert_eq!(
         store
             .append_sample(run, &sample(0), frame, &window())
@@ -154,10 +156,10 @@ async fn a_transaction_that_fails_midway_leaves_nothing_half_written() -> Result
         .append_sample(
             run,
             &sample(0),
-            FrameRecord {
+            Some(FrameRecord {
                 meta: meta(),
                 data: &[1],
-            },
+            }),
             &window(),
         )
         .await?;
@@ -168,10 +170,10 @@ async fn a_transaction_that_fails_midway_leaves_nothing_half_written() -> Result
         .append_sample(
             run,
             &sample(1),
-            FrameRecord {
+            Some(FrameRecord {
                 meta: meta(),
                 data: &[],
-            },
+            }),
             &window(),
         )
         .await
@@ -195,10 +197,10 @@ async fn a_transaction_that_fails_midway_leaves_nothing_half_written() -> Result
         .append_sample(
             run,
             &sample(1),
-            FrameRecord {
+            Some(FrameRecord {
                 meta: meta(),
                 data: &[9],
-            },
+            }),
             &window(),
         )
         .await?;
@@ -222,10 +224,10 @@ async fn runs_list_counts_ok_rejected_retries_and_faults() -> Result<(), StoreEr
     })?;
     let store = store_in(&dir).await;
     let run = new_run(&store).await;
-    let frame = FrameRecord {
+    let frame = Some(FrameRecord {
         meta: meta(),
         data: &[1],
-    };
+    });
     store
         .append_sample(run, &sample(0), frame, &window())
         .await?;
@@ -265,6 +267,19 @@ async fn runs_list_counts_ok_rejected_retries_and_faults() -> Result<(), StoreEr
         ("completed", 1, 1, 2, 2, 1)
     );
     assert_eq!(r.seed, -1, "u64::MAX is stored as its bit pattern");
+    let record = store.run_record(run).await?;
+    assert_eq!(
+        (
+            record.seed_u64(),
+            record.rod_schedule.as_str(),
+            record.rod_block
+        ),
+        (u64::MAX, "circle-10", 10)
+    );
+    assert!(matches!(
+        store.run_record(7).await,
+        Err(StoreError::NoSuchRun(7))
+    ));
     let events = store.events(run, 1).await?;
     assert_eq!(events.len(), 1);
     assert_eq!(events[0].kind, "started");
@@ -289,10 +304,10 @@ async fn a_store_dropped_without_closing_reopens_intact() -> Result<(), StoreErr
                 .append_sample(
                     run,
                     &sample(i),
-                    FrameRecord {
+                    Some(FrameRecord {
                         meta: meta(),
                         data: &[1, 2],
-                    },
+                    }),
                     &window(),
                 )
                 .await?;
@@ -308,6 +323,28 @@ async fn a_store_dropped_without_closing_reopens_intact() -> Result<(), StoreErr
             samples: 20,
             frames: 20,
             windows: 20
+        }
+    );
+    Ok(())
+}
+
+#[tokio::test]
+async fn a_sample_rejected_before_any_frame_is_stored_without_one() -> Result<(), StoreError> {
+    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
+        what: "tempdir",
+        why: e.to_string(),
+    })?;
+    let store = store_in(&dir).await;
+    let run = new_run(&store).await;
+    let mut s = sample(0);
+    s.status = SampleStatus::Rejected(RejectReason::FrameTimeout);
+    store.append_sample(run, &s, None, &[]).await?;
+    assert_eq!(
+        store.row_counts(run).await?,
+        RowCounts {
+            samples: 1,
+            frames: 0,
+            windows: 1
         }
     );
     Ok(())

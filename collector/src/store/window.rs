@@ -28,7 +28,7 @@ pub fn encode_window(readings: &[FtReading]) -> Vec<u8> {
 /// Unpack readings; `None` if the blob is not a whole number of records.
 #[must_use]
 pub fn decode_window(blob: &[u8]) -> Option<Vec<FtReading>> {
-    if blob.len() % RECORD != 0 {
+    if !blob.len().is_multiple_of(RECORD) {
         return None;
     }
     let u32_at = |b: &[u8], at: usize| {

@@ -52,6 +52,12 @@ pub struct ContactParams {
     /// Tangential slip (fraction of the approach) at which friction is fully developed
     /// (regularised Coulomb: friction = μ·N·tanh(slip / this)).
     pub friction_slip: f64,
+    /// Stress relaxation of the silicone: right after the finger stops pressing, the
+    /// contact wrench is `1 + this` times its equilibrium value, decaying
+    /// exponentially (a standard linear solid under a step strain).
+    pub relaxation_ratio: f64,
+    /// Time constant of that decay, s.
+    pub relaxation_time_s: f64,
 }
 
 impl Default for ContactParams {
@@ -63,6 +69,8 @@ impl Default for ContactParams {
             tip_softening: 0.85,
             friction: 0.4,
             friction_slip: 0.05,
+            relaxation_ratio: 0.12,
+            relaxation_time_s: 0.06,
         }
     }
 }

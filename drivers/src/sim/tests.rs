@@ -482,6 +482,48 @@ async fn the_arm_reflex_effect_injects_faults() {
 }
 
 #[tokio::test(start_paused = true)]
+async fn the_contact_force_relaxes_to_equilibrium_after_the_arm_stops() {
+    let clock = TokioClock::new();
+    let scene = bare();
+    let mut rig = SimRig::new(&defaults::rig(), &scene, 4, clock).expect("rig");
+    let p = pose(0.03, 0.0, 0.3);
+    rig.arm.move_to(&target(p), 0.1).await.expect("move");
+    rig.force_sensor.start().await.expect("start");
+    let t0 = clock.now();
+    let readings = collect(
+        &mut rig.force_sensor,
+        TimestampNs(t0.0 + 400_000_000),
+        &clock,
+    )
+    .await;
+    let truth = render_contact(&scene, "circle-10", &p, 4)
+        .expect("render")
+        .wrench_in_sensor;
+    let ratio = |r: &FtReading| r.wrench_in_sensor.force_norm_n() / truth.force_norm_n();
+    let params = ContactParams::default();
+    let first = ratio(&readings[0]);
+    let expect_first = 1.0
+        + params.relaxation_ratio
+            * (-((readings[0].t.0 - t0.0) as f64 * 1e-9) / params.relaxation_time_s).exp();
+    assert!(
+        (first - expect_first).abs() < 1e-3,
+        "{first} vs {expect_first}"
+    );
+    assert!(first > 1.05, "force is raised right after arrival: {first}");
+    assert!(
+        readings
+            .windows(2)
+            .all(|w| ratio(&w[1]) <= ratio(&w[0]) + 1e-9),
+        "decays monotonically"
+    );
+    let last = readings.last().map(ratio).unwrap_or_default();
+    assert!(
+        (last - 1.0).abs() < 1e-3,
+        "relaxed to equilibrium after 0.4 s: {last}"
+    );
+}
+
+#[tokio::test(start_paused = true)]
 async fn the_sensor_reads_the_contact_the_arm_made_and_the_camera_sees_it() {
     let clock = TokioClock::new();
     let scene = bare();
@@ -489,6 +531,8 @@ async fn the_sensor_reads_the_contact_the_arm_made_and_the_camera_sees_it() {
     let p = pose(0.035, -0.01, 1.2);
     rig.handle.set_rod("triangle-12").expect("rod");
     rig.arm.move_to(&target(p), 0.1).await.expect("move");
+    // Let the silicone relax to equilibrium (τ = 60 ms): the truth is the equilibrium.
+    tokio::time::sleep(std::time::Duration::from_secs(1)).await;
     rig.force_sensor.start().await.expect("start");
     let t0 = clock.now();
     let readings = collect(

@@ -231,9 +231,23 @@ impl SimWorld {
         Ok(w)
     }
 
-    /// The true contact wrench at `t`.
+    /// The contact wrench at `t`: the equilibrium wrench of the pose, raised by the
+    /// silicone's stress relaxation after the last move ended (the finger at rest).
     pub(crate) fn wrench_at(&mut self, t: TimestampNs) -> Result<Wrench, SimError> {
         let pose = self.pose_at(t);
-        self.wrench_for(&pose)
+        let equilibrium = self.wrench_for(&pose)?;
+        let p = &self.scene.model.params.contact;
+        let arrived = self.segments.last().map(|s| s.t1).filter(|t1| *t1 <= t);
+        let Some(t1) = arrived else {
+            return Ok(equilibrium);
+        };
+        if !(p.relaxation_ratio > 0.0 && p.relaxation_time_s > 0.0) {
+            return Ok(equilibrium);
+        }
+        let since_s = (t.0 - t1.0) as f64 * 1e-9;
+        let factor = 1.0 + p.relaxation_ratio * (-since_s / p.relaxation_time_s).exp();
+        Ok(Wrench::from_array(
+            equilibrium.to_array().map(|v| v * factor),
+        ))
     }
 }

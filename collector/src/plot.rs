@@ -1,0 +1,401 @@
+//! Plots as PNG files with plotters, pure Rust (no system font libraries): the bundled
+//! DejaVu Sans Mono is registered once as `sans-serif` (see [`register_font`]).
+//!
+//! Helpers meant for reuse across the collector (dataset statistics, bench results,
+//! trainer sweeps):
+//! - [`histogram_grid`]: a grid of histogram panels, one per value series.
+//! - [`xy_chart`]: several labelled x–y series as lines, points or both.
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+use std::path::Path;
+use std::sync::OnceLock;
+
+/// The bundled font (DejaVu Sans Mono, license in `assets/DejaVu-LICENSE.txt`).
+const FONT: &[u8] = include_bytes!("../assets/DejaVuSansMono.ttf");
+
+/// The font family every chart here uses.
+pub const FONT_FAMILY: &str = "sans-serif";
+
+/// Colours for series, in order (a colour-blind-safe palette).
+pub const PALETTE: [RGBColor; 6] = [
+    RGBColor(0, 114, 178),
+    RGBColor(230, 159, 0),
+    RGBColor(0, 158, 115),
+    RGBColor(204, 121, 167),
+    RGBColor(86, 180, 233),
+    RGBColor(213, 94, 0),
+];
+
+/// Drawing a plot failed.
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    /// The bundled font could not be loaded.
+    #[error("cannot load the bundled font")]
+    Font,
+    /// Drawing or writing the file failed.
+    #[error("cannot draw {path}: {why}")]
+    Draw {
+        /// The output file.
+        path: String,
+        /// Why.
+        why: String,
+    },
+    /// Nothing to draw, or a bad layout.
+    #[error("cannot draw {path}: {why}")]
+    Invalid {
+        /// The output file.
+        path: String,
+        /// Why.
+        why: String,
+    },
+}
+
+/// Register the bundled font as [`FONT_FAMILY`] (normal style) once per process.
+/// Every helper here calls it; call it yourself before drawing with plotters directly.
+pub fn register_font() -> Result<(), PlotError> {
+    static REGISTERED: OnceLock<bool> = OnceLock::new();
+    let ok = *REGISTERED.get_or_init(|| {
+        plotters::style::register_font(FONT_FAMILY, FontStyle::Normal, FONT).is_ok()
+    });
+    if ok { Ok(()) } else { Err(PlotError::Font) }
+}
+
+fn draw_err<E: std::fmt::Display>(path: &Path) -> impl Fn(E) -> PlotError + '_ {
+    move |e| PlotError::Draw {
+        path: path.display().to_string(),
+        why: e.to_string(),
+    }
+}
+
+/// One histogram panel.
+#[derive(Debug, Clone)]
+pub struct HistogramPanel<'a> {
+    /// Title above the panel, e.g. `Fx`.
+    pub title: String,
+    /// Label of the x axis, with the unit, e.g. `force (N)`.
+    pub x_label: String,
+    /// The values (non-finite ones are skipped).
+    pub values: &'a [f64],
+    /// Number of bins (at least 1).
+    pub bins: usize,
+}
+
+/// Bin finite values into `bins` equal bins over their range: `(low, high, count)`.
+#[must_use]
+pub fn bin(values: &[f64], bins: usize) -> Vec<(f64, f64, u64)> {
+    let bins = bins.max(1);
+    let finite = values.iter().copied().filter(|v| v.is_finite());
+    let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+        (lo.min(v), hi.max(v))
+    });
+    if lo > hi {
+        return Vec::new();
+    }
+    // A constant series gets a unit-wide range around its value.
+    let (lo, hi) = if hi > lo {
+        (lo, hi)
+    } else {
+        (lo - 0.5, hi + 0.5)
+    };
+    let width = (hi - lo) / bins as f64;
+    let mut counts = vec![0u64; bins];
+    for v in values.iter().copied().filter(|v| v.is_finite()) {
+        let i = (((v - lo) / width) as usize).min(bins - 1);
+        if let Some(c) = counts.get_mut(i) {
+            *c += 1;
+        }
+    }
+    counts
+        .into_iter()
+        .enumerate()
+        .map(|(i, c)| (lo + width * i as f64, lo + width * (i + 1) as f64, c))
+        .collect()
+}
+
+/// Draw histogram panels in a grid of `columns` columns into a PNG of `size` pixels,
+/// with an optional title over the whole figure.
+pub fn histogram_grid(
+    path: &Path,
+    title: Option<&str>,
+    panels: &[HistogramPanel<'_>],
+    columns: usize,
+    size: (u32, u32),
+) -> Result<(), PlotError> {
+    register_font()?;
+    if panels.is_empty() || columns == 0 {
+        return Err(PlotError::Invalid {
+            path: path.display().to_string(),
+            why: "no panels".into(),
+        });
+    }
+    let rows = panels.len().div_ceil(columns);
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    root.fill(&WHITE).map_err(draw_err(path))?;
+    let body = match title {
+        Some(t) => root.titled(t, (FONT_FAMILY, 26)).map_err(draw_err(path))?,
+        None => root.clone(),
+    };
+    let areas = body.split_evenly((rows, columns));
+    for (i, (panel, area)) in panels.iter().zip(areas.iter()).enumerate() {
+        draw_histogram(path, area, panel, PALETTE[i % PALETTE.len()])?;
+    }
+    root.present().map_err(draw_err(path))?;
+    Ok(())
+}
+
+fn draw_histogram(
+    path: &Path,
+    area: &DrawingArea<BitMapBackend<'_>, Shift>,
+    panel: &HistogramPanel<'_>,
+    colour: RGBColor,
+) -> Result<(), PlotError> {
+    let bins = bin(panel.values, panel.bins);
+    let (x0, x1) = match (bins.first(), bins.last()) {
+        (Some(f), Some(l)) => (f.0, l.1),
+        _ => (-1.0, 1.0),
+    };
+    let y1 = bins.iter().map(|b| b.2).max().unwrap_or(1).max(1) as f64 * 1.08;
+    let mut chart = ChartBuilder::on(area)
+        .caption(&panel.title, (FONT_FAMILY, 20))
+        .margin(8)
+        .x_label_area_size(40)
+        .y_label_area_size(56)
+        .build_cartesian_2d(x0..x1, 0.0..y1)
+        .map_err(draw_err(path))?;
+    chart
+        .configure_mesh()
+        .x_desc(panel.x_label.as_str())
+        .y_desc("samples")
+        .x_labels(6)
+        .y_labels(5)
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .x_label_formatter(&|v| format_tick(*v))
+        .label_style((FONT_FAMILY, 13))
+        .axis_desc_style((FONT_FAMILY, 15))
+        .light_line_style(WHITE)
+        .draw()
+        .map_err(draw_err(path))?;
+    chart
+        .draw_series(bins.iter().map(|&(lo, hi, count)| {
+            Rectangle::new([(lo, 0.0), (hi, count as f64)], colour.mix(0.85).filled())
+        }))
+        .map_err(draw_err(path))?;
+    Ok(())
+}
+
+/// Tick text: few digits, no trailing zeros (`-5`, `0.5`, `2.25`, `1.2e-4`).
+fn format_tick(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && a < 0.01 {
+        return format!("{v:.1e}");
+    }
+    let text = if a >= 100.0 {
+        format!("{v:.0}")
+    } else {
+        format!("{v:.2}")
+    };
+    let text = if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_owned()
+    } else {
+        text
+    };
+    if text == "-0" { "0".into() } else { text }
+}
+
+/// How a series is drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SeriesStyle {
+    /// Connected by lines.
+    Line,
+    /// Markers only.
+    Points,
+    /// Lines and markers.
+    LinePoints,
+}
+
+/// One labelled x–y series.
+#[derive(Debug, Clone)]
+pub struct Series {
+    /// Legend text.
+    pub label: String,
+    /// The points, drawn in order (non-finite ones are skipped).
+    pub points: Vec<(f64, f64)>,
+    /// Lines, points or both.
+    pub style: SeriesStyle,
+}
+
+/// An x–y chart.
+#[derive(Debug, Clone)]
+pub struct XyChart<'a> {
+    /// Title.
+    pub title: &'a str,
+    /// Label of the x axis, with the unit.
+    pub x_label: &'a str,
+    /// Label of the y axis, with the unit.
+    pub y_label: &'a str,
+    /// The series (each gets a colour from [`PALETTE`] and a legend entry).
+    pub series: &'a [Series],
+}
+
+/// Draw an x–y chart into a PNG of `size` pixels. Axis ranges cover every finite
+/// point with a small margin.
+pub fn xy_chart(path: &Path, chart: &XyChart<'_>, size: (u32, u32)) -> Result<(), PlotError> {
+    register_font()?;
+    let points = || {
+        chart
+            .series
+            .iter()
+            .flat_map(|s| s.points.iter().copied())
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+    };
+    let Some((x0, x1, y0, y1)) =
+        points().fold(None, |acc: Option<(f64, f64, f64, f64)>, (x, y)| {
+            Some(match acc {
+                None => (x, x, y, y),
+                Some((a, b, c, d)) => (a.min(x), b.max(x), c.min(y), d.max(y)),
+            })
+        })
+    else {
+        return Err(PlotError::Invalid {
+            path: path.display().to_string(),
+            why: "no finite points".into(),
+        });
+    };
+    let pad = |lo: f64, hi: f64| {
+        let m = if hi > lo { (hi - lo) * 0.05 } else { 0.5 };
+        (lo - m, hi + m)
+    };
+    let (x0, x1) = pad(x0, x1);
+    let (y0, y1) = pad(y0, y1);
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    root.fill(&WHITE).map_err(draw_err(path))?;
+    let mut ctx = ChartBuilder::on(&root)
+        .caption(chart.title, (FONT_FAMILY, 22))
+        .margin(12)
+        .x_label_area_size(44)
+        .y_label_area_size(64)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(draw_err(path))?;
+    ctx.configure_mesh()
+        .x_desc(chart.x_label)
+        .y_desc(chart.y_label)
+        .x_label_formatter(&|v| format_tick(*v))
+        .y_label_formatter(&|v| format_tick(*v))
+        .label_style((FONT_FAMILY, 13))
+        .axis_desc_style((FONT_FAMILY, 15))
+        .draw()
+        .map_err(draw_err(path))?;
+    for (i, s) in chart.series.iter().enumerate() {
+        let colour = PALETTE[i % PALETTE.len()];
+        let pts: Vec<(f64, f64)> = s
+            .points
+            .iter()
+            .copied()
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .collect();
+        let legend = move |(x, y): (i32, i32)| {
+            PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+        };
+        if matches!(s.style, SeriesStyle::Line | SeriesStyle::LinePoints) {
+            ctx.draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
+                .map_err(draw_err(path))?
+                .label(s.label.as_str())
+                .legend(legend);
+        }
+        if matches!(s.style, SeriesStyle::Points | SeriesStyle::LinePoints) {
+            let drawn = ctx
+                .draw_series(PointSeries::of_element(
+                    pts,
+                    3,
+                    colour.filled(),
+                    &|c, s, st| EmptyElement::at(c) + Circle::new((0, 0), s, st),
+                ))
+                .map_err(draw_err(path))?;
+            if s.style == SeriesStyle::Points {
+                drawn
+                    .label(s.label.as_str())
+                    .legend(move |(x, y)| Circle::new((x + 9, y), 3, colour.filled()));
+            }
+        }
+    }
+    ctx.configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT_FAMILY, 14))
+        .draw()
+        .map_err(draw_err(path))?;
+    root.present().map_err(draw_err(path))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bins_cover_every_finite_value_once() {
+        let values = [0.0, 0.1, 0.5, 1.0, f64::NAN, f64::INFINITY];
+        let bins = bin(&values, 4);
+        assert_eq!(bins.len(), 4);
+        assert_eq!(bins.iter().map(|b| b.2).sum::<u64>(), 4);
+        assert_eq!(bins.last().map(|b| b.2), Some(1)); // the maximum lands in the last bin
+        assert!(bin(&[], 4).is_empty());
+        assert_eq!(bin(&[2.0, 2.0], 3).iter().map(|b| b.2).sum::<u64>(), 2);
+    }
+
+    #[test]
+    fn ticks_are_short() {
+        let got: Vec<String> = [-5.0, 0.5, 2.25, 0.0, -0.0001, 150.0, 12.5]
+            .into_iter()
+            .map(format_tick)
+            .collect();
+        assert_eq!(got, ["-5", "0.5", "2.25", "0", "-1.0e-4", "150", "12.5"]);
+    }
+
+    #[test]
+    fn both_helpers_write_png_files() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let values: Vec<f64> = (0..500)
+            .map(|i| (f64::from(i) * 0.37).sin() * 5.0)
+            .collect();
+        let panels: Vec<HistogramPanel<'_>> = ["a", "b", "c", "d"]
+            .iter()
+            .map(|t| HistogramPanel {
+                title: (*t).into(),
+                x_label: "value (N)".into(),
+                values: &values,
+                bins: 20,
+            })
+            .collect();
+        let hist = dir.path().join("h.png");
+        histogram_grid(&hist, Some("test"), &panels, 2, (640, 480))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let chart = dir.path().join("c.png");
+        let series = [
+            Series {
+                label: "line".into(),
+                points: (0..10).map(|i| (f64::from(i), f64::from(i * i))).collect(),
+                style: SeriesStyle::LinePoints,
+            },
+            Series {
+                label: "points".into(),
+                points: (0..10).map(|i| (f64::from(i), f64::from(50 - i))).collect(),
+                style: SeriesStyle::Points,
+            },
+        ];
+        let spec = XyChart {
+            title: "t",
+            x_label: "x (s)",
+            y_label: "y (N)",
+            series: &series,
+        };
+        xy_chart(&chart, &spec, (480, 360)).unwrap_or_else(|e| panic!("{e}"));
+        for p in [hist, chart] {
+            let img = image::open(&p).unwrap_or_else(|e| panic!("{e}"));
+            assert!(img.width() > 100);
+        }
+        assert!(histogram_grid(&dir.path().join("x.png"), None, &[], 2, (10, 10)).is_err());
+    }
+}

@@ -1,0 +1,576 @@
+//! The Franka Emika Panda (FER, FCI v5) through franka-rs (library `franka`).
+//!
+//! franka-rs is synchronous and runs a 1 kHz loop, so the robot lives on its own
+//! thread; [`FrankaArm`] talks to it over channels. A move is a straight line in
+//! Cartesian space (translation interpolated, rotation slerped) along one path
+//! parameter driven by franka-rs's jerk-limited OTG, with limits chosen so the
+//! translation stays within the velocity/acceleration/jerk of [`MotionLimits`] and
+//! the rotation within its rotational limits (PROTOCOLS.md §3). The first setpoint is
+//! seeded from the commanded pose `O_T_EE_c`. Dropping a move's future (a timeout, a
+//! cancelled task) ends the motion at the next cycle.
+//!
+//! The finger's pose is the robot's end-effector frame `O_T_EE`: configure the
+//! finger as the end effector in Desk (or with `set_ee`) so the two agree.
+
+use crate::arm::{Arm, ArmState};
+use crate::clock::Clock;
+use crate::error::DeviceError;
+use async_trait::async_trait;
+use softtouch_schemas::{ArmPose, Wrench};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use tokio::sync::oneshot;
+
+const DEVICE: &str = "franka";
+
+/// Limits of a move (defaults: franka-rs target control's conservative ones).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionLimits {
+    /// Translational acceleration, m/s² (FCI allows 13; one FER refused 2.5).
+    pub accel_m_s2: f64,
+    /// Translational jerk, m/s³ (FCI allows 6500).
+    pub jerk_m_s3: f64,
+    /// Rotational velocity, rad/s (FCI allows 2.5).
+    pub rot_speed_rad_s: f64,
+    /// Rotational acceleration, rad/s² (FCI allows 25).
+    pub rot_accel_rad_s2: f64,
+    /// Rotational jerk, rad/s³ (FCI allows 12500).
+    pub rot_jerk_rad_s3: f64,
+}
+
+impl Default for MotionLimits {
+    fn default() -> Self {
+        Self {
+            accel_m_s2: 0.5,
+            jerk_m_s3: 20.0,
+            rot_speed_rad_s: 0.5,
+            rot_accel_rad_s2: 1.0,
+            rot_jerk_rad_s3: 20.0,
+        }
+    }
+}
+
+/// The FCI's translational velocity limit used here (frankx's 1.7 m/s), m/s.
+pub const MAX_SPEED_M_S: f64 = 1.7;
+
+/// Connection settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrankaConfig {
+    /// The robot's address (`172.16.0.2`, optionally `:port`).
+    pub address: String,
+    /// Upper force threshold of the collision behaviour, N (and 0.1 × that in N·m for
+    /// the Cartesian torques; joint torque thresholds 100 N·m).
+    pub reflex_force_n: f64,
+    /// Move limits.
+    pub limits: MotionLimits,
+}
+
+type Reply<T> = oneshot::Sender<Result<T, DeviceError>>;
+
+enum Cmd {
+    Move {
+        target: ArmPose,
+        speed: f64,
+        reply: Reply<ArmState>,
+    },
+    State {
+        reply: Reply<ArmState>,
+    },
+    Recover {
+        reply: Reply<()>,
+    },
+    Stop {
+        reply: Reply<()>,
+    },
+}
+
+/// A Panda behind a worker thread. Implements [`Arm`].
+#[derive(Debug)]
+pub struct FrankaArm {
+    tx: mpsc::Sender<Cmd>,
+    abort: Arc<AtomicBool>,
+    clock: Arc<dyn Clock>,
+}
+
+impl std::fmt::Debug for Cmd {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Move { .. } => "Move",
+            Self::State { .. } => "State",
+            Self::Recover { .. } => "Recover",
+            Self::Stop { .. } => "Stop",
+        })
+    }
+}
+
+fn err(e: franka::FrankaError) -> DeviceError {
+    use franka::FrankaError as F;
+    match e {
+        F::Control(c) => DeviceError::Fault {
+            device: DEVICE.into(),
+            code: None,
+            message: format!("{} (errors: {})", c.message, c.last_motion_errors),
+        },
+        F::Command(m) => DeviceError::Fault {
+            device: DEVICE.into(),
+            code: None,
+            message: m,
+        },
+        F::Network(m) => DeviceError::Link {
+            device: DEVICE.into(),
+            message: m,
+        },
+        F::Protocol(m) => DeviceError::Protocol {
+            device: DEVICE.into(),
+            message: m,
+        },
+        F::IncompatibleVersion {
+            server_version,
+            library_version,
+        } => DeviceError::Link {
+            device: DEVICE.into(),
+            message: format!(
+                "incompatible FCI version: server {server_version}, library {library_version}"
+            ),
+        },
+        F::InvalidArgument(m) | F::InvalidOperation(m) => DeviceError::InvalidCommand {
+            device: DEVICE.into(),
+            message: m,
+        },
+        other => DeviceError::Fault {
+            device: DEVICE.into(),
+            code: None,
+            message: other.to_string(),
+        },
+    }
+}
+
+fn gone() -> DeviceError {
+    DeviceError::Link {
+        device: DEVICE.into(),
+        message: "the robot thread has stopped".into(),
+    }
+}
+
+/// Column-major 4×4 transform of a pose.
+#[must_use]
+pub fn pose_to_matrix(p: &ArmPose) -> [f64; 16] {
+    let [w, x, y, z] = normalise(p.rotation_wxyz);
+    let r = [
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ];
+    let t = p.translation_m;
+    [
+        r[0][0], r[1][0], r[2][0], 0.0, r[0][1], r[1][1], r[2][1], 0.0, r[0][2], r[1][2], r[2][2],
+        0.0, t[0], t[1], t[2], 1.0,
+    ]
+}
+
+/// The pose of a column-major 4×4 transform.
+#[must_use]
+pub fn matrix_to_pose(m: &[f64; 16]) -> ArmPose {
+    let r = |row: usize, col: usize| m[col * 4 + row];
+    let trace = r(0, 0) + r(1, 1) + r(2, 2);
+    let q = if trace > 0.0 {
+        let s = (trace + 1.0).sqrt() * 2.0;
+        [
+            0.25 * s,
+            (r(2, 1) - r(1, 2)) / s,
+            (r(0, 2) - r(2, 0)) / s,
+            (r(1, 0) - r(0, 1)) / s,
+        ]
+    } else if r(0, 0) > r(1, 1) && r(0, 0) > r(2, 2) {
+        let s = (1.0 + r(0, 0) - r(1, 1) - r(2, 2)).sqrt() * 2.0;
+        [
+            (r(2, 1) - r(1, 2)) / s,
+            0.25 * s,
+            (r(0, 1) + r(1, 0)) / s,
+            (r(0, 2) + r(2, 0)) / s,
+        ]
+    } else if r(1, 1) > r(2, 2) {
+        let s = (1.0 + r(1, 1) - r(0, 0) - r(2, 2)).sqrt() * 2.0;
+        [
+            (r(0, 2) - r(2, 0)) / s,
+            (r(0, 1) + r(1, 0)) / s,
+            0.25 * s,
+            (r(1, 2) + r(2, 1)) / s,
+        ]
+    } else {
+        let s = (1.0 + r(2, 2) - r(0, 0) - r(1, 1)).sqrt() * 2.0;
+        [
+            (r(1, 0) - r(0, 1)) / s,
+            (r(0, 2) + r(2, 0)) / s,
+            (r(1, 2) + r(2, 1)) / s,
+            0.25 * s,
+        ]
+    };
+    ArmPose {
+        translation_m: [m[12], m[13], m[14]],
+        rotation_wxyz: normalise(q),
+    }
+}
+
+fn normalise(q: [f64; 4]) -> [f64; 4] {
+    let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if n > 0.0 && n.is_finite() {
+        q.map(|v| v / n)
+    } else {
+        [1.0, 0.0, 0.0, 0.0]
+    }
+}
+
+/// Spherical interpolation from `a` to `b` at `s` ∈ [0, 1] (shortest way).
+#[must_use]
+pub fn slerp(a: [f64; 4], b: [f64; 4], s: f64) -> [f64; 4] {
+    let (a, mut b) = (normalise(a), normalise(b));
+    let mut dot: f64 = (0..4).map(|i| a[i] * b[i]).sum();
+    if dot < 0.0 {
+        b = b.map(|v| -v);
+        dot = -dot;
+    }
+    if dot > 0.9995 {
+        return normalise(std::array::from_fn(|i| a[i] + s * (b[i] - a[i])));
+    }
+    let theta = dot.clamp(-1.0, 1.0).acos();
+    let (wa, wb) = (
+        ((1.0 - s) * theta).sin() / theta.sin(),
+        (s * theta).sin() / theta.sin(),
+    );
+    normalise(std::array::from_fn(|i| wa * a[i] + wb * b[i]))
+}
+
+/// Angle between two orientations, rad.
+#[must_use]
+pub fn angle_between(a: [f64; 4], b: [f64; 4]) -> f64 {
+    let (a, b) = (normalise(a), normalise(b));
+    let dot: f64 = (0..4).map(|i| a[i] * b[i]).sum::<f64>().abs().min(1.0);
+    2.0 * dot.acos()
+}
+
+/// Limits of the path parameter s ∈ [0, 1] for a move of `dist_m` and `angle_rad`,
+/// such that translation and rotation both stay within theirs.
+#[must_use]
+pub fn path_limits(
+    dist_m: f64,
+    angle_rad: f64,
+    speed_m_s: f64,
+    l: &MotionLimits,
+) -> franka::OtgLimits {
+    let per = |lin: f64, rot: f64| {
+        let a = if dist_m > 1e-9 {
+            lin / dist_m
+        } else {
+            f64::INFINITY
+        };
+        let b = if angle_rad > 1e-9 {
+            rot / angle_rad
+        } else {
+            f64::INFINITY
+        };
+        let v = a.min(b);
+        if v.is_finite() { v } else { 1e6 }
+    };
+    franka::OtgLimits {
+        max_velocity: per(speed_m_s.min(MAX_SPEED_M_S), l.rot_speed_rad_s),
+        max_acceleration: per(l.accel_m_s2, l.rot_accel_rad_s2),
+        max_jerk: per(l.jerk_m_s3, l.rot_jerk_rad_s3),
+    }
+}
+
+fn state_of(s: &franka::RobotState, clock: &dyn Clock) -> ArmState {
+    let f = s.O_F_ext_hat_K;
+    ArmState {
+        t: clock.now(),
+        base_from_finger: matrix_to_pose(&s.O_T_EE),
+        external_wrench: Some(Wrench {
+            force_n: [f[0], f[1], f[2]],
+            torque_nm: [f[3], f[4], f[5]],
+        }),
+        faulted: s.robot_mode == franka::RobotMode::Reflex || s.current_errors.any(),
+    }
+}
+
+fn run_move(
+    robot: &franka::Robot,
+    target: &ArmPose,
+    speed: f64,
+    limits: &MotionLimits,
+    abort: &AtomicBool,
+) -> Result<(), DeviceError> {
+    let start = robot.read_once().map_err(err)?;
+    let from = matrix_to_pose(&start.O_T_EE_c);
+    let dist = (0..3)
+        .map(|i| (target.translation_m[i] - from.translation_m[i]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let angle = angle_between(from.rotation_wxyz, target.rotation_wxyz);
+    let mut otg = franka::Otg::new(0.0, path_limits(dist, angle, speed, limits)).map_err(err)?;
+    otg.set_target(1.0).map_err(err)?;
+    let mut seed: Option<ArmPose> = None;
+    let target = *target;
+    robot
+        .control_cartesian_pose(
+            |state, dt| {
+                // Seed from the commanded pose of the first cycle.
+                let a = *seed.get_or_insert_with(|| matrix_to_pose(&state.O_T_EE_c));
+                let s = if abort.load(Ordering::SeqCst) {
+                    otg.position()
+                } else {
+                    otg.step(dt.as_secs_f64())
+                };
+                let p = ArmPose {
+                    translation_m: std::array::from_fn(|i| {
+                        a.translation_m[i] + s * (target.translation_m[i] - a.translation_m[i])
+                    }),
+                    rotation_wxyz: slerp(a.rotation_wxyz, target.rotation_wxyz, s),
+                };
+                let cmd = franka::CartesianPose::new(pose_to_matrix(&p));
+                let done = (s >= 1.0 - 1e-9 && otg.velocity().abs() < 1e-9)
+                    || abort.load(Ordering::SeqCst);
+                if done {
+                    franka::motion_finished(cmd)
+                } else {
+                    cmd
+                }
+            },
+            franka::ControllerMode::CartesianImpedance,
+            true,
+            franka::MAX_CUTOFF_FREQUENCY,
+        )
+        .map_err(err)
+}
+
+fn worker(
+    robot: franka::Robot,
+    rx: mpsc::Receiver<Cmd>,
+    limits: MotionLimits,
+    abort: Arc<AtomicBool>,
+    clock: Arc<dyn Clock>,
+) {
+    let state = |r: &franka::Robot| {
+        r.read_once()
+            .map_err(err)
+            .map(|s| state_of(&s, clock.as_ref()))
+    };
+    while let Ok(cmd) = rx.recv() {
+        match cmd {
+            Cmd::Move {
+                target,
+                speed,
+                reply,
+            } => {
+                abort.store(false, Ordering::SeqCst);
+                let r =
+                    run_move(&robot, &target, speed, &limits, &abort).and_then(|()| state(&robot));
+                let _ = reply.send(r);
+            }
+            Cmd::State { reply } => {
+                let _ = reply.send(state(&robot));
+            }
+            Cmd::Recover { reply } => {
+                let _ = reply.send(robot.automatic_error_recovery().map_err(err));
+            }
+            Cmd::Stop { reply } => {
+                let _ = reply.send(robot.stop().map_err(err));
+            }
+        }
+    }
+}
+
+/// Sets the abort flag if a move's future is dropped before it completes.
+struct AbortOnDrop<'a>(&'a AtomicBool, bool);
+
+impl Drop for AbortOnDrop<'_> {
+    fn drop(&mut self) {
+        if self.1 {
+            self.0.store(true, Ordering::SeqCst);
+        }
+    }
+}
+
+impl FrankaArm {
+    /// Connect (FCI v5, realtime priority not enforced), set the collision behaviour
+    /// from `reflex_force_n`, and start the robot thread.
+    pub async fn connect(config: FrankaConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        if !(config.reflex_force_n.is_finite() && config.reflex_force_n > 0.0) {
+            return Err(DeviceError::InvalidCommand {
+                device: DEVICE.into(),
+                message: "reflex_force_n must be positive".into(),
+            });
+        }
+        let (tx, rx) = mpsc::channel::<Cmd>();
+        let (ready_tx, ready_rx) = oneshot::channel::<Result<(), DeviceError>>();
+        let abort = Arc::new(AtomicBool::new(false));
+        let (abort2, clock2) = (abort.clone(), clock.clone());
+        std::thread::Builder::new()
+            .name("franka".into())
+            .spawn(move || {
+                let options = franka::RobotOptions::new(franka::RealtimeConfig::Ignore)
+                    .with_version(franka::VersionPolicy::Exact(franka::FciVersion::V5));
+                let robot = match franka::Robot::with_options(&config.address, options) {
+                    Ok(r) => r,
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(err(e)));
+                        return;
+                    }
+                };
+                let f = config.reflex_force_n;
+                let lower_f = [f * 0.5, f * 0.5, f * 0.5, f * 0.05, f * 0.05, f * 0.05];
+                let upper_f = [f, f, f, f * 0.1, f * 0.1, f * 0.1];
+                let set = robot
+                    .set_collision_behavior_simple([50.0; 7], [100.0; 7], lower_f, upper_f)
+                    .map_err(err);
+                let ok = set.is_ok();
+                let _ = ready_tx.send(set);
+                if ok {
+                    worker(robot, rx, config.limits, abort2, clock2);
+                }
+            })
+            .map_err(|e| DeviceError::Link {
+                device: DEVICE.into(),
+                message: format!("cannot start the robot thread: {e}"),
+            })?;
+        ready_rx.await.map_err(|_| gone())??;
+        Ok(Self { tx, abort, clock })
+    }
+
+    async fn ask<T>(&self, make: impl FnOnce(Reply<T>) -> Cmd) -> Result<T, DeviceError> {
+        let (reply, rx) = oneshot::channel();
+        self.tx.send(make(reply)).map_err(|_| gone())?;
+        rx.await.map_err(|_| gone())?
+    }
+
+    /// The clock the states are stamped with.
+    #[must_use]
+    pub fn clock(&self) -> &Arc<dyn Clock> {
+        &self.clock
+    }
+}
+
+#[async_trait]
+impl Arm for FrankaArm {
+    async fn move_to(&mut self, target: &ArmPose, speed_m_s: f64) -> Result<ArmState, DeviceError> {
+        if !(target.is_valid()
+            && speed_m_s.is_finite()
+            && speed_m_s > 0.0
+            && speed_m_s <= MAX_SPEED_M_S)
+        {
+            return Err(DeviceError::InvalidCommand {
+                device: DEVICE.into(),
+                message: format!(
+                    "invalid target {target:?} or speed {speed_m_s} m/s (at most {MAX_SPEED_M_S})"
+                ),
+            });
+        }
+        let mut guard = AbortOnDrop(&self.abort, true);
+        let target = *target;
+        let r = self
+            .ask(|reply| Cmd::Move {
+                target,
+                speed: speed_m_s,
+                reply,
+            })
+            .await;
+        guard.1 = false;
+        r
+    }
+
+    async fn state(&mut self) -> Result<ArmState, DeviceError> {
+        self.ask(|reply| Cmd::State { reply }).await
+    }
+
+    async fn recover(&mut self) -> Result<(), DeviceError> {
+        self.ask(|reply| Cmd::Recover { reply }).await
+    }
+
+    async fn stop(&mut self) -> Result<(), DeviceError> {
+        self.abort.store(true, Ordering::SeqCst);
+        self.ask(|reply| Cmd::Stop { reply }).await
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn poses_and_matrices_convert_both_ways() {
+        let p = ArmPose {
+            translation_m: [0.4, -0.1, 0.3],
+            rotation_wxyz: normalise([0.3, 0.8, -0.2, 0.4]),
+        };
+        let back = matrix_to_pose(&pose_to_matrix(&p));
+        assert!(angle_between(p.rotation_wxyz, back.rotation_wxyz) < 1e-9);
+        assert!((0..3).all(|i| (p.translation_m[i] - back.translation_m[i]).abs() < 1e-12));
+        for q in [
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ] {
+            let p = ArmPose {
+                translation_m: [0.0; 3],
+                rotation_wxyz: q,
+            };
+            assert!(angle_between(q, matrix_to_pose(&pose_to_matrix(&p)).rotation_wxyz) < 1e-9);
+        }
+    }
+
+    #[test]
+    fn path_limits_keep_translation_and_rotation_within_theirs() {
+        let l = MotionLimits::default();
+        let p = path_limits(0.2, 0.5, 0.1, &l);
+        assert!(
+            p.max_velocity * 0.2 <= 0.1 + 1e-12
+                && p.max_velocity * 0.5 <= l.rot_speed_rad_s + 1e-12
+        );
+        assert!(p.max_acceleration * 0.2 <= l.accel_m_s2 + 1e-12);
+        assert!(p.max_jerk * 0.5 <= l.rot_jerk_rad_s3 + 1e-12);
+        let p = path_limits(0.0, 0.0, 0.1, &l);
+        assert!(p.max_velocity.is_finite());
+        let s = slerp([1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0], 0.5);
+        assert!(
+            (angle_between([1.0, 0.0, 0.0, 0.0], s) - std::f64::consts::FRAC_PI_2).abs() < 1e-9
+        );
+    }
+
+    #[tokio::test]
+    #[cfg_attr(
+        not(feature = "hardware"),
+        ignore = "needs a Panda: feature `hardware` and SOFTTOUCH_FRANKA_ADDRESS"
+    )]
+    async fn hardware_reads_the_pose_and_moves_1_cm() {
+        let Ok(address) = std::env::var("SOFTTOUCH_FRANKA_ADDRESS") else {
+            eprintln!("SKIPPED: SOFTTOUCH_FRANKA_ADDRESS is not set");
+            return;
+        };
+        let config = FrankaConfig {
+            address,
+            reflex_force_n: 30.0,
+            limits: MotionLimits::default(),
+        };
+        let mut arm = FrankaArm::connect(config, Arc::new(crate::TokioClock::new()))
+            .await
+            .expect("connect");
+        let s = arm.state().await.expect("state");
+        let mut target = s.base_from_finger;
+        target.translation_m[2] += 0.01;
+        arm.move_to(&target, 0.05).await.expect("move up 1 cm");
+        let back = s.base_from_finger;
+        arm.move_to(&back, 0.05).await.expect("move back");
+    }
+}

@@ -1,0 +1,473 @@
+//! The Net F/T RDT client: a [`ForceSensor`] over UDP.
+
+use super::codec::{self, Calibration, Command, RawRecord};
+use crate::clock::Clock;
+use crate::error::DeviceError;
+use crate::force::ForceSensor;
+use async_trait::async_trait;
+use softtouch_schemas::{FtReading, FtStatus, TimestampNs, Wrench};
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpStream, UdpSocket};
+
+const DEVICE: &str = "net-ft";
+
+/// Real-time (one record per datagram) or buffered (several per datagram) streaming.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StreamMode {
+    /// Command `0x0002`.
+    RealTime,
+    /// Command `0x0003`.
+    Buffered,
+}
+
+/// Where the counts-per-unit come from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Scaling {
+    /// Given (rig config): counts per N and counts per N·m.
+    Given {
+        /// Counts per newton.
+        counts_per_force: f64,
+        /// Counts per newton-metre.
+        counts_per_torque: f64,
+    },
+    /// Read with the TCP calibration request from this address (port 49151 on a sensor).
+    CalibrationRequest(SocketAddr),
+    /// Read from `http://ADDR/netftapi2.xml`.
+    Http(SocketAddr),
+}
+
+/// How to reach the sensor and how patient to be.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NetFtConfig {
+    /// The sensor's RDT address (port 49152 on a sensor).
+    pub rdt_addr: SocketAddr,
+    /// Counts per unit.
+    pub scaling: Scaling,
+    /// Real-time or buffered.
+    pub mode: StreamMode,
+    /// The sensor's output rate, Hz: records of a buffered datagram are back-dated by
+    /// one period each from the datagram's arrival.
+    pub rate_hz: f64,
+    /// Start commands sent before giving up (the first record confirms the start).
+    pub start_attempts: u32,
+    /// How long to wait for the first record after each start command, and for the
+    /// calibration reply.
+    pub reply_timeout: Duration,
+    /// How long [`ForceSensor::read`] waits for a datagram before a timeout error.
+    pub read_timeout: Duration,
+}
+
+impl NetFtConfig {
+    /// Defaults for a sensor at `rdt_addr`, calibration read over TCP at port 49151 of
+    /// the same host: real-time mode, 10 start attempts, 100 ms reply timeout, 1 s read
+    /// timeout.
+    #[must_use]
+    pub fn new(rdt_addr: SocketAddr, rate_hz: f64) -> Self {
+        let cal = SocketAddr::new(rdt_addr.ip(), codec::CALIBRATION_PORT);
+        Self {
+            rdt_addr,
+            scaling: Scaling::CalibrationRequest(cal),
+            mode: StreamMode::RealTime,
+            rate_hz,
+            start_attempts: 10,
+            reply_timeout: Duration::from_millis(100),
+            read_timeout: Duration::from_secs(1),
+        }
+    }
+}
+
+/// Counters of what the link did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct NetFtStats {
+    /// Records delivered.
+    pub received: u64,
+    /// Records known lost (gaps in `rdt_sequence`, wrap at 2^32 included).
+    pub lost: u64,
+    /// Records dropped because their `rdt_sequence` went backwards (stale or duplicated).
+    pub out_of_order: u64,
+    /// Datagrams rejected as not following the protocol.
+    pub bad_datagrams: u64,
+    /// Records whose status word reported a fault (delivered all the same).
+    pub faulted: u64,
+    /// Records whose status word reported a warning only.
+    pub warnings: u64,
+    /// Start commands sent (more than one when a start was lost).
+    pub start_commands: u64,
+}
+
+/// A Net F/T over RDT. Implements [`ForceSensor`].
+#[derive(Debug)]
+pub struct NetFtClient {
+    socket: UdpSocket,
+    config: NetFtConfig,
+    clock: Arc<dyn Clock>,
+    counts_per_force: f64,
+    counts_per_torque: f64,
+    streaming: bool,
+    last_sequence: Option<u32>,
+    latched_status: FtStatus,
+    stats: NetFtStats,
+    buf: Vec<u8>,
+    records: Vec<RawRecord>,
+    /// Length of the confirming datagram `start` left in `buf`, and when it came.
+    pending: Option<usize>,
+    pending_t: TimestampNs,
+}
+
+fn link(e: impl std::fmt::Display) -> DeviceError {
+    DeviceError::Link {
+        device: DEVICE.into(),
+        message: e.to_string(),
+    }
+}
+
+fn protocol(e: impl std::fmt::Display) -> DeviceError {
+    DeviceError::Protocol {
+        device: DEVICE.into(),
+        message: e.to_string(),
+    }
+}
+
+fn timeout(d: Duration) -> DeviceError {
+    DeviceError::Timeout {
+        device: DEVICE.into(),
+        timeout_ms: u64::try_from(d.as_millis()).unwrap_or(u64::MAX),
+    }
+}
+
+/// Read the calibration with the TCP request (port 49151 on a sensor).
+pub async fn read_calibration(
+    addr: SocketAddr,
+    wait: Duration,
+) -> Result<Calibration, DeviceError> {
+    let exchange = async {
+        let mut s = TcpStream::connect(addr).await.map_err(link)?;
+        s.write_all(&codec::encode_calibration_request())
+            .await
+            .map_err(link)?;
+        let mut reply = [0u8; codec::CALIBRATION_REPLY_LEN];
+        s.read_exact(&mut reply).await.map_err(|e| {
+            if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                protocol("calibration reply truncated")
+            } else {
+                link(e)
+            }
+        })?;
+        codec::decode_calibration_reply(&reply).map_err(protocol)
+    };
+    tokio::time::timeout(wait, exchange)
+        .await
+        .map_err(|_| timeout(wait))?
+}
+
+/// Read counts per N and per N·m from `http://ADDR/netftapi2.xml`.
+pub async fn read_netftapi2(addr: SocketAddr, wait: Duration) -> Result<(f64, f64), DeviceError> {
+    let exchange = async {
+        let mut s = TcpStream::connect(addr).await.map_err(link)?;
+        let req = format!(
+            "GET /netftapi2.xml HTTP/1.0\r\nHost: {}\r\nConnection: close\r\n\r\n",
+            addr.ip()
+        );
+        s.write_all(req.as_bytes()).await.map_err(link)?;
+        let mut body = Vec::new();
+        // A sensor's page is a few kB; refuse anything absurd.
+        (&mut s)
+            .take(1 << 20)
+            .read_to_end(&mut body)
+            .await
+            .map_err(link)?;
+        let text = String::from_utf8_lossy(&body);
+        if !text.starts_with("HTTP/1.") || !text.lines().next().is_some_and(|l| l.contains(" 200"))
+        {
+            return Err(protocol(format!(
+                "netftapi2.xml: unexpected HTTP answer {:?}",
+                text.lines().next().unwrap_or("")
+            )));
+        }
+        codec::parse_netftapi2(&text).map_err(protocol)
+    };
+    tokio::time::timeout(wait, exchange)
+        .await
+        .map_err(|_| timeout(wait))?
+}
+
+impl NetFtClient {
+    /// Bind a local UDP port, connect it to the sensor and resolve the scaling
+    /// (reading the calibration from the sensor when the config does not give it).
+    pub async fn connect(config: NetFtConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        let (counts_per_force, counts_per_torque) = match &config.scaling {
+            Scaling::Given {
+                counts_per_force,
+                counts_per_torque,
+            } => (*counts_per_force, *counts_per_torque),
+            Scaling::CalibrationRequest(addr) => read_calibration(*addr, config.reply_timeout)
+                .await?
+                .counts_per_si()
+                .map_err(protocol)?,
+            Scaling::Http(addr) => read_netftapi2(*addr, config.reply_timeout).await?,
+        };
+        let valid = |v: f64| v.is_finite() && v > 0.0;
+        if !valid(counts_per_force) || !valid(counts_per_torque) {
+            return Err(DeviceError::InvalidCommand {
+                device: DEVICE.into(),
+                message: format!(
+                    "counts per force/torque must be positive, got {counts_per_force} / {counts_per_torque}"
+                ),
+            });
+        }
+        let local: SocketAddr = if config.rdt_addr.is_ipv4() {
+            ([0, 0, 0, 0], 0).into()
+        } else {
+            (std::net::Ipv6Addr::UNSPECIFIED, 0).into()
+        };
+        let socket = UdpSocket::bind(local).await.map_err(link)?;
+        // Connected: the kernel drops datagrams from anyone but the sensor.
+        socket.connect(config.rdt_addr).await.map_err(link)?;
+        Ok(Self {
+            socket,
+            config,
+            clock,
+            counts_per_force,
+            counts_per_torque,
+            streaming: false,
+            last_sequence: None,
+            latched_status: FtStatus::OK,
+            stats: NetFtStats::default(),
+            buf: vec![0u8; 65_536],
+            records: Vec::new(),
+            pending: None,
+            pending_t: TimestampNs(0),
+        })
+    }
+
+    /// The local address the stream arrives on.
+    pub fn local_addr(&self) -> Result<SocketAddr, DeviceError> {
+        self.socket.local_addr().map_err(link)
+    }
+
+    /// Counts per N and per N·m in use.
+    #[must_use]
+    pub const fn scaling(&self) -> (f64, f64) {
+        (self.counts_per_force, self.counts_per_torque)
+    }
+
+    /// What the link did so far.
+    #[must_use]
+    pub const fn stats(&self) -> NetFtStats {
+        self.stats
+    }
+
+    /// The first non-OK status word seen since the last [`Self::clear_latched_status`]
+    /// (the reference driver latches any non-zero status the same way).
+    #[must_use]
+    pub const fn latched_status(&self) -> FtStatus {
+        self.latched_status
+    }
+
+    /// Forget the latched status.
+    pub fn clear_latched_status(&mut self) {
+        self.latched_status = FtStatus::OK;
+    }
+
+    /// Send one RDT command.
+    pub async fn send_command(
+        &self,
+        command: Command,
+        sample_count: u32,
+    ) -> Result<(), DeviceError> {
+        self.socket
+            .send(&codec::encode_request(command, sample_count))
+            .await
+            .map_err(link)
+            .map(|_| ())
+    }
+
+    /// Drain datagrams already queued (after a stop, before a start).
+    fn drain(&mut self) {
+        while self.socket.try_recv(&mut self.buf).is_ok() {}
+    }
+
+    /// Turn one datagram's records into readings appended to `out`.
+    fn accept_datagram(
+        &mut self,
+        len: usize,
+        t: TimestampNs,
+        out: &mut Vec<FtReading>,
+    ) -> Result<usize, DeviceError> {
+        self.records.clear();
+        let bytes = self.buf.get(..len).unwrap_or(&[]);
+        if let Err(e) = codec::decode_records(bytes, &mut self.records) {
+            self.stats.bad_datagrams += 1;
+            return Err(protocol(e));
+        }
+        let n = self.records.len();
+        let period_ns = if self.config.rate_hz > 0.0 {
+            1e9 / self.config.rate_hz
+        } else {
+            0.0
+        };
+        let mut appended = 0;
+        for (i, r) in self.records.iter().enumerate() {
+            if let Some(last) = self.last_sequence {
+                let ahead = r.rdt_sequence.wrapping_sub(last);
+                if ahead == 0 || ahead >= 1 << 31 {
+                    self.stats.out_of_order += 1;
+                    continue;
+                }
+                self.stats.lost += u64::from(ahead - 1);
+            }
+            self.last_sequence = Some(r.rdt_sequence);
+            let status = FtStatus(r.status);
+            if status.is_fault() {
+                self.stats.faulted += 1;
+            } else if status.is_warning() {
+                self.stats.warnings += 1;
+            }
+            if !status.is_ok() && self.latched_status.is_ok() {
+                self.latched_status = status;
+            }
+            let back = ((n - 1 - i) as f64 * period_ns).round() as u64;
+            let c = r.counts;
+            out.push(FtReading {
+                t: TimestampNs(t.0.saturating_sub(back)),
+                rdt_sequence: r.rdt_sequence,
+                ft_sequence: r.ft_sequence,
+                status,
+                wrench_in_sensor: Wrench {
+                    force_n: std::array::from_fn(|k| f64::from(c[k]) / self.counts_per_force),
+                    torque_nm: std::array::from_fn(|k| {
+                        f64::from(c[k + 3]) / self.counts_per_torque
+                    }),
+                },
+            });
+            appended += 1;
+        }
+        self.stats.received += appended as u64;
+        Ok(appended)
+    }
+
+    async fn recv_within(&mut self, wait: Duration) -> Result<Option<usize>, DeviceError> {
+        match tokio::time::timeout(wait, self.socket.recv(&mut self.buf)).await {
+            Err(_) => Ok(None),
+            Ok(Ok(len)) => Ok(Some(len)),
+            Ok(Err(e)) => Err(link(e)),
+        }
+    }
+
+    fn start_command(&self) -> Command {
+        match self.config.mode {
+            StreamMode::RealTime => Command::RealTime,
+            StreamMode::Buffered => Command::Buffered,
+        }
+    }
+}
+
+#[async_trait]
+impl ForceSensor for NetFtClient {
+    /// Send the start command and wait for the first record; a lost command is sent
+    /// again, up to `start_attempts` times. The first records are kept for `read`.
+    async fn start(&mut self) -> Result<(), DeviceError> {
+        if self.streaming {
+            return Ok(());
+        }
+        self.drain();
+        self.last_sequence = None;
+        let command = self.start_command();
+        let attempts = self.config.start_attempts.max(1);
+        for _ in 0..attempts {
+            self.send_command(command, 0).await?;
+            self.stats.start_commands += 1;
+            let deadline = tokio::time::Instant::now() + self.config.reply_timeout;
+            loop {
+                let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+                match self.recv_within(left).await {
+                    Ok(Some(len)) => {
+                        // Only a valid datagram confirms the start; stray bytes do not.
+                        if codec::decode_records(
+                            self.buf.get(..len).unwrap_or(&[]),
+                            &mut Vec::new(),
+                        )
+                        .is_ok()
+                        {
+                            // Keep its records: put them back for the next read.
+                            self.pending = Some(len);
+                            self.pending_t = self.clock.now();
+                            self.streaming = true;
+                            return Ok(());
+                        }
+                        self.stats.bad_datagrams += 1;
+                    }
+                    Ok(None) => break,
+                    // ICMP "port unreachable" on a connected socket: the sensor is not
+                    // there (yet); count it as a lost start.
+                    Err(DeviceError::Link { .. }) if left > Duration::ZERO => {
+                        tokio::time::sleep(left).await;
+                        break;
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
+        }
+        Err(DeviceError::Timeout {
+            device: DEVICE.into(),
+            timeout_ms: u64::try_from((self.config.reply_timeout * attempts).as_millis())
+                .unwrap_or(u64::MAX),
+        })
+    }
+
+    async fn read(&mut self, out: &mut Vec<FtReading>) -> Result<usize, DeviceError> {
+        if !self.streaming {
+            return Err(DeviceError::InvalidCommand {
+                device: DEVICE.into(),
+                message: "read before start".into(),
+            });
+        }
+        let mut appended = 0;
+        if let Some(len) = self.pending.take() {
+            let t = self.pending_t;
+            appended += self.accept_datagram(len, t, out)?;
+        }
+        let deadline = tokio::time::Instant::now() + self.config.read_timeout;
+        while appended == 0 {
+            let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+            match self.recv_within(left).await? {
+                None => return Err(timeout(self.config.read_timeout)),
+                Some(len) => {
+                    let t = self.clock.now();
+                    appended += self.accept_datagram(len, t, out)?;
+                }
+            }
+        }
+        // Everything else already received, without waiting.
+        loop {
+            match self.socket.try_recv(&mut self.buf) {
+                Ok(len) => {
+                    let t = self.clock.now();
+                    appended += self.accept_datagram(len, t, out)?;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
+                Err(e) => return Err(link(e)),
+            }
+        }
+        Ok(appended)
+    }
+
+    async fn bias(&mut self) -> Result<(), DeviceError> {
+        self.send_command(Command::Bias, 0).await
+    }
+
+    async fn stop(&mut self) -> Result<(), DeviceError> {
+        self.send_command(Command::Stop, 0).await?;
+        self.streaming = false;
+        self.pending = None;
+        self.drain();
+        Ok(())
+    }
+
+    fn lost_readings(&self) -> u64 {
+        self.stats.lost
+    }
+}

@@ -1,0 +1,290 @@
+//! A V4L2 camera (feature `v4l`): 640×480 at the highest rate the device offers in
+//! MJPEG or YUYV, captured on its own thread through memory-mapped buffers, each
+//! frame stamped from its driver timestamp (CLOCK_MONOTONIC) mapped onto the injected
+//! clock, and decoded with `image` (MJPEG) or converted (YUYV) to RGB8.
+
+use crate::camera::{Camera, Frame};
+use crate::clock::Clock;
+use crate::error::DeviceError;
+use async_trait::async_trait;
+use softtouch_schemas::{FrameFormat, FrameMeta, TimestampNs};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
+use tokio::sync::mpsc;
+use v4l::FourCC;
+use v4l::buffer::Type;
+use v4l::frameinterval::FrameIntervalEnum;
+use v4l::io::traits::CaptureStream;
+use v4l::prelude::*;
+use v4l::video::Capture;
+
+/// Width asked for.
+pub const WIDTH: u32 = 640;
+/// Height asked for.
+pub const HEIGHT: u32 = 480;
+
+fn link(device: &str, e: impl std::fmt::Display) -> DeviceError {
+    DeviceError::Link {
+        device: device.into(),
+        message: e.to_string(),
+    }
+}
+
+fn monotonic_ns() -> u64 {
+    nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC)
+        .map(|t| {
+            (t.tv_sec().max(0) as u64)
+                .saturating_mul(1_000_000_000)
+                .saturating_add(t.tv_nsec().max(0) as u64)
+        })
+        .unwrap_or(0)
+}
+
+/// YUYV (4:2:2) to RGB8; `None` when the buffer is short.
+#[must_use]
+pub fn yuyv_to_rgb(yuyv: &[u8], width: u32, height: u32) -> Option<Vec<u8>> {
+    let n = (width as usize) * (height as usize);
+    let src = yuyv.get(..n * 2)?;
+    let mut out = Vec::with_capacity(n * 3);
+    let px = |y: f64, u: f64, v: f64, out: &mut Vec<u8>| {
+        let c = |x: f64| x.round().clamp(0.0, 255.0) as u8;
+        out.extend_from_slice(&[
+            c(y + 1.402 * v),
+            c(y - 0.344_136 * u - 0.714_136 * v),
+            c(y + 1.772 * u),
+        ]);
+    };
+    for q in src.chunks_exact(4) {
+        let (y0, u, y1, v) = (
+            f64::from(q[0]),
+            f64::from(q[1]) - 128.0,
+            f64::from(q[2]),
+            f64::from(q[3]) - 128.0,
+        );
+        px(y0, u, v, &mut out);
+        px(y1, u, v, &mut out);
+    }
+    Some(out)
+}
+
+/// The chosen format and rate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mode {
+    /// `MJPG` or `YUYV`.
+    pub fourcc: [u8; 4],
+    /// Frames per second.
+    pub fps: f64,
+}
+
+fn best_mode(dev: &Device) -> Result<Mode, String> {
+    let mut best: Option<Mode> = None;
+    for fourcc in [*b"MJPG", *b"YUYV"] {
+        let Ok(intervals) = dev.enum_frameintervals(FourCC::new(&fourcc), WIDTH, HEIGHT) else {
+            continue;
+        };
+        for i in intervals {
+            let fps = match i.interval {
+                FrameIntervalEnum::Discrete(f) if f.numerator > 0 => {
+                    f64::from(f.denominator) / f64::from(f.numerator)
+                }
+                FrameIntervalEnum::Stepwise(s) if s.min.numerator > 0 => {
+                    f64::from(s.min.denominator) / f64::from(s.min.numerator)
+                }
+                _ => continue,
+            };
+            if best.is_none_or(|b| fps > b.fps) {
+                best = Some(Mode { fourcc, fps });
+            }
+        }
+    }
+    best.ok_or_else(|| format!("no {WIDTH}x{HEIGHT} MJPEG or YUYV mode"))
+}
+
+/// A V4L2 camera. Implements [`Camera`].
+#[derive(Debug)]
+pub struct V4lCamera {
+    rx: mpsc::Receiver<Result<Frame, DeviceError>>,
+    dropped: Arc<AtomicU64>,
+    stop: Arc<AtomicBool>,
+    mode: Mode,
+    device: String,
+}
+
+impl Drop for V4lCamera {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+    }
+}
+
+impl V4lCamera {
+    /// Open `path`, pick the mode, and start capturing.
+    pub fn open(path: &str, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        let dev = Device::with_path(path).map_err(|e| link(path, e))?;
+        let mode = best_mode(&dev).map_err(|m| DeviceError::InvalidCommand {
+            device: path.into(),
+            message: m,
+        })?;
+        let fmt = v4l::Format::new(WIDTH, HEIGHT, FourCC::new(&mode.fourcc));
+        let got = dev.set_format(&fmt).map_err(|e| link(path, e))?;
+        if got.width != WIDTH || got.height != HEIGHT {
+            return Err(DeviceError::InvalidCommand {
+                device: path.into(),
+                message: format!(
+                    "asked {WIDTH}x{HEIGHT}, the device set {}x{}",
+                    got.width, got.height
+                ),
+            });
+        }
+        let _ = dev.set_params(&v4l::video::capture::Parameters::with_fps(
+            mode.fps.round() as u32
+        ));
+        let (tx, rx) = mpsc::channel(8);
+        let dropped = Arc::new(AtomicU64::new(0));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (d2, s2, name) = (dropped.clone(), stop.clone(), path.to_string());
+        std::thread::Builder::new()
+            .name("v4l".into())
+            .spawn(move || capture(dev, mode, clock, tx, d2, s2, name))
+            .map_err(|e| link(path, e))?;
+        Ok(Self {
+            rx,
+            dropped,
+            stop,
+            mode,
+            device: path.into(),
+        })
+    }
+
+    /// The mode in use.
+    #[must_use]
+    pub const fn mode(&self) -> Mode {
+        self.mode
+    }
+}
+
+fn capture(
+    dev: Device,
+    mode: Mode,
+    clock: Arc<dyn Clock>,
+    tx: mpsc::Sender<Result<Frame, DeviceError>>,
+    dropped: Arc<AtomicU64>,
+    stop: Arc<AtomicBool>,
+    name: String,
+) {
+    let mut stream = match MmapStream::with_buffers(&dev, Type::VideoCapture, 4) {
+        Ok(s) => s,
+        Err(e) => {
+            let _ = tx.blocking_send(Err(link(&name, e)));
+            return;
+        }
+    };
+    let mut last_seq: Option<u32> = None;
+    while !stop.load(Ordering::SeqCst) {
+        let (buf, meta) = match stream.next() {
+            Ok(x) => x,
+            Err(e) => {
+                let _ = tx.blocking_send(Err(link(&name, e)));
+                return;
+            }
+        };
+        if let Some(l) = last_seq {
+            dropped.fetch_add(
+                u64::from(meta.sequence.wrapping_sub(l).saturating_sub(1)),
+                Ordering::Relaxed,
+            );
+        }
+        last_seq = Some(meta.sequence);
+        // Map the driver's monotonic timestamp onto the injected clock.
+        let ts = (meta.timestamp.sec.max(0) as u64) * 1_000_000_000
+            + (meta.timestamp.usec.max(0) as u64) * 1000;
+        let age = monotonic_ns().saturating_sub(ts);
+        let t = TimestampNs(clock.now().0.saturating_sub(age));
+        let bytes = buf.get(..meta.bytesused as usize).unwrap_or(buf);
+        let rgb = if &mode.fourcc == b"MJPG" {
+            image::load_from_memory_with_format(bytes, image::ImageFormat::Jpeg)
+                .ok()
+                .map(|i| i.to_rgb8().into_raw())
+        } else {
+            yuyv_to_rgb(bytes, WIDTH, HEIGHT)
+        };
+        let Some(data) = rgb.filter(|d| d.len() == (WIDTH * HEIGHT * 3) as usize) else {
+            dropped.fetch_add(1, Ordering::Relaxed);
+            continue;
+        };
+        let frame = Frame {
+            meta: FrameMeta {
+                t,
+                sequence: u64::from(meta.sequence),
+                width: WIDTH,
+                height: HEIGHT,
+                format: FrameFormat::Rgb8,
+            },
+            data,
+        };
+        match tx.try_send(Ok(frame)) {
+            Ok(()) => {}
+            Err(mpsc::error::TrySendError::Full(_)) => {
+                dropped.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(mpsc::error::TrySendError::Closed(_)) => return,
+        }
+    }
+}
+
+#[async_trait]
+impl Camera for V4lCamera {
+    async fn frame_after(&mut self, t: TimestampNs, timeout_ms: u64) -> Result<Frame, DeviceError> {
+        let deadline = tokio::time::Instant::now() + Duration::from_millis(timeout_ms);
+        loop {
+            match tokio::time::timeout_at(deadline, self.rx.recv()).await {
+                Err(_) => {
+                    return Err(DeviceError::Timeout {
+                        device: self.device.clone(),
+                        timeout_ms,
+                    });
+                }
+                Ok(None) => return Err(link(&self.device, "the capture thread stopped")),
+                Ok(Some(Err(e))) => return Err(e),
+                Ok(Some(Ok(f))) if f.meta.t >= t => return Ok(f),
+                Ok(Some(Ok(_))) => {}
+            }
+        }
+    }
+
+    fn dropped_frames(&self) -> u64 {
+        self.dropped.load(Ordering::Relaxed)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn yuyv_grey_is_grey_and_short_buffers_are_refused() {
+        let rgb = yuyv_to_rgb(&[128, 128, 128, 128], 2, 1).expect("2 px");
+        assert_eq!(rgb, vec![128; 6]);
+        assert!(yuyv_to_rgb(&[0; 3], 2, 1).is_none());
+    }
+
+    #[tokio::test]
+    #[cfg_attr(
+        not(feature = "hardware"),
+        ignore = "needs a camera: feature `hardware` and SOFTTOUCH_V4L_DEVICE"
+    )]
+    async fn hardware_captures_a_frame() {
+        let Ok(path) = std::env::var("SOFTTOUCH_V4L_DEVICE") else {
+            eprintln!("SKIPPED: SOFTTOUCH_V4L_DEVICE is not set");
+            return;
+        };
+        let clock: Arc<dyn Clock> = Arc::new(crate::TokioClock::new());
+        let mut cam = V4lCamera::open(&path, clock.clone()).expect("open");
+        let f = cam.frame_after(clock.now(), 2000).await.expect("a frame");
+        assert_eq!(
+            (f.meta.width, f.meta.height, f.data.len()),
+            (640, 480, 640 * 480 * 3)
+        );
+        eprintln!("mode {:?}, dropped {}", cam.mode(), cam.dropped_frames());
+    }
+}

@@ -1,0 +1,167 @@
+//! Test devices shared by the driver tests.
+#![allow(dead_code, unreachable_pub)]
+
+use async_trait::async_trait;
+use softtouch_drivers::{DeviceError, ForceSensor};
+use softtouch_schemas::{FtReading, FtStatus, TimestampNs, Wrench};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::Duration;
+use tokio::time::Instant;
+
+/// The wrench of reading `k` of a [`PatternSensor`] (before bias).
+pub fn pattern(k: u64) -> Wrench {
+    let s = (k % 1000) as f64;
+    Wrench {
+        force_n: [0.001 * s, -0.002 * s, 1.5],
+        torque_nm: [0.0001 * s, 0.0, -0.05],
+    }
+}
+
+/// A sensor that produces [`pattern`] at `rate_hz` on tokio's clock.
+#[derive(Debug)]
+pub struct PatternSensor {
+    rate_hz: f64,
+    start: Option<Instant>,
+    next_k: u64,
+    /// Status word of every `fault_every`-th reading.
+    pub fault_every: Option<(u64, u32)>,
+    /// Every `lose_every`-th reading is lost (counted, not delivered).
+    pub lose_every: Option<u64>,
+    lost: u64,
+    /// Bias commands seen.
+    pub biases: Arc<AtomicU32>,
+}
+
+impl PatternSensor {
+    pub fn new(rate_hz: f64) -> Self {
+        Self {
+            rate_hz,
+            start: None,
+            next_k: 0,
+            fault_every: None,
+            lose_every: None,
+            lost: 0,
+            biases: Arc::new(AtomicU32::new(0)),
+        }
+    }
+}
+
+#[async_trait]
+impl ForceSensor for PatternSensor {
+    async fn start(&mut self) -> Result<(), DeviceError> {
+        if self.start.is_none() {
+            self.start = Some(Instant::now());
+            self.next_k = 0;
+        }
+        Ok(())
+    }
+
+    async fn read(&mut self, out: &mut Vec<FtReading>) -> Result<usize, DeviceError> {
+        let Some(start) = self.start else {
+            return Err(DeviceError::InvalidCommand {
+                device: "pattern".into(),
+                message: "not started".into(),
+            });
+        };
+        let at = |k: u64| start + Duration::from_secs_f64(k as f64 / self.rate_hz);
+        tokio::time::sleep_until(at(self.next_k)).await;
+        let due = ((start.elapsed().as_secs_f64() * self.rate_hz).floor() as u64 + 1)
+            .min(self.next_k + 2000);
+        let mut n = 0;
+        for k in self.next_k..due.max(self.next_k + 1) {
+            if self.lose_every.is_some_and(|e| k % e == e - 1) {
+                self.lost += 1;
+                continue;
+            }
+            let status = match self.fault_every {
+                Some((e, word)) if k % e == e - 1 => FtStatus(word),
+                _ => FtStatus::OK,
+            };
+            out.push(FtReading {
+                t: TimestampNs(0),
+                rdt_sequence: k as u32,
+                ft_sequence: k as u32,
+                status,
+                wrench_in_sensor: pattern(k),
+            });
+            n += 1;
+        }
+        self.next_k = due.max(self.next_k + 1);
+        Ok(n)
+    }
+
+    async fn bias(&mut self) -> Result<(), DeviceError> {
+        self.biases.fetch_add(1, Ordering::SeqCst);
+        Ok(())
+    }
+
+    async fn stop(&mut self) -> Result<(), DeviceError> {
+        self.start = None;
+        Ok(())
+    }
+
+    fn lost_readings(&self) -> u64 {
+        self.lost
+    }
+}
+
+/// Whether `socat` is on the PATH (the pty tests need it).
+pub fn have_socat() -> bool {
+    std::process::Command::new("socat")
+        .arg("-V")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// A pty pair made by `socat -d -d pty,raw,echo=0 pty,raw,echo=0`: the child and the
+/// two device paths. Dropping the guard kills socat.
+#[derive(Debug)]
+pub struct PtyPair {
+    child: std::process::Child,
+    pub a: String,
+    pub b: String,
+}
+
+impl Drop for PtyPair {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Start socat and read the two pty paths it reports; `None` when socat is missing.
+pub fn pty_pair() -> Option<PtyPair> {
+    use std::io::BufRead;
+    if !have_socat() {
+        eprintln!("SKIPPED: socat is not installed (apt-get install socat); the pty test needs it");
+        return None;
+    }
+    let mut child = std::process::Command::new("socat")
+        .args(["-d", "-d", "pty,raw,echo=0", "pty,raw,echo=0"])
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("spawn socat");
+    let stderr = child.stderr.take().expect("socat stderr");
+    let mut lines = std::io::BufReader::new(stderr).lines();
+    let mut paths = Vec::new();
+    while paths.len() < 2 {
+        let line = lines
+            .next()
+            .expect("socat reports its ptys")
+            .expect("read socat stderr");
+        if let Some(i) = line.find("PTY is ") {
+            paths.push(line[i + 7..].trim().to_string());
+        }
+    }
+    // Keep draining socat's log so it never blocks on a full pipe.
+    std::thread::spawn(move || for _ in lines {});
+    Some(PtyPair {
+        child,
+        a: paths[0].clone(),
+        b: paths[1].clone(),
+    })
+}

@@ -1,0 +1,235 @@
+//! The Hand-E driver against the simulated Hand-E (the simulator's gripper behind
+//! the Modbus register map), over an in-memory pipe and a pty pair, and against
+//! hand-made peers for CRC errors, exception replies and silence.
+
+mod common;
+
+use softtouch_drivers::gripper::{GripperCommand, ObjectStatus, opening_mm};
+use softtouch_drivers::hande::{self, HandE, HandEConfig, HandEService, regs};
+use softtouch_drivers::sim::SimRig;
+use softtouch_drivers::{Clock, DeviceError, Gripper, TokioClock};
+use softtouch_schemas::defaults;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+fn sim_service() -> HandEService<softtouch_drivers::sim::SimGripper> {
+    let rig =
+        SimRig::new(&defaults::rig(), &defaults::scene(), 3, TokioClock::new()).expect("sim rig");
+    HandEService::new(rig.gripper, 9)
+}
+
+fn pipe_pair(
+    service: HandEService<softtouch_drivers::sim::SimGripper>,
+) -> (HandE, Arc<TokioClock>) {
+    let (a, b) = tokio::io::duplex(1024);
+    tokio::spawn(hande::serve_rtu(service, b, std::future::pending()));
+    let clock = Arc::new(TokioClock::new());
+    (HandE::new(a, HandEConfig::default(), clock.clone()), clock)
+}
+
+const CLOSE: GripperCommand = GripperCommand {
+    position: 255,
+    speed: 255,
+    force: 255,
+};
+
+async fn wait_until_still(g: &mut HandE) -> softtouch_drivers::GripperStatus {
+    loop {
+        let s = g.status().await.expect("status");
+        if s.object != ObjectStatus::Moving {
+            return s;
+        }
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn activates_moves_and_reports_status_through_the_simulated_hand_e() {
+    let (mut g, clock) = pipe_pair(sim_service());
+    let s = g.status().await.expect("status");
+    assert!(!s.activated);
+    g.activate().await.expect("activate");
+    assert!(g.status().await.expect("status").activated);
+    g.command(CLOSE).await.expect("close");
+    let s = wait_until_still(&mut g).await;
+    assert_eq!(s.object, ObjectStatus::AtPosition);
+    assert_eq!((s.requested_position, s.position, s.fault), (255, 255, 0));
+    assert!(opening_mm(s.position) < 0.1);
+    g.command(GripperCommand {
+        position: 0,
+        ..CLOSE
+    })
+    .await
+    .expect("open");
+    let s = wait_until_still(&mut g).await;
+    assert!((opening_mm(s.position) - 50.0).abs() < 0.2, "{s:?}");
+    // Never faster than 200 transactions per second, on the injected clock.
+    let n = g.stats().transactions;
+    let elapsed_ms = clock.now().0 / 1_000_000;
+    assert!(
+        elapsed_ms >= (n - 1) * 5,
+        "{n} transactions in {elapsed_ms} ms"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn commands_are_paced_at_most_200_per_second() {
+    let (mut g, clock) = pipe_pair(sim_service());
+    let t0 = clock.now();
+    for _ in 0..100 {
+        g.status().await.expect("status");
+    }
+    let ms = (clock.now().0 - t0.0) as f64 / 1e6;
+    assert!(ms >= 99.0 * 5.0, "100 reads in {ms} ms");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_major_fault_needs_a_new_activation_edge() {
+    let service = sim_service();
+    let (mut g, _clock) = pipe_pair(service.clone());
+    g.activate().await.expect("activate");
+    service.inject_fault(0x0E);
+    let s = g.status().await.expect("status");
+    assert_eq!(s.fault, 0x0E);
+    let e = g.command(CLOSE).await.expect_err("refused");
+    assert!(
+        matches!(
+            e,
+            DeviceError::Fault {
+                code: Some(0x0E),
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.is_fault() && !e.is_link());
+    g.activate().await.expect("re-activation clears it");
+    assert_eq!(g.status().await.expect("status").fault, 0);
+    g.command(CLOSE).await.expect("moves again");
+}
+
+#[tokio::test]
+async fn works_over_a_pty_pair_with_the_tokio_modbus_rtu_server() {
+    let Some(pair) = common::pty_pair() else {
+        return;
+    };
+    let server_port = hande::open_port(&pair.b).expect("open pty b");
+    let client_port = hande::open_port(&pair.a).expect("open pty a");
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(hande::serve_serial(
+        sim_service(),
+        server_port,
+        async move {
+            let _ = rx.await;
+        },
+    ));
+    let mut g = HandE::new(
+        client_port,
+        HandEConfig::default(),
+        Arc::new(TokioClock::new()),
+    );
+    g.activate().await.expect("activate");
+    g.command(GripperCommand {
+        position: 128,
+        speed: 255,
+        force: 100,
+    })
+    .await
+    .expect("move");
+    let s = wait_until_still(&mut g).await;
+    assert_eq!(s.position, 128);
+    let _ = tx.send(());
+    server.await.expect("join").expect("server");
+}
+
+/// A hand-made slave that answers the first request with `reply` (CRC appended,
+/// then byte `corrupt` flipped if given), and every later one correctly.
+async fn scripted(reply: Vec<u8>, corrupt: Option<usize>, silent: bool) -> HandE {
+    let (a, mut b) = tokio::io::duplex(1024);
+    tokio::spawn(async move {
+        let mut buf = [0u8; 64];
+        let mut first = true;
+        loop {
+            let Ok(n) = b.read(&mut buf).await else {
+                return;
+            };
+            if n == 0 || silent {
+                if n == 0 {
+                    return;
+                }
+                continue;
+            }
+            let mut out = if first {
+                reply.clone()
+            } else {
+                vec![9, 4, 6, 0x31, 0, 0, 0, 0, 0]
+            };
+            let crc = regs::crc16(&out);
+            out.extend_from_slice(&crc.to_le_bytes());
+            if first && let Some(i) = corrupt {
+                out[i] ^= 0x40;
+            }
+            first = false;
+            let _ = b.write_all(&out).await;
+        }
+    });
+    let config = HandEConfig {
+        reply_timeout: Duration::from_millis(100),
+        ..HandEConfig::default()
+    };
+    HandE::new(a, config, Arc::new(TokioClock::new()))
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_reply_with_a_bad_crc_is_never_taken_as_data() {
+    let reply = vec![9, 4, 6, 0x31, 0, 0, 0, 0, 0];
+    for i in [3, 9] {
+        let mut g = scripted(reply.clone(), Some(i), false).await;
+        let e = g.status().await.expect_err("corrupted");
+        assert!(e.is_link(), "corrupt byte {i}: {e}");
+        assert!(!e.is_fault());
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn exception_replies_are_device_faults_with_their_code() {
+    let mut g = scripted(vec![9, 0x84, 0x02], None, false).await;
+    let e = g.status().await.expect_err("exception");
+    assert!(matches!(e, DeviceError::Fault { code: Some(2), .. }), "{e}");
+    assert_eq!(g.stats().exceptions, 1);
+    assert!(g.status().await.expect("next one answers").activated);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_silent_gripper_times_out() {
+    let mut g = scripted(Vec::new(), None, true).await;
+    let e = g.status().await.expect_err("silence");
+    assert!(
+        matches!(
+            e,
+            DeviceError::Timeout {
+                timeout_ms: 100,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let e = g.activate().await.expect_err("silence");
+    assert!(matches!(e, DeviceError::Timeout { .. }), "{e}");
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_simulated_hand_e_refuses_registers_outside_its_map() {
+    use tokio_modbus::client::{Reader, rtu};
+    use tokio_modbus::{ExceptionCode, Slave};
+    let (a, b) = tokio::io::duplex(1024);
+    tokio::spawn(hande::serve_rtu(sim_service(), b, std::future::pending()));
+    let mut ctx = rtu::attach_slave(a, Slave(9));
+    let r = ctx
+        .read_input_registers(0x0000, 3)
+        .await
+        .expect("transport");
+    assert_eq!(r, Err(ExceptionCode::IllegalDataAddress));
+    let r = ctx.read_coils(0, 1).await.expect("transport");
+    assert_eq!(r, Err(ExceptionCode::IllegalFunction));
+}
