@@ -31,7 +31,9 @@ fn help_lists_only_working_verbs_and_each_verb_has_an_example() {
     let out = softtouch(dir.path(), &["--help"]);
     assert!(out.status.success());
     let help = text(&out.stdout);
-    for verb in ["config", "db", "runs"] {
+    for verb in [
+        "config", "db", "runs", "collect", "status", "dataset", "sim", "bench",
+    ] {
         assert!(help.contains(verb), "{help}");
     }
     assert!(
@@ -74,7 +76,7 @@ fn config_show_prints_defaults_that_parse_back_to_the_defaults() {
 #[test]
 fn an_edited_config_file_is_shown_resolved() {
     let dir = tempdir();
-    let edited = defaults::RIG_TOML.replace("settle_s = 0.2", "settle_s = 0.75");
+    let edited = defaults::RIG_TOML.replace("settle_s = 0.3", "settle_s = 0.75");
     std::fs::write(dir.path().join("rig.toml"), edited).unwrap_or_else(|e| panic!("{e}"));
     let out = softtouch(dir.path(), &["config", "show", "rig", "--rig", "rig.toml"]);
     assert!(out.status.success(), "{}", text(&out.stderr));
@@ -84,7 +86,7 @@ fn an_edited_config_file_is_shown_resolved() {
 #[test]
 fn a_malformed_config_exits_2_naming_file_line_and_field() {
     let dir = tempdir();
-    let bad = defaults::RIG_TOML.replace("settle_s = 0.2", "settle = 0.2");
+    let bad = defaults::RIG_TOML.replace("settle_s = 0.3", "settle = 0.3");
     std::fs::write(dir.path().join("rig.toml"), bad).unwrap_or_else(|e| panic!("{e}"));
     let out = softtouch(dir.path(), &["config", "check", "--rig", "rig.toml"]);
     assert_eq!(out.status.code(), Some(2));

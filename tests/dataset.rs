@@ -994,6 +994,65 @@ fn a_damaged_export_imports_nothing() {
         2,
         "manifest.json: line 2, column",
     );
+    // Labels edited consistently with the manifest's checksum: the values are checked.
+    for (case, edit, expected) in [
+        (
+            "nan",
+            ",NaN,",
+            "labels.csv: line 2, column 2: fx_n: `NaN` is not finite",
+        ),
+        (
+            "word",
+            ",abc,",
+            "labels.csv: line 2, column 2: fx_n: `abc` is not a number",
+        ),
+        (
+            "split",
+            ",train,",
+            "line 2, column 13: split: unknown split `train,x`",
+        ),
+    ] {
+        let c = copy(case);
+        let text = String::from_utf8(read(&c.join("labels.csv"))).unwrap_or_default();
+        let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+        let fields: Vec<&str> = lines[1].split(',').collect();
+        lines[1] = match case {
+            "split" => lines[1].replacen(fields[12], "\"train,x\"", 1),
+            _ => format!("{}{edit}{}", fields[0], fields[2..].join(",")),
+        };
+        let edited = lines.join("\n") + "\n";
+        write(&c.join("labels.csv"), &edited);
+        let manifest = String::from_utf8(read(&c.join("manifest.json"))).unwrap_or_default();
+        write(
+            &c.join("manifest.json"),
+            manifest.replace(&sha256_hex(text.as_bytes()), &sha256_hex(edited.as_bytes())),
+        );
+        fails_with(
+            &softtouch(
+                d,
+                &["--db", "lab.db", "dataset", "import", case, "--name", case],
+            ),
+            2,
+            expected,
+        );
+    }
+    // A manifest from a newer format.
+    let c = copy("newer");
+    let manifest = String::from_utf8(read(&c.join("manifest.json"))).unwrap_or_default();
+    write(
+        &c.join("manifest.json"),
+        manifest.replace("\"format_version\": 1,", "\"format_version\": 99,"),
+    );
+    fails_with(
+        &softtouch(
+            d,
+            &[
+                "--db", "lab.db", "dataset", "import", "newer", "--name", "n",
+            ],
+        ),
+        2,
+        "format version 99 is newer",
+    );
     fails_with(
         &softtouch(d, &["--db", "lab.db", "dataset", "import", "nowhere"]),
         2,

@@ -541,7 +541,8 @@ async fn the_sensor_reads_the_contact_the_arm_made_and_the_camera_sees_it() {
         &clock,
     )
     .await;
-    assert!((99..=101).contains(&readings.len()), "{}", readings.len());
+    // 100 ms at 1 kHz, delivered in packets of 5 ms: the last packet may overshoot.
+    assert!((99..=105).contains(&readings.len()), "{}", readings.len());
     let truth = render_contact(&scene, "triangle-12", &p, 4).expect("render");
     for r in &readings {
         assert_eq!(r.status, FtStatus::OK);

@@ -195,21 +195,18 @@ impl SimWorld {
         }
     }
 
-    /// Where the finger is at `t`.
+    /// Where the finger is at `t`: in the latest segment that started by `t` (searched
+    /// from the newest, where the sensor and camera almost always look).
     pub(crate) fn pose_at(&self, t: TimestampNs) -> ArmPose {
-        let mut pose = self.initial;
-        for seg in &self.segments {
-            if t < seg.t0 {
-                break;
-            }
-            pose = if t >= seg.t1 || seg.t1 <= seg.t0 {
-                seg.to
-            } else {
-                let s = (t.0 - seg.t0.0) as f64 / (seg.t1.0 - seg.t0.0) as f64;
-                super::arm::interpolate(&seg.from, &seg.to, super::arm::profile(s))
-            };
+        let Some(seg) = self.segments.iter().rev().find(|seg| seg.t0 <= t) else {
+            return self.initial;
+        };
+        if t >= seg.t1 || seg.t1 <= seg.t0 {
+            seg.to
+        } else {
+            let s = (t.0 - seg.t0.0) as f64 / (seg.t1.0 - seg.t0.0) as f64;
+            super::arm::interpolate(&seg.from, &seg.to, super::arm::profile(s))
         }
-        pose
     }
 
     /// The contact pose (rod frame) of a finger pose.
