@@ -1,29 +1,14 @@
 //! End-to-end tests of the `softtouch` CLI: the binary as a user runs it.
 
+mod common;
+use common::{softtouch, tempdir, text};
+
 use softtouch_collector::store::{FrameRecord, NewRun, RunStatus, Store};
 use softtouch_schemas::{
     ConfigSource, ContactPose, FrameFormat, FrameMeta, Medium, RigConfig, Sample, SampleStatus,
     SceneSpec, TimestampNs, Wrench, config::parse_toml, defaults,
 };
-use std::path::Path;
-use std::process::{Command, Output};
-
-fn softtouch(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_softtouch"))
-        .args(args)
-        .current_dir(dir)
-        .env_remove("SOFTTOUCH_DB")
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run softtouch: {e}"))
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
-fn tempdir() -> tempfile::TempDir {
-    tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"))
-}
+use std::process::Command;
 
 #[test]
 fn help_lists_only_working_verbs_and_each_verb_has_an_example() {

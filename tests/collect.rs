@@ -1,32 +1,15 @@
 //! End-to-end tests of `softtouch collect` on the simulated rig: a run's database,
 //! kill -9 and resume, and fault injection.
 
+mod common;
+use common::{runtime, softtouch, text};
+
 use softtouch_collector::collect::sampler::PoseSampler;
 use softtouch_collector::store::{Store, decode_window};
 use softtouch_schemas::defaults;
 use sqlx::Row as _;
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
-
-fn softtouch(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_softtouch"))
-        .args(args)
-        .current_dir(dir)
-        .env_remove("SOFTTOUCH_DB")
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run softtouch: {e}"))
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
-fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap_or_else(|e| panic!("{e}"))
-}
+use std::process::{Command, Stdio};
 
 async fn open(db: &Path) -> Store {
     Store::open(db).await.unwrap_or_else(|e| panic!("{e}"))

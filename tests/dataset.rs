@@ -7,6 +7,9 @@
 //! each case folder holds a `data_frame.csv` and an `expected.txt` with the text the
 //! error must contain (images `img0.png` … `img3.png` are written beside it here).
 
+mod common;
+use common::{softtouch, tempdir, text};
+
 use sha2::{Digest as _, Sha256};
 use softtouch_collector::dataset::{self, Filters, NewDataset, SplitRatio};
 use softtouch_collector::store::{FrameRecord, NewRun, RunStatus, Store};
@@ -17,20 +20,7 @@ use softtouch_schemas::{
 };
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn softtouch(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_softtouch"))
-        .args(args)
-        .current_dir(dir)
-        .env_remove("SOFTTOUCH_DB")
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run softtouch: {e}"))
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
+use std::process::Output;
 
 fn ok(out: &Output) -> String {
     assert!(
@@ -60,10 +50,6 @@ fn block_on<F: std::future::Future>(f: F) -> F::Output {
         .build()
         .unwrap_or_else(|e| panic!("{e}"))
         .block_on(f)
-}
-
-fn tempdir() -> tempfile::TempDir {
-    tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn read(path: &Path) -> Vec<u8> {

@@ -156,6 +156,16 @@ pub struct ForceLimits {
     pub sensor_range_torque_nm: [f64; 3],
 }
 
+impl ForceLimits {
+    /// The sensor's range per axis in storage order `[Fx, Fy, Fz, Tx, Ty, Tz]` (N, N·m).
+    #[must_use]
+    pub fn sensor_range(&self) -> [f64; 6] {
+        let [fx, fy, fz] = self.sensor_range_force_n;
+        let [tx, ty, tz] = self.sensor_range_torque_nm;
+        [fx, fy, fz, tx, ty, tz]
+    }
+}
+
 /// Timings and retry policy of one sample.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -204,14 +204,7 @@ pub async fn collect(
         ft,
         rules: WindowRules {
             min_readings: plan.rig.procedure.min_window_readings,
-            range: [
-                l.sensor_range_force_n[0],
-                l.sensor_range_force_n[1],
-                l.sensor_range_force_n[2],
-                l.sensor_range_torque_nm[0],
-                l.sensor_range_torque_nm[1],
-                l.sensor_range_torque_nm[2],
-            ],
+            range: l.sensor_range(),
         },
         home: ArmPose::from_contact(&w.base_from_rod, &w.home),
         counters: Counters::default(),

@@ -426,15 +426,7 @@ impl SimRig {
         let world = SimWorld::new(Scene::new(scene, seed, model), w.base_from_rod, home)?;
         let ft_effects = world.scene.effects.ft.clone();
         let world = Arc::new(Mutex::new(world));
-        let l = &rig.limits;
-        let range = [
-            l.sensor_range_force_n[0],
-            l.sensor_range_force_n[1],
-            l.sensor_range_force_n[2],
-            l.sensor_range_torque_nm[0],
-            l.sensor_range_torque_nm[1],
-            l.sensor_range_torque_nm[2],
-        ];
+        let range = rig.limits.sensor_range();
         let camera = SimCamera::new(Arc::clone(&world), clock, fps, seed)
             .map_err(|e| SimError::InvalidParameter(e.to_string()))?;
         Ok(Self {

@@ -1,0 +1,35 @@
+//! Helpers shared by the end-to-end tests (each test file is its own crate and uses
+//! its own subset of these).
+#![allow(dead_code)]
+
+use std::path::Path;
+use std::process::Output;
+
+/// Run the `softtouch` binary in `dir` with `args`, with no `SOFTTOUCH_DB` from the
+/// environment.
+pub(crate) fn softtouch(dir: &Path, args: &[&str]) -> Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_softtouch"))
+        .args(args)
+        .current_dir(dir)
+        .env_remove("SOFTTOUCH_DB")
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run softtouch: {e}"))
+}
+
+/// Output bytes as text.
+pub(crate) fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// A fresh temporary directory.
+pub(crate) fn tempdir() -> tempfile::TempDir {
+    tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// A current-thread tokio runtime for store checks.
+pub(crate) fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap_or_else(|e| panic!("{e}"))
+}
