@@ -92,6 +92,20 @@ fn a_simulated_run_stores_every_sample_with_its_frame_and_window() {
     );
 }
 
+/// Samples of run 1 so far, read without migrating (the child owns the database).
+async fn stored_samples(db: &Path) -> i64 {
+    let options = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(db)
+        .read_only(true);
+    let Ok(mut conn) = sqlx::ConnectOptions::connect(&options).await else {
+        return 0;
+    };
+    sqlx::query_scalar("SELECT COUNT(*) FROM samples WHERE run_id = 1")
+        .fetch_one(&mut conn)
+        .await
+        .unwrap_or(0)
+}
+
 #[test]
 fn a_run_killed_at_random_points_resumes_to_exactly_the_planned_samples() {
     let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
@@ -127,17 +141,7 @@ fn a_run_killed_at_random_points_resumes_to_exactly_the_planned_samples() {
             if child.try_wait().ok().flatten().is_some() {
                 break;
             }
-            let stored = rt.block_on(async {
-                if !db.exists() {
-                    return 0;
-                }
-                let Ok(store) = Store::open(&db).await else {
-                    return 0;
-                };
-                let n = store.row_counts(1).await.map_or(0, |c| c.samples);
-                store.close().await;
-                n
-            });
+            let stored = rt.block_on(stored_samples(&db));
             if stored >= target {
                 break;
             }

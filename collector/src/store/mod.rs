@@ -249,21 +249,37 @@ impl Store {
             .synchronous(SqliteSynchronous::Normal)
             .foreign_keys(true)
             .busy_timeout(Duration::from_secs(10));
-        let pool = SqlitePoolOptions::new()
-            .max_connections(4)
-            .connect_with(options)
-            .await
-            .map_err(|source| StoreError::Open {
-                path: path.to_owned(),
-                source,
-            })?;
-        MIGRATOR
-            .run(&pool)
-            .await
-            .map_err(|source| StoreError::Migrate {
-                path: path.to_owned(),
-                source,
-            })?;
+        // Two processes opening a new database at once race: switching the new file to
+        // WAL can find it locked, and both try the first migration (the loser fails on
+        // a table that now exists). Once the winner is done, a second look succeeds.
+        let mut attempt = 0u64;
+        let pool = loop {
+            attempt += 1;
+            let result = match SqlitePoolOptions::new()
+                .max_connections(4)
+                .connect_with(options.clone())
+                .await
+            {
+                Ok(pool) => match MIGRATOR.run(&pool).await {
+                    Ok(()) => Ok(pool),
+                    Err(source) => Err(StoreError::Migrate {
+                        path: path.to_owned(),
+                        source,
+                    }),
+                },
+                Err(source) => Err(StoreError::Open {
+                    path: path.to_owned(),
+                    source,
+                }),
+            };
+            match result {
+                Ok(pool) => break pool,
+                Err(_) if attempt < 5 => {
+                    tokio::time::sleep(Duration::from_millis(40 * attempt)).await
+                }
+                Err(e) => return Err(e),
+            }
+        };
         Ok(Self {
             pool,
             path: path.to_owned(),

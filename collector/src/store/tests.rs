@@ -368,3 +368,24 @@ fn stored_statuses_parse_back_or_fail_clearly() {
     assert!(parse_status("ok", Some("saturated")).is_err());
     assert!(parse_status("rejected", Some("bogus")).is_err());
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_processes_opening_a_new_database_at_once_both_succeed() -> Result<(), StoreError> {
+    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
+        what: "tempdir",
+        why: e.to_string(),
+    })?;
+    let path = dir.path().join("fresh.db");
+    for _ in 0..5 {
+        let _ = std::fs::remove_file(&path);
+        let (a, b) = tokio::join!(Store::open(&path), Store::open(&path));
+        let (a, b) = (a?, b?);
+        assert_eq!(a.integrity_check().await?, "ok");
+        a.close().await;
+        b.close().await;
+        for suffix in ["-wal", "-shm"] {
+            let _ = std::fs::remove_file(format!("{}{suffix}", path.display()));
+        }
+    }
+    Ok(())
+}

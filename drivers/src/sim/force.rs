@@ -21,9 +21,11 @@ pub const COUNTS_PER_FORCE: f64 = 1_000_000.0;
 pub const COUNTS_PER_TORQUE: f64 = 1_000_000.0;
 /// Readings the host's receive buffer holds; older unread ones are lost.
 pub const BUFFER_READINGS: u64 = 4096;
-/// Readings arrive in packets spanning this long (as a Net F/T in buffered mode sends
-/// several records per datagram): one wake-up per packet instead of per reading.
-pub(crate) const PACKET_NS: f64 = 5_000_000.0;
+/// Readings arrive in packets spanning up to this long, as a Net F/T in buffered mode
+/// sends several records per datagram: one wake-up per packet instead of per reading.
+pub(crate) const PACKET_NS: f64 = 20_000_000.0;
+/// Most records per packet (a Net F/T's RDT buffer holds up to 40).
+pub(crate) const PACKET_MAX_READINGS: u64 = 40;
 const DEVICE: &str = "sim-ft";
 
 /// The simulated sensor.
@@ -68,7 +70,7 @@ impl SimForceSensor {
             world,
             clock,
             period_ns,
-            batch: ((PACKET_NS / period_ns).floor() as u64).max(1),
+            batch: ((PACKET_NS / period_ns).floor() as u64).clamp(1, PACKET_MAX_READINGS),
             prev_contact: None,
             latency_ns,
             effects,
@@ -164,7 +166,7 @@ impl ForceSensor for SimForceSensor {
             let mut world = lock(&self.world)?;
             // The contact is evaluated once per packet, at its last reading, and
             // interpolated linearly from the previous packet's: the motion is smooth on
-            // a 5 ms scale, and the contact model is the costly part of a reading.
+            // a packet's scale (≤ 20 ms), and the contact model is the costly part.
             let end = world
                 .wrench_at(self.sample_time(last_k))
                 .map_err(Self::fault)?;
