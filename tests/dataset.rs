@@ -8,7 +8,7 @@
 //! error must contain (images `img0.png` … `img3.png` are written beside it here).
 
 mod common;
-use common::{softtouch, tempdir, text};
+use common::{fails_with, ok, softtouch, tempdir, text};
 
 use sha2::{Digest as _, Sha256};
 use softtouch_collector::dataset::{self, Filters, NewDataset, SplitRatio};
@@ -20,29 +20,6 @@ use softtouch_schemas::{
 };
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::Output;
-
-fn ok(out: &Output) -> String {
-    assert!(
-        out.status.success(),
-        "exit {:?}\nstdout: {}\nstderr: {}",
-        out.status.code(),
-        text(&out.stdout),
-        text(&out.stderr)
-    );
-    text(&out.stdout)
-}
-
-fn fails_with(out: &Output, code: i32, needle: &str) {
-    let err = text(&out.stderr);
-    assert_eq!(
-        out.status.code(),
-        Some(code),
-        "stderr: {err}\nstdout: {}",
-        text(&out.stdout)
-    );
-    assert!(err.contains(needle), "expected `{needle}` in: {err}");
-}
 
 fn block_on<F: std::future::Future>(f: F) -> F::Output {
     tokio::runtime::Builder::new_current_thread()

@@ -14,5 +14,6 @@ pub mod cli;
 pub mod collect;
 pub mod configs;
 pub mod dataset;
+pub mod models;
 pub mod plot;
 pub mod store;

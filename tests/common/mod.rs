@@ -33,3 +33,27 @@ pub(crate) fn runtime() -> tokio::runtime::Runtime {
         .build()
         .unwrap_or_else(|e| panic!("{e}"))
 }
+
+/// The stdout of a command that must succeed (its output is shown if it does not).
+pub(crate) fn ok(out: &Output) -> String {
+    assert!(
+        out.status.success(),
+        "exit {:?}\nstdout: {}\nstderr: {}",
+        out.status.code(),
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+    text(&out.stdout)
+}
+
+/// Asserts a command exited with `code` and said `needle` on stderr.
+pub(crate) fn fails_with(out: &Output, code: i32, needle: &str) {
+    let err = text(&out.stderr);
+    assert_eq!(
+        out.status.code(),
+        Some(code),
+        "stderr: {err}\nstdout: {}",
+        text(&out.stdout)
+    );
+    assert!(err.contains(needle), "expected `{needle}` in: {err}");
+}

@@ -18,6 +18,14 @@ use std::time::Instant;
 
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {
+    /// Accuracy costs time, for the model: over input size, encoder width and latent
+    /// size, train on a dataset and report test R², training time per epoch and
+    /// inference latency at batch 1 on one core; a table, CSV and a PNG of R² against
+    /// latency.
+    #[command(after_help = "Examples:
+  softtouch bench model --dataset air
+  softtouch bench model --dataset air --sizes 32,64 --widths 8,16 --latents 32 --epochs 10")]
+    Model(super::train::BenchModelArgs),
     /// Accuracy costs time: sweep settle time and force/torque window on the simulated
     /// scene (whose true wrench is known); print label error against samples per hour,
     /// and write a CSV and PNG plots. Also reports where a sample's time goes.
@@ -76,8 +84,9 @@ fn scratch_db(out: &Path) -> Result<PathBuf, Failure> {
     Ok(db)
 }
 
-pub async fn run(cmd: BenchCommand, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run(cmd: BenchCommand, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
     match cmd {
+        BenchCommand::Model(args) => super::train::run_bench_model(args, db, out).await,
         BenchCommand::Collection {
             samples,
             settle,

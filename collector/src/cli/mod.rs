@@ -10,6 +10,7 @@ pub mod dataset;
 pub mod db;
 pub mod runs;
 pub mod sim;
+pub mod train;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -78,6 +79,26 @@ pub enum Command {
     /// Measure: what accuracy costs in time, where the time goes, store ingest.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Train a model (SVAE, VAE or ConvNet) on a dataset; store it with its metrics.
+    #[command(after_help = "Examples:
+  softtouch train --dataset air
+  softtouch train --dataset air --model convnet --epochs 20 --name air-cnn
+  softtouch train --dataset air --alpha 10 --beta 0.1 --latent 64 --out air-a10.stm
+
+Interrupted? Run the same command again: it resumes from the last epoch's checkpoint.")]
+    Train(train::TrainArgs),
+    /// Evaluate a model: R² per axis, image MSE, error spread per force/torque range.
+    #[command(after_help = "Examples:
+  softtouch eval air-svae
+  softtouch eval air-svae --dataset water --split all
+  softtouch eval model.stm --dataset air")]
+    Eval(train::EvalArgs),
+    /// List stored models with their test metrics.
+    #[command(after_help = "Example:\n  softtouch models")]
+    Models,
+    /// Sweep a setting and train once per value: α (the paper's Table 1) or latent size.
+    #[command(subcommand)]
+    Sweep(train::SweepCommand),
 }
 
 /// A failed command, with its class for the exit code.
@@ -133,7 +154,11 @@ pub async fn run(cli: Cli, out: &mut dyn std::io::Write) -> Result<(), Failure> 
         Command::Collect(args) => collect::run_collect(args, &cli.db, out).await,
         Command::Status { run } => collect::run_status(&cli.db, run, out).await,
         Command::Sim(cmd) => sim::run(cmd, out).await,
-        Command::Bench(cmd) => bench::run(cmd, out).await,
+        Command::Bench(cmd) => bench::run(cmd, &cli.db, out).await,
+        Command::Train(args) => train::run_train(args, &cli.db, out).await,
+        Command::Eval(args) => train::run_eval(args, &cli.db, out).await,
+        Command::Models => train::run_models(&cli.db, out).await,
+        Command::Sweep(cmd) => train::run_sweep(cmd, &cli.db, out).await,
     }
 }
 

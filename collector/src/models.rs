@@ -1,0 +1,320 @@
+//! Models in the store: loading a dataset's splits for the trainer, and recording the
+//! trained models (artifact, dataset, hyper-parameters, metrics).
+//!
+//! The trainer knows nothing of SQL; this module is the bridge. Frames are decoded
+//! and preprocessed on every core ([`load_splits`]).
+
+use crate::dataset::{self, DatasetError, query_err};
+use crate::store::Store;
+use futures_util::TryStreamExt as _;
+use softtouch_trainer::labels::label_from_si;
+use softtouch_trainer::{Example, Preprocess, Splits, Trained};
+use sqlx::FromRow;
+
+/// A model operation failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    /// The dataset side failed (no such dataset, a query).
+    #[error(transparent)]
+    Dataset(#[from] DatasetError),
+    /// A query failed.
+    #[error("database error while {doing}: {source}")]
+    Query {
+        /// What we were doing.
+        doing: &'static str,
+        /// Why.
+        #[source]
+        source: sqlx::Error,
+    },
+    /// A stored frame cannot be used.
+    #[error("run {run}, sample {index}: {why}")]
+    Frame {
+        /// Run id.
+        run: i64,
+        /// Sample index.
+        index: i64,
+        /// What is wrong.
+        why: String,
+    },
+    /// The name is taken.
+    #[error("a model named `{0}` already exists in this database: choose another name")]
+    Exists(String),
+    /// No model of that name.
+    #[error("no model named `{0}` in this database (see `softtouch models`)")]
+    NotFound(String),
+    /// The trainer failed.
+    #[error(transparent)]
+    Train(#[from] softtouch_trainer::TrainError),
+}
+
+impl ModelError {
+    /// Whether the user's input is at fault (exit code 2).
+    #[must_use]
+    pub fn is_bad_input(&self) -> bool {
+        match self {
+            Self::Dataset(e) => e.is_bad_input(),
+            Self::Exists(_) | Self::NotFound(_) => true,
+            Self::Train(e) => e.is_bad_input(),
+            Self::Query { .. } | Self::Frame { .. } => false,
+        }
+    }
+}
+
+fn model_query(doing: &'static str) -> impl FnOnce(sqlx::Error) -> ModelError {
+    move |source| ModelError::Query { doing, source }
+}
+
+#[derive(Debug, FromRow)]
+struct MemberRow {
+    split: String,
+    run_id: i64,
+    sample_index: i64,
+    fx_n: f64,
+    fy_n: f64,
+    fz_n: f64,
+    tx_nm: f64,
+    ty_nm: f64,
+    tz_nm: f64,
+    format: String,
+    width: i64,
+    height: i64,
+    data: Vec<u8>,
+}
+
+/// Decodes a stored frame into RGB8.
+fn decode(row: &MemberRow) -> Result<(usize, usize, Vec<u8>), String> {
+    match row.format.as_str() {
+        "rgb8" => {
+            let (w, h) = (
+                usize::try_from(row.width).map_err(|_| "bad width")?,
+                usize::try_from(row.height).map_err(|_| "bad height")?,
+            );
+            if row.data.len() != w * h * 3 {
+                return Err(format!(
+                    "rgb8 frame holds {} bytes, {w}×{h} needs {}",
+                    row.data.len(),
+                    w * h * 3
+                ));
+            }
+            Ok((w, h, row.data.clone()))
+        }
+        "png" | "jpeg" => {
+            let format = if row.format == "png" {
+                image::ImageFormat::Png
+            } else {
+                image::ImageFormat::Jpeg
+            };
+            let img = image::load_from_memory_with_format(&row.data, format)
+                .map_err(|e| format!("cannot decode its {} frame: {e}", row.format))?
+                .into_rgb8();
+            let (w, h) = (img.width() as usize, img.height() as usize);
+            Ok((w, h, img.into_raw()))
+        }
+        other => Err(format!("unknown frame format `{other}`")),
+    }
+}
+
+/// Loads dataset `name`'s frames and labels, preprocessed for the model, split as the
+/// dataset says. `progress` is told the examples done so far.
+pub async fn load_splits(
+    store: &Store,
+    name: &str,
+    preprocess: &Preprocess,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<Splits, ModelError> {
+    let info = dataset::get(store, name).await?;
+    let total = u64::try_from(info.sample_count).unwrap_or(0);
+    let mut rows = sqlx::query_as::<_, MemberRow>(
+        "SELECT m.split, m.run_id, m.sample_index,
+                s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
+                f.format, f.width, f.height, f.data
+         FROM dataset_members m
+         JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
+         JOIN frames f ON f.run_id = m.run_id AND f.sample_index = m.sample_index
+         WHERE m.dataset_id = ? ORDER BY m.position",
+    )
+    .bind(info.dataset_id)
+    .fetch(store.pool());
+    let mut splits = Splits::default();
+    let mut chunk = Vec::with_capacity(256);
+    let mut done = 0u64;
+    loop {
+        let row = rows
+            .try_next()
+            .await
+            .map_err(query_err("reading the dataset's frames"))?;
+        let last = row.is_none();
+        if let Some(row) = row {
+            chunk.push(row);
+        }
+        if chunk.len() >= 256 || (last && !chunk.is_empty()) {
+            let rows = std::mem::take(&mut chunk);
+            done += rows.len() as u64;
+            for (split, example) in preprocess_parallel(rows, preprocess)? {
+                match split.as_str() {
+                    "train" => splits.train.push(example),
+                    "val" => splits.val.push(example),
+                    _ => splits.test.push(example),
+                }
+            }
+            progress(done, total);
+        }
+        if last {
+            break;
+        }
+    }
+    Ok(splits)
+}
+
+/// Decodes and preprocesses rows on every core, keeping their order.
+fn preprocess_parallel(
+    rows: Vec<MemberRow>,
+    preprocess: &Preprocess,
+) -> Result<Vec<(String, Example)>, ModelError> {
+    let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
+    let per = rows.len().div_ceil(threads).max(1);
+    let one = |row: &MemberRow| -> Result<(String, Example), ModelError> {
+        let frame_err = |why: String| ModelError::Frame {
+            run: row.run_id,
+            index: row.sample_index,
+            why,
+        };
+        let (w, h, rgb) = decode(row).map_err(frame_err)?;
+        let image = preprocess.apply(w, h, &rgb)?;
+        let label = label_from_si(
+            [row.fx_n, row.fy_n, row.fz_n],
+            [row.tx_nm, row.ty_nm, row.tz_nm],
+        );
+        if label.iter().any(|v| !v.is_finite()) {
+            return Err(frame_err(format!("its label is not finite: {label:?}")));
+        }
+        Ok((row.split.clone(), Example { image, label }))
+    };
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = rows
+            .chunks(per)
+            .map(|part| scope.spawn(move || part.iter().map(one).collect::<Result<Vec<_>, _>>()))
+            .collect();
+        let mut out = Vec::with_capacity(rows.len());
+        for h in handles {
+            match h.join() {
+                Ok(part) => out.extend(part?),
+                Err(_) => {
+                    return Err(ModelError::Frame {
+                        run: 0,
+                        index: 0,
+                        why: "a preprocessing thread panicked".into(),
+                    });
+                }
+            }
+        }
+        Ok(out)
+    })
+}
+
+/// A stored model, without its artifact.
+#[derive(Debug, Clone, FromRow)]
+pub struct ModelInfo {
+    /// Row id.
+    pub model_id: i64,
+    /// Name.
+    pub name: String,
+    /// The dataset it was trained on.
+    pub dataset_name: String,
+    /// svae, vae or convnet.
+    pub kind: String,
+    /// Model config (JSON).
+    pub config_json: String,
+    /// Training settings (JSON).
+    pub train_json: String,
+    /// Mean test R² (absent for the VAE).
+    pub test_r2_mean: Option<f64>,
+    /// Test image MSE (absent for the ConvNet).
+    pub test_image_mse: Option<f64>,
+    /// When (UTC).
+    pub created_at: String,
+}
+
+/// Records a trained model. Fails if the name is taken.
+pub async fn record(
+    store: &Store,
+    name: &str,
+    dataset_name: &str,
+    trained: &Trained,
+) -> Result<i64, ModelError> {
+    dataset::validate_name(name)?;
+    if find(store, name).await?.is_some() {
+        return Err(ModelError::Exists(name.to_owned()));
+    }
+    let info = dataset::get(store, dataset_name).await?;
+    let header = &trained.artifact.header;
+    let json = |v: serde_json::Result<String>| {
+        v.map_err(|e| ModelError::Train(softtouch_trainer::TrainError::Artifact(e.to_string())))
+    };
+    let config_json = json(serde_json::to_string(&header.config))?;
+    let summary = header.training.as_ref();
+    let train_json = json(serde_json::to_string(&summary.map(|s| s.train)))?;
+    let metrics_json = json(serde_json::to_string(&summary))?;
+    let history_json = json(serde_json::to_string(&trained.history))?;
+    let artifact = trained.artifact.to_bytes()?;
+    let result = sqlx::query(
+        "INSERT INTO models (name, dataset_id, dataset_name, kind, config_json, train_json,
+                             metrics_json, history_json, test_r2_mean, test_image_mse, artifact,
+                             software_version, created_at)
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, strftime('%Y-%m-%dT%H:%M:%fZ', 'now'))",
+    )
+    .bind(name)
+    .bind(info.dataset_id)
+    .bind(&info.name)
+    .bind(header.config.kind.name())
+    .bind(config_json)
+    .bind(train_json)
+    .bind(metrics_json)
+    .bind(history_json)
+    .bind(summary.and_then(|s| s.test.r2_mean))
+    .bind(summary.and_then(|s| s.test.image_mse))
+    .bind(artifact)
+    .bind(env!("CARGO_PKG_VERSION"))
+    .execute(store.pool())
+    .await
+    .map_err(model_query("recording the model"))?;
+    Ok(result.last_insert_rowid())
+}
+
+macro_rules! info_select {
+    ($rest:literal) => {
+        concat!(
+            "SELECT model_id, name, dataset_name, kind, config_json, train_json, \
+             test_r2_mean, test_image_mse, created_at FROM models ",
+            $rest
+        )
+    };
+}
+
+/// The model called `name`, if any.
+pub async fn find(store: &Store, name: &str) -> Result<Option<ModelInfo>, ModelError> {
+    sqlx::query_as::<_, ModelInfo>(info_select!("WHERE name = ?"))
+        .bind(name)
+        .fetch_optional(store.pool())
+        .await
+        .map_err(model_query("looking up a model"))
+}
+
+/// Every model, oldest first.
+pub async fn list(store: &Store) -> Result<Vec<ModelInfo>, ModelError> {
+    sqlx::query_as::<_, ModelInfo>(info_select!("ORDER BY model_id"))
+        .fetch_all(store.pool())
+        .await
+        .map_err(model_query("listing models"))
+}
+
+/// The artifact bytes of model `name`.
+pub async fn artifact(store: &Store, name: &str) -> Result<Vec<u8>, ModelError> {
+    let row: Option<(Vec<u8>,)> = sqlx::query_as("SELECT artifact FROM models WHERE name = ?")
+        .bind(name)
+        .fetch_optional(store.pool())
+        .await
+        .map_err(model_query("reading a model"))?;
+    row.map(|(a,)| a)
+        .ok_or_else(|| ModelError::NotFound(name.to_owned()))
+}

@@ -1,0 +1,149 @@
+//! The model artifact: one file holding the weights with everything needed to use
+//! them — the model config (which includes the preprocessing parameters), the label
+//! normalisation, and a summary of the training that made it.
+//!
+//! Layout: the 8-byte magic `STMODEL1`, the JSON header's length as a little-endian
+//! u64, the JSON header, then burn's burnpack bytes of the weights.
+
+use std::path::Path;
+
+use burn::prelude::*;
+use burn::store::ModuleRecord;
+use serde::{Deserialize, Serialize};
+
+use crate::TrainError;
+use crate::labels::LabelNorm;
+use crate::metrics::Metrics;
+use crate::model::{ModelConfig, Net};
+use crate::train::TrainConfig;
+
+const MAGIC: &[u8; 8] = b"STMODEL1";
+/// Version of the header's JSON layout.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// How a model was trained, and how well it did.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainingSummary {
+    pub train: TrainConfig,
+    pub train_samples: usize,
+    pub val_samples: usize,
+    pub test_samples: usize,
+    pub epochs_run: usize,
+    pub best_epoch: usize,
+    pub stopped_early: bool,
+    pub seconds: f64,
+    pub train_images_per_s: f64,
+    pub val: Metrics,
+    pub test: Metrics,
+}
+
+/// The header of a model artifact.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ArtifactHeader {
+    pub format_version: u32,
+    pub software_version: String,
+    pub config: ModelConfig,
+    pub norm: LabelNorm,
+    pub training: Option<TrainingSummary>,
+}
+
+/// A model and its header, on any device.
+#[derive(Debug)]
+pub struct ModelArtifact {
+    pub header: ArtifactHeader,
+    pub net: Net,
+}
+
+impl ModelArtifact {
+    /// Serialises to the artifact layout.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, TrainError> {
+        let json = serde_json::to_vec(&self.header)
+            .map_err(|e| TrainError::Artifact(format!("encoding the header: {e}")))?;
+        let weights = encode_weights(&self.net).map_err(TrainError::Artifact)?;
+        let mut out = Vec::with_capacity(16 + json.len() + weights.len());
+        out.extend_from_slice(MAGIC);
+        out.extend_from_slice(&(json.len() as u64).to_le_bytes());
+        out.extend_from_slice(&json);
+        out.extend_from_slice(&weights);
+        Ok(out)
+    }
+
+    /// Reads only the header (cheap: no weights are decoded).
+    pub fn header_from_bytes(bytes: &[u8]) -> Result<(ArtifactHeader, &[u8]), TrainError> {
+        if bytes.len() < 16 || &bytes[..8] != MAGIC {
+            return Err(TrainError::Artifact(
+                "not a softtouch model (it does not start with STMODEL1)".into(),
+            ));
+        }
+        let mut len = [0u8; 8];
+        len.copy_from_slice(&bytes[8..16]);
+        let len = usize::try_from(u64::from_le_bytes(len)).unwrap_or(usize::MAX);
+        let Some(json) = bytes.get(16..16usize.saturating_add(len)) else {
+            return Err(TrainError::Artifact(format!(
+                "truncated: the header claims {len} bytes, the file holds {}",
+                bytes.len().saturating_sub(16)
+            )));
+        };
+        let header: ArtifactHeader = serde_json::from_slice(json)
+            .map_err(|e| TrainError::Artifact(format!("reading the header: {e}")))?;
+        if header.format_version != FORMAT_VERSION {
+            return Err(TrainError::Artifact(format!(
+                "format version {} (this build reads {FORMAT_VERSION})",
+                header.format_version
+            )));
+        }
+        let problems = header.config.problems();
+        if !problems.is_empty() {
+            return Err(TrainError::Artifact(format!(
+                "its config is unusable: {}",
+                problems.join("; ")
+            )));
+        }
+        Ok((header, &bytes[16 + len..]))
+    }
+
+    /// Parses an artifact and loads its weights onto `device`.
+    pub fn from_bytes(bytes: &[u8], device: &Device) -> Result<Self, TrainError> {
+        let (header, weights) = Self::header_from_bytes(bytes)?;
+        let net = decode_weights(weights.to_vec(), &header.config, device)
+            .map_err(TrainError::Artifact)?;
+        Ok(Self { header, net })
+    }
+
+    /// Writes the artifact atomically (a temporary file renamed into place).
+    pub fn save(&self, path: &Path) -> Result<(), TrainError> {
+        crate::write_atomic(path, &self.to_bytes()?)
+    }
+
+    pub fn load(path: &Path, device: &Device) -> Result<Self, TrainError> {
+        let bytes = std::fs::read(path).map_err(|e| TrainError::io("read", path, e))?;
+        Self::from_bytes(&bytes, device).map_err(|e| e.in_file(path))
+    }
+}
+
+/// A module's weights as burnpack bytes (artifacts and checkpoints alike).
+pub(crate) fn encode_weights(net: &Net) -> Result<Vec<u8>, String> {
+    net.clone()
+        .into_record()
+        .into_bytes()
+        .map(|b| b.to_vec())
+        .map_err(|e| format!("encoding the weights: {e}"))
+}
+
+/// A model of `config` on `device` with the weights in `bytes`.
+pub(crate) fn decode_weights(
+    bytes: Vec<u8>,
+    config: &ModelConfig,
+    device: &Device,
+) -> Result<Net, String> {
+    let record = ModuleRecord::from_bytes(burn::tensor::Bytes::from_bytes_vec(bytes))
+        .map_err(|e| format!("reading the weights: {e}"))?;
+    // Loaded parameters replace the lazy ones before they draw anything, but the
+    // lock keeps even that off the generator of a training being seeded.
+    let _guard = crate::train::init_lock();
+    config
+        .init(device)
+        .try_load_record(record)
+        .map_err(|e| format!("the weights do not fit the config: {e}"))
+}

@@ -1,0 +1,168 @@
+//! Real-time inference: one camera frame → wrench (and the latent mean), what the
+//! grasp controller calls at the camera's 120 Hz.
+
+use std::path::Path;
+
+use burn::prelude::*;
+
+use crate::TrainError;
+use crate::artifact::{ArtifactHeader, ModelArtifact};
+use crate::labels::WrenchLabel;
+use crate::model::Net;
+
+/// One inference.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Prediction {
+    /// `[Fx, Fy, Fz]` in N, `[Tx, Ty, Tz]` in N·mm, sensor frame; `None` for a VAE.
+    pub wrench: Option<WrenchLabel>,
+    /// The latent mean μ (the SVAE's touch representation).
+    pub latent_mean: Vec<f32>,
+}
+
+/// A loaded model on the CPU, ready for single images.
+#[derive(Debug)]
+pub struct Predictor {
+    header: ArtifactHeader,
+    net: Net,
+    device: Device,
+    input: Vec<f32>,
+}
+
+impl Predictor {
+    /// Wraps an artifact; its weights stay on the device they were loaded on.
+    pub fn new(artifact: ModelArtifact) -> Self {
+        let device = artifact
+            .net
+            .devices()
+            .first()
+            .map_or_else(Device::flex, |d| d.clone().inner());
+        let input = vec![0.0; artifact.header.config.preprocess.input_len()];
+        Self {
+            net: artifact.net.valid(),
+            header: artifact.header,
+            device,
+            input,
+        }
+    }
+
+    pub fn load(path: &Path) -> Result<Self, TrainError> {
+        Ok(Self::new(ModelArtifact::load(
+            path,
+            &crate::backend::device()?,
+        )?))
+    }
+
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, TrainError> {
+        Ok(Self::new(ModelArtifact::from_bytes(
+            bytes,
+            &crate::backend::device()?,
+        )?))
+    }
+
+    pub fn header(&self) -> &ArtifactHeader {
+        &self.header
+    }
+
+    /// A raw RGB8 frame → prediction (preprocessing included).
+    pub fn predict_rgb(
+        &mut self,
+        width: usize,
+        height: usize,
+        rgb: &[u8],
+    ) -> Result<Prediction, TrainError> {
+        let mut input = std::mem::take(&mut self.input);
+        let result = self
+            .header
+            .config
+            .preprocess
+            .apply_into(width, height, rgb, &mut input)
+            .and_then(|()| self.predict_preprocessed(&input));
+        self.input = input;
+        result
+    }
+
+    /// An already preprocessed image (`channels × size × size`) → prediction.
+    pub fn predict_preprocessed(&self, image: &[f32]) -> Result<Prediction, TrainError> {
+        let p = &self.header.config.preprocess;
+        if image.len() != p.input_len() {
+            return Err(TrainError::Input(format!(
+                "preprocessed image holds {} values: the model needs {}",
+                image.len(),
+                p.input_len()
+            )));
+        }
+        let x = Tensor::<4>::from_data(
+            TensorData::new(image.to_vec(), [1, p.channels, p.size_px, p.size_px]),
+            &self.device,
+        );
+        let (mean, wrench) = self.net.forward_wrench(x);
+        let read = |t: Tensor<2>| {
+            t.into_data()
+                .as_slice::<f32>()
+                .map(<[f32]>::to_vec)
+                .map_err(|e| TrainError::Artifact(format!("reading the output: {e:?}")))
+        };
+        let latent_mean = read(mean)?;
+        let wrench = match wrench {
+            Some(w) => Some(self.header.norm.denormalise(&read(w)?)),
+            None => None,
+        };
+        if let Some(w) = &wrench
+            && w.iter().any(|v| !v.is_finite())
+        {
+            return Err(TrainError::NonFinite {
+                epoch: 0,
+                step: 0,
+                detail: format!("inference produced {w:?}"),
+            });
+        }
+        Ok(Prediction {
+            wrench,
+            latent_mean,
+        })
+    }
+}
+
+/// Latency of [`Predictor::predict_preprocessed`] at batch 1.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Latency {
+    pub runs: usize,
+    pub threads: usize,
+    pub median_ms: f64,
+    pub p95_ms: f64,
+    pub mean_ms: f64,
+}
+
+/// Times `runs` single-image inferences (after 10 warm-up runs) on a pool of
+/// `threads` threads (1: one core).
+pub fn measure_latency(
+    predictor: &Predictor,
+    image: &[f32],
+    runs: usize,
+    threads: usize,
+) -> Result<Latency, TrainError> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.max(1))
+        .build()
+        .map_err(|e| TrainError::Config(format!("cannot build a thread pool: {e}")))?;
+    pool.install(|| {
+        for _ in 0..10 {
+            predictor.predict_preprocessed(image)?;
+        }
+        let mut ms = Vec::with_capacity(runs.max(1));
+        for _ in 0..runs.max(1) {
+            let t = std::time::Instant::now();
+            predictor.predict_preprocessed(image)?;
+            ms.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        ms.sort_by(f64::total_cmp);
+        let at = |q: f64| ms[((ms.len() - 1) as f64 * q).round() as usize];
+        Ok(Latency {
+            runs: ms.len(),
+            threads: threads.max(1),
+            median_ms: at(0.5),
+            p95_ms: at(0.95),
+            mean_ms: ms.iter().sum::<f64>() / ms.len() as f64,
+        })
+    })
+}

@@ -1,0 +1,748 @@
+//! The training loop: Adam with a per-epoch exponentially decreasing learning rate,
+//! batches of 64, validation after every epoch, early stopping on the validation score,
+//! a checkpoint after every epoch, and resume from the last one.
+//!
+//! Determinism: weights are initialised from the seed (under a process-wide lock,
+//! because burn seeds its generator per backend rather than per model), the epoch's
+//! shuffle comes from `(seed, epoch)` and every batch's latent noise from
+//! `(seed, epoch, step)`. Same seed and data, same metrics, including after a resume,
+//! up to the order of float sums in multithreaded kernels (a last-bit difference after
+//! two epochs was seen when other work competed for the cores).
+//!
+//! Checkpoints: after each epoch the weights and optimiser state go into files named
+//! by the epoch, then `checkpoint.json` (the commit point) is replaced atomically to
+//! point at them, then older files are deleted. A kill at any moment leaves the last
+//! committed epoch readable.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::prelude::*;
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+use crate::TrainError;
+use crate::artifact::{ArtifactHeader, FORMAT_VERSION, ModelArtifact, TrainingSummary};
+use crate::labels::{LabelNorm, WrenchLabel};
+use crate::loss::{combine, kl_mean, mse};
+use crate::metrics::Metrics;
+use crate::model::{ModelConfig, Net};
+
+/// One preprocessed image and its label.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Example {
+    /// `channels × size × size` values in [0, 1] from [`crate::Preprocess::apply`].
+    pub image: Vec<f32>,
+    pub label: WrenchLabel,
+}
+
+/// The three splits of a dataset.
+#[derive(Debug, Clone, Default)]
+pub struct Splits {
+    pub train: Vec<Example>,
+    pub val: Vec<Example>,
+    pub test: Vec<Example>,
+}
+
+/// Optimisation settings (the model's own settings are in [`ModelConfig`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainConfig {
+    pub epochs: usize,
+    pub batch_size: usize,
+    /// Adam's learning rate in the first epoch.
+    pub learning_rate: f64,
+    /// The learning rate is multiplied by this after every epoch.
+    pub lr_decay: f64,
+    /// Stop after this many epochs without a better validation score (0: never).
+    pub patience: usize,
+    pub seed: u64,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            // 12 epochs with the rate ×0.8 per epoch: on 21 000 simulated images this
+            // beat ×0.92 at every epoch compared (validation R² min 0.9914 against
+            // 0.9856 after epoch 6 and 5; see trainer/README.md).
+            epochs: 12,
+            batch_size: 64,
+            learning_rate: 2e-3,
+            lr_decay: 0.8,
+            patience: 8,
+            seed: 1,
+        }
+    }
+}
+
+impl TrainConfig {
+    pub fn problems(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if self.epochs == 0 {
+            out.push("epochs 0: expected at least 1".into());
+        }
+        if self.batch_size < 2 {
+            out.push(format!(
+                "batch size {}: expected at least 2 (batch norm needs two images)",
+                self.batch_size
+            ));
+        }
+        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
+            out.push(format!(
+                "learning rate {}: expected a finite value > 0",
+                self.learning_rate
+            ));
+        }
+        if !(self.lr_decay.is_finite() && self.lr_decay > 0.0 && self.lr_decay <= 1.0) {
+            out.push(format!(
+                "lr decay {}: expected a value in (0, 1]",
+                self.lr_decay
+            ));
+        }
+        out
+    }
+
+    fn learning_rate_at(&self, epoch: usize) -> f64 {
+        self.learning_rate * self.lr_decay.powi(i32::try_from(epoch).unwrap_or(i32::MAX))
+    }
+}
+
+/// One epoch's figures (what the progress line and the history show).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpochReport {
+    /// 1-based.
+    pub epoch: usize,
+    pub learning_rate: f64,
+    pub train_loss: f64,
+    pub train_recon: Option<f64>,
+    pub train_pred: Option<f64>,
+    pub train_kl: Option<f64>,
+    pub val_r2_mean: Option<f64>,
+    pub val_r2_min: Option<f64>,
+    pub val_image_mse: Option<f64>,
+    /// Higher is better: mean validation R² (or −image MSE for the VAE).
+    pub val_score: f64,
+    pub best: bool,
+    pub seconds: f64,
+    pub train_images_per_s: f64,
+}
+
+/// Receives progress; every method has a do-nothing default.
+pub trait Observer {
+    fn resumed(&mut self, _completed_epochs: usize) {}
+    fn batch(&mut self, _epoch: usize, _step: usize, _steps: usize) {}
+    fn epoch(&mut self, _report: &EpochReport) {}
+}
+
+/// An observer that ignores everything.
+#[derive(Debug, Default)]
+pub struct Quiet;
+impl Observer for Quiet {}
+
+/// What [`train`] returns.
+#[derive(Debug)]
+pub struct Trained {
+    /// The best epoch's model, with its header (config, normalisation, summary).
+    pub artifact: ModelArtifact,
+    pub history: Vec<EpochReport>,
+    /// Epochs that a checkpoint had already done.
+    pub resumed_after: Option<usize>,
+}
+
+/// The committed state of a checkpoint folder (`checkpoint.json`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CheckpointState {
+    config: ModelConfig,
+    train: TrainConfig,
+    data_fingerprint: String,
+    norm: LabelNorm,
+    completed_epochs: usize,
+    best_epoch: usize,
+    best_score: f64,
+    model_file: String,
+    optimizer_file: String,
+    best_file: String,
+    history: Vec<EpochReport>,
+    seconds: f64,
+}
+
+const CHECKPOINT: &str = "checkpoint.json";
+
+/// Burn keeps one random generator per backend (process-wide), not per module, and
+/// draws a parameter's initial values lazily, on its first use. Seeding, building
+/// and materialising a net therefore happen under this lock, and every other
+/// construction of a net in this crate takes it too: without it, a second training
+/// (or a model being loaded) in another thread draws from the generator between
+/// `seed` and the first forward pass, and the same seed gives other weights.
+pub(crate) static INIT_LOCK: Mutex<()> = Mutex::new(());
+
+pub(crate) fn init_lock() -> std::sync::MutexGuard<'static, ()> {
+    INIT_LOCK
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+fn init_net(config: &ModelConfig, seed: u64, device: &Device) -> Net {
+    let _guard = init_lock();
+    device.seed(seed);
+    let net = config.init(device);
+    // Draw every parameter now, in module order, while the generator is ours.
+    net.visit(&mut Materialise);
+    net
+}
+
+/// Forces lazily initialised parameters to draw their values.
+struct Materialise;
+
+impl burn::module::ModuleVisitor for Materialise {
+    fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
+        let _ = param.val();
+    }
+}
+
+/// A short fingerprint of the training data (sizes and every label), so a resume on
+/// different data is refused rather than silently mixed.
+fn fingerprint(splits: &Splits) -> String {
+    // FNV-1a over sizes and label bits: stable across runs and platforms.
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut feed = |bytes: &[u8]| {
+        for b in bytes {
+            h ^= u64::from(*b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    for split in [&splits.train, &splits.val, &splits.test] {
+        feed(&(split.len() as u64).to_le_bytes());
+        for e in split {
+            for v in e.label {
+                feed(&v.to_bits().to_le_bytes());
+            }
+            feed(&(e.image.len() as u64).to_le_bytes());
+        }
+    }
+    format!("{h:016x}")
+}
+
+fn check_inputs(
+    config: &ModelConfig,
+    train: &TrainConfig,
+    splits: &Splits,
+) -> Result<(), TrainError> {
+    let mut problems = config.problems();
+    problems.extend(train.problems());
+    if !problems.is_empty() {
+        return Err(TrainError::Config(problems.join("; ")));
+    }
+    let need = config.preprocess.input_len();
+    for (name, split) in [
+        ("train", &splits.train),
+        ("val", &splits.val),
+        ("test", &splits.test),
+    ] {
+        if split.is_empty() {
+            return Err(TrainError::Input(format!("the {name} split is empty")));
+        }
+        if let Some(i) = split.iter().position(|e| e.image.len() != need) {
+            return Err(TrainError::Input(format!(
+                "{name} image {i} holds {} values: the model's input needs {need}",
+                split[i].image.len()
+            )));
+        }
+        if let Some(i) = split.iter().position(|e| {
+            e.image.iter().any(|v| !v.is_finite()) || e.label.iter().any(|v| !v.is_finite())
+        }) {
+            return Err(TrainError::Input(format!(
+                "{name} example {i} holds a non-finite value"
+            )));
+        }
+    }
+    if splits.train.len() < 2 {
+        return Err(TrainError::Input(
+            "the train split needs at least 2 examples (batch norm)".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Builds the image and label tensors of `examples[indices]`.
+pub(crate) fn batch_tensors(
+    examples: &[Example],
+    indices: &[usize],
+    config: &ModelConfig,
+    norm: &LabelNorm,
+    device: &Device,
+) -> (Tensor<4>, Tensor<2>) {
+    let p = &config.preprocess;
+    let mut pixels = Vec::with_capacity(indices.len() * p.input_len());
+    let mut labels = Vec::with_capacity(indices.len() * 6);
+    for &i in indices {
+        pixels.extend_from_slice(&examples[i].image);
+        labels.extend_from_slice(&norm.normalise(&examples[i].label));
+    }
+    let n = indices.len();
+    let images = Tensor::<4>::from_data(
+        TensorData::new(pixels, [n, p.channels, p.size_px, p.size_px]),
+        device,
+    );
+    let labels = Tensor::<2>::from_data(TensorData::new(labels, [n, 6]), device);
+    (images, labels)
+}
+
+fn to_vec(t: Tensor<2>) -> Vec<f32> {
+    let data = t.into_data();
+    data.as_slice::<f32>()
+        .map(<[f32]>::to_vec)
+        .unwrap_or_default()
+}
+
+/// Runs a model (in evaluation mode) over `examples`: wrench predictions in label
+/// units (if it predicts any) and the image MSE (if it reconstructs).
+pub fn evaluate(
+    net: &Net,
+    config: &ModelConfig,
+    norm: &LabelNorm,
+    examples: &[Example],
+    device: &Device,
+) -> (Metrics, Option<Vec<WrenchLabel>>) {
+    let net = net.valid();
+    let mut predictions = config.kind.predicts_wrench().then(Vec::new);
+    let mut sq_err_sum = 0.0f64;
+    let indices: Vec<usize> = (0..examples.len()).collect();
+    for chunk in indices.chunks(64) {
+        let (images, _) = batch_tensors(examples, chunk, config, norm, device);
+        // Without a decoder there is nothing to reconstruct: the cheaper pass.
+        let wrench = if config.kind.has_decoder() {
+            let out = net.forward(images.clone(), None);
+            if let Some(image) = out.image {
+                let per_batch = mse(image, images).into_scalar::<f32>();
+                sq_err_sum += f64::from(per_batch) * chunk.len() as f64;
+            }
+            out.wrench
+        } else {
+            net.forward_wrench(images).1
+        };
+        if let (Some(p), Some(w)) = (predictions.as_mut(), wrench) {
+            p.extend(to_vec(w).chunks_exact(6).map(|z| norm.denormalise(z)));
+        }
+    }
+    let targets: Vec<WrenchLabel> = examples.iter().map(|e| e.label).collect();
+    let image_mse = config
+        .kind
+        .has_decoder()
+        .then(|| sq_err_sum / examples.len().max(1) as f64);
+    let metrics = Metrics::compute(predictions.as_deref(), &targets, image_mse);
+    (metrics, predictions)
+}
+
+fn score(config: &ModelConfig, m: &Metrics) -> f64 {
+    if config.kind.predicts_wrench() {
+        m.r2_mean.unwrap_or(f64::MIN)
+    } else {
+        -m.image_mse.unwrap_or(f64::MAX)
+    }
+}
+
+fn record_bytes(net: &Net) -> Result<Vec<u8>, TrainError> {
+    crate::artifact::encode_weights(net).map_err(TrainError::Checkpoint)
+}
+
+fn load_net(bytes: Vec<u8>, config: &ModelConfig, device: &Device) -> Result<Net, TrainError> {
+    crate::artifact::decode_weights(bytes, config, device).map_err(TrainError::Checkpoint)
+}
+
+/// Trains `config` on `splits`. With `checkpoint_dir`, every epoch is checkpointed
+/// there and a matching checkpoint found there is resumed.
+pub fn train(
+    config: &ModelConfig,
+    train_config: &TrainConfig,
+    splits: &Splits,
+    checkpoint_dir: Option<&Path>,
+    observer: &mut dyn Observer,
+) -> Result<Trained, TrainError> {
+    check_inputs(config, train_config, splits)?;
+    let plain = crate::backend::device()?;
+    let device = plain.clone().autodiff();
+    let fingerprint = fingerprint(splits);
+    let labels: Vec<WrenchLabel> = splits.train.iter().map(|e| e.label).collect();
+    let norm = LabelNorm::fit(&labels)?;
+
+    let mut net = init_net(config, train_config.seed, &device);
+    let mut optimizer: ModuleOptimizer = AdamConfig::new().init();
+    let mut history = Vec::new();
+    let (mut start_epoch, mut best_epoch, mut best_score) = (0usize, 0usize, f64::MIN);
+    let mut best_bytes: Option<Vec<u8>> = None;
+    let mut seconds_before = 0.0;
+    let mut resumed_after = None;
+
+    if let Some(dir) = checkpoint_dir {
+        std::fs::create_dir_all(dir).map_err(|e| TrainError::io("create", dir, e))?;
+        if let Some(state) = read_checkpoint(dir)? {
+            // Only the number of epochs may change: a resume can extend a training.
+            let same_train = TrainConfig {
+                epochs: train_config.epochs,
+                ..state.train
+            } == *train_config;
+            if state.config != *config || !same_train {
+                return Err(TrainError::Checkpoint(format!(
+                    "{} holds a training with other settings ({} {:?}); \
+                     pass a new name, or restart to discard it",
+                    dir.display(),
+                    state.config.kind,
+                    state.train
+                )));
+            }
+            if state.data_fingerprint != fingerprint {
+                return Err(TrainError::Checkpoint(format!(
+                    "{} was trained on other data (fingerprint {} ≠ {fingerprint}); \
+                     pass a new name, or restart to discard it",
+                    dir.display(),
+                    state.data_fingerprint
+                )));
+            }
+            let read = |name: &str| {
+                let path = dir.join(name);
+                std::fs::read(&path).map_err(|e| TrainError::io("read", &path, e))
+            };
+            net = load_net(read(&state.model_file)?, config, &device)?;
+            optimizer = optimizer
+                .from_bytes(burn::tensor::Bytes::from_bytes_vec(read(
+                    &state.optimizer_file,
+                )?))
+                .map_err(|e| TrainError::Checkpoint(format!("reading the optimiser state: {e}")))?;
+            best_bytes = Some(read(&state.best_file)?);
+            start_epoch = state.completed_epochs;
+            best_epoch = state.best_epoch;
+            best_score = state.best_score;
+            history = state.history;
+            history.truncate(start_epoch);
+            seconds_before = state.seconds;
+            resumed_after = Some(start_epoch);
+            observer.resumed(start_epoch);
+        }
+    }
+
+    let (w_recon, w_pred, w_kl) = config.loss_weights();
+    let batch = train_config.batch_size;
+    let n_train = splits.train.len();
+    let steps = n_train.div_ceil(batch);
+    let started = Instant::now();
+    let mut stopped_early = false;
+
+    for epoch in start_epoch..train_config.epochs {
+        if train_config.patience > 0
+            && epoch >= best_epoch + train_config.patience
+            && best_epoch > 0
+        {
+            stopped_early = true;
+            break;
+        }
+        let epoch_started = Instant::now();
+        let lr = train_config.learning_rate_at(epoch);
+        let mut order: Vec<usize> = (0..n_train).collect();
+        order.shuffle(&mut ChaCha8Rng::seed_from_u64(mix(
+            train_config.seed,
+            epoch as u64,
+            0,
+        )));
+        let (mut sum_total, mut sum_recon, mut sum_pred, mut sum_kl, mut seen) =
+            (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0usize);
+        for (step, chunk) in order.chunks(batch).enumerate() {
+            // Batch norm needs two images; a last batch of one is dropped.
+            if chunk.len() < 2 {
+                continue;
+            }
+            let (images, targets) = batch_tensors(&splits.train, chunk, config, &norm, &device);
+            let noise = config.kind.has_decoder().then(|| {
+                let mut rng = ChaCha8Rng::seed_from_u64(mix(
+                    train_config.seed,
+                    epoch as u64,
+                    step as u64 + 1,
+                ));
+                let values: Vec<f32> = (0..chunk.len() * config.latent)
+                    .map(|_| StandardNormal.sample(&mut rng))
+                    .collect();
+                Tensor::<2>::from_data(
+                    TensorData::new(values, [chunk.len(), config.latent]),
+                    &device,
+                )
+            });
+            let out = net.forward(images.clone(), noise);
+            let recon = out.image.map(|img| mse(img, images));
+            let pred = out.wrench.map(|w| mse(w, targets));
+            let kl = match (config.kind.has_decoder(), out.log_var) {
+                (true, Some(lv)) => Some(kl_mean(out.mean, lv)),
+                _ => None,
+            };
+            let terms = combine((w_recon, w_pred, w_kl), recon, pred, kl, &device);
+            let value = |t: &Option<Tensor<1>>| {
+                t.as_ref()
+                    .map(|t| f64::from(t.clone().into_scalar::<f32>()))
+            };
+            let total = f64::from(terms.total.clone().into_scalar::<f32>());
+            let (r, p, k) = (value(&terms.recon), value(&terms.pred), value(&terms.kl));
+            if !total.is_finite() {
+                return Err(TrainError::NonFinite {
+                    epoch: epoch + 1,
+                    step: step + 1,
+                    detail: format!(
+                        "loss {total} (reconstruction {r:?}, prediction {p:?}, KL {k:?}) at learning rate {lr:.3e}"
+                    ),
+                });
+            }
+            let grads = GradientsParams::from_grads(terms.total.backward(), &net);
+            net = optimizer.step(lr, net, grads);
+            let n = chunk.len() as f64;
+            sum_total += total * n;
+            sum_recon += r.unwrap_or(0.0) * n;
+            sum_pred += p.unwrap_or(0.0) * n;
+            sum_kl += k.unwrap_or(0.0) * n;
+            seen += chunk.len();
+            observer.batch(epoch + 1, step + 1, steps);
+        }
+        let train_seconds = epoch_started.elapsed().as_secs_f64();
+        let (val, _) = evaluate(&net, config, &norm, &splits.val, &plain);
+        let val_score = score(config, &val);
+        let best = val_score > best_score;
+        if best {
+            best_score = val_score;
+            best_epoch = epoch + 1;
+            best_bytes = Some(record_bytes(&net)?);
+        }
+        let seen_f = seen.max(1) as f64;
+        let has = |used: bool, v: f64| used.then_some(v / seen_f);
+        let report = EpochReport {
+            epoch: epoch + 1,
+            learning_rate: lr,
+            train_loss: sum_total / seen_f,
+            train_recon: has(config.kind.has_decoder(), sum_recon),
+            train_pred: has(config.kind.predicts_wrench(), sum_pred),
+            train_kl: has(config.kind.has_decoder(), sum_kl),
+            val_r2_mean: val.r2_mean,
+            val_r2_min: val.r2_min(),
+            val_image_mse: val.image_mse,
+            val_score,
+            best,
+            seconds: epoch_started.elapsed().as_secs_f64(),
+            train_images_per_s: seen as f64 / train_seconds.max(1e-9),
+        };
+        history.push(report.clone());
+        observer.epoch(&report);
+        if let Some(dir) = checkpoint_dir {
+            write_checkpoint(
+                dir,
+                &net,
+                &optimizer,
+                best_bytes.as_deref(),
+                CheckpointState {
+                    config: *config,
+                    train: *train_config,
+                    data_fingerprint: fingerprint.clone(),
+                    norm,
+                    completed_epochs: epoch + 1,
+                    best_epoch,
+                    best_score,
+                    model_file: format!("epoch-{:04}.model", epoch + 1),
+                    optimizer_file: format!("epoch-{:04}.optim", epoch + 1),
+                    best_file: format!("best-{best_epoch:04}.model"),
+                    history: history.clone(),
+                    seconds: seconds_before + started.elapsed().as_secs_f64(),
+                },
+            )?;
+        }
+    }
+
+    let best_net = match best_bytes {
+        Some(bytes) => load_net(bytes, config, &plain)?,
+        None => net.valid(),
+    };
+    let (val, _) = evaluate(&best_net, config, &norm, &splits.val, &plain);
+    let (test, _) = evaluate(&best_net, config, &norm, &splits.test, &plain);
+    let epochs_run = history.len();
+    let train_rate = {
+        let total_seconds: f64 = history.iter().map(|h| h.seconds).sum();
+        let images: f64 = history
+            .iter()
+            .map(|h| h.train_images_per_s * h.seconds)
+            .sum();
+        // Mean throughput weighted by epoch time (validation excluded in each rate).
+        if total_seconds > 0.0 {
+            images / total_seconds
+        } else {
+            0.0
+        }
+    };
+    let header = ArtifactHeader {
+        format_version: FORMAT_VERSION,
+        software_version: env!("CARGO_PKG_VERSION").to_owned(),
+        config: *config,
+        norm,
+        training: Some(TrainingSummary {
+            train: *train_config,
+            train_samples: splits.train.len(),
+            val_samples: splits.val.len(),
+            test_samples: splits.test.len(),
+            epochs_run,
+            best_epoch,
+            stopped_early,
+            seconds: seconds_before + started.elapsed().as_secs_f64(),
+            train_images_per_s: train_rate,
+            val,
+            test,
+        }),
+    };
+    Ok(Trained {
+        artifact: ModelArtifact {
+            header,
+            net: best_net,
+        },
+        history,
+        resumed_after,
+    })
+}
+
+/// Mixes a seed with two counters (SplitMix64 finaliser) into a stream seed.
+fn mix(seed: u64, a: u64, b: u64) -> u64 {
+    let mut z =
+        seed ^ a.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ b.wrapping_mul(0xc2b2_ae3d_27d4_eb4f);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+fn read_checkpoint(dir: &Path) -> Result<Option<CheckpointState>, TrainError> {
+    let path = dir.join(CHECKPOINT);
+    let text = match std::fs::read_to_string(&path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(TrainError::io("read", &path, e)),
+    };
+    serde_json::from_str(&text)
+        .map(Some)
+        .map_err(|e| TrainError::Checkpoint(format!("{}: {e}", path.display())))
+}
+
+fn write_checkpoint(
+    dir: &Path,
+    net: &Net,
+    optimizer: &ModuleOptimizer,
+    best: Option<&[u8]>,
+    state: CheckpointState,
+) -> Result<(), TrainError> {
+    crate::write_atomic(&dir.join(&state.model_file), &record_bytes(net)?)?;
+    let optim = optimizer
+        .into_bytes()
+        .map_err(|e| TrainError::Checkpoint(format!("encoding the optimiser state: {e}")))?;
+    crate::write_atomic(&dir.join(&state.optimizer_file), &optim)?;
+    let best_path = dir.join(&state.best_file);
+    if !best_path.exists() {
+        let bytes = match best {
+            Some(b) => b.to_vec(),
+            None => record_bytes(net)?,
+        };
+        crate::write_atomic(&best_path, &bytes)?;
+    }
+    let json = serde_json::to_vec_pretty(&state)
+        .map_err(|e| TrainError::Checkpoint(format!("encoding the state: {e}")))?;
+    crate::write_atomic(&dir.join(CHECKPOINT), &json)?;
+    // Committed: files of other epochs are garbage now.
+    let keep = [&state.model_file, &state.optimizer_file, &state.best_file];
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            let ours = name.starts_with("epoch-") || name.starts_with("best-");
+            if ours && !keep.iter().any(|k| **k == name) {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Removes a checkpoint folder's files (for a deliberate restart).
+pub fn discard_checkpoint(dir: &Path) -> Result<(), TrainError> {
+    match std::fs::remove_dir_all(dir) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(TrainError::io("remove", dir, e)),
+    }
+}
+
+/// Where checkpoints of a named training go under a root folder.
+pub fn checkpoint_dir(root: &Path, name: &str) -> PathBuf {
+    root.join(name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::ModelKind;
+    use crate::preprocess::Preprocess;
+
+    /// Nets built from one seed in concurrent threads get the same weights: burn's
+    /// generator is process-wide and parameters draw lazily, so without the lock and
+    /// the materialisation under it one thread's draws land in another's net.
+    #[test]
+    fn the_same_seed_gives_the_same_weights_under_concurrency() {
+        let config = ModelConfig {
+            kind: ModelKind::Svae,
+            width: 4,
+            latent: 6,
+            preprocess: Preprocess {
+                size_px: 16,
+                ..Preprocess::default()
+            },
+            ..ModelConfig::default()
+        };
+        let device = Device::flex();
+        let weights: Vec<Vec<f32>> = std::thread::scope(|s| {
+            let handles: Vec<_> = (0..4)
+                .map(|i| {
+                    let device = device.clone();
+                    s.spawn(move || {
+                        let mut last = Vec::new();
+                        for _ in 0..100 {
+                            // Every other thread builds another seed's net in between.
+                            let seed = if i % 2 == 0 { 7 } else { 8 };
+                            let net = init_net(&config, seed, &device);
+                            let mut values = Values(Vec::new());
+                            net.visit(&mut values);
+                            last = values.0;
+                        }
+                        last
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().expect("thread"))
+                .collect()
+        });
+        // Bit-exact, compared without printing thousands of values.
+        let same = |a: &[f32], b: &[f32]| {
+            a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+        };
+        assert!(same(&weights[0], &weights[2]), "seed 7 gave two nets");
+        assert!(same(&weights[1], &weights[3]), "seed 8 gave two nets");
+        assert!(
+            !same(&weights[0], &weights[1]),
+            "seeds 7 and 8 gave one net"
+        );
+    }
+
+    /// Every float parameter's values, in module order.
+    struct Values(Vec<f32>);
+
+    impl burn::module::ModuleVisitor for Values {
+        fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
+            let data = param.val().into_data();
+            self.0
+                .extend_from_slice(data.as_slice::<f32>().expect("f32 parameters"));
+        }
+    }
+}
