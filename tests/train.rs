@@ -188,11 +188,15 @@ fn sweeps_and_the_model_benchmark_write_tables_csv_and_png() {
         ],
     ));
     assert!(
-        out.contains("latency ms") && out.contains("16px w4 l8"),
+        out.contains("model ms") && out.contains("frame ms") && out.contains("16px w4 l8"),
         "{out}"
     );
     let csv = std::fs::read_to_string(d.join("bm/bench-model.csv")).expect("csv");
     assert_eq!(csv.lines().count(), 3, "{csv}");
+    assert!(
+        csv.starts_with("label,") && csv.contains(",latency_ms,frame_latency_ms,"),
+        "{csv}"
+    );
     assert!(d.join("bm/bench-model.png").is_file());
 }
 

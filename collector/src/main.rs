@@ -9,7 +9,11 @@ fn main() -> ExitCode {
     let cli = Cli::parse(); // exits 2 on bad arguments, 0 on --help
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
+            // sqlx warns of "slow statements" when a streamed query (a dataset's
+            // frames, read while they are preprocessed) stays open for over a second:
+            // expected, not a fault, so its statement log is off unless RUST_LOG asks.
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "warn,sqlx::query=error".into()),
         )
         .with_writer(std::io::stderr)
         .init();

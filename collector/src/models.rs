@@ -8,7 +8,7 @@ use crate::dataset::{self, DatasetError, query_err};
 use crate::store::Store;
 use futures_util::TryStreamExt as _;
 use softtouch_trainer::labels::label_from_si;
-use softtouch_trainer::{Example, Preprocess, Splits, Trained};
+use softtouch_trainer::{Example, FingerTable, Preprocess, Splits, Trained};
 use sqlx::FromRow;
 
 /// A model operation failed.
@@ -135,6 +135,8 @@ pub async fn load_splits(
     )
     .bind(info.dataset_id)
     .fetch(store.pool());
+    // The colour threshold as a lookup, built once for the whole dataset.
+    let table = FingerTable::new(preprocess);
     let mut splits = Splits::default();
     let mut chunk = Vec::with_capacity(256);
     let mut done = 0u64;
@@ -150,7 +152,7 @@ pub async fn load_splits(
         if chunk.len() >= 256 || (last && !chunk.is_empty()) {
             let rows = std::mem::take(&mut chunk);
             done += rows.len() as u64;
-            for (split, example) in preprocess_parallel(rows, preprocess)? {
+            for (split, example) in preprocess_parallel(rows, &table)? {
                 match split.as_str() {
                     "train" => splits.train.push(example),
                     "val" => splits.val.push(example),
@@ -166,10 +168,44 @@ pub async fn load_splits(
     Ok(splits)
 }
 
+/// Dataset `name`'s first test frame as stored, decoded to RGB8 `(width, height,
+/// bytes)`: a real camera frame to time inference on, preprocessing included.
+pub async fn first_test_frame(
+    store: &Store,
+    name: &str,
+) -> Result<(usize, usize, Vec<u8>), ModelError> {
+    let info = dataset::get(store, name).await?;
+    let row = sqlx::query_as::<_, MemberRow>(
+        "SELECT m.split, m.run_id, m.sample_index,
+                s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
+                f.format, f.width, f.height, f.data
+         FROM dataset_members m
+         JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
+         JOIN frames f ON f.run_id = m.run_id AND f.sample_index = m.sample_index
+         WHERE m.dataset_id = ? ORDER BY m.split = 'test' DESC, m.position LIMIT 1",
+    )
+    .bind(info.dataset_id)
+    .fetch_optional(store.pool())
+    .await
+    .map_err(query_err("reading a frame of the dataset"))?;
+    let Some(row) = row else {
+        return Err(ModelError::Frame {
+            run: 0,
+            index: 0,
+            why: format!("dataset `{name}` holds no frames"),
+        });
+    };
+    decode(&row).map_err(|why| ModelError::Frame {
+        run: row.run_id,
+        index: row.sample_index,
+        why,
+    })
+}
+
 /// Decodes and preprocesses rows on every core, keeping their order.
 fn preprocess_parallel(
     rows: Vec<MemberRow>,
-    preprocess: &Preprocess,
+    table: &FingerTable,
 ) -> Result<Vec<(String, Example)>, ModelError> {
     let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
     let per = rows.len().div_ceil(threads).max(1);
@@ -180,7 +216,7 @@ fn preprocess_parallel(
             why,
         };
         let (w, h, rgb) = decode(row).map_err(frame_err)?;
-        let image = preprocess.apply(w, h, &rgb)?;
+        let image = table.apply(w, h, &rgb)?;
         let label = label_from_si(
             [row.fx_n, row.fy_n, row.fz_n],
             [row.tx_nm, row.ty_nm, row.tz_nm],

@@ -50,6 +50,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
     let t = std::time::Instant::now();
     let mut examples = Vec::with_capacity(samples);
+    let mut frame: Option<(usize, usize, Vec<u8>)> = None;
     for i in 0..samples {
         let pose = ContactPose {
             x_m: rng.random_range(scene.poses.x_m.min..=scene.poses.x_m.max),
@@ -58,6 +59,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         };
         let rod = &scene.rods[i % scene.rods.len()].name;
         let r = sim.render(rod, &pose, i as u64, 0.0)?;
+        if i + 1 == samples {
+            // The last frame is in the test split: the raw frame for the latency.
+            frame = Some((
+                r.image.width() as usize,
+                r.image.height() as usize,
+                r.image.as_raw().clone(),
+            ));
+        }
         let image = config.preprocess.apply(
             r.image.width() as usize,
             r.image.height() as usize,
@@ -91,13 +100,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .ok_or("no summary")?;
     println!("test:\n{}", summary.test.render());
     let image = splits.test[0].image.clone();
-    let predictor = softtouch_trainer::Predictor::new(trained.artifact);
+    let mut predictor = softtouch_trainer::Predictor::new(trained.artifact);
     for threads in [1, 2] {
         let l = softtouch_trainer::measure_latency(&predictor, &image, 500, threads)?;
         println!(
             "inference, batch 1, {threads} thread(s): median {:.3} ms, p95 {:.3} ms, mean {:.3} ms over {} runs",
             l.median_ms, l.p95_ms, l.mean_ms, l.runs
         );
+        if let Some((w, h, rgb)) = &frame {
+            let l = softtouch_trainer::measure_frame_latency(
+                &mut predictor,
+                (*w, *h, rgb),
+                500,
+                threads,
+            )?;
+            println!(
+                "raw {w}×{h} frame → wrench, {threads} thread(s): median {:.3} ms, p95 {:.3} ms, mean {:.3} ms over {} runs",
+                l.median_ms, l.p95_ms, l.mean_ms, l.runs
+            );
+        }
     }
     println!(
         "backend {}: {:.1} train images/s (mean over epochs)",

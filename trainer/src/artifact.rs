@@ -111,6 +111,30 @@ impl ModelArtifact {
         Ok(Self { header, net })
     }
 
+    /// A freshly initialised (untrained) model of `config` from `seed`, with identity
+    /// label normalisation and no training summary: for timing inference and for
+    /// tools that need a net of the right shape before any training.
+    pub fn untrained(config: &ModelConfig, seed: u64) -> Result<Self, TrainError> {
+        let problems = config.problems();
+        if !problems.is_empty() {
+            return Err(TrainError::Config(problems.join("; ")));
+        }
+        let device = crate::backend::device()?;
+        Ok(Self {
+            header: ArtifactHeader {
+                format_version: FORMAT_VERSION,
+                software_version: env!("CARGO_PKG_VERSION").to_owned(),
+                config: *config,
+                norm: LabelNorm {
+                    mean: [0.0; 6],
+                    std: [1.0; 6],
+                },
+                training: None,
+            },
+            net: crate::train::init_net(config, seed, &device),
+        })
+    }
+
     /// Writes the artifact atomically (a temporary file renamed into place).
     pub fn save(&self, path: &Path) -> Result<(), TrainError> {
         crate::write_atomic(path, &self.to_bytes()?)

@@ -8,7 +8,8 @@ use burn::prelude::*;
 use crate::TrainError;
 use crate::artifact::{ArtifactHeader, ModelArtifact};
 use crate::labels::WrenchLabel;
-use crate::model::Net;
+use crate::model::InferenceNet;
+use crate::preprocess::FingerTable;
 
 /// One inference.
 #[derive(Debug, Clone, PartialEq)]
@@ -23,9 +24,12 @@ pub struct Prediction {
 #[derive(Debug)]
 pub struct Predictor {
     header: ArtifactHeader,
-    net: Net,
+    /// The encoder and heads with batch norm folded in (what one image needs).
+    net: InferenceNet,
     device: Device,
     input: Vec<f32>,
+    /// The model's colour threshold as a lookup table (built once, about 0.1 s).
+    table: FingerTable,
 }
 
 impl Predictor {
@@ -37,8 +41,10 @@ impl Predictor {
             .first()
             .map_or_else(Device::flex, |d| d.clone().inner());
         let input = vec![0.0; artifact.header.config.preprocess.input_len()];
+        let table = FingerTable::new(&artifact.header.config.preprocess);
         Self {
-            net: artifact.net.valid(),
+            table,
+            net: InferenceNet::new(&artifact.net),
             header: artifact.header,
             device,
             input,
@@ -72,9 +78,7 @@ impl Predictor {
     ) -> Result<Prediction, TrainError> {
         let mut input = std::mem::take(&mut self.input);
         let result = self
-            .header
-            .config
-            .preprocess
+            .table
             .apply_into(width, height, rgb, &mut input)
             .and_then(|()| self.predict_preprocessed(&input));
         self.input = input;
@@ -95,7 +99,7 @@ impl Predictor {
             TensorData::new(image.to_vec(), [1, p.channels, p.size_px, p.size_px]),
             &self.device,
         );
-        let (mean, wrench) = self.net.forward_wrench(x);
+        let (mean, wrench) = self.net.forward(x);
         let read = |t: Tensor<2>| {
             t.into_data()
                 .as_slice::<f32>()
@@ -123,7 +127,7 @@ impl Predictor {
     }
 }
 
-/// Latency of [`Predictor::predict_preprocessed`] at batch 1.
+/// Latency of single-image inference (batch 1).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Latency {
     pub runs: usize,
@@ -133,13 +137,38 @@ pub struct Latency {
     pub mean_ms: f64,
 }
 
-/// Times `runs` single-image inferences (after 10 warm-up runs) on a pool of
-/// `threads` threads (1: one core).
+/// Times `runs` single-image inferences of an already preprocessed image (after 10
+/// warm-up runs) on a pool of `threads` threads (1: one core): the model alone.
 pub fn measure_latency(
     predictor: &Predictor,
     image: &[f32],
     runs: usize,
     threads: usize,
+) -> Result<Latency, TrainError> {
+    time_calls(runs, threads, || {
+        predictor.predict_preprocessed(image).map(drop)
+    })
+}
+
+/// Times `runs` calls of [`Predictor::predict_rgb`] on a raw RGB8 camera frame: the
+/// colour threshold, the squash and the model, which is what a controller pays per
+/// frame.
+pub fn measure_frame_latency(
+    predictor: &mut Predictor,
+    frame: (usize, usize, &[u8]),
+    runs: usize,
+    threads: usize,
+) -> Result<Latency, TrainError> {
+    let (width, height, rgb) = frame;
+    time_calls(runs, threads, || {
+        predictor.predict_rgb(width, height, rgb).map(drop)
+    })
+}
+
+fn time_calls(
+    runs: usize,
+    threads: usize,
+    mut call: impl FnMut() -> Result<(), TrainError> + Send,
 ) -> Result<Latency, TrainError> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.max(1))
@@ -147,12 +176,12 @@ pub fn measure_latency(
         .map_err(|e| TrainError::Config(format!("cannot build a thread pool: {e}")))?;
     pool.install(|| {
         for _ in 0..10 {
-            predictor.predict_preprocessed(image)?;
+            call()?;
         }
         let mut ms = Vec::with_capacity(runs.max(1));
         for _ in 0..runs.max(1) {
             let t = std::time::Instant::now();
-            predictor.predict_preprocessed(image)?;
+            call()?;
             ms.push(t.elapsed().as_secs_f64() * 1e3);
         }
         ms.sort_by(f64::total_cmp);

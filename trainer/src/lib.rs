@@ -20,11 +20,11 @@ pub mod train;
 use std::path::Path;
 
 pub use artifact::{ArtifactHeader, ModelArtifact, TrainingSummary};
-pub use infer::{Latency, Prediction, Predictor, measure_latency};
+pub use infer::{Latency, Prediction, Predictor, measure_frame_latency, measure_latency};
 pub use labels::{AXES, LabelNorm, UNITS, WrenchLabel};
 pub use metrics::Metrics;
 pub use model::{ModelConfig, ModelKind};
-pub use preprocess::Preprocess;
+pub use preprocess::{FingerTable, Preprocess};
 pub use train::{
     EpochReport, Example, Observer, Quiet, Splits, TrainConfig, Trained, evaluate, train,
 };

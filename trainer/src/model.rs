@@ -11,6 +11,7 @@
 //! residual stages that halve the size and double the channels (capped at 8w) until
 //! the map is 4×4; the decoder mirrors this with stride-2 transposed convolutions.
 
+use burn::module::Param;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, Linear, LinearConfig, PaddingConfig2d};
 use burn::prelude::*;
@@ -349,6 +350,89 @@ impl Net {
     }
 }
 
+/// A convolution followed by batch norm in evaluation mode, folded into one
+/// convolution: `bn(conv(x)) = conv'(x)` with the weights scaled per output channel by
+/// `s = γ / √(σ² + ε)` and the bias `(b − μ)·s + β`. Batch norm in evaluation mode is
+/// four broadcast passes over the feature map; folded, it costs nothing.
+fn fold(conv: &Conv2d, bn: &BatchNorm) -> Conv2d {
+    let [c_out, ..] = conv.weight.dims();
+    let scale = bn.gamma.val() / bn.running_var.value().add_scalar(bn.epsilon).sqrt();
+    let weight = conv.weight.val() * scale.clone().reshape([c_out, 1, 1, 1]);
+    let bias = match &conv.bias {
+        Some(b) => b.val(),
+        None => Tensor::zeros([c_out], &scale.device()),
+    };
+    let bias = (bias - bn.running_mean.value()) * scale + bn.beta.val();
+    Conv2d {
+        weight: Param::from_tensor(weight),
+        bias: Some(Param::from_tensor(bias)),
+        ..conv.clone()
+    }
+}
+
+/// A residual stage with its batch norms folded into its convolutions.
+#[derive(Module, Debug)]
+struct FoldedBlock {
+    conv1: Conv2d,
+    conv2: Conv2d,
+    skip: Option<Conv2d>,
+}
+
+impl FoldedBlock {
+    fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        let h = relu(self.conv1.forward(x.clone()));
+        let h = self.conv2.forward(h);
+        let s = match &self.skip {
+            Some(conv) => conv.forward(x),
+            None => x,
+        };
+        relu(h + s)
+    }
+}
+
+/// What single-image inference runs: the encoder with every batch norm folded into
+/// the convolution before it, the latent-mean head and the regression head. It gives
+/// the evaluation-mode [`Net::forward_wrench`] (to float rounding) in fewer passes.
+#[derive(Module, Debug)]
+pub struct InferenceNet {
+    stem: Conv2d,
+    stages: Vec<FoldedBlock>,
+    fc_mean: Linear,
+    head: Option<Linear>,
+}
+
+impl InferenceNet {
+    /// Folds an evaluation-mode copy of `net` (its running statistics, not a batch's).
+    pub fn new(net: &Net) -> Self {
+        let net = net.valid();
+        Self {
+            stem: fold(&net.stem, &net.stem_bn),
+            stages: net
+                .stages
+                .iter()
+                .map(|b| FoldedBlock {
+                    conv1: fold(&b.conv1, &b.bn1),
+                    conv2: fold(&b.conv2, &b.bn2),
+                    skip: b.skip.clone(),
+                })
+                .collect(),
+            fc_mean: net.fc_mean.clone(),
+            head: net.head.clone(),
+        }
+    }
+
+    /// Images → (latent mean, standardised wrench if the model predicts one).
+    pub fn forward(&self, images: Tensor<4>) -> (Tensor<2>, Option<Tensor<2>>) {
+        let mut x = relu(self.stem.forward(images));
+        for stage in &self.stages {
+            x = stage.forward(x);
+        }
+        let mean = self.fc_mean.forward(x.flatten(1, 3));
+        let wrench = self.head.as_ref().map(|h| h.forward(relu(mean.clone())));
+        (mean, wrench)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -383,6 +467,66 @@ mod tests {
                 );
                 let (mean, _) = net.forward_wrench(x);
                 assert_eq!(mean.dims(), [2, 6]);
+            }
+        }
+    }
+
+    /// Batch norm with statistics far from the identity (as after training), drawn
+    /// from `seed`.
+    fn randomise(bn: &mut BatchNorm, seed: u64, device: &Device) {
+        use burn::module::RunningState;
+        use burn::tensor::Distribution;
+        let [c] = bn.gamma.dims();
+        device.seed(seed);
+        let uniform = |lo, hi| Tensor::<1>::random([c], Distribution::Uniform(lo, hi), device);
+        bn.gamma = Param::from_tensor(uniform(0.2, 3.0));
+        bn.beta = Param::from_tensor(uniform(-1.0, 1.0));
+        bn.running_mean = RunningState::new(uniform(-2.0, 2.0));
+        // Down to ~ε, where the scale is largest.
+        bn.running_var = RunningState::new(uniform(1e-5, 4.0));
+    }
+
+    #[test]
+    fn the_folded_inference_net_gives_the_evaluation_mode_output() {
+        let device = Device::flex();
+        for kind in [ModelKind::Svae, ModelKind::Convnet, ModelKind::Vae] {
+            let config = ModelConfig {
+                kind,
+                width: 4,
+                latent: 6,
+                preprocess: Preprocess {
+                    size_px: 32,
+                    ..Preprocess::default()
+                },
+                ..ModelConfig::default()
+            };
+            let _guard = crate::train::init_lock();
+            let mut net = config.init(&device);
+            let mut seed = 10;
+            randomise(&mut net.stem_bn, seed, &device);
+            for stage in &mut net.stages {
+                for bn in [&mut stage.bn1, &mut stage.bn2] {
+                    seed += 1;
+                    randomise(bn, seed, &device);
+                }
+            }
+            let folded = InferenceNet::new(&net);
+            let x = Tensor::<4>::random(
+                [3, 1, 32, 32],
+                burn::tensor::Distribution::Uniform(0.0, 1.0),
+                &device,
+            );
+            let (mean, wrench) = net.valid().forward_wrench(x.clone());
+            let (f_mean, f_wrench) = folded.forward(x);
+            let values = |t: Tensor<2>| t.into_data().as_slice::<f32>().expect("f32").to_vec();
+            let close = |a: Vec<f32>, b: Vec<f32>| {
+                let scale = a.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+                a.iter().zip(&b).all(|(x, y)| (x - y).abs() <= 1e-4 * scale)
+            };
+            assert!(close(values(mean), values(f_mean)), "{kind}: latent mean");
+            assert_eq!(wrench.is_some(), f_wrench.is_some());
+            if let (Some(w), Some(f)) = (wrench, f_wrench) {
+                assert!(close(values(w), values(f)), "{kind}: wrench");
             }
         }
     }

@@ -188,7 +188,7 @@ pub(crate) fn init_lock() -> std::sync::MutexGuard<'static, ()> {
         .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
-fn init_net(config: &ModelConfig, seed: u64, device: &Device) -> Net {
+pub(crate) fn init_net(config: &ModelConfig, seed: u64, device: &Device) -> Net {
     let _guard = init_lock();
     device.seed(seed);
     let net = config.init(device);

@@ -10,7 +10,7 @@ use clap::{Args, Subcommand};
 use softtouch_trainer::train::{EpochReport, Observer};
 use softtouch_trainer::{
     AXES, Metrics, ModelArtifact, ModelConfig, ModelKind, Predictor, Preprocess, Splits,
-    TrainConfig, Trained, evaluate, measure_latency,
+    TrainConfig, Trained, evaluate, measure_frame_latency, measure_latency,
 };
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -503,7 +503,10 @@ struct Row {
     epochs: usize,
     seconds_per_epoch: f64,
     images_per_s: f64,
+    /// Median single-image latency on one core: the model on a preprocessed image.
     latency_ms: Option<f64>,
+    /// The same from a raw camera frame (colour threshold and squash included).
+    frame_latency_ms: Option<f64>,
 }
 
 fn train_row(
@@ -531,6 +534,7 @@ fn train_row(
             seconds_per_epoch: seconds / s.epochs_run.max(1) as f64,
             images_per_s: s.train_images_per_s,
             latency_ms: None,
+            frame_latency_ms: None,
         },
         trained,
     ))
@@ -542,7 +546,7 @@ fn fmt_opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {
 
 fn write_csv(path: &Path, rows: &[Row]) -> Result<(), Failure> {
     let mut s = String::from(
-        "label,model,alpha,beta,latent,width,size_px,epochs,seconds_per_epoch,train_images_per_s,latency_ms,image_mse,r2_mean",
+        "label,model,alpha,beta,latent,width,size_px,epochs,seconds_per_epoch,train_images_per_s,latency_ms,frame_latency_ms,image_mse,r2_mean",
     );
     for a in AXES {
         s.push_str(&format!(",r2_{}", a.to_lowercase()));
@@ -551,7 +555,7 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<(), Failure> {
     for r in rows {
         let c = &r.config;
         s.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{:.3},{:.1},{},{},{}",
+            "{},{},{},{},{},{},{},{},{:.3},{:.1},{},{},{},{}",
             r.label,
             c.kind,
             c.alpha,
@@ -563,6 +567,7 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<(), Failure> {
             r.seconds_per_epoch,
             r.images_per_s,
             fmt_opt(r.latency_ms, |v| format!("{v:.4}")),
+            fmt_opt(r.frame_latency_ms, |v| format!("{v:.4}")),
             fmt_opt(r.test.image_mse, |v| format!("{v:.6e}")),
             fmt_opt(r.test.r2_mean, |v| format!("{v:.6}")),
         ));
@@ -770,6 +775,7 @@ pub async fn run_bench_model(
     }
     let store = open_existing(db).await?;
     prepare_out(&args.out)?;
+    let frame = models::first_test_frame(&store, &args.dataset).await?;
     let mut rows = Vec::new();
     let mut loaded: Option<(usize, Splits)> = None;
     for config in wanted {
@@ -790,18 +796,23 @@ pub async fn run_bench_model(
             .first()
             .map(|e| e.image.clone())
             .unwrap_or_default();
-        let predictor = Predictor::new(trained.artifact);
+        let mut predictor = Predictor::new(trained.artifact);
         let latency = measure_latency(&predictor, &image, args.runs, 1)?;
+        let (w, h, rgb) = &frame;
+        let frame_latency = measure_frame_latency(&mut predictor, (*w, *h, rgb), args.runs, 1)?;
         row.latency_ms = Some(latency.median_ms);
+        row.frame_latency_ms = Some(frame_latency.median_ms);
         writeln!(
             out,
-            "   test R² {:.5} (min {:.5}), {:.1} s/epoch, {:.0} img/s, inference {:.3} ms median / {:.3} ms p95 on one core",
+            "   test R² {:.5} (min {:.5}), {:.1} s/epoch, {:.0} img/s, on one core: model {:.3} ms median / {:.3} ms p95, {w}×{h} frame → wrench {:.3} ms median / {:.3} ms p95",
             row.test.r2_mean.unwrap_or(f64::NAN),
             row.test.r2_min().unwrap_or(f64::NAN),
             row.seconds_per_epoch,
             row.images_per_s,
             latency.median_ms,
-            latency.p95_ms
+            latency.p95_ms,
+            frame_latency.median_ms,
+            frame_latency.p95_ms
         )
         .map_err(io_failure)?;
         rows.push(row);
@@ -809,20 +820,21 @@ pub async fn run_bench_model(
     store.close().await;
     writeln!(
         out,
-        "\n{:<16} {:>9} {:>9} {:>9} {:>9} {:>11}",
-        "input/width/lat", "R² avg", "R² min", "s/epoch", "img/s", "latency ms"
+        "\n{:<16} {:>9} {:>9} {:>9} {:>9} {:>11} {:>11}",
+        "input/width/lat", "R² avg", "R² min", "s/epoch", "img/s", "model ms", "frame ms"
     )
     .map_err(io_failure)?;
     for r in &rows {
         writeln!(
             out,
-            "{:<16} {:>9} {:>9} {:>9.1} {:>9.0} {:>11}",
+            "{:<16} {:>9} {:>9} {:>9.1} {:>9.0} {:>11} {:>11}",
             r.label,
             fmt_opt(r.test.r2_mean, |v| format!("{v:.5}")),
             fmt_opt(r.test.r2_min(), |v| format!("{v:.5}")),
             r.seconds_per_epoch,
             r.images_per_s,
-            fmt_opt(r.latency_ms, |v| format!("{v:.3}"))
+            fmt_opt(r.latency_ms, |v| format!("{v:.3}")),
+            fmt_opt(r.frame_latency_ms, |v| format!("{v:.3}"))
         )
         .map_err(io_failure)?;
     }
