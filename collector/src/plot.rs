@@ -171,7 +171,7 @@ fn draw_histogram(
         .x_labels(6)
         .y_labels(5)
         .y_label_formatter(&|v| format!("{v:.0}"))
-        .x_label_formatter(&|v| format_tick(*v))
+        .x_label_formatter(&|v| format_tick_in(*v, x1 - x0))
         .label_style((FONT_FAMILY, 13))
         .axis_desc_style((FONT_FAMILY, 15))
         .light_line_style(WHITE)
@@ -186,16 +186,28 @@ fn draw_histogram(
 }
 
 /// Tick text: few digits, no trailing zeros (`-5`, `0.5`, `2.25`, `1.2e-4`).
-fn format_tick(v: f64) -> String {
+/// A short tick label for `v` on an axis spanning `span`, with enough decimals that
+/// neighbouring ticks (about a tenth of the span apart) read differently: an R² axis
+/// from 0.9971 to 0.9983 needs four, where two would label every tick "1".
+fn format_tick_in(v: f64, span: f64) -> String {
     let a = v.abs();
+    let step = span / 10.0;
+    let usable = step.is_finite() && step > 0.0;
     if a != 0.0 && a < 0.01 {
-        return format!("{v:.1e}");
+        let digits = if usable {
+            (a / step).log10().ceil().clamp(1.0, 6.0) as usize
+        } else {
+            1
+        };
+        return format!("{v:.digits$e}");
     }
-    let text = if a >= 100.0 {
-        format!("{v:.0}")
+    let needed = if usable {
+        (-step.log10()).ceil().clamp(0.0, 8.0) as usize
     } else {
-        format!("{v:.2}")
+        0
     };
+    let decimals = if a >= 100.0 { 0 } else { 2 }.max(needed);
+    let text = format!("{v:.decimals$}");
     let text = if text.contains('.') {
         text.trim_end_matches('0').trim_end_matches('.').to_owned()
     } else {
@@ -281,8 +293,8 @@ pub fn xy_chart(path: &Path, chart: &XyChart<'_>, size: (u32, u32)) -> Result<()
     ctx.configure_mesh()
         .x_desc(chart.x_label)
         .y_desc(chart.y_label)
-        .x_label_formatter(&|v| format_tick(*v))
-        .y_label_formatter(&|v| format_tick(*v))
+        .x_label_formatter(&|v| format_tick_in(*v, x1 - x0))
+        .y_label_formatter(&|v| format_tick_in(*v, y1 - y0))
         .label_style((FONT_FAMILY, 13))
         .axis_desc_style((FONT_FAMILY, 15))
         .draw()
@@ -349,9 +361,28 @@ mod tests {
     fn ticks_are_short() {
         let got: Vec<String> = [-5.0, 0.5, 2.25, 0.0, -0.0001, 150.0, 12.5]
             .into_iter()
-            .map(format_tick)
+            .map(|v| format_tick_in(v, f64::INFINITY))
             .collect();
         assert_eq!(got, ["-5", "0.5", "2.25", "0", "-1.0e-4", "150", "12.5"]);
+    }
+
+    #[test]
+    fn ticks_on_a_narrow_axis_differ() {
+        // An R² axis of a model benchmark, and an image-MSE axis.
+        let r2: Vec<String> = [0.9970, 0.9972, 0.9974, 0.9976]
+            .into_iter()
+            .map(|v| format_tick_in(v, 0.0014))
+            .collect();
+        assert_eq!(r2, ["0.997", "0.9972", "0.9974", "0.9976"]);
+        let mse: Vec<String> = [1.5e-3, 2.0e-3, 2.5e-3]
+            .into_iter()
+            .map(|v| format_tick_in(v, 6e-3))
+            .collect();
+        assert_eq!(mse, ["1.5e-3", "2.0e-3", "2.5e-3"]);
+        // A wide axis keeps its short labels; a degenerate span falls back to them.
+        assert_eq!(format_tick_in(150.0, 400.0), "150");
+        assert_eq!(format_tick_in(0.5, 0.0), "0.5");
+        assert_eq!(format_tick_in(0.5, f64::NAN), "0.5");
     }
 
     #[test]

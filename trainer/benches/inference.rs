@@ -39,7 +39,11 @@ fn inference(c: &mut Criterion) {
     let table = FingerTable::new(&config.preprocess);
     let image = table.apply(w, h, &rgb).expect("frame");
 
-    let mut group = c.benchmark_group("one core, default model (64×64×1, width 16, latent 32)");
+    let p = &config.preprocess;
+    let mut group = c.benchmark_group(format!(
+        "one core, default model ({0}×{0}×{1}, width {2}, latent {3})",
+        p.size_px, p.channels, config.width, config.latent
+    ));
     group.bench_function("model on a preprocessed image", |b| {
         pool.install(|| b.iter(|| predictor.predict_preprocessed(&image).expect("predict")));
     });

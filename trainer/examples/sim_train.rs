@@ -33,17 +33,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let arg = |i: usize, d: usize| args.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
     let samples = arg(0, 3000);
     let epochs = arg(1, 20);
+    let defaults = ModelConfig::default();
     let config = ModelConfig {
-        width: arg(2, 16),
-        latent: arg(4, 32),
+        width: arg(2, defaults.width),
+        latent: arg(4, defaults.latent),
         kind: args
             .get(5)
             .map_or(Ok(softtouch_trainer::ModelKind::Svae), |s| s.parse())?,
         preprocess: Preprocess {
-            size_px: arg(3, 64),
+            size_px: arg(3, defaults.preprocess.size_px),
             ..Preprocess::default()
         },
-        ..ModelConfig::default()
+        ..defaults
     };
     let scene = softtouch_schemas::defaults::scene();
     let sim = SceneSim::new(&scene, 1)?;

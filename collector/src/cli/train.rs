@@ -36,31 +36,31 @@ impl From<softtouch_trainer::TrainError> for Failure {
 #[derive(Debug, Clone, Args)]
 pub struct ModelArgs {
     /// Which model: svae, vae or convnet.
-    #[arg(long, default_value = "svae")]
+    #[arg(long, default_value_t = ModelConfig::default().kind)]
     pub model: ModelKind,
     /// Reconstruction weight of the SVAE loss: α/(1+α)·recon + 1/(1+α)·pred + β·KL.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = ModelConfig::default().alpha)]
     pub alpha: f64,
     /// KL weight β.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = ModelConfig::default().beta)]
     pub beta: f64,
     /// Latent dimensions.
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = ModelConfig::default().latent)]
     pub latent: usize,
     /// Channels of the encoder's stem (stages double it, up to 8×).
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = ModelConfig::default().width)]
     pub width: usize,
     /// Input size in pixels (square, a power of two in 16..=256).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = Preprocess::default().size_px)]
     pub size: usize,
     /// Input channels: 1 (brightness of the finger's pixels) or 3 (RGB).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = Preprocess::default().channels)]
     pub channels: usize,
     /// Maximum epochs.
     #[arg(long, default_value_t = TrainConfig::default().epochs)]
     pub epochs: usize,
     /// Batch size.
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = TrainConfig::default().batch_size)]
     pub batch: usize,
     /// Adam's initial learning rate (multiplied by --lr-decay after each epoch).
     #[arg(long, default_value_t = TrainConfig::default().learning_rate)]
@@ -72,7 +72,7 @@ pub struct ModelArgs {
     #[arg(long, default_value_t = TrainConfig::default().patience)]
     pub patience: usize,
     /// Seed of initialisation, shuffling and latent noise.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = TrainConfig::default().seed)]
     pub seed: u64,
 }
 
@@ -186,7 +186,7 @@ pub struct BenchModelArgs {
     #[arg(long, value_delimiter = ',', default_value = "32,64")]
     pub sizes: Vec<usize>,
     /// Encoder widths to try.
-    #[arg(long, value_delimiter = ',', default_value = "8,16,32")]
+    #[arg(long, value_delimiter = ',', default_value = "8,12,16")]
     pub widths: Vec<usize>,
     /// Latent sizes to try.
     #[arg(long, value_delimiter = ',', default_value = "32")]
