@@ -1,6 +1,7 @@
 //! Single-image inference on one core (a rayon pool of one thread, as the grasp
 //! controller would run it beside the camera): the default model on a preprocessed
-//! image, the preprocessing of a raw 640×480 frame, and the two together.
+//! image, the preprocessing of a raw 640×480 frame, the two together, and building
+//! the colour lookup table that preprocessing uses.
 //!
 //! `cargo bench -p softtouch-trainer --bench inference`
 
@@ -53,6 +54,14 @@ fn inference(c: &mut Criterion) {
     });
     group.bench_function("640×480 frame → wrench", |b| {
         pool.install(|| b.iter(|| predictor.predict_rgb(w, h, &rgb).expect("predict")));
+    });
+    group.finish();
+
+    // Paid once per Predictor and per dataset load, not per frame.
+    let mut group = c.benchmark_group("once per model");
+    group.sample_size(10);
+    group.bench_function("build the colour lookup table (2²⁴ colours)", |b| {
+        pool.install(|| b.iter(|| FingerTable::new(&config.preprocess)));
     });
     group.finish();
 }
