@@ -203,10 +203,10 @@ fn sweeps_and_the_model_benchmark_write_tables_csv_and_png() {
 /// The full-size run behind the README's accuracy figures: 30 000 simulated samples
 /// of the default scene, a 7:1:2 dataset, the default SVAE (α = 1, β = 0.1, 32×32,
 /// width 16, latent 32, 12 epochs); every test axis must reach R² ≥ 0.99. About
-/// 15 minutes on 2 cores (collection 4, preprocessing 1, training 8):
+/// 11 minutes on 2 cores (collection 4, preprocessing 1, training 6):
 /// `cargo test --release -p softtouch-collector --test train -- --ignored --nocapture`
 #[test]
-#[ignore = "full-size training, ~15 min on 2 cores"]
+#[ignore = "full-size training, ~11 min on 2 cores"]
 fn full_size_svae_reaches_r2_0_99_on_every_test_axis() {
     let dir = tempdir();
     let d = dir.path();

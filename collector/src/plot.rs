@@ -185,8 +185,8 @@ fn draw_histogram(
     Ok(())
 }
 
-/// Tick text: few digits, no trailing zeros (`-5`, `0.5`, `2.25`, `1.2e-4`).
-/// A short tick label for `v` on an axis spanning `span`, with enough decimals that
+/// A short tick label for `v` on an axis spanning `span` (`-5`, `0.5`, `2.25`,
+/// `1.2e-4`: no trailing zeros), with enough decimals that
 /// neighbouring ticks (about a tenth of the span apart) read differently: an R² axis
 /// from 0.9971 to 0.9983 needs four, where two would label every tick "1".
 fn format_tick_in(v: f64, span: f64) -> String {
