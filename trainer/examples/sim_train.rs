@@ -37,12 +37,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let config = ModelConfig {
         width: arg(2, defaults.width),
         latent: arg(4, defaults.latent),
-        kind: args
-            .get(5)
-            .map_or(Ok(softtouch_trainer::ModelKind::Svae), |s| s.parse())?,
+        kind: args.get(5).map_or(Ok(defaults.kind), |s| s.parse())?,
         preprocess: Preprocess {
             size_px: arg(3, defaults.preprocess.size_px),
-            ..Preprocess::default()
+            ..defaults.preprocess
         },
         ..defaults
     };

@@ -34,7 +34,7 @@ impl Default for Preprocess {
     fn default() -> Self {
         Self {
             // 32×32: as accurate as 64×64 on the simulated finger, in air and in water,
-            // at 4× the training throughput and a fifth of the latency (`softtouch
+            // at 4.5× the training throughput and a sixth of the latency (`softtouch
             // bench model`, trainer/README.md).
             size_px: 32,
             channels: 1,
