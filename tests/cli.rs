@@ -3,10 +3,10 @@
 mod common;
 use common::{softtouch, tempdir, text};
 
-use softtouch_collector::store::{FrameRecord, NewRun, RunStatus, Store};
+use softtouch_collector::store::RunStatus;
+use softtouch_collector::testing::{RunPlan, block_on, frame, seeded_run, temp_store};
 use softtouch_schemas::{
-    ConfigSource, ContactPose, FrameFormat, FrameMeta, Medium, RigConfig, Sample, SampleStatus,
-    SceneSpec, TimestampNs, Wrench, config::parse_toml, defaults,
+    ConfigSource, FrameFormat, RigConfig, SceneSpec, config::parse_toml, defaults,
 };
 use std::process::Command;
 
@@ -148,73 +148,25 @@ fn db_init_creates_the_database_in_the_working_directory_and_runs_lists_it() {
 
 #[test]
 fn runs_shows_each_runs_status_and_counts() {
-    let dir = tempdir();
-    let db = dir.path().join("lab.db");
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap_or_else(|e| panic!("{e}"));
-    rt.block_on(async {
-        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
-        let run = store
-            .create_run(&NewRun {
-                seed: 42,
-                samples_planned: 3,
-                rod_schedule: &["circle-10".to_owned()],
-                rod_block: 3,
-                scene_name: "on-land",
-                medium: Medium::Air,
-                rig_toml: defaults::RIG_TOML,
-                scene_toml: defaults::SCENE_TOML,
-            })
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
-        for index in 0..2 {
-            let sample = Sample {
-                index,
-                rod: "circle-10".into(),
-                medium: Medium::Air,
-                commanded: ContactPose {
-                    x_m: 0.01,
-                    z_m: 0.0,
-                    theta_rad: 0.0,
-                },
-                measured: None,
-                wrench_mean_in_sensor: Wrench::ZERO,
-                wrench_std_in_sensor: Wrench::ZERO,
-                reading_count: 0,
-                frame_t: TimestampNs(0),
-                window_start: TimestampNs(0),
-                window_end: TimestampNs(0),
-                sync_skew_ns: 0,
-                status: SampleStatus::Ok,
-                attempts: 1 + u32::try_from(index).unwrap_or(0),
-            };
-            let meta = FrameMeta {
-                t: TimestampNs(0),
-                sequence: index,
-                width: 1,
-                height: 1,
-                format: FrameFormat::Rgb8,
-            };
-            store
-                .append_sample(
-                    run,
-                    &sample,
-                    Some(FrameRecord {
-                        meta,
-                        data: &[0, 0, 0],
-                    }),
-                    &[],
-                )
-                .await
-                .unwrap_or_else(|e| panic!("{e}"));
-        }
+    let dir = block_on(async {
+        let (dir, store) = temp_store("lab.db").await;
+        // 3 planned, 2 written (the second retried once), then stopped.
+        let plan = RunPlan::new(42, 3);
+        let run = seeded_run(&store, &plan, 2, |sample, _| {
+            let index = sample.index();
+            let attempts = 1 + u32::try_from(index).unwrap_or(0);
+            (
+                sample.attempts(attempts),
+                Some(frame(index, 1, 1, FrameFormat::Rgb8)),
+            )
+        })
+        .await;
         store
             .set_run_status(run, RunStatus::Stopped)
             .await
             .unwrap_or_else(|e| panic!("{e}"));
         store.close().await;
+        dir
     });
     let out = softtouch(dir.path(), &["--db", "lab.db", "runs"]);
     assert!(out.status.success(), "{}", text(&out.stderr));
@@ -270,11 +222,7 @@ fn sim_netft_serves_the_simulated_sensor_to_a_real_net_ft_client() {
     };
     let (rdt, cal) = (addr("udp://"), addr("tcp://"));
 
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap_or_else(|e| panic!("{e}"));
-    let readings = rt.block_on(async {
+    let readings = block_on(async {
         let clock: Arc<dyn Clock> = Arc::new(TokioClock::new());
         let mut config = NetFtConfig::new(rdt, 2000.0);
         config.scaling = Scaling::CalibrationRequest(cal);

@@ -2,7 +2,7 @@
 //! kill -9 and resume, and fault injection.
 
 mod common;
-use common::{runtime, softtouch, text};
+use common::{runtime, softtouch, tempdir, text};
 
 use softtouch_collector::collect::sampler::PoseSampler;
 use softtouch_collector::store::{Store, decode_window};
@@ -29,7 +29,7 @@ async fn poses(store: &Store, run: i64) -> Vec<(i64, f64, f64, f64)> {
 
 #[test]
 fn a_simulated_run_stores_every_sample_with_its_frame_and_window() {
-    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let dir = tempdir();
     let out = softtouch(dir.path(), &["collect", "--samples", "240", "--seed", "11"]);
     assert!(
         out.status.success(),
@@ -108,7 +108,7 @@ async fn stored_samples(db: &Path) -> i64 {
 
 #[test]
 fn a_run_killed_at_random_points_resumes_to_exactly_the_planned_samples() {
-    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let dir = tempdir();
     let db = dir.path().join("softtouch.db");
     let planned = 150i64;
     // Kill points: after these many stored samples (spread over the run), plus wherever
@@ -186,7 +186,7 @@ fn a_run_killed_at_random_points_resumes_to_exactly_the_planned_samples() {
 
 #[test]
 fn a_scene_with_packet_loss_frame_drops_and_reflexes_completes_and_logs_every_fault() {
-    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let dir = tempdir();
     let scene = format!(
         "{}\n[[effects]]\nkind = \"ft_packet_loss\"\nprobability = 0.003\n\n[[effects]]\nkind = \"frame_drops\"\nprobability = 0.3\n\n[[effects]]\nkind = \"arm_reflex\"\nprobability = 0.05\n",
         defaults::SCENE_TOML

@@ -10,24 +10,14 @@
 mod common;
 use common::{fails_with, ok, softtouch, tempdir, text};
 
-use sha2::{Digest as _, Sha256};
+use softtouch_collector::dataset::export::sha256_hex;
 use softtouch_collector::dataset::{self, Filters, NewDataset, SplitRatio};
-use softtouch_collector::store::{FrameRecord, NewRun, RunStatus, Store};
+use softtouch_collector::store::{RunStatus, Store};
+use softtouch_collector::testing::{RunPlan, block_on, frame, seeded_run, temp_store};
 use softtouch_schemas::sample::RejectReason;
-use softtouch_schemas::{
-    ContactPose, FrameFormat, FrameMeta, FtReading, FtStatus, Medium, Sample, SampleStatus,
-    TimestampNs, Wrench,
-};
+use softtouch_schemas::{FrameFormat, Medium, SampleStatus};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-
-fn block_on<F: std::future::Future>(f: F) -> F::Output {
-    tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap_or_else(|e| panic!("{e}"))
-        .block_on(f)
-}
 
 fn read(path: &Path) -> Vec<u8> {
     std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -37,44 +27,13 @@ fn write(path: &Path, bytes: impl AsRef<[u8]>) {
     std::fs::write(path, bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
 }
 
-/// A small deterministic generator for test data.
-struct Lcg(u64);
-impl Lcg {
-    fn unit(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.unit()
-    }
+/// A `w`×`h` PNG of the test pattern.
+fn png(seed: u64, w: u32, h: u32) -> Vec<u8> {
+    frame(seed, w, h, FrameFormat::Png).data
 }
 
-fn rgb_image(w: u32, h: u32, seed: u64) -> image::RgbImage {
-    image::RgbImage::from_fn(w, h, |x, y| {
-        let s = seed.wrapping_mul(31);
-        image::Rgb([
-            ((u64::from(x) * 7 + s) % 256) as u8,
-            ((u64::from(y) * 11 + s / 3) % 256) as u8,
-            ((u64::from(x + y) + s / 7) % 256) as u8,
-        ])
-    })
-}
-
-fn png_bytes(img: &image::RgbImage) -> Vec<u8> {
-    let mut out = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut out, image::ImageFormat::Png)
-        .unwrap_or_else(|e| panic!("{e}"));
-    out.into_inner()
-}
-
-fn jpeg_bytes(img: &image::RgbImage) -> Vec<u8> {
-    let mut out = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut out, image::ImageFormat::Jpeg)
-        .unwrap_or_else(|e| panic!("{e}"));
-    out.into_inner()
+fn jpeg(seed: u64, w: u32, h: u32) -> Vec<u8> {
+    frame(seed, w, h, FrameFormat::Jpeg).data
 }
 
 /// How one test run looks.
@@ -90,27 +49,20 @@ struct RunSpec {
 /// Write a run with the store API; returns its id. Every 10th sample is rejected
 /// (saturated), sample 5 is rejected without a frame, readings and skew vary.
 async fn make_run(store: &Store, spec: &RunSpec, width: u32, height: u32) -> i64 {
-    let rods: Vec<String> = spec.rods.iter().map(|r| (*r).to_owned()).collect();
-    let run = store
-        .create_run(&NewRun {
-            seed: spec.seed,
-            samples_planned: spec.samples,
-            rod_schedule: &rods,
-            rod_block: 1,
-            scene_name: if spec.medium == Medium::Air {
-                "on-land"
-            } else {
-                "underwater"
-            },
-            medium: spec.medium,
-            rig_toml: "[arm]\ndriver = \"sim\"\n",
-            scene_toml: "name = \"test\"\n",
-        })
-        .await
-        .unwrap_or_else(|e| panic!("{e}"));
-    let mut rng = Lcg(spec.seed);
-    let mut pngs: Vec<Vec<u8>> = Vec::new();
-    for index in 0..spec.samples {
+    let plan = RunPlan {
+        rods: spec.rods.iter().map(|r| (*r).to_owned()).collect(),
+        rod_block: 1,
+        medium: spec.medium,
+        scene_name: if spec.medium == Medium::Air {
+            "on-land"
+        } else {
+            "underwater"
+        }
+        .into(),
+        ..RunPlan::new(spec.seed, spec.samples)
+    };
+    let run = seeded_run(store, &plan, spec.samples, |sample, rng| {
+        let index = sample.index();
         let status = if index % 10 == 9 {
             SampleStatus::Rejected(RejectReason::Saturated)
         } else if index == 5 {
@@ -118,70 +70,20 @@ async fn make_run(store: &Store, spec: &RunSpec, width: u32, height: u32) -> i64
         } else {
             SampleStatus::Ok
         };
-        let wrench = Wrench::from_array([
-            rng.range(-3.0, 3.0),
-            rng.range(-3.0, 3.0),
-            rng.range(-10.0, 0.5),
-            rng.range(-0.6, 0.6),
-            rng.range(-0.6, 0.6),
-            rng.range(-0.1, 0.1),
-        ]);
-        let reading_count = 10 + u32::try_from(index % 30).unwrap_or(0);
-        let sample = Sample {
-            index,
-            rod: spec.rods[usize::try_from(index).unwrap_or(0) % spec.rods.len()].to_owned(),
-            medium: spec.medium,
-            commanded: ContactPose {
-                x_m: rng.range(0.0, 0.05),
-                z_m: rng.range(-0.05, 0.05),
-                theta_rad: rng.range(-std::f64::consts::PI, std::f64::consts::PI),
-            },
-            measured: None,
-            wrench_mean_in_sensor: wrench,
-            wrench_std_in_sensor: Wrench::from_array([0.01; 6]),
-            reading_count,
-            frame_t: TimestampNs(1_000_000 * index),
-            window_start: TimestampNs(1_000_000 * index),
-            window_end: TimestampNs(1_000_000 * index + 25_000),
-            sync_skew_ns: i64::try_from(index % 7).unwrap_or(0) * 500_000 - 1_500_000,
-            status,
-            attempts: 1,
-        };
-        let img = rgb_image(width, height, spec.seed * 1000 + index);
+        let wrench = rng.wrench();
+        let t = 1_000_000 * index;
+        let sample = sample
+            .wrench(wrench)
+            .pose(rng.pose())
+            .readings(10 + u32::try_from(index % 30).unwrap_or(0))
+            .times(t, t, t + 25_000)
+            .skew_ns(i64::try_from(index % 7).unwrap_or(0) * 500_000 - 1_500_000)
+            .status(status);
         let format = (spec.format)(index);
-        let data = match format {
-            FrameFormat::Png => {
-                // A few distinct images suffice; a big run reuses them.
-                if pngs.len() < 64 {
-                    pngs.push(png_bytes(&img));
-                }
-                pngs[usize::try_from(index).unwrap_or(0) % pngs.len()].clone()
-            }
-            FrameFormat::Jpeg => jpeg_bytes(&img),
-            FrameFormat::Rgb8 => img.into_raw(),
-        };
-        let meta = FrameMeta {
-            t: TimestampNs(1_000_000 * index),
-            sequence: index,
-            width,
-            height,
-            format,
-        };
-        let frame = (index != 5).then_some(FrameRecord { meta, data: &data });
-        let window: Vec<FtReading> = (0..reading_count)
-            .map(|i| FtReading {
-                t: TimestampNs(1_000_000 * index + u64::from(i) * 1000),
-                rdt_sequence: i,
-                ft_sequence: i,
-                status: FtStatus::OK,
-                wrench_in_sensor: wrench,
-            })
-            .collect();
-        store
-            .append_sample(run, &sample, frame, &window)
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
-    }
+        let image = (index != 5).then(|| frame(spec.seed * 1000 + index, width, height, format));
+        (sample, image)
+    })
+    .await;
     store
         .set_run_status(run, RunStatus::Completed)
         .await
@@ -192,10 +94,8 @@ async fn make_run(store: &Store, spec: &RunSpec, width: u32, height: u32) -> i64
 /// Run 1: air, 120 samples, PNG frames, two rods. Run 2: water, 60 samples, raw RGB
 /// and JPEG frames, three rods.
 fn lab() -> (tempfile::TempDir, PathBuf) {
-    let dir = tempdir();
-    let db = dir.path().join("lab.db");
     block_on(async {
-        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
+        let (dir, store) = temp_store("lab.db").await;
         let air = RunSpec {
             medium: Medium::Air,
             samples: 120,
@@ -218,9 +118,10 @@ fn lab() -> (tempfile::TempDir, PathBuf) {
         };
         assert_eq!(make_run(&store, &air, 32, 24).await, 1);
         assert_eq!(make_run(&store, &water, 32, 24).await, 2);
+        let db = store.path().to_owned();
         store.close().await;
-    });
-    (dir, db)
+        (dir, db)
+    })
 }
 
 /// Accepted samples with frames: run 1 has 120 − 12 rejected − 1 without frame = 107;
@@ -605,13 +506,6 @@ fn stats_prints_a_table_and_writes_six_histograms() {
     );
 }
 
-fn sha256_hex(bytes: &[u8]) -> String {
-    Sha256::digest(bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
-}
-
 fn labels(dir: &Path) -> Vec<Vec<String>> {
     let text = String::from_utf8(read(&dir.join("labels.csv"))).unwrap_or_else(|e| panic!("{e}"));
     text.lines()
@@ -907,10 +801,7 @@ fn a_damaged_export_imports_nothing() {
     );
     // A changed image, found inside the transaction half-way: rolled back.
     let c = copy("changed");
-    write(
-        &c.join("images/000150.png"),
-        png_bytes(&rgb_image(32, 24, 999)),
-    );
+    write(&c.join("images/000150.png"), png(999, 32, 24));
     fails_with(
         &softtouch(
             d,
@@ -1033,10 +924,7 @@ fn a_damaged_export_imports_nothing() {
 
 fn write_case_images(dir: &Path) {
     for i in 0..4 {
-        write(
-            &dir.join(format!("img{i}.png")),
-            png_bytes(&rgb_image(8, 6, i)),
-        );
+        write(&dir.join(format!("img{i}.png")), png(i, 8, 6));
     }
 }
 
@@ -1047,7 +935,7 @@ fn the_papers_layout_imports_with_torque_in_nmm() {
     let data = d.join("paper");
     std::fs::create_dir(&data).unwrap_or_else(|e| panic!("{e}"));
     write_case_images(&data);
-    write(&data.join("img9.jpg"), jpeg_bytes(&rgb_image(8, 6, 9)));
+    write(&data.join("img9.jpg"), jpeg(9, 8, 6));
     let mut csv = String::from("image,Fx,Fy,Fz,Tx,Ty,Tz\n");
     for i in 0..20 {
         let img = if i == 19 {
@@ -1096,7 +984,7 @@ fn the_papers_layout_imports_with_torque_in_nmm() {
     let headless = d.join("headless");
     std::fs::create_dir(&headless).unwrap_or_else(|e| panic!("{e}"));
     write_case_images(&headless);
-    write(&headless.join("img9.jpg"), jpeg_bytes(&rgb_image(8, 6, 9)));
+    write(&headless.join("img9.jpg"), jpeg(9, 8, 6));
     write(
         &headless.join("data_frame.csv"),
         csv.lines().skip(1).collect::<Vec<_>>().join("\n"),
@@ -1143,114 +1031,4 @@ fn malformed_paper_files_are_refused_naming_line_and_column() {
     }
     assert_eq!(count_rows(&d.join("cases.db"), "samples"), 0);
     assert_eq!(count_rows(&d.join("cases.db"), "runs"), 0);
-}
-
-/// Build a big synthetic database for measuring export (not run by default):
-///
-/// ```sh
-/// SOFTTOUCH_BENCH_DB=/tmp/bench.db SOFTTOUCH_BENCH_SAMPLES=30000 \
-///   cargo test -p softtouch-collector --release --test dataset -- --ignored make_bench_db
-/// ```
-///
-/// 640×480 PNG frames (64 distinct noisy images of 100–200 KB, reused), one run in
-/// air, then a dataset `bench` over it.
-#[test]
-#[ignore = "writes a multi-gigabyte database; run by hand to measure export"]
-fn make_bench_db() {
-    let db = PathBuf::from(
-        std::env::var("SOFTTOUCH_BENCH_DB").unwrap_or_else(|_| "/tmp/softtouch-bench.db".into()),
-    );
-    let n: u64 = std::env::var("SOFTTOUCH_BENCH_SAMPLES")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(30_000);
-    block_on(async {
-        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
-        let rods = vec!["circle-10".to_owned()];
-        let run = store
-            .create_run(&NewRun {
-                seed: 7,
-                samples_planned: n,
-                rod_schedule: &rods,
-                rod_block: 1,
-                scene_name: "bench",
-                medium: Medium::Air,
-                rig_toml: "[arm]\n",
-                scene_toml: "name = \"bench\"\n",
-            })
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
-        let mut rng = Lcg(7);
-        let frames: Vec<Vec<u8>> = (0..64u64)
-            .map(|k| {
-                let img = image::RgbImage::from_fn(640, 480, |x, y| {
-                    // Speckle in 2×2 blocks: compresses like a camera frame (~200 KB).
-                    let h = (x / 2).wrapping_mul(73_856_093)
-                        ^ (y / 2).wrapping_mul(19_349_663)
-                        ^ u32::try_from(k).unwrap_or(0).wrapping_mul(83_492_791);
-                    let noise = (h >> 7) % 5;
-                    let v = (x / 4 + y / 3 + u32::try_from(k).unwrap_or(0) * 9 + noise) % 256;
-                    image::Rgb([v as u8, (v / 2 + 60) as u8, (255 - v) as u8])
-                });
-                png_bytes(&img)
-            })
-            .collect();
-        let mean = frames.iter().map(Vec::len).sum::<usize>() / frames.len();
-        eprintln!("frames of {mean} bytes on average");
-        for index in 0..n {
-            let wrench = Wrench::from_array([
-                rng.range(-3.0, 3.0),
-                rng.range(-3.0, 3.0),
-                rng.range(-10.0, 0.0),
-                rng.range(-0.6, 0.6),
-                rng.range(-0.6, 0.6),
-                rng.range(-0.1, 0.1),
-            ]);
-            let sample = Sample {
-                index,
-                rod: rods[0].clone(),
-                medium: Medium::Air,
-                commanded: ContactPose {
-                    x_m: rng.range(0.0, 0.05),
-                    z_m: rng.range(-0.05, 0.05),
-                    theta_rad: rng.range(-std::f64::consts::PI, std::f64::consts::PI),
-                },
-                measured: None,
-                wrench_mean_in_sensor: wrench,
-                wrench_std_in_sensor: Wrench::ZERO,
-                reading_count: 25,
-                frame_t: TimestampNs(index),
-                window_start: TimestampNs(index),
-                window_end: TimestampNs(index),
-                sync_skew_ns: 0,
-                status: SampleStatus::Ok,
-                attempts: 1,
-            };
-            let data = &frames[usize::try_from(index % 64).unwrap_or(0)];
-            let meta = FrameMeta {
-                t: TimestampNs(index),
-                sequence: index,
-                width: 640,
-                height: 480,
-                format: FrameFormat::Png,
-            };
-            store
-                .append_sample(run, &sample, Some(FrameRecord { meta, data }), &[])
-                .await
-                .unwrap_or_else(|e| panic!("{e}"));
-        }
-        dataset::create(
-            &store,
-            &NewDataset {
-                name: "bench".into(),
-                runs: vec![run],
-                filters: Filters::default(),
-                ratio: SplitRatio::PAPER,
-                seed: 0,
-            },
-        )
-        .await
-        .unwrap_or_else(|e| panic!("{e}"));
-        store.close().await;
-    });
 }

@@ -2,11 +2,23 @@
 //!
 //! # Layout
 //! - [`store`]: SQLite through sqlx (runs, samples, frames, force/torque windows,
-//!   events), one transaction per sample.
-//! - [`collect`]: the collection job (pose sampler, per-sample procedure, force/torque
-//!   stream and windows, faults and retries).
+//!   events), one transaction per sample; one insert function per table.
+//! - [`collect`]: the collection job (planning a new or resumed run, building the
+//!   devices, pose sampler, per-sample procedure, force/torque stream and windows,
+//!   faults and retries, the collection benchmark).
+//! - [`dataset`]: named datasets over runs (filters, seeded splits), statistics,
+//!   export to files Python reads, import of an export or the paper's layout.
+//! - [`models`]: the bridge to the trainer: a dataset's splits as training examples,
+//!   trained models stored with their metrics.
+//! - [`experiments`]: Table 1, the latent sweep and the model benchmark: grids, rows,
+//!   CSV and plots, shared by the verbs and reports.
 //! - [`configs`]: resolving the rig and scene from files or the embedded defaults.
-//! - [`cli`]: the `softtouch` command line (clap), its verbs and exit codes.
+//! - [`plot`]: PNG histograms and x–y charts (plotters).
+//! - `progress`: the progress bar and the per-epoch training lines.
+//! - [`synthetic`]: synthetic samples and windows (`bench ingest`, tests, examples).
+//! - `testing` (the `testing` feature, on in tests and examples): test fixtures.
+//! - [`cli`]: the `softtouch` command line (clap): one file per verb group, each only
+//!   parsing, calling the library and printing; exit codes.
 //!
 //! `src/main.rs` only parses arguments, sets up logging and calls [`cli::run`].
 
@@ -14,6 +26,11 @@ pub mod cli;
 pub mod collect;
 pub mod configs;
 pub mod dataset;
+pub mod experiments;
 pub mod models;
 pub mod plot;
+pub(crate) mod progress;
 pub mod store;
+pub mod synthetic;
+#[cfg(any(test, feature = "testing"))]
+pub mod testing;

@@ -6,7 +6,9 @@
 
 use crate::dataset::{self, DatasetError, query_err};
 use crate::store::Store;
+use crate::store::rows::now_sql;
 use futures_util::TryStreamExt as _;
+use softtouch_schemas::FrameFormat;
 use softtouch_trainer::labels::label_from_si;
 use softtouch_trainer::{Example, FingerTable, Preprocess, Splits, Trained};
 use sqlx::FromRow;
@@ -83,8 +85,8 @@ struct MemberRow {
 
 /// Decodes a stored frame into RGB8.
 fn decode(row: &MemberRow) -> Result<(usize, usize, Vec<u8>), String> {
-    match row.format.as_str() {
-        "rgb8" => {
+    match row.format.parse::<FrameFormat>()? {
+        FrameFormat::Rgb8 => {
             let (w, h) = (
                 usize::try_from(row.width).map_err(|_| "bad width")?,
                 usize::try_from(row.height).map_err(|_| "bad height")?,
@@ -98,8 +100,8 @@ fn decode(row: &MemberRow) -> Result<(usize, usize, Vec<u8>), String> {
             }
             Ok((w, h, row.data.clone()))
         }
-        "png" | "jpeg" => {
-            let format = if row.format == "png" {
+        format @ (FrameFormat::Png | FrameFormat::Jpeg) => {
+            let format = if format == FrameFormat::Png {
                 image::ImageFormat::Png
             } else {
                 image::ImageFormat::Jpeg
@@ -110,7 +112,6 @@ fn decode(row: &MemberRow) -> Result<(usize, usize, Vec<u8>), String> {
             let (w, h) = (img.width() as usize, img.height() as usize);
             Ok((w, h, img.into_raw()))
         }
-        other => Err(format!("unknown frame format `{other}`")),
     }
 }
 
@@ -293,12 +294,14 @@ pub async fn record(
     let metrics_json = json(serde_json::to_string(&summary))?;
     let history_json = json(serde_json::to_string(&trained.history))?;
     let artifact = trained.artifact.to_bytes()?;
-    let result = sqlx::query(
+    let result = sqlx::query(concat!(
         "INSERT INTO models (name, dataset_id, dataset_name, kind, config_json, train_json,
                              metrics_json, history_json, test_r2_mean, test_image_mse, artifact,
                              software_version, created_at)
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, strftime('%Y-%m-%dT%H:%M:%fZ', 'now'))",
-    )
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ",
+        now_sql!(),
+        ")"
+    ))
     .bind(name)
     .bind(info.dataset_id)
     .bind(&info.name)

@@ -104,7 +104,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("label ranges over {n} random default poses (forces N, torques N·mm):");
     for (k, axis) in softtouch_schemas::wrench::AXES.iter().enumerate() {
         println!(
-            "  {axis}: min {:+9.3}  max {:+9.3}  rms {:8.3}",
+            "  {}: min {:+9.3}  max {:+9.3}  rms {:8.3}",
+            axis.key,
             lo[k],
             hi[k],
             (sq[k] / n as f64).sqrt()

@@ -186,6 +186,124 @@ impl ArmPose {
         (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z))
     }
 
+    /// The same pose with a unit quaternion; a degenerate one (near zero or not
+    /// finite) becomes the identity rather than spreading NaN.
+    #[must_use]
+    pub fn normalised(&self) -> Self {
+        Self {
+            translation_m: self.translation_m,
+            rotation_wxyz: quat_normalize(self.rotation_wxyz),
+        }
+    }
+
+    /// The rotation as a row-major 3×3 matrix: `r[row][col]`.
+    #[must_use]
+    pub fn rotation_matrix(&self) -> [[f64; 3]; 3] {
+        let [w, x, y, z] = quat_normalize(self.rotation_wxyz);
+        [
+            [
+                1.0 - 2.0 * (y * y + z * z),
+                2.0 * (x * y - w * z),
+                2.0 * (x * z + w * y),
+            ],
+            [
+                2.0 * (x * y + w * z),
+                1.0 - 2.0 * (x * x + z * z),
+                2.0 * (y * z - w * x),
+            ],
+            [
+                2.0 * (x * z - w * y),
+                2.0 * (y * z + w * x),
+                1.0 - 2.0 * (x * x + y * y),
+            ],
+        ]
+    }
+
+    /// The homogeneous 4×4 transform, column-major (element `(row, col)` at
+    /// `col * 4 + row`): the layout libfranka uses for `O_T_EE`.
+    #[must_use]
+    pub fn to_matrix(&self) -> [f64; 16] {
+        let r = self.rotation_matrix();
+        let t = self.translation_m;
+        [
+            r[0][0], r[1][0], r[2][0], 0.0, r[0][1], r[1][1], r[2][1], 0.0, r[0][2], r[1][2],
+            r[2][2], 0.0, t[0], t[1], t[2], 1.0,
+        ]
+    }
+
+    /// The pose of a column-major homogeneous 4×4 transform (the inverse of
+    /// [`ArmPose::to_matrix`]). The rotation block is assumed orthonormal; the bottom
+    /// row is ignored.
+    #[must_use]
+    pub fn from_matrix(m: &[f64; 16]) -> Self {
+        let r = |row: usize, col: usize| m[col * 4 + row];
+        let trace = r(0, 0) + r(1, 1) + r(2, 2);
+        // Shepperd's method: divide by the largest of the four candidates, so a
+        // rotation near 180° (trace ≈ −1) stays accurate.
+        let q = if trace > 0.0 {
+            let s = (trace + 1.0).sqrt() * 2.0;
+            [
+                0.25 * s,
+                (r(2, 1) - r(1, 2)) / s,
+                (r(0, 2) - r(2, 0)) / s,
+                (r(1, 0) - r(0, 1)) / s,
+            ]
+        } else if r(0, 0) > r(1, 1) && r(0, 0) > r(2, 2) {
+            let s = (1.0 + r(0, 0) - r(1, 1) - r(2, 2)).sqrt() * 2.0;
+            [
+                (r(2, 1) - r(1, 2)) / s,
+                0.25 * s,
+                (r(0, 1) + r(1, 0)) / s,
+                (r(0, 2) + r(2, 0)) / s,
+            ]
+        } else if r(1, 1) > r(2, 2) {
+            let s = (1.0 + r(1, 1) - r(0, 0) - r(2, 2)).sqrt() * 2.0;
+            [
+                (r(0, 2) - r(2, 0)) / s,
+                (r(0, 1) + r(1, 0)) / s,
+                0.25 * s,
+                (r(1, 2) + r(2, 1)) / s,
+            ]
+        } else {
+            let s = (1.0 + r(2, 2) - r(0, 0) - r(1, 1)).sqrt() * 2.0;
+            [
+                (r(1, 0) - r(0, 1)) / s,
+                (r(0, 2) + r(2, 0)) / s,
+                (r(1, 2) + r(2, 1)) / s,
+                0.25 * s,
+            ]
+        };
+        Self {
+            translation_m: [m[12], m[13], m[14]],
+            rotation_wxyz: quat_normalize(q),
+        }
+    }
+
+    /// The pose a fraction `s` ∈ [0, 1] of the way to `other`: translation along the
+    /// straight line, rotation by spherical interpolation the short way round (a
+    /// Cartesian straight-line move at constant angular rate).
+    #[must_use]
+    pub fn slerp(&self, other: &ArmPose, s: f64) -> Self {
+        Self {
+            translation_m: std::array::from_fn(|i| {
+                self.translation_m[i] + s * (other.translation_m[i] - self.translation_m[i])
+            }),
+            rotation_wxyz: quat_slerp(self.rotation_wxyz, other.rotation_wxyz, s),
+        }
+    }
+
+    /// The angle of the rotation taking this orientation to `other`'s, rad in
+    /// `[0, π]` (`q` and `−q` are the same orientation).
+    #[must_use]
+    pub fn angle_to(&self, other: &ArmPose) -> f64 {
+        let (a, b) = (
+            quat_normalize(self.rotation_wxyz),
+            quat_normalize(other.rotation_wxyz),
+        );
+        let dot = quat_dot(a, b).abs().min(1.0);
+        2.0 * dot.acos()
+    }
+
     /// All components finite and the quaternion not degenerate.
     #[must_use]
     pub fn is_valid(&self) -> bool {
@@ -198,7 +316,8 @@ impl ArmPose {
     }
 }
 
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+/// `a × b`.
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [
         a[1] * b[2] - a[2] * b[1],
         a[2] * b[0] - a[0] * b[2],
@@ -215,6 +334,30 @@ fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
         aw * by - ax * bz + ay * bw + az * bx,
         aw * bz + ax * by - ay * bx + az * bw,
     ]
+}
+
+fn quat_dot(a: [f64; 4], b: [f64; 4]) -> f64 {
+    a.iter().zip(&b).map(|(x, y)| x * y).sum()
+}
+
+/// Spherical interpolation from `a` to `b` at `s`, the short way round. Nearly equal
+/// quaternions fall back to a normalised lerp, where `sin θ` would divide by ~0.
+fn quat_slerp(a: [f64; 4], b: [f64; 4], s: f64) -> [f64; 4] {
+    let (a, mut b) = (quat_normalize(a), quat_normalize(b));
+    let mut dot = quat_dot(a, b);
+    if dot < 0.0 {
+        b = b.map(|v| -v);
+        dot = -dot;
+    }
+    if dot > 0.9995 {
+        return quat_normalize(std::array::from_fn(|i| a[i] + s * (b[i] - a[i])));
+    }
+    let theta = dot.clamp(-1.0, 1.0).acos();
+    let (wa, wb) = (
+        ((1.0 - s) * theta).sin() / theta.sin(),
+        (s * theta).sin() / theta.sin(),
+    );
+    quat_normalize(std::array::from_fn(|i| wa * a[i] + wb * b[i]))
 }
 
 /// Normalise; a degenerate (near-zero or non-finite) quaternion becomes the identity
@@ -253,6 +396,138 @@ mod tests {
         assert!(!Range::new(1.0, 0.0).is_valid());
         assert!(Range::new(0.0, 0.0).is_valid());
         assert!(!Range::new(0.0, 1.0).contains(f64::NAN));
+    }
+
+    fn pose(t: [f64; 3], q: [f64; 4]) -> ArmPose {
+        ArmPose {
+            translation_m: t,
+            rotation_wxyz: q,
+        }
+        .normalised()
+    }
+
+    /// Same translation and orientation (`q` or `−q`), compared by component:
+    /// `acos` near 1 would turn rounding into an angle of ~1e-8.
+    fn same_pose(a: &ArmPose, b: &ArmPose) -> bool {
+        let (qa, qb) = (a.normalised().rotation_wxyz, b.normalised().rotation_wxyz);
+        let sign = if quat_dot(qa, qb) < 0.0 { -1.0 } else { 1.0 };
+        (0..4).all(|i| close(qa[i], sign * qb[i]))
+            && (0..3).all(|i| close(a.translation_m[i], b.translation_m[i]))
+    }
+
+    /// `m · [v, 1]` for a column-major 4×4.
+    fn apply(m: &[f64; 16], v: [f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|row| (0..3).map(|c| m[c * 4 + row] * v[c]).sum::<f64>() + m[12 + row])
+    }
+
+    #[test]
+    fn the_identity_is_the_identity_matrix_and_back() {
+        let m = ArmPose::IDENTITY.to_matrix();
+        for (k, v) in m.iter().enumerate() {
+            let expect = if k % 5 == 0 { 1.0 } else { 0.0 };
+            assert!(close(*v, expect), "{m:?}");
+        }
+        assert_eq!(ArmPose::from_matrix(&m), ArmPose::IDENTITY);
+    }
+
+    #[test]
+    fn poses_and_matrices_convert_both_ways() {
+        let p = pose([0.4, -0.1, 0.3], [0.3, 0.8, -0.2, 0.4]);
+        let back = ArmPose::from_matrix(&p.to_matrix());
+        assert!(same_pose(&p, &back), "{p:?} vs {back:?}");
+        // Half turns (trace −1) take each of the non-trace branches.
+        for q in [
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+            [0.0, 0.6, 0.8, 0.0],
+        ] {
+            let p = pose([0.0; 3], q);
+            let back = ArmPose::from_matrix(&p.to_matrix());
+            assert!(same_pose(&p, &back), "{q:?}: {back:?}");
+        }
+    }
+
+    #[test]
+    fn the_matrix_moves_points_like_the_pose() {
+        let p = pose([0.4, -0.1, 0.3], [0.3, 0.8, -0.2, 0.4]);
+        let v = [0.02, -0.5, 1.5];
+        let by_pose = p.rotate(v);
+        let by_matrix = apply(&p.to_matrix(), v);
+        for i in 0..3 {
+            assert!(close(by_matrix[i], by_pose[i] + p.translation_m[i]));
+        }
+    }
+
+    #[test]
+    fn slerp_ends_at_its_ends_and_halves_the_angle() {
+        let a = pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]);
+        let b = pose([0.2, -0.4, 0.6], [0.0, 0.0, 0.0, 1.0]);
+        assert!(same_pose(&a.slerp(&b, 0.0), &a));
+        assert!(same_pose(&a.slerp(&b, 1.0), &b));
+        let mid = a.slerp(&b, 0.5);
+        assert!(close(a.angle_to(&mid), std::f64::consts::FRAC_PI_2));
+        assert!(close(mid.angle_to(&b), std::f64::consts::FRAC_PI_2));
+        assert!(same_pose(
+            &mid,
+            &pose([0.1, -0.2, 0.3], [1.0, 0.0, 0.0, 1.0])
+        ));
+    }
+
+    #[test]
+    fn slerp_takes_the_short_way_round() {
+        let a = ArmPose::from_translation_yaw([0.0; 3], 170f64.to_radians());
+        let b = ArmPose::from_translation_yaw([0.0; 3], -170f64.to_radians());
+        assert!(close(a.angle_to(&b), 20f64.to_radians()));
+        let mid = a.slerp(&b, 0.5);
+        assert!(close(mid.yaw_rad().abs(), std::f64::consts::PI), "{mid:?}");
+    }
+
+    #[test]
+    fn antipodal_quaternions_are_one_orientation() {
+        let q = [0.3, 0.8, -0.2, 0.4];
+        let a = pose([0.0; 3], q);
+        let b = pose([0.0; 3], q.map(|v| -v));
+        // Rounding near `acos(1)` leaves up to ~3e-8 rad.
+        assert!(a.angle_to(&b).abs() < 1e-7);
+        for s in [0.0, 0.5, 1.0] {
+            let p = a.slerp(&b, s);
+            assert!(p.is_valid() && same_pose(&p, &a), "{s}: {p:?}");
+        }
+    }
+
+    #[test]
+    fn near_identical_poses_give_finite_results() {
+        let a = ArmPose::from_translation_yaw([0.1, 0.2, 0.3], 0.7);
+        let b = ArmPose::from_translation_yaw([0.1, 0.2, 0.3 + 1e-12], 0.7 + 1e-10);
+        let angle = a.angle_to(&b);
+        assert!(angle.is_finite() && angle < 1e-6, "{angle}");
+        assert!(a.angle_to(&a).is_finite());
+        for s in [0.0, 1e-9, 0.5, 1.0] {
+            let p = a.slerp(&b, s);
+            assert!(p.is_valid() && same_pose(&p, &a), "{s}: {p:?}");
+        }
+        let zero = pose([0.0; 3], [0.0; 4]);
+        assert!(zero.angle_to(&ArmPose::IDENTITY).abs() < 1e-12);
+        assert_eq!(zero.rotation_wxyz, [1.0, 0.0, 0.0, 0.0]);
+    }
+
+    proptest! {
+        #[test]
+        fn any_pose_survives_the_matrix_and_slerp_is_uniform(
+            q in proptest::array::uniform4(-1.0..1.0f64), t in proptest::array::uniform3(-1.0..1.0f64),
+            q2 in proptest::array::uniform4(-1.0..1.0f64), s in 0.0..1.0f64,
+        ) {
+            prop_assume!(q.iter().map(|v| v * v).sum::<f64>() > 1e-3);
+            prop_assume!(q2.iter().map(|v| v * v).sum::<f64>() > 1e-3);
+            let a = pose(t, q);
+            prop_assert!(same_pose(&a, &ArmPose::from_matrix(&a.to_matrix())));
+            let b = pose([0.0; 3], q2);
+            let total = a.angle_to(&b);
+            let p = a.slerp(&b, s);
+            prop_assert!((a.angle_to(&p) - s * total).abs() < 1e-5, "{} vs {}", a.angle_to(&p), s * total);
+            prop_assert!((p.angle_to(&b) - (1.0 - s) * total).abs() < 1e-5);
+        }
     }
 
     proptest! {

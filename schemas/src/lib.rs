@@ -5,8 +5,10 @@
 //!
 //! # Layout
 //! - [`time`]: timestamps and durations in nanoseconds of one monotonic clock.
-//! - [`geometry`]: the contact pose `(x, z, θ)` and the arm's rigid pose.
-//! - [`wrench`]: force/torque values and readings from a sensor.
+//! - [`geometry`]: the contact pose `(x, z, θ)` and the arm's rigid pose with its
+//!   SE(3) maths (compose, invert, 4×4 matrices, slerp).
+//! - [`wrench`]: force/torque values (and their change of frame), the axis names, and
+//!   readings from a sensor.
 //! - [`sample`]: frame metadata and one collected sample.
 //! - [`rig`]: the rig config (devices, workspace bounds, limits, timings).
 //! - [`scene`]: the scene spec (medium, rods, declared effects, pose ranges).
@@ -28,7 +30,7 @@ pub use rig::{ArmDevice, CameraDevice, ForceSensorDevice, GripperDevice, RigConf
 pub use sample::{FrameFormat, FrameMeta, Sample, SampleStatus};
 pub use scene::{Effect, Medium, RodShape, RodSpec, SceneSpec};
 pub use time::{DurationNs, TimestampNs};
-pub use wrench::{FtReading, FtStatus, Wrench};
+pub use wrench::{Axis, DegenerateDirection, FtReading, FtStatus, Wrench};
 
 /// Version of this crate, recorded with every run for provenance.
 pub const SOFTWARE_VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -1,5 +1,6 @@
 //! Forces and torques, and readings from a force/torque sensor.
 
+use crate::geometry::{ArmPose, cross};
 use crate::time::TimestampNs;
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -14,8 +15,65 @@ pub struct Wrench {
     pub torque_nm: [f64; 3],
 }
 
-/// Axis names in storage and export order.
-pub const AXES: [&str; 6] = ["fx", "fy", "fz", "tx", "ty", "tz"];
+/// One wrench axis as labels, statistics and exports name it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Axis {
+    /// Display name: `Fx` … `Tz`.
+    pub name: &'static str,
+    /// Lower-case key for columns, file names and CSV headers: `fx` … `tz`.
+    pub key: &'static str,
+    /// Unit of labels and reports, the paper's: N for forces, N·mm for torques
+    /// ([`Wrench`] itself stores N·m).
+    pub report_unit: &'static str,
+}
+
+/// The six axes in storage, label and export order (`Fx, Fy, Fz, Tx, Ty, Tz`): the
+/// one list every crate names axes from.
+pub const AXES: [Axis; 6] = [
+    Axis::new("Fx", "fx", "N"),
+    Axis::new("Fy", "fy", "N"),
+    Axis::new("Fz", "fz", "N"),
+    Axis::new("Tx", "tx", "N·mm"),
+    Axis::new("Ty", "ty", "N·mm"),
+    Axis::new("Tz", "tz", "N·mm"),
+];
+
+/// The names of [`AXES`] (`Fx` … `Tz`), for code that wants plain strings.
+pub const AXIS_NAMES: [&str; 6] = {
+    let mut out = [""; 6];
+    let mut i = 0;
+    while i < 6 {
+        out[i] = AXES[i].name;
+        i += 1;
+    }
+    out
+};
+
+/// The report units of [`AXES`] (N, N·mm), for code that wants plain strings.
+pub const AXIS_UNITS: [&str; 6] = {
+    let mut out = [""; 6];
+    let mut i = 0;
+    while i < 6 {
+        out[i] = AXES[i].report_unit;
+        i += 1;
+    }
+    out
+};
+
+impl Axis {
+    const fn new(name: &'static str, key: &'static str, report_unit: &'static str) -> Self {
+        Self {
+            name,
+            key,
+            report_unit,
+        }
+    }
+}
+
+/// A direction of zero length (or not finite): nothing to project a force on.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("direction {0:?} has no usable length: cannot project a force on it")]
+pub struct DegenerateDirection(pub [f64; 3]);
 
 impl Wrench {
     /// No force, no torque.
@@ -57,6 +115,38 @@ impl Wrench {
     #[must_use]
     pub fn is_finite(&self) -> bool {
         self.to_array().iter().all(|v| v.is_finite())
+    }
+
+    /// This wrench, held in frame A about A's origin, expressed in frame B about B's
+    /// origin, given `b_from_a` (A's pose in B): `F_b = R·F_a`,
+    /// `τ_b = R·τ_a + p × F_b` with `p` A's origin in B, the lever arm of the force
+    /// about the new origin. For example
+    /// `wrench_in_world = wrench_in_sensor.expressed_in(&world_from_sensor)`.
+    #[must_use]
+    pub fn expressed_in(&self, b_from_a: &ArmPose) -> Wrench {
+        let force_n = b_from_a.rotate(self.force_n);
+        let turned = b_from_a.rotate(self.torque_nm);
+        let shift = cross(b_from_a.translation_m, force_n);
+        Wrench {
+            force_n,
+            torque_nm: std::array::from_fn(|i| turned[i] + shift[i]),
+        }
+    }
+
+    /// The force's component along `direction` (same frame as the wrench; any
+    /// length, it is normalised), N. A zero or non-finite direction is an error, not
+    /// a NaN.
+    pub fn force_along(&self, direction: [f64; 3]) -> Result<f64, DegenerateDirection> {
+        let norm = direction.iter().map(|d| d * d).sum::<f64>().sqrt();
+        if !(norm.is_finite() && norm > 1e-12) {
+            return Err(DegenerateDirection(direction));
+        }
+        Ok(self
+            .force_n
+            .iter()
+            .zip(&direction)
+            .map(|(f, d)| f * d / norm)
+            .sum())
     }
 
     /// Component-wise sum.
@@ -147,6 +237,73 @@ pub struct FtReading {
 #[allow(clippy::float_cmp)] // exact values are the point of these tests
 mod tests {
     use super::*;
+
+    fn close(a: &Wrench, b: &Wrench) -> bool {
+        a.to_array()
+            .iter()
+            .zip(&b.to_array())
+            .all(|(x, y)| (x - y).abs() < 1e-12)
+    }
+
+    const W: Wrench = Wrench::from_array([1.0, -2.0, 3.0, 0.1, -0.2, 0.3]);
+
+    #[test]
+    fn the_identity_leaves_a_wrench_alone() {
+        assert!(close(&W.expressed_in(&ArmPose::IDENTITY), &W));
+    }
+
+    #[test]
+    fn a_quarter_turn_about_z_permutes_the_axes() {
+        let b_from_a = ArmPose::from_translation_yaw([0.0; 3], std::f64::consts::FRAC_PI_2);
+        // x_a → y_b, y_a → −x_b.
+        let expect = Wrench::from_array([2.0, 1.0, 3.0, 0.2, 0.1, 0.3]);
+        assert!(
+            close(&W.expressed_in(&b_from_a), &expect),
+            "{}",
+            W.expressed_in(&b_from_a)
+        );
+    }
+
+    #[test]
+    fn moving_the_origin_adds_the_lever_arm_torque() {
+        // A's origin 0.1 m along x of B: a force of −2 N along y there turns B's origin
+        // by 0.1 × (−2) = −0.2 N·m about z; 3 N along z by −0.1 × 3 about y.
+        let b_from_a = ArmPose::from_translation_yaw([0.1, 0.0, 0.0], 0.0);
+        let expect = Wrench::from_array([1.0, -2.0, 3.0, 0.1, -0.2 - 0.3, 0.3 - 0.2]);
+        assert!(close(&W.expressed_in(&b_from_a), &expect));
+    }
+
+    #[test]
+    fn the_inverse_pose_brings_a_wrench_back() {
+        let b_from_a = ArmPose {
+            translation_m: [0.3, -0.1, 0.25],
+            rotation_wxyz: [0.3, 0.8, -0.2, 0.4],
+        };
+        let there = W.expressed_in(&b_from_a);
+        assert!(!close(&there, &W));
+        assert!(close(&there.expressed_in(&b_from_a.inverse()), &W));
+        assert!((there.force_norm_n() - W.force_norm_n()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn force_along_normalises_and_refuses_a_zero_direction() {
+        let along = |d| W.force_along(d).expect("a usable direction");
+        assert!((along([0.0, 0.0, 1.0]) - 3.0).abs() < 1e-12);
+        assert!((along([0.0, -10.0, 0.0]) - 2.0).abs() < 1e-12);
+        assert!((along([1.0, 1.0, 0.0]) - (-1.0 / 2f64.sqrt())).abs() < 1e-12);
+        assert_eq!(W.force_along([0.0; 3]), Err(DegenerateDirection([0.0; 3])));
+        assert!(W.force_along([f64::NAN, 0.0, 1.0]).is_err());
+        assert!(W.force_along([f64::INFINITY, 0.0, 0.0]).is_err());
+    }
+
+    #[test]
+    fn axes_name_key_and_unit_agree() {
+        assert_eq!(AXIS_NAMES, ["Fx", "Fy", "Fz", "Tx", "Ty", "Tz"]);
+        assert_eq!(AXIS_UNITS, ["N", "N", "N", "N·mm", "N·mm", "N·mm"]);
+        for a in AXES {
+            assert_eq!(a.key, a.name.to_lowercase());
+        }
+    }
 
     #[test]
     fn the_monitor_latch_is_a_warning_and_anything_else_a_fault() {

@@ -21,10 +21,7 @@ pub(crate) fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
-/// A fresh temporary directory.
-pub(crate) fn tempdir() -> tempfile::TempDir {
-    tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"))
-}
+pub(crate) use softtouch_collector::testing::tempdir;
 
 /// A current-thread tokio runtime for store checks.
 pub(crate) fn runtime() -> tokio::runtime::Runtime {

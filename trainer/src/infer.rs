@@ -4,20 +4,30 @@
 use std::path::Path;
 
 use burn::prelude::*;
+use softtouch_schemas::Wrench;
 
 use crate::TrainError;
 use crate::artifact::{ArtifactHeader, ModelArtifact};
-use crate::labels::WrenchLabel;
+use crate::labels::{WrenchLabel, wrench_from_label};
 use crate::model::InferenceNet;
 use crate::preprocess::FingerTable;
 
 /// One inference.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Prediction {
-    /// `[Fx, Fy, Fz]` in N, `[Tx, Ty, Tz]` in N·mm, sensor frame; `None` for a VAE.
-    pub wrench: Option<WrenchLabel>,
+    /// `[Fx, Fy, Fz]` in N, `[Tx, Ty, Tz]` in N·mm (the label units), sensor frame;
+    /// `None` for a VAE. [`Prediction::wrench`] gives it in SI.
+    pub wrench_n_nmm: Option<WrenchLabel>,
     /// The latent mean μ (the SVAE's touch representation).
     pub latent_mean: Vec<f32>,
+}
+
+impl Prediction {
+    /// The predicted wrench in SI (N, N·m), sensor frame, as the rest of softtouch
+    /// holds wrenches; `None` for a VAE.
+    pub fn wrench(&self) -> Option<Wrench> {
+        self.wrench_n_nmm.as_ref().map(wrench_from_label)
+    }
 }
 
 /// A loaded model on the CPU, ready for single images.
@@ -121,7 +131,7 @@ impl Predictor {
             });
         }
         Ok(Prediction {
-            wrench,
+            wrench_n_nmm: wrench,
             latent_mean,
         })
     }
@@ -194,4 +204,27 @@ fn time_calls(
             mean_ms: ms.iter().sum::<f64>() / ms.len() as f64,
         })
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_prediction_gives_its_wrench_in_si() {
+        let p = Prediction {
+            wrench_n_nmm: Some([1.0, -2.0, 0.5, 100.0, -250.0, 12.5]),
+            latent_mean: vec![0.0; 4],
+        };
+        let w = p.wrench().expect("an SVAE prediction");
+        let expect = Wrench::from_array([1.0, -2.0, 0.5, 0.1, -0.25, 0.0125]);
+        for (got, want) in w.to_array().iter().zip(&expect.to_array()) {
+            assert!((got - want).abs() < 1e-9, "{w:?}");
+        }
+        let vae = Prediction {
+            wrench_n_nmm: None,
+            ..p
+        };
+        assert!(vae.wrench().is_none());
+    }
 }

@@ -9,16 +9,23 @@
 //! standardising makes the loss weigh every axis the way the metric does.
 
 use serde::{Deserialize, Serialize};
+use softtouch_schemas::Wrench;
 
 use crate::TrainError;
 
-/// Axis names, in label order.
-pub const AXES: [&str; 6] = ["Fx", "Fy", "Fz", "Tx", "Ty", "Tz"];
-/// Units of each axis, in label order.
-pub const UNITS: [&str; 6] = ["N", "N", "N", "N·mm", "N·mm", "N·mm"];
+/// Axis names (`Fx` … `Tz`) and units (N, N·mm) in label order: the schemas' list.
+pub use softtouch_schemas::wrench::{AXIS_NAMES as AXES, AXIS_UNITS as UNITS};
 
 /// A wrench label: `[Fx, Fy, Fz]` in N then `[Tx, Ty, Tz]` in N·mm, sensor frame.
 pub type WrenchLabel = [f32; 6];
+
+/// The SI wrench (N, N·m) of a label: the inverse of [`label_from_si`].
+pub fn wrench_from_label(label: &WrenchLabel) -> Wrench {
+    Wrench {
+        force_n: [label[0], label[1], label[2]].map(f64::from),
+        torque_nm: [label[3], label[4], label[5]].map(|t| f64::from(t) * 1e-3),
+    }
+}
 
 /// Builds a label from a stored wrench (torque in N·m).
 pub fn label_from_si(force_n: [f64; 3], torque_nm: [f64; 3]) -> WrenchLabel {
@@ -124,5 +131,22 @@ mod tests {
     fn torque_is_converted_to_newton_millimetres() {
         let l = label_from_si([1.0, 2.0, 3.0], [0.1, -0.2, 0.0125]);
         assert_eq!(l, [1.0, 2.0, 3.0, 100.0, -200.0, 12.5]);
+    }
+
+    #[test]
+    fn labels_convert_back_to_si() {
+        let w = wrench_from_label(&[1.0, 2.0, 3.0, 100.0, -200.0, 12.5]);
+        let expect = [1.0, 2.0, 3.0, 0.1, -0.2, 0.0125];
+        for (got, want) in w.to_array().iter().zip(&expect) {
+            assert!((got - want).abs() < 1e-9, "{w:?}");
+        }
+        let back = label_from_si(w.force_n, w.torque_nm);
+        assert_eq!(back, [1.0, 2.0, 3.0, 100.0, -200.0, 12.5]);
+    }
+
+    #[test]
+    fn axes_are_the_schemas_names_and_units() {
+        assert_eq!(AXES, ["Fx", "Fy", "Fz", "Tx", "Ty", "Tz"]);
+        assert_eq!(UNITS[3], "N·mm");
     }
 }

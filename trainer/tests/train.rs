@@ -269,7 +269,7 @@ fn artifacts_round_trip_and_black_and_white_images_give_finite_wrenches() {
     for px in [[0u8, 0, 0], [255, 255, 255], [240, 130, 30]] {
         let rgb: Vec<u8> = px.iter().copied().cycle().take(640 * 480 * 3).collect();
         let p = b.predict_rgb(640, 480, &rgb).expect("predicts");
-        let w = p.wrench.expect("SVAE");
+        let w = p.wrench_n_nmm.expect("SVAE");
         assert!(w.iter().all(|v| v.is_finite()), "{px:?}: {w:?}");
         assert_eq!(p.latent_mean.len(), 8);
         assert_eq!(a.predict_rgb(640, 480, &rgb).expect("predicts"), p);

@@ -1,17 +1,20 @@
-//! `softtouch bench collection|ingest`.
+//! `softtouch bench collection|ingest|model`.
 
+use super::train::{ModelArgs, load};
 use super::{Failure, io_failure};
 use crate::collect::bench::{Breakdown, SweepPoint, sweep_point};
 use crate::configs;
+use crate::experiments::{self, fmt_opt};
 use crate::plot::{Series, SeriesStyle, XyChart, xy_chart};
+use crate::progress::TrainProgress;
 use crate::store::{OwnedNewRun, SyncStore};
+use crate::synthetic::SampleBuilder;
 use anyhow::anyhow;
+use clap::Args;
 use clap::Subcommand;
 use softtouch_drivers::Frame;
-use softtouch_schemas::{
-    ContactPose, FrameFormat, FrameMeta, FtReading, FtStatus, Medium, Sample, SampleStatus,
-    TimestampNs, Wrench,
-};
+use softtouch_schemas::{ContactPose, FrameFormat, FrameMeta, Medium, TimestampNs};
+use softtouch_trainer::Splits;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -25,7 +28,7 @@ pub enum BenchCommand {
     #[command(after_help = "Examples:
   softtouch bench model --dataset air
   softtouch bench model --dataset air --sizes 32,64 --widths 8,16 --latents 32 --epochs 10")]
-    Model(super::train::BenchModelArgs),
+    Model(BenchModelArgs),
     /// Accuracy costs time: sweep settle time and force/torque window on the simulated
     /// scene (whose true wrench is known); print label error against samples per hour,
     /// and write a CSV and PNG plots. Also reports where a sample's time goes.
@@ -86,7 +89,7 @@ fn scratch_db(out: &Path) -> Result<PathBuf, Failure> {
 
 pub async fn run(cmd: BenchCommand, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
     match cmd {
-        BenchCommand::Model(args) => super::train::run_bench_model(args, db, out).await,
+        BenchCommand::Model(args) => run_bench_model(args, db, out).await,
         BenchCommand::Collection {
             samples,
             settle,
@@ -177,7 +180,9 @@ pub async fn run(cmd: BenchCommand, db: &Path, out: &mut dyn Write) -> Result<()
                 let started = Instant::now();
                 for i in 0..samples {
                     let frame = frames[usize::try_from(i).unwrap_or(0) % frames.len()].clone();
-                    store.submit_sample(run, ingest_sample(i), Some(frame), ingest_window(i))?;
+                    let sample = SampleBuilder::new(i);
+                    let window = sample.window();
+                    store.submit_sample(run, sample.build(), Some(frame), window)?;
                 }
                 store.flush()?;
                 let secs = started.elapsed().as_secs_f64();
@@ -224,41 +229,6 @@ fn ingest_frames() -> Result<Vec<Frame>, Failure> {
                 },
                 data: r.image.into_raw(),
             })
-        })
-        .collect()
-}
-
-fn ingest_sample(index: u64) -> Sample {
-    Sample {
-        index,
-        rod: "circle-10".into(),
-        medium: Medium::Air,
-        commanded: ContactPose {
-            x_m: 0.01,
-            z_m: 0.0,
-            theta_rad: 0.0,
-        },
-        measured: None,
-        wrench_mean_in_sensor: Wrench::from_array([1.0, 2.0, 3.0, 0.1, 0.2, 0.3]),
-        wrench_std_in_sensor: Wrench::from_array([0.01; 6]),
-        reading_count: 50,
-        frame_t: TimestampNs(25_000_000),
-        window_start: TimestampNs(0),
-        window_end: TimestampNs(50_000_000),
-        sync_skew_ns: 0,
-        status: SampleStatus::Ok,
-        attempts: 1,
-    }
-}
-
-fn ingest_window(index: u64) -> Vec<FtReading> {
-    (0..50u32)
-        .map(|k| FtReading {
-            t: TimestampNs(u64::from(k) * 1_000_000),
-            rdt_sequence: k,
-            ft_sequence: k + u32::try_from(index % 1000).unwrap_or(0),
-            status: FtStatus::OK,
-            wrench_in_sensor: Wrench::from_array([1.0, 2.0, 3.0, 0.1, 0.2, 0.3]),
         })
         .collect()
 }
@@ -360,4 +330,107 @@ fn report_collection(
         table.push_str(&format!("wrote {}\n", p.display()));
     }
     out.write_all(table.as_bytes()).map_err(io_failure)
+}
+
+/// `softtouch bench model`.
+#[derive(Debug, Args)]
+pub struct BenchModelArgs {
+    /// The dataset.
+    #[arg(long)]
+    pub dataset: String,
+    /// Input sizes to try, px.
+    #[arg(long, value_delimiter = ',', default_value = "32,64")]
+    pub sizes: Vec<usize>,
+    /// Encoder widths to try.
+    #[arg(long, value_delimiter = ',', default_value = "8,12,16")]
+    pub widths: Vec<usize>,
+    /// Latent sizes to try.
+    #[arg(long, value_delimiter = ',', default_value = "32")]
+    pub latents: Vec<usize>,
+    /// Single-image inferences timed per point.
+    #[arg(long, default_value_t = 200)]
+    pub runs: usize,
+    /// Where the CSV and PNG go.
+    #[arg(long, default_value = "bench-out")]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub model: ModelArgs,
+}
+
+/// `softtouch bench model`: train each point of the grid, then time it on one core.
+async fn run_bench_model(
+    args: BenchModelArgs,
+    db: &Path,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    let (base, train) = args.model.configs()?;
+    let wanted = experiments::model_grid(&base, &args.sizes, &args.widths, &args.latents)?;
+    let store = super::open_existing(db).await?;
+    experiments::prepare_out(&args.out)?;
+    let (w, h, rgb) = crate::models::first_test_frame(&store, &args.dataset).await?;
+    let mut rows = Vec::new();
+    let mut loaded: Option<(usize, Splits)> = None;
+    for (label, config) in wanted {
+        let size = config.preprocess.size_px;
+        if loaded.as_ref().is_none_or(|(s, _)| *s != size) {
+            let splits = load(&store, &args.dataset, &config.preprocess, out).await?;
+            loaded = Some((size, splits));
+        }
+        let Some((_, splits)) = loaded.as_ref() else {
+            continue;
+        };
+        writeln!(out, "— {label}").map_err(io_failure)?;
+        let (mut row, trained) = {
+            let mut progress = TrainProgress::new(out, train.epochs, true);
+            experiments::train_row(label, config, &train, splits, &mut progress)?
+        };
+        let image = splits
+            .test
+            .first()
+            .map(|e| e.image.clone())
+            .unwrap_or_default();
+        let (latency, frame_latency) =
+            experiments::measure_row(&mut row, trained, &image, (w, h, &rgb), args.runs)?;
+        writeln!(
+            out,
+            "   test R² {:.5} (min {:.5}), {:.1} s/epoch, {:.0} img/s, on one core: model {:.3} ms median / {:.3} ms p95, {w}×{h} frame → wrench {:.3} ms median / {:.3} ms p95",
+            row.test.r2_mean.unwrap_or(f64::NAN),
+            row.test.r2_min().unwrap_or(f64::NAN),
+            row.seconds_per_epoch,
+            row.images_per_s,
+            latency.median_ms,
+            latency.p95_ms,
+            frame_latency.median_ms,
+            frame_latency.p95_ms
+        )
+        .map_err(io_failure)?;
+        rows.push(row);
+    }
+    store.close().await;
+    writeln!(
+        out,
+        "\n{:<16} {:>9} {:>9} {:>9} {:>9} {:>11} {:>11}",
+        "input/width/lat", "R² avg", "R² min", "s/epoch", "img/s", "model ms", "frame ms"
+    )
+    .map_err(io_failure)?;
+    for r in &rows {
+        writeln!(
+            out,
+            "{:<16} {:>9} {:>9} {:>9.1} {:>9.0} {:>11} {:>11}",
+            r.label,
+            fmt_opt(r.test.r2_mean, |v| format!("{v:.5}")),
+            fmt_opt(r.test.r2_min(), |v| format!("{v:.5}")),
+            r.seconds_per_epoch,
+            r.images_per_s,
+            fmt_opt(r.latency_ms, |v| format!("{v:.3}")),
+            fmt_opt(r.frame_latency_ms, |v| format!("{v:.3}"))
+        )
+        .map_err(io_failure)?;
+    }
+    let csv = args.out.join("bench-model.csv");
+    experiments::write_csv(&csv, &rows)?;
+    let png = args.out.join("bench-model.png");
+    experiments::plot_bench_model(&png, &rows)?;
+    writeln!(out, "wrote {} and {}", csv.display(), png.display()).map_err(io_failure)?;
+    Ok(())
 }

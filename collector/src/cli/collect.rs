@@ -1,16 +1,13 @@
 //! `softtouch collect` and `softtouch status`.
 
 use super::{Failure, io_failure, open_existing};
-use crate::collect::rods::{RodChanger, TerminalOperator};
-use crate::collect::sampler::RodSchedule;
-use crate::collect::{CollectDevices, CollectPlan, Counters, Outcome, Progress, collect};
-use crate::configs;
-use crate::store::{OwnedNewRun, RunStatus, SyncStore};
+use crate::collect::{
+    CollectPlan, Counters, NewRunRequest, Outcome, PlanError, Progress, Resumed, build_devices,
+    collect,
+};
+use crate::store::SyncStore;
 use anyhow::anyhow;
 use clap::Args;
-use softtouch_drivers::TokioClock;
-use softtouch_schemas::config::{ConfigSource, parse_toml, to_toml};
-use softtouch_schemas::{ArmDevice, CameraDevice, ForceSensorDevice, RigConfig, SceneSpec};
 use std::io::{IsTerminal as _, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -48,42 +45,6 @@ pub struct CollectArgs {
     /// Continue run RUN at its next sample, with its stored seed, rig and scene.
     #[arg(long, value_name = "RUN")]
     pub resume: Option<i64>,
-}
-
-/// Devices for a rig, real or simulated per its config. When every device that takes
-/// part in collection (arm, sensor, camera) is simulated, the run uses virtual time.
-async fn build_devices(
-    rig: &RigConfig,
-    scene: &SceneSpec,
-    seed: u64,
-) -> Result<(CollectDevices, TokioClock), Failure> {
-    let virtual_time = matches!(rig.arm, ArmDevice::Sim { .. })
-        && matches!(rig.force_sensor, ForceSensorDevice::Sim { .. })
-        && matches!(rig.camera, CameraDevice::Sim { .. });
-    if virtual_time {
-        // The clock stands still while code runs and jumps to the next timer when
-        // everything waits; main() runs a current-thread runtime, as pause() needs.
-        tokio::time::pause();
-    }
-    let clock = TokioClock::new();
-    let devices = softtouch_drivers::select::build(rig, scene, seed, clock)
-        .await
-        .map_err(|e| Failure::Runtime(anyhow!("cannot set up the rig: {e}")))?;
-    // The rod is part of the simulated world when the arm is simulated; on a real rig
-    // an operator changes it.
-    let rods: Box<dyn RodChanger> = match (&rig.arm, devices.sim) {
-        (ArmDevice::Sim { .. }, Some(handle)) => Box::new(handle),
-        _ => Box::new(TerminalOperator::default()),
-    };
-    Ok((
-        CollectDevices {
-            arm: devices.arm,
-            force_sensor: devices.force_sensor,
-            camera: devices.camera,
-            rods,
-        },
-        clock,
-    ))
 }
 
 struct BarProgress {
@@ -131,137 +92,34 @@ impl Progress for LineProgress {
     }
 }
 
-pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
-    let store = SyncStore::open(db)?;
-    let (run_id, plan_seed, start_index, end_index, schedule, rig, scene) =
-        if let Some(run_id) = args.resume {
-            let record = store.run_record(run_id)?;
-            if record.status == RunStatus::Completed.as_str() {
-                writeln!(out, "run {run_id} is already complete").map_err(io_failure)?;
-                return Ok(());
-            }
-            let rig: RigConfig = parse_toml(
-                &record.rig_toml,
-                &ConfigSource::Stored(format!("run {run_id} rig")),
-            )?;
-            let scene: SceneSpec = parse_toml(
-                &record.scene_toml,
-                &ConfigSource::Stored(format!("run {run_id} scene")),
-            )?;
-            let rods: Vec<String> = record.rod_schedule.split(',').map(str::to_owned).collect();
-            let schedule = RodSchedule::new(rods, u64::try_from(record.rod_block).unwrap_or(1))
-                .ok_or_else(|| Failure::Runtime(anyhow!("run {run_id} has no rod schedule")))?;
-            let start = store.next_index(run_id)?;
-            let end = u64::try_from(record.samples_planned).unwrap_or(0);
-            store.set_run_status(run_id, RunStatus::Running)?;
-            store.log_event(
-                run_id,
-                Some(start),
-                None,
-                crate::store::EventLevel::Info,
-                "resumed",
-                &format!("resumed at sample {start}"),
-            )?;
-            (run_id, record.seed_u64(), start, end, schedule, rig, scene)
-        } else {
-            let resolved = configs::resolve(args.rig.as_deref(), args.scene.as_deref())?;
-            let samples = args.samples.unwrap_or(0);
-            let rods = if args.rods.is_empty() {
-                resolved
-                    .scene
-                    .rods
-                    .iter()
-                    .map(|r| r.name.clone())
-                    .collect::<Vec<_>>()
-            } else {
-                for r in &args.rods {
-                    if resolved.scene.rod(r).is_none() {
-                        return Err(Failure::BadInput(anyhow!(
-                            "--rods: no rod `{r}` in scene {} (it has: {})",
-                            resolved.scene_source,
-                            resolved
-                                .scene
-                                .rods
-                                .iter()
-                                .map(|r| r.name.as_str())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        )));
-                    }
-                }
-                args.rods.clone()
-            };
-            let n_rods = rods.len() as u64;
-            let block = match args.block {
-                Some(0) => {
-                    return Err(Failure::BadInput(anyhow!(
-                        "--block: expected at least 1 sample per rod"
-                    )));
-                }
-                Some(b) => b,
-                None => samples.div_ceil(n_rods).max(1),
-            };
-            let schedule = RodSchedule::new(rods, block)
-                .ok_or_else(|| Failure::BadInput(anyhow!("no rods to use")))?;
-            let seed = args.seed.unwrap_or_else(|| {
-                std::time::SystemTime::now()
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map_or(0, |d| d.as_nanos() as u64)
-            });
-            let run_id = store.create_run(OwnedNewRun {
-                seed,
-                samples_planned: samples,
-                rod_schedule: schedule.rods().to_vec(),
-                rod_block: schedule.block(),
-                scene_name: resolved.scene.name.clone(),
-                medium: resolved.scene.medium,
-                rig_toml: to_toml(&resolved.rig),
-                scene_toml: to_toml(&resolved.scene),
-            })?;
-            (
-                run_id,
-                seed,
-                0,
-                samples,
-                schedule,
-                resolved.rig,
-                resolved.scene,
-            )
-        };
+/// A planning error as a CLI failure: the exit code says whose fault it is.
+fn plan_failure(e: PlanError) -> Failure {
+    match e {
+        // Unwrapped so the message and class are what these errors give everywhere.
+        PlanError::Store(e) => e.into(),
+        PlanError::Config(e) => e.into(),
+        e if e.is_bad_input() => Failure::BadInput(e.into()),
+        e => Failure::Runtime(e.into()),
+    }
+}
 
-    let (devices, clock) = build_devices(&rig, &scene, plan_seed).await?;
-    let total = end_index.saturating_sub(start_index);
-    writeln!(
-        out,
-        "run {run_id}: samples {start_index}..{end_index} of scene `{}` ({}), seed {plan_seed}",
-        scene.name, scene.medium
-    )
-    .map_err(io_failure)?;
-    let plan = CollectPlan {
-        run_id,
-        seed: plan_seed,
-        start_index,
-        end_index,
-        rods: schedule,
-        rig,
-        scene,
-    };
-
-    let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
-    let signals = tokio::spawn(async move {
-        let mut presses = 0;
-        while tokio::signal::ctrl_c().await.is_ok() {
-            presses += 1;
-            if presses == 1 {
-                eprintln!("\nstopping after this sample (Ctrl-C again to stop at once)");
-            }
-            if stop_tx.send(presses).is_err() {
-                break;
-            }
+/// Count Ctrl-C presses into `stop` (1: finish the sample, 2: stop at once).
+async fn count_ctrl_c(stop: tokio::sync::watch::Sender<u32>) {
+    let mut presses = 0;
+    while tokio::signal::ctrl_c().await.is_ok() {
+        presses += 1;
+        if presses == 1 {
+            eprintln!("\nstopping after this sample (Ctrl-C again to stop at once)");
         }
-    });
+        if stop.send(presses).is_err() {
+            break;
+        }
+    }
+}
 
-    let mut progress: Box<dyn Progress> = if std::io::stderr().is_terminal() {
+/// A bar on a terminal, log lines otherwise.
+fn progress_reporter(total: u64) -> Box<dyn Progress> {
+    if std::io::stderr().is_terminal() {
         let bar = indicatif::ProgressBar::new(total);
         bar.set_style(
             indicatif::ProgressStyle::with_template(
@@ -278,7 +136,45 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
             done: 0,
             total,
         })
+    }
+}
+
+pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    let store = SyncStore::open(db)?;
+    let plan = if let Some(run_id) = args.resume {
+        match CollectPlan::resume(&store, run_id).map_err(plan_failure)? {
+            Resumed::AlreadyComplete => {
+                writeln!(out, "run {run_id} is already complete").map_err(io_failure)?;
+                return Ok(());
+            }
+            Resumed::Plan(plan) => *plan,
+        }
+    } else {
+        let request = NewRunRequest {
+            rig: args.rig,
+            scene: args.scene,
+            samples: args.samples.unwrap_or(0),
+            seed: args.seed,
+            rods: args.rods,
+            block: args.block,
+        };
+        CollectPlan::new_run(&store, &request).map_err(plan_failure)?
     };
+
+    let (devices, clock) = build_devices(&plan.rig, &plan.scene, plan.seed)
+        .await
+        .map_err(|e| Failure::Runtime(anyhow!("cannot set up the rig: {e}")))?;
+    let run_id = plan.run_id;
+    writeln!(
+        out,
+        "run {run_id}: samples {}..{} of scene `{}` ({}), seed {}",
+        plan.start_index, plan.end_index, plan.scene.name, plan.scene.medium, plan.seed
+    )
+    .map_err(io_failure)?;
+
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
+    let signals = tokio::spawn(count_ctrl_c(stop_tx));
+    let mut progress = progress_reporter(plan.remaining());
     let started = Instant::now();
     let result = collect(&store, &plan, devices, clock, stop_rx, progress.as_mut()).await;
     signals.abort();

@@ -8,8 +8,10 @@ pub mod collect;
 pub mod config;
 pub mod dataset;
 pub mod db;
+pub mod eval;
 pub mod runs;
 pub mod sim;
+pub mod sweep;
 pub mod train;
 
 use clap::{Parser, Subcommand};
@@ -92,13 +94,13 @@ Interrupted? Run the same command again: it resumes from the last epoch's checkp
   softtouch eval air-svae
   softtouch eval air-svae --dataset water --split all
   softtouch eval model.stm --dataset air")]
-    Eval(train::EvalArgs),
+    Eval(eval::EvalArgs),
     /// List stored models with their test metrics.
     #[command(after_help = "Example:\n  softtouch models")]
     Models,
     /// Sweep a setting and train once per value: α (the paper's Table 1) or latent size.
     #[command(subcommand)]
-    Sweep(train::SweepCommand),
+    Sweep(sweep::SweepCommand),
 }
 
 /// A failed command, with its class for the exit code.
@@ -144,6 +146,35 @@ impl From<crate::store::StoreError> for Failure {
     }
 }
 
+impl From<crate::models::ModelError> for Failure {
+    fn from(e: crate::models::ModelError) -> Self {
+        if e.is_bad_input() {
+            Self::BadInput(e.into())
+        } else {
+            Self::Runtime(e.into())
+        }
+    }
+}
+
+impl From<softtouch_trainer::TrainError> for Failure {
+    fn from(e: softtouch_trainer::TrainError) -> Self {
+        crate::models::ModelError::from(e).into()
+    }
+}
+
+impl From<crate::experiments::ExperimentError> for Failure {
+    fn from(e: crate::experiments::ExperimentError) -> Self {
+        use crate::experiments::ExperimentError as E;
+        match e {
+            E::Invalid(_) => Self::BadInput(e.into()),
+            E::Train(t) => t.into(),
+            E::Plot(_) | E::Write { .. } | E::CreateDir { .. } | E::NoSummary => {
+                Self::Runtime(e.into())
+            }
+        }
+    }
+}
+
 /// Run a parsed command line; output goes to `out`.
 pub async fn run(cli: Cli, out: &mut dyn std::io::Write) -> Result<(), Failure> {
     match cli.command {
@@ -156,9 +187,9 @@ pub async fn run(cli: Cli, out: &mut dyn std::io::Write) -> Result<(), Failure> 
         Command::Sim(cmd) => sim::run(cmd, out).await,
         Command::Bench(cmd) => bench::run(cmd, &cli.db, out).await,
         Command::Train(args) => train::run_train(args, &cli.db, out).await,
-        Command::Eval(args) => train::run_eval(args, &cli.db, out).await,
-        Command::Models => train::run_models(&cli.db, out).await,
-        Command::Sweep(cmd) => train::run_sweep(cmd, &cli.db, out).await,
+        Command::Eval(args) => eval::run_eval(args, &cli.db, out).await,
+        Command::Models => eval::run_models(&cli.db, out).await,
+        Command::Sweep(cmd) => sweep::run_sweep(cmd, &cli.db, out).await,
     }
 }
 

@@ -26,8 +26,7 @@ pub async fn run(db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
         "updated (UTC)"
     );
     for r in &runs {
-        // Seeds are stored as the bit pattern of a u64.
-        let seed = u64::from_ne_bytes(r.seed.to_ne_bytes());
+        let seed = crate::store::rows::seed_from_sql(r.seed);
         text.push_str(&format!(
             "{:>4}  {:<9}  {:<12}  {:<5}  {:>20}  {:>8}  {:>8}  {:>8}  {:>7}  {:>6}  {}\n",
             r.run_id,

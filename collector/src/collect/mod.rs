@@ -13,63 +13,40 @@
 //! Faults: an arm reflex is recovered automatically with backoff and the sample tried
 //! again; a sensor fault, a bad window or a frame timeout retries the sample; when the
 //! attempts run out the sample is stored as rejected with its reason. After too many
-//! failed samples in a row the run stops safely (retreat, flush, event, error).
-//! Everything that goes wrong is an event in the store.
+//! failed samples in a row the run stops safely (stop, retreat, flush, event, error).
+//! Everything that goes wrong is an event in the store, a stop the arm refused included.
+//!
+//! # Layout
+//! - this module: the job loop (rods, samples in order, failures in a row) and the
+//!   safe stop at its end (stop, retreat, stream counts, the run's final status);
+//! - `procedure`: one sample's state machine, its retries, and storing it;
+//! - [`plan`]: what to collect, for a new run or the rest of a stored one;
+//! - [`devices`]: the devices of a collection, built from the rig config;
+//! - [`sampler`]: contact poses and the rod schedule;
+//! - [`window`]: the force/torque stream and a sample's label window;
+//! - [`rods`]: changing the rod (an operator, or the simulator);
+//! - [`bench`]: what collection costs, and where its time goes.
 
 pub mod bench;
+pub mod devices;
+pub mod plan;
+mod procedure;
 pub mod rods;
 pub mod sampler;
 pub mod window;
 
-use crate::store::{EventLevel, RunId, RunStatus, StoreError, SyncStore};
+pub use devices::{CollectDevices, build_devices};
+pub use plan::{CollectPlan, NewRunRequest, PlanError, Resumed};
+
+use crate::store::{EventKind, EventLevel, RunId, RunStatus, StoreError, SyncStore};
+use procedure::SampleEnd;
 use rods::RodChanger;
-use sampler::{PoseSampler, RodSchedule};
-use softtouch_drivers::{Arm, Camera, Clock, DeviceError, Frame, TokioClock};
-use softtouch_schemas::sample::RejectReason;
-use softtouch_schemas::{
-    ArmPose, ContactPose, DurationNs, FtReading, RigConfig, Sample, SampleStatus, SceneSpec,
-    TimestampNs, Wrench,
-};
+use sampler::PoseSampler;
+use softtouch_drivers::{Arm, Camera, Clock, DeviceError, TokioClock};
+use softtouch_schemas::{ArmPose, SampleStatus};
 use std::time::Duration;
 use tokio::sync::watch;
-use window::{FtStream, WindowRules, window_bounds, window_stats};
-
-/// The devices a collection needs.
-pub struct CollectDevices {
-    /// The arm.
-    pub arm: Box<dyn Arm>,
-    /// The force/torque sensor.
-    pub force_sensor: Box<dyn softtouch_drivers::ForceSensor>,
-    /// The in-finger camera.
-    pub camera: Box<dyn Camera>,
-    /// Who changes the rod.
-    pub rods: Box<dyn RodChanger>,
-}
-
-impl std::fmt::Debug for CollectDevices {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("CollectDevices").finish_non_exhaustive()
-    }
-}
-
-/// What to collect.
-#[derive(Debug, Clone)]
-pub struct CollectPlan {
-    /// The run the samples belong to (already in the store).
-    pub run_id: RunId,
-    /// The run's seed.
-    pub seed: u64,
-    /// Index of the first sample to take (0, or where a resumed run left off).
-    pub start_index: u64,
-    /// One past the last index.
-    pub end_index: u64,
-    /// Rods in blocks.
-    pub rods: RodSchedule,
-    /// The rig.
-    pub rig: RigConfig,
-    /// The scene.
-    pub scene: SceneSpec,
-}
+use window::{FtStream, WindowRules};
 
 /// How a collection ended.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -127,38 +104,38 @@ pub enum CollectError {
     Device(#[from] DeviceError),
 }
 
-/// Why one attempt at a sample failed.
-#[derive(Debug)]
-enum AttemptError {
-    /// Reflex or other arm fault: recover and retry.
-    ArmFault(DeviceError),
-    /// The arm's link failed: stop safely.
-    ArmLink(DeviceError),
-    /// The force guard tripped during the approach.
-    ForceLimit(FtReading),
-    /// No frame came.
-    FrameTimeout(DeviceError),
-    /// The sensor failed while recording.
-    Sensor(DeviceError),
-    /// A target outside the workspace: never sent. A bug or a bad config.
-    Unsafe(String),
-    /// A forced stop (second Ctrl-C) interrupted the attempt.
-    Interrupted,
+/// Logs a run's events, stamped with the rig's clock. Apart from the job so that it
+/// still works while the job is being taken apart at the end.
+#[derive(Clone, Copy)]
+struct RunEvents<'a> {
+    store: &'a SyncStore,
+    run: RunId,
+    clock: TokioClock,
 }
 
-/// A finished attempt: the pieces of a sample.
-struct Taken {
-    measured: Option<ContactPose>,
-    frame: Frame,
-    stats: window::WindowStats,
-    window: Vec<FtReading>,
-    start: TimestampNs,
-    end: TimestampNs,
+impl RunEvents<'_> {
+    fn log(
+        &self,
+        kind: EventKind,
+        level: EventLevel,
+        sample: Option<u64>,
+        message: &str,
+    ) -> Result<(), StoreError> {
+        self.store.log_event(
+            self.run,
+            sample,
+            Some(self.clock.now()),
+            level,
+            kind.as_str(),
+            message,
+        )
+    }
 }
 
 struct Job<'a> {
     store: &'a SyncStore,
     plan: &'a CollectPlan,
+    events: RunEvents<'a>,
     clock: TokioClock,
     arm: Box<dyn Arm>,
     camera: Box<dyn Camera>,
@@ -198,6 +175,11 @@ pub async fn collect(
     let mut job = Job {
         store,
         plan,
+        events: RunEvents {
+            store,
+            run: plan.run_id,
+            clock,
+        },
         clock,
         arm: devices.arm,
         camera: devices.camera,
@@ -210,144 +192,141 @@ pub async fn collect(
         counters: Counters::default(),
         stop,
     };
-    let mut rods = devices.rods;
-    let sampler = PoseSampler::new(plan.seed, plan.scene.poses.clone());
-    let max_failures = plan.rig.procedure.max_consecutive_failures;
-    let mut consecutive_failures = 0u32;
-    let mut current_rod: Option<String> = None;
-    let run = plan.run_id;
+    // A store error ends the job at once: nothing more could be recorded, not even
+    // the safe stop.
+    let (outcome, next_index) = job.run_samples(devices.rods, progress).await?;
+    job.finish(outcome, next_index).await
+}
 
-    let mut outcome = Outcome::Completed;
-    if let Err(e) = job.go_home(None).await {
-        outcome = Outcome::SafeStop {
-            reason: format!("cannot move the arm home before starting: {e}"),
-        };
-    }
-    let mut index = plan.start_index;
-    while outcome == Outcome::Completed && index < plan.end_index {
-        if *job.stop.borrow() > 0 {
-            outcome = Outcome::Stopped;
-            break;
+impl<'a> Job<'a> {
+    /// Take the planned samples in order, changing rods between blocks. Returns how
+    /// the loop ended and the index of the next sample it would have taken.
+    async fn run_samples(
+        &mut self,
+        mut rods: Box<dyn RodChanger>,
+        progress: &mut dyn Progress,
+    ) -> Result<(Outcome, u64), CollectError> {
+        let plan: &'a CollectPlan = self.plan;
+        let sampler = PoseSampler::new(plan.seed, plan.scene.poses.clone());
+        let max_failures = plan.rig.procedure.max_consecutive_failures;
+        let mut consecutive_failures = 0u32;
+        let mut current_rod: Option<&str> = None;
+        let mut index = plan.start_index;
+        if let Err(e) = self.go_home(None).await {
+            let reason = format!("cannot move the arm home before starting: {e}");
+            return Ok((Outcome::SafeStop { reason }, index));
         }
-        let rod = plan.rods.rod_for(index);
-        if current_rod.as_deref() != Some(rod) {
-            if let Err(e) = rods.change_rod(rod).await {
-                outcome = Outcome::SafeStop {
-                    reason: format!("cannot change to rod `{rod}`: {e}"),
-                };
-                break;
+        while index < plan.end_index {
+            if *self.stop.borrow() > 0 {
+                return Ok((Outcome::Stopped, index));
             }
-            store.log_event(
-                run,
-                Some(index),
-                Some(job.clock.now()),
-                EventLevel::Info,
-                "rod_change",
-                &format!("rod `{rod}` in place"),
-            )?;
-            progress.note(&format!("rod `{rod}` in place"));
-            current_rod = Some(rod.to_owned());
-        }
-        let pose = sampler.pose(index);
-        match job.sample(index, rod, pose).await? {
-            SampleEnd::Stored(SampleStatus::Ok) => consecutive_failures = 0,
-            SampleEnd::Stored(SampleStatus::Rejected(_)) => consecutive_failures += 1,
-            SampleEnd::Interrupted => {
-                outcome = Outcome::Stopped;
-                break;
+            let rod = plan.rods.rod_for(index);
+            if current_rod != Some(rod) {
+                if let Err(e) = rods.change_rod(rod).await {
+                    let reason = format!("cannot change to rod `{rod}`: {e}");
+                    return Ok((Outcome::SafeStop { reason }, index));
+                }
+                let message = format!("rod `{rod}` in place");
+                self.events.log(
+                    EventKind::RodChange,
+                    EventLevel::Info,
+                    Some(index),
+                    &message,
+                )?;
+                progress.note(&message);
+                current_rod = Some(rod);
             }
-            SampleEnd::Fatal(reason) => {
-                outcome = Outcome::SafeStop { reason };
-                break;
+            match self.sample(index, rod, sampler.pose(index)).await? {
+                SampleEnd::Stored(SampleStatus::Ok) => consecutive_failures = 0,
+                SampleEnd::Stored(SampleStatus::Rejected(_)) => consecutive_failures += 1,
+                SampleEnd::Interrupted => return Ok((Outcome::Stopped, index)),
+                SampleEnd::Fatal(reason) => return Ok((Outcome::SafeStop { reason }, index)),
             }
-        }
-        progress.sample_done(index, &job.counters);
-        if consecutive_failures >= max_failures {
-            outcome = Outcome::SafeStop {
-                reason: format!(
+            progress.sample_done(index, &self.counters);
+            index += 1;
+            if consecutive_failures >= max_failures {
+                let reason = format!(
                     "{consecutive_failures} samples in a row failed (limit procedure.max_consecutive_failures = {max_failures})"
-                ),
-            };
+                );
+                return Ok((Outcome::SafeStop { reason }, index));
+            }
         }
-        index += 1;
+        Ok((Outcome::Completed, index))
     }
 
-    // Whatever happened: stop the arm, retreat, flush, record.
-    let _ = job.arm.stop().await;
-    if let Err(e) = job.go_home(None).await {
-        store.log_event(
-            run,
-            None,
-            Some(job.clock.now()),
-            EventLevel::Error,
-            "retreat_failed",
-            &format!("could not retreat home at the end: {e}"),
-        )?;
-    }
-    let received = job.ft.received();
-    let ft_errors = job.ft.errors();
-    let ft_result = job.ft.shutdown().await;
-    let lost = ft_result.as_ref().map_or(0, |l| *l);
-    let dropped = job.camera.dropped_frames();
-    store
-        .log_event(
-            run,
-            None,
-            Some(job.clock.now()),
+    /// Whatever happened: stop the arm, retreat, stop the sensor, record how the run
+    /// ended and flush.
+    async fn finish(
+        mut self,
+        outcome: Outcome,
+        next_index: u64,
+    ) -> Result<(Outcome, Counters), CollectError> {
+        let events = self.events;
+        if let Err(e) = self.arm.stop().await {
+            events.log(
+                EventKind::ArmStopFailed,
+                EventLevel::Error,
+                None,
+                &format!("could not stop the arm at the end: {e}"),
+            )?;
+        }
+        if let Err(e) = self.go_home(None).await {
+            events.log(
+                EventKind::RetreatFailed,
+                EventLevel::Error,
+                None,
+                &format!("could not retreat home at the end: {e}"),
+            )?;
+        }
+        let received = self.ft.received();
+        let ft_errors = self.ft.errors();
+        let ft_result = self.ft.shutdown().await;
+        let lost = ft_result.as_ref().map_or(0, |l| *l);
+        let dropped = self.camera.dropped_frames();
+        events.log(
+            EventKind::StreamCounts,
             EventLevel::Info,
-            "stream_counts",
+            None,
             &format!(
                 "force/torque: {received} readings received, {lost} lost on the link, {ft_errors} read errors; \
                  camera: {dropped} frames dropped"
             ),
-        )
-        ?;
-    if let Err(e) = ft_result {
-        store.log_event(
-            run,
-            None,
-            Some(job.clock.now()),
-            EventLevel::Warn,
-            "sensor_stop",
-            &e.to_string(),
         )?;
-    }
-    let (status, level, kind, message) = match &outcome {
-        Outcome::Completed => (
-            RunStatus::Completed,
-            EventLevel::Info,
-            "completed",
-            "all planned samples stored".to_owned(),
-        ),
-        Outcome::Stopped => (
-            RunStatus::Stopped,
-            EventLevel::Info,
-            "stopped",
-            format!("stopped by the operator before sample {index}"),
-        ),
-        Outcome::SafeStop { reason } => (
-            RunStatus::Failed,
-            EventLevel::Error,
-            "safe_stop",
-            reason.clone(),
-        ),
-    };
-    store.log_event(run, None, Some(job.clock.now()), level, kind, &message)?;
-    store.set_run_status(run, status)?;
-    let written = store.flush()?;
-    job.counters.already_present = written.already_present;
-    Ok((outcome, job.counters))
-}
-
-enum SampleEnd {
-    Stored(SampleStatus),
-    Interrupted,
-    Fatal(String),
-}
-
-impl Job<'_> {
-    fn forced(&self) -> bool {
-        *self.stop.borrow() >= 2
+        if let Err(e) = ft_result {
+            events.log(
+                EventKind::SensorStop,
+                EventLevel::Warn,
+                None,
+                &e.to_string(),
+            )?;
+        }
+        let (status, level, kind, message) = match &outcome {
+            Outcome::Completed => (
+                RunStatus::Completed,
+                EventLevel::Info,
+                EventKind::Completed,
+                "all planned samples stored".to_owned(),
+            ),
+            Outcome::Stopped => (
+                RunStatus::Stopped,
+                EventLevel::Info,
+                EventKind::Stopped,
+                format!("stopped by the operator before sample {next_index}"),
+            ),
+            Outcome::SafeStop { reason } => (
+                RunStatus::Failed,
+                EventLevel::Error,
+                EventKind::SafeStop,
+                reason.clone(),
+            ),
+        };
+        events.log(kind, level, None, &message)?;
+        let store = self.store;
+        store.set_run_status(self.plan.run_id, status)?;
+        let written = store.flush()?;
+        let mut counters = self.counters;
+        counters.already_present = written.already_present;
+        Ok((outcome, counters))
     }
 
     /// Move home, recovering from reflexes on the way (with backoff, logged).
@@ -361,338 +340,23 @@ impl Job<'_> {
                 Ok(_) => return Ok(()),
                 Err(e) if e.is_fault() && n < tries => {
                     self.counters.arm_faults += 1;
-                    self.store.log_event(
-                        self.plan.run_id,
-                        index,
-                        Some(self.clock.now()),
+                    self.events.log(
+                        EventKind::ArmFault,
                         EventLevel::Warn,
-                        "arm_fault",
+                        index,
                         &format!("retreating: {e}"),
                     )?;
                     tokio::time::sleep(recovery_backoff(n)).await;
                     self.arm.recover().await?;
-                    self.store.log_event(
-                        self.plan.run_id,
-                        index,
-                        Some(self.clock.now()),
+                    self.events.log(
+                        EventKind::ArmRecovered,
                         EventLevel::Info,
-                        "arm_recovered",
+                        index,
                         "automatic error recovery succeeded",
                     )?;
                 }
                 Err(e) => return Err(e.into()),
             }
         }
-    }
-
-    fn event(
-        &self,
-        index: u64,
-        level: EventLevel,
-        kind: &str,
-        message: &str,
-    ) -> Result<(), StoreError> {
-        self.store.log_event(
-            self.plan.run_id,
-            Some(index),
-            Some(self.clock.now()),
-            level,
-            kind,
-            message,
-        )
-    }
-
-    /// Take sample `index`, retrying as the procedure allows, and store it.
-    async fn sample(
-        &mut self,
-        index: u64,
-        rod: &str,
-        pose: ContactPose,
-    ) -> Result<SampleEnd, CollectError> {
-        let max_attempts = self.plan.rig.procedure.max_attempts;
-        let mut recoveries = 0u32;
-        let mut last_reject = RejectReason::ArmFault;
-        for attempt in 1..=max_attempts {
-            if attempt > 1 {
-                self.counters.retries += 1;
-            }
-            let result = self.attempt(pose).await;
-            // Always end an attempt at home, whatever happened.
-            // (A reflex is recovered below first.)
-            if !matches!(
-                result,
-                Err(AttemptError::ArmLink(_)
-                    | AttemptError::Interrupted
-                    | AttemptError::ArmFault(_))
-            ) && let Err(e) = self.go_home(Some(index)).await
-            {
-                return Ok(SampleEnd::Fatal(format!(
-                    "cannot retreat home after sample {index}: {e}"
-                )));
-            }
-            match result {
-                Ok(taken) => match taken.stats.reject {
-                    None => {
-                        return self.store_sample(
-                            index,
-                            rod,
-                            pose,
-                            attempt,
-                            SampleStatus::Ok,
-                            Some(taken),
-                        );
-                    }
-                    Some(reason) => {
-                        self.counters.bad_windows += 1;
-                        last_reject = reason;
-                        // A saturated window comes back the same at the same pose.
-                        let retry = reason != RejectReason::Saturated && attempt < max_attempts;
-                        self.event(
-                            index,
-                            EventLevel::Warn,
-                            reason.as_str(),
-                            &format!(
-                                "attempt {attempt}: window rejected ({reason}: {} readings){}",
-                                taken.stats.count,
-                                if retry { ", retrying" } else { "" }
-                            ),
-                        )?;
-                        if !retry {
-                            return self.store_sample(
-                                index,
-                                rod,
-                                pose,
-                                attempt,
-                                SampleStatus::Rejected(reason),
-                                Some(taken),
-                            );
-                        }
-                    }
-                },
-                Err(AttemptError::ArmFault(e)) => {
-                    self.counters.arm_faults += 1;
-                    last_reject = RejectReason::ArmFault;
-                    self.event(
-                        index,
-                        EventLevel::Warn,
-                        "arm_fault",
-                        &format!("attempt {attempt}: {e}"),
-                    )?;
-                    recoveries += 1;
-                    tokio::time::sleep(recovery_backoff(recoveries)).await;
-                    match self.arm.recover().await {
-                        Ok(()) => self.event(
-                            index,
-                            EventLevel::Info,
-                            "arm_recovered",
-                            "automatic error recovery succeeded",
-                        )?,
-                        Err(e) => return Ok(SampleEnd::Fatal(format!("arm recovery failed: {e}"))),
-                    }
-                    if let Err(e) = self.go_home(Some(index)).await {
-                        return Ok(SampleEnd::Fatal(format!(
-                            "cannot retreat home after a reflex: {e}"
-                        )));
-                    }
-                }
-                Err(AttemptError::ForceLimit(r)) => {
-                    self.event(
-                        index,
-                        EventLevel::Warn,
-                        "force_limit",
-                        &format!(
-                            "attempt {attempt}: approach aborted at {}",
-                            r.wrench_in_sensor
-                        ),
-                    )?;
-                    // The same pose would press as hard again: reject at once.
-                    return self.store_sample(
-                        index,
-                        rod,
-                        pose,
-                        attempt,
-                        SampleStatus::Rejected(RejectReason::ForceLimit),
-                        None,
-                    );
-                }
-                Err(AttemptError::FrameTimeout(e)) => {
-                    self.counters.frame_timeouts += 1;
-                    last_reject = RejectReason::FrameTimeout;
-                    self.event(
-                        index,
-                        EventLevel::Warn,
-                        "frame_timeout",
-                        &format!("attempt {attempt}: {e}"),
-                    )?;
-                }
-                Err(AttemptError::Sensor(e)) => {
-                    last_reject = RejectReason::SensorFault;
-                    self.event(
-                        index,
-                        EventLevel::Warn,
-                        "sensor_fault",
-                        &format!("attempt {attempt}: {e}"),
-                    )?;
-                }
-                Err(AttemptError::ArmLink(e)) => {
-                    return Ok(SampleEnd::Fatal(format!("lost the arm: {e}")));
-                }
-                Err(AttemptError::Unsafe(msg)) => return Ok(SampleEnd::Fatal(msg)),
-                Err(AttemptError::Interrupted) => {
-                    let _ = self.arm.stop().await;
-                    self.event(
-                        index,
-                        EventLevel::Info,
-                        "interrupted",
-                        "forced stop during the sample; not stored",
-                    )?;
-                    return Ok(SampleEnd::Interrupted);
-                }
-            }
-        }
-        self.event(
-            index,
-            EventLevel::Warn,
-            "rejected",
-            &format!("gave up after {max_attempts} attempts ({last_reject})"),
-        )?;
-        self.store_sample(
-            index,
-            rod,
-            pose,
-            max_attempts,
-            SampleStatus::Rejected(last_reject),
-            None,
-        )
-    }
-
-    fn store_sample(
-        &mut self,
-        index: u64,
-        rod: &str,
-        pose: ContactPose,
-        attempts: u32,
-        status: SampleStatus,
-        taken: Option<Taken>,
-    ) -> Result<SampleEnd, CollectError> {
-        let (measured, stats, frame, window, start, end) = match taken {
-            Some(t) => (
-                t.measured,
-                Some(t.stats),
-                Some(t.frame),
-                t.window,
-                t.start,
-                t.end,
-            ),
-            None => (
-                None,
-                None,
-                None,
-                Vec::new(),
-                TimestampNs::ZERO,
-                TimestampNs::ZERO,
-            ),
-        };
-        let sample = Sample {
-            index,
-            rod: rod.to_owned(),
-            medium: self.plan.scene.medium,
-            commanded: pose,
-            measured,
-            wrench_mean_in_sensor: stats.as_ref().map_or(Wrench::ZERO, |s| s.mean),
-            wrench_std_in_sensor: stats.as_ref().map_or(Wrench::ZERO, |s| s.std),
-            reading_count: stats.as_ref().map_or(0, |s| s.count),
-            frame_t: frame.as_ref().map_or(TimestampNs::ZERO, |f| f.meta.t),
-            window_start: start,
-            window_end: end,
-            sync_skew_ns: stats.as_ref().map_or(0, |s| s.skew_ns),
-            status,
-            attempts,
-        };
-        self.store
-            .submit_sample(self.plan.run_id, sample, frame, window)?;
-        match status {
-            SampleStatus::Ok => self.counters.ok += 1,
-            SampleStatus::Rejected(_) => self.counters.rejected += 1,
-        }
-        Ok(SampleEnd::Stored(status))
-    }
-
-    /// One try: approach, settle, record. Leaves the arm wherever it ended.
-    async fn attempt(&mut self, pose: ContactPose) -> Result<Taken, AttemptError> {
-        let w = &self.plan.rig.workspace;
-        let p = &self.plan.rig.procedure;
-        let l = &self.plan.rig.limits;
-        let target = ArmPose::from_contact(&w.base_from_rod, &pose);
-        // Every command is checked before it reaches the arm.
-        if !pose.is_finite() || !w.contains_contact(&pose) || !w.contains_arm(&target) {
-            return Err(AttemptError::Unsafe(format!(
-                "pose {pose:?} (flange at {:?} m) lies outside the workspace; not sent",
-                target.translation_m
-            )));
-        }
-        if self.forced() {
-            return Err(AttemptError::Interrupted);
-        }
-
-        // approach, guarded
-        let guard = self.ft.wait_over_limit(l.max_force_n, l.max_torque_nm);
-        let moved = tokio::select! {
-            moved = self.arm.move_to(&target, p.approach_speed_m_s) => moved,
-            tripped = guard => {
-                let _ = self.arm.stop().await;
-                return Err(AttemptError::ForceLimit(tripped));
-            }
-        };
-        match moved {
-            Ok(_) => {}
-            Err(e) if e.is_fault() => return Err(AttemptError::ArmFault(e)),
-            Err(e @ DeviceError::InvalidCommand { .. }) => {
-                return Err(AttemptError::Unsafe(e.to_string()));
-            }
-            Err(e) => return Err(AttemptError::ArmLink(e)),
-        }
-
-        // settle
-        tokio::time::sleep(Duration::from_secs_f64(p.settle_s)).await;
-        if self.forced() {
-            return Err(AttemptError::Interrupted);
-        }
-        let measured = match self.arm.state().await {
-            Ok(s) if s.faulted => {
-                return Err(AttemptError::ArmFault(DeviceError::Fault {
-                    device: "arm".into(),
-                    code: None,
-                    message: "faulted while settling".into(),
-                }));
-            }
-            Ok(s) => Some(ContactPose::from_arm(&w.base_from_rod, &s.base_from_finger)),
-            Err(e) if e.is_fault() => return Err(AttemptError::ArmFault(e)),
-            Err(e) => return Err(AttemptError::ArmLink(e)),
-        };
-
-        // record: the first frame after settling, and the readings around its time
-        let timeout_ms = (p.frame_timeout_s * 1000.0).ceil() as u64;
-        let frame = self
-            .camera
-            .frame_after(self.clock.now(), timeout_ms)
-            .await
-            .map_err(AttemptError::FrameTimeout)?;
-        let (start, end) = window_bounds(frame.meta.t, DurationNs::from_secs_f64(p.ft_window_s));
-        let deadline = self.clock.instant_at(end) + Duration::from_secs_f64(p.frame_timeout_s);
-        match self.ft.wait_until(end, deadline).await {
-            Ok(_) => {}
-            Err(e) => return Err(AttemptError::Sensor(e)),
-        }
-        let readings = self.ft.take_window(start, end);
-        let stats = window_stats(&readings, frame.meta.t, &self.rules);
-        Ok(Taken {
-            measured,
-            frame,
-            stats,
-            window: readings,
-            start,
-            end,
-        })
     }
 }

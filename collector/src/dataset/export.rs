@@ -27,183 +27,22 @@
 //! `.NAME.partial-PID` beside DIR and renamed to DIR at the end, so an interrupted
 //! export never looks complete.
 
-use super::{DatasetError, Definition, EXPORT_FORMAT_VERSION, Split, csv, get, query_err};
+pub use super::manifest::{
+    LABEL_COLUMNS, MANIFEST_FORMAT, Manifest, ManifestColumn, ManifestDataset, ManifestRun,
+};
+
+use super::manifest::columns;
+use super::{DatasetError, EXPORT_FORMAT_VERSION, Split, csv, get, query_err};
+use crate::progress::progress_bar;
 use crate::store::Store;
+use crate::store::rows::{now_sql, seed_from_sql};
 use futures_util::TryStreamExt as _;
-use serde::{Deserialize, Serialize};
 use sha2::{Digest as _, Sha256};
+use softtouch_schemas::FrameFormat;
 use sqlx::FromRow;
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
-
-/// The columns of `labels.csv`, in order.
-pub const LABEL_COLUMNS: [&str; 15] = [
-    "image",
-    "fx_n",
-    "fy_n",
-    "fz_n",
-    "tx_nmm",
-    "ty_nmm",
-    "tz_nmm",
-    "x_m",
-    "z_m",
-    "theta_rad",
-    "rod",
-    "medium",
-    "split",
-    "run",
-    "index",
-];
-
-/// Value of `manifest.json`'s `format`.
-pub const MANIFEST_FORMAT: &str = "softtouch-dataset";
-
-/// `manifest.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Manifest {
-    /// Always [`MANIFEST_FORMAT`].
-    pub format: String,
-    /// [`EXPORT_FORMAT_VERSION`].
-    pub format_version: u32,
-    /// Version of the software that exported.
-    pub software_version: String,
-    /// Schema version of the database it was exported from.
-    pub schema_version: i64,
-    /// When (UTC).
-    pub exported_at: String,
-    /// The dataset.
-    pub dataset: ManifestDataset,
-    /// The runs the samples come from, by the id in the `run` column.
-    pub runs: Vec<ManifestRun>,
-    /// The columns of `labels.csv` with their units.
-    pub columns: Vec<ManifestColumn>,
-    /// sha256 (hex) of `labels.csv` and of every image, by path relative to the folder.
-    pub sha256: BTreeMap<String, String>,
-}
-
-/// The dataset in a manifest.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ManifestDataset {
-    /// Name.
-    pub name: String,
-    /// How it was made.
-    pub definition: Definition,
-    /// Samples.
-    pub sample_count: i64,
-    /// Samples per split.
-    pub split_counts: BTreeMap<String, i64>,
-    /// When it was created (UTC).
-    pub created_at: String,
-    /// Software version that created it.
-    pub software_version: String,
-    /// Schema version it was created under.
-    pub schema_version: i64,
-}
-
-/// A run in a manifest.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ManifestRun {
-    /// The id in `labels.csv`'s `run` column.
-    pub run: i64,
-    /// Seed of the run (pose sampler and simulation).
-    pub seed: u64,
-    /// Status when exported.
-    pub status: String,
-    /// Scene name.
-    pub scene_name: String,
-    /// Medium.
-    pub medium: String,
-    /// Resolved rig config (TOML).
-    pub rig_toml: String,
-    /// Resolved scene spec (TOML).
-    pub scene_toml: String,
-    /// Software version that collected it.
-    pub software_version: String,
-    /// Schema version it was collected under.
-    pub schema_version: i64,
-    /// When it was created (UTC).
-    pub created_at: String,
-    /// For a run that was itself imported: where from.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub imported: Option<serde_json::Value>,
-}
-
-/// A column of `labels.csv`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ManifestColumn {
-    /// Header name.
-    pub name: String,
-    /// Unit, if any.
-    pub unit: Option<String>,
-    /// What it holds.
-    pub description: String,
-}
-
-fn columns() -> Vec<ManifestColumn> {
-    let c = |name: &str, unit: Option<&str>, description: &str| ManifestColumn {
-        name: name.into(),
-        unit: unit.map(Into::into),
-        description: description.into(),
-    };
-    vec![
-        c("image", None, "PNG path relative to the export folder"),
-        c(
-            "fx_n",
-            Some("N"),
-            "force x, sensor frame, mean over the window",
-        ),
-        c(
-            "fy_n",
-            Some("N"),
-            "force y, sensor frame, mean over the window",
-        ),
-        c(
-            "fz_n",
-            Some("N"),
-            "force z, sensor frame, mean over the window",
-        ),
-        c(
-            "tx_nmm",
-            Some("N·mm"),
-            "torque x, sensor frame, mean over the window",
-        ),
-        c(
-            "ty_nmm",
-            Some("N·mm"),
-            "torque y, sensor frame, mean over the window",
-        ),
-        c(
-            "tz_nmm",
-            Some("N·mm"),
-            "torque z, sensor frame, mean over the window",
-        ),
-        c(
-            "x_m",
-            Some("m"),
-            "commanded contact pose: offset along the approach axis",
-        ),
-        c(
-            "z_m",
-            Some("m"),
-            "commanded contact pose: offset along the rod's axis",
-        ),
-        c(
-            "theta_rad",
-            Some("rad"),
-            "commanded contact pose: rotation about the rod's axis",
-        ),
-        c("rod", None, "rod name from the scene"),
-        c("medium", None, "air or water"),
-        c("split", None, "train, val or test"),
-        c(
-            "run",
-            None,
-            "run id where the sample was collected (see manifest runs)",
-        ),
-        c("index", None, "sample index within its run"),
-    ]
-}
 
 /// What an export wrote.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -277,21 +116,6 @@ pub(crate) fn image_name(position: i64, count: i64) -> String {
     format!("images/{position:0width$}.png")
 }
 
-/// A progress bar on stderr, hidden when stderr is not a terminal.
-pub(crate) fn progress_bar(len: u64, enabled: bool, what: &str) -> indicatif::ProgressBar {
-    use std::io::IsTerminal as _;
-    if !enabled || !std::io::stderr().is_terminal() {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(len);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(&format!(
-        "{what} {{bar:40}} {{pos}}/{{len}} {{per_sec}} eta {{eta}}"
-    )) {
-        bar.set_style(style);
-    }
-    bar
-}
-
 /// Encode a stored frame as PNG bytes (PNG frames come back as they are).
 pub(crate) fn frame_to_png(
     format: &str,
@@ -301,18 +125,17 @@ pub(crate) fn frame_to_png(
     what: &dyn Fn() -> String,
 ) -> Result<Vec<u8>, DatasetError> {
     let img_err = |why: String| DatasetError::Image { what: what(), why };
-    let rgb = match format {
-        "png" => return Ok(data),
-        "rgb8" => {
+    let rgb = match format.parse::<FrameFormat>().map_err(img_err)? {
+        FrameFormat::Png => return Ok(data),
+        FrameFormat::Rgb8 => {
             let w = u32::try_from(width).map_err(|e| img_err(e.to_string()))?;
             let h = u32::try_from(height).map_err(|e| img_err(e.to_string()))?;
             image::RgbImage::from_raw(w, h, data)
                 .ok_or_else(|| img_err(format!("rgb8 data does not fill {w}×{h}")))?
         }
-        "jpeg" => image::load_from_memory_with_format(&data, image::ImageFormat::Jpeg)
+        FrameFormat::Jpeg => image::load_from_memory_with_format(&data, image::ImageFormat::Jpeg)
             .map_err(|e| img_err(e.to_string()))?
             .to_rgb8(),
-        other => return Err(img_err(format!("unknown frame format `{other}`"))),
     };
     encode_png(&rgb).map_err(img_err)
 }
@@ -527,7 +350,7 @@ async fn write_into(
         .map_err(DatasetError::io("sync", &labels_path))?;
     sha256.insert("labels.csv".to_owned(), hex(&hash.finalize()));
 
-    let exported_at: String = sqlx::query_scalar("SELECT strftime('%Y-%m-%dT%H:%M:%fZ', 'now')")
+    let exported_at: String = sqlx::query_scalar(concat!("SELECT ", now_sql!()))
         .fetch_one(store.pool())
         .await
         .map_err(query_err("reading the clock"))?;
@@ -553,7 +376,7 @@ async fn write_into(
             .into_iter()
             .map(|r| ManifestRun {
                 run: shown.get(&r.run_id).copied().unwrap_or(r.run_id),
-                seed: u64::from_ne_bytes(r.seed.to_ne_bytes()),
+                seed: seed_from_sql(r.seed),
                 status: r.status,
                 scene_name: r.scene_name,
                 medium: r.medium,

@@ -16,18 +16,20 @@
 //!
 //! # Layout
 //! - [`split`]: split counts and seeded assignment.
-//! - [`export`]: `images/`, `labels.csv`, `manifest.json`.
+//! - [`export`]: `images/`, `labels.csv`, `manifest.json` (their format: `manifest.rs`).
 //! - [`import`]: the export layout back into the store, and the paper's `data_frame.csv`.
 //! - [`stats`]: counts, per-axis statistics, histograms.
 
 mod csv;
 pub mod export;
 pub mod import;
+mod manifest;
 pub mod split;
 pub mod stats;
 
 pub use split::{Split, SplitError, SplitRatio};
 
+use crate::store::rows::{now_sql, seed_to_sql};
 use crate::store::{RunId, Store, StoreError};
 use futures_util::TryStreamExt as _;
 use serde::{Deserialize, Serialize};
@@ -308,11 +310,6 @@ pub fn validate_name(name: &str) -> Result<(), DatasetError> {
     }
 }
 
-/// Seeds are stored as the bit pattern of a `u64` in SQLite's signed integer.
-pub(crate) const fn seed_to_sql(seed: u64) -> i64 {
-    i64::from_ne_bytes(seed.to_ne_bytes())
-}
-
 /// Create a dataset: select, split, store. Returns its info.
 pub async fn create(store: &Store, new: &NewDataset) -> Result<DatasetInfo, DatasetError> {
     validate_name(&new.name)?;
@@ -401,12 +398,13 @@ pub(crate) async fn insert_dataset(
         .map_err(|e| DatasetError::Invalid(format!("cannot encode the definition: {e}")))?;
     let count = i64::try_from(members.len())
         .map_err(|_| DatasetError::Invalid("too many samples".into()))?;
-    let inserted = sqlx::query(
+    let inserted = sqlx::query(concat!(
         "INSERT INTO datasets (name, definition_json, seed, split_ratio, sample_count,
                                software_version, schema_version, created_at)
-         VALUES (?, ?, ?, ?, ?, ?, ?, strftime('%Y-%m-%dT%H:%M:%fZ', 'now'))
-         ON CONFLICT (name) DO NOTHING",
-    )
+         VALUES (?, ?, ?, ?, ?, ?, ?, ",
+        now_sql!(),
+        ") ON CONFLICT (name) DO NOTHING"
+    ))
     .bind(name)
     .bind(json)
     .bind(seed_to_sql(definition.seed))

@@ -6,20 +6,11 @@ use super::{DatasetError, DatasetInfo, Split, get, query_err};
 use crate::plot::{self, HistogramPanel};
 use crate::store::Store;
 use futures_util::TryStreamExt as _;
+use softtouch_schemas::wrench::AXES;
 use sqlx::FromRow;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
-
-/// Axis names and units, in export order.
-pub const AXES: [(&str, &str); 6] = [
-    ("Fx", "N"),
-    ("Fy", "N"),
-    ("Fz", "N"),
-    ("Tx", "N·mm"),
-    ("Ty", "N·mm"),
-    ("Tz", "N·mm"),
-];
 
 /// Bins of each histogram in the PNG.
 pub const PNG_BINS: usize = 40;
@@ -164,9 +155,17 @@ pub fn write_histograms(stats: &Stats, path: &Path) -> Result<(), DatasetError> 
     let panels: Vec<HistogramPanel<'_>> = AXES
         .iter()
         .zip(&stats.values)
-        .map(|(&(axis, unit), values)| HistogramPanel {
-            title: axis.to_owned(),
-            x_label: format!("{} ({unit})", if unit == "N" { "force" } else { "torque" }),
+        .map(|(axis, values)| HistogramPanel {
+            title: axis.name.to_owned(),
+            x_label: format!(
+                "{} ({})",
+                if axis.report_unit == "N" {
+                    "force"
+                } else {
+                    "torque"
+                },
+                axis.report_unit
+            ),
             values,
             bins: PNG_BINS,
         })
@@ -247,12 +246,12 @@ pub fn render(stats: &Stats) -> String {
         "\n{:<4} {:<5} {:>10} {:>10} {:>10} {:>10}  histogram (min → max)",
         "axis", "unit", "min", "max", "mean", "std"
     );
-    for ((&(axis, unit), a), values) in AXES.iter().zip(&stats.axes).zip(&stats.values) {
+    for ((axis, a), values) in AXES.iter().zip(&stats.axes).zip(&stats.values) {
         let _ = writeln!(
             s,
             "{:<4} {:<5} {:>10.3} {:>10.3} {:>10.3} {:>10.3}  |{}|",
-            axis,
-            unit,
+            axis.name,
+            axis.report_unit,
             a.min,
             a.max,
             a.mean,

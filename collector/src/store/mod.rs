@@ -5,20 +5,32 @@
 //! idempotent on `(run, index)`: they are all there or all absent, and writing a sample
 //! that is already there changes nothing. Queries are built at run time (no
 //! `DATABASE_URL` needed to compile).
+//!
+//! Each table's INSERT is in `rows.rs`, shared with the dataset import; runs are in
+//! `runs.rs`, the writer thread in `sync.rs`.
 
+mod event;
+pub use event::EventKind;
+pub(crate) mod rows;
+mod runs;
 mod sync;
 mod window;
 
+use rows::now_sql;
+pub use runs::{NewRun, RunRecord, RunStatus, RunSummary};
 pub use sync::{LabelRow, OwnedNewRun, SyncStore, WriterStats, encode_for_store};
 
 pub use window::{WINDOW_ENCODING, decode_window, encode_window};
 
-use softtouch_schemas::sample::RejectReason;
-use softtouch_schemas::{FrameMeta, FtReading, Medium, Sample, SampleStatus};
+use softtouch_schemas::{FrameMeta, FtReading, Sample, SampleStatus};
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 use sqlx::{FromRow, Row, SqlitePool};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
+
+// store/tests.rs takes it through `use super::*`; only rows.rs uses it now.
+#[cfg(test)]
+use softtouch_schemas::sample::RejectReason;
 
 /// The migrations, embedded at build time.
 pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("../migrations");
@@ -73,32 +85,6 @@ fn query_err(doing: &'static str) -> impl FnOnce(sqlx::Error) -> StoreError {
     move |source| StoreError::Query { doing, source }
 }
 
-/// Status of a run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RunStatus {
-    /// Collecting (or killed while collecting: resume it).
-    Running,
-    /// All planned samples taken.
-    Completed,
-    /// Stopped by the operator before the end.
-    Stopped,
-    /// Stopped by a fault.
-    Failed,
-}
-
-impl RunStatus {
-    /// As stored.
-    #[must_use]
-    pub const fn as_str(self) -> &'static str {
-        match self {
-            Self::Running => "running",
-            Self::Completed => "completed",
-            Self::Stopped => "stopped",
-            Self::Failed => "failed",
-        }
-    }
-}
-
 /// Level of an event.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum EventLevel {
@@ -122,27 +108,6 @@ impl EventLevel {
     }
 }
 
-/// What a new run records for provenance.
-#[derive(Debug, Clone)]
-pub struct NewRun<'a> {
-    /// Seed of the pose sampler and the simulation.
-    pub seed: u64,
-    /// Samples planned.
-    pub samples_planned: u64,
-    /// Rod names in the order they are used.
-    pub rod_schedule: &'a [String],
-    /// Samples per rod block.
-    pub rod_block: u64,
-    /// Scene name.
-    pub scene_name: &'a str,
-    /// Medium.
-    pub medium: Medium,
-    /// Resolved rig config, as TOML.
-    pub rig_toml: &'a str,
-    /// Resolved scene spec, as TOML.
-    pub scene_toml: &'a str,
-}
-
 /// A frame to store with its sample: metadata and encoded bytes.
 #[derive(Debug, Clone, Copy)]
 pub struct FrameRecord<'a> {
@@ -159,39 +124,6 @@ pub enum Appended {
     Inserted,
     /// A sample with this `(run, index)` was already there; nothing changed.
     AlreadyPresent,
-}
-
-/// One run with its counts, for listings.
-#[derive(Debug, Clone, PartialEq, FromRow)]
-pub struct RunSummary {
-    /// The run.
-    pub run_id: RunId,
-    /// `running`, `completed`, `stopped` or `failed`.
-    pub status: String,
-    /// Seed.
-    pub seed: i64,
-    /// Scene name.
-    pub scene_name: String,
-    /// Medium.
-    pub medium: String,
-    /// Samples planned.
-    pub samples_planned: i64,
-    /// Accepted samples.
-    pub ok: i64,
-    /// Rejected samples.
-    pub rejected: i64,
-    /// Extra attempts over all samples (retries).
-    pub retried: i64,
-    /// Events logged.
-    pub events: i64,
-    /// Warnings and errors among them.
-    pub faults: i64,
-    /// When it was created (UTC).
-    pub created_at: String,
-    /// Last change (UTC).
-    pub updated_at: String,
-    /// Hours from creation to the last change.
-    pub hours: f64,
 }
 
 /// An event as stored.
@@ -213,14 +145,6 @@ pub struct EventRow {
     pub kind: String,
     /// What happened.
     pub message: String,
-}
-
-/// Wall-clock "now" in SQL, ISO-8601 UTC with milliseconds. A macro so that queries
-/// stay `&'static str` literals (sqlx refuses strings built at run time).
-macro_rules! now_sql {
-    () => {
-        "strftime('%Y-%m-%dT%H:%M:%fZ', 'now')"
-    };
 }
 
 /// The store.
@@ -309,57 +233,6 @@ impl Store {
         self.pool.close().await;
     }
 
-    /// Record a new run (status `running`) and return its id.
-    pub async fn create_run(&self, run: &NewRun<'_>) -> Result<RunId, StoreError> {
-        let sql = concat!(
-            "INSERT INTO runs (status, seed, samples_planned, rod_schedule, rod_block, scene_name, medium,
-                               rig_toml, scene_toml, software_version, schema_version, created_at, updated_at)
-             VALUES ('running', ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ",
-            now_sql!(),
-            ", ",
-            now_sql!(),
-            ")"
-        );
-        // The seed is stored as its two's-complement bit pattern so every u64 fits.
-        let seed = i64::from_ne_bytes(run.seed.to_ne_bytes());
-        let result = sqlx::query(sql)
-            .bind(seed)
-            .bind(to_i64("samples_planned", run.samples_planned)?)
-            .bind(run.rod_schedule.join(","))
-            .bind(to_i64("rod_block", run.rod_block)?)
-            .bind(run.scene_name)
-            .bind(run.medium.as_str())
-            .bind(run.rig_toml)
-            .bind(run.scene_toml)
-            .bind(softtouch_schemas::SOFTWARE_VERSION)
-            .bind(Self::schema_version())
-            .execute(&self.pool)
-            .await
-            .map_err(query_err("creating a run"))?;
-        Ok(result.last_insert_rowid())
-    }
-
-    /// Change a run's status (and stamp `finished_at` unless it is `running`).
-    pub async fn set_run_status(&self, run_id: RunId, status: RunStatus) -> Result<(), StoreError> {
-        let sql = concat!(
-            "UPDATE runs SET status = ?1, updated_at = ",
-            now_sql!(),
-            ", finished_at = CASE WHEN ?1 = 'running' THEN NULL ELSE ",
-            now_sql!(),
-            " END WHERE run_id = ?2"
-        );
-        let result = sqlx::query(sql)
-            .bind(status.as_str())
-            .bind(run_id)
-            .execute(&self.pool)
-            .await
-            .map_err(query_err("updating a run's status"))?;
-        if result.rows_affected() == 0 {
-            return Err(StoreError::NoSuchRun(run_id));
-        }
-        Ok(())
-    }
-
     /// Append a sample with its frame and raw window, in one transaction.
     ///
     /// Idempotent on `(run, sample.index)`: if that sample is already stored nothing
@@ -372,102 +245,22 @@ impl Store {
         frame: Option<FrameRecord<'_>>,
         window: &[FtReading],
     ) -> Result<Appended, StoreError> {
-        let index = to_i64("sample index", sample.index)?;
-        let window_blob = encode_window(window);
-        let window_count = i64::try_from(window.len()).map_err(|_| StoreError::Invalid {
-            what: "window",
-            why: "too many readings".into(),
-        })?;
         let mut tx = self
             .pool
             .begin()
             .await
             .map_err(query_err("starting a sample transaction"))?;
-
-        let m = sample.wrench_mean_in_sensor.to_array();
-        let s = sample.wrench_std_in_sensor.to_array();
-        let measured = sample.measured;
-        let inserted = sqlx::query(
-            "INSERT INTO samples (run_id, sample_index, rod, medium,
-                 cmd_x_m, cmd_z_m, cmd_theta_rad, meas_x_m, meas_z_m, meas_theta_rad,
-                 fx_n, fy_n, fz_n, tx_nm, ty_nm, tz_nm,
-                 fx_std_n, fy_std_n, fz_std_n, tx_std_nm, ty_std_nm, tz_std_nm,
-                 reading_count, frame_t_ns, window_start_ns, window_end_ns, sync_skew_ns,
-                 status, reject_reason, attempts)
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)
-             ON CONFLICT (run_id, sample_index) DO NOTHING",
-        )
-        .bind(run_id)
-        .bind(index)
-        .bind(&sample.rod)
-        .bind(sample.medium.as_str())
-        .bind(sample.commanded.x_m)
-        .bind(sample.commanded.z_m)
-        .bind(sample.commanded.theta_rad)
-        .bind(measured.map(|p| p.x_m))
-        .bind(measured.map(|p| p.z_m))
-        .bind(measured.map(|p| p.theta_rad))
-        .bind(m[0])
-        .bind(m[1])
-        .bind(m[2])
-        .bind(m[3])
-        .bind(m[4])
-        .bind(m[5])
-        .bind(s[0])
-        .bind(s[1])
-        .bind(s[2])
-        .bind(s[3])
-        .bind(s[4])
-        .bind(s[5])
-        .bind(i64::from(sample.reading_count))
-        .bind(to_i64("frame time", sample.frame_t.0)?)
-        .bind(to_i64("window start", sample.window_start.0)?)
-        .bind(to_i64("window end", sample.window_end.0)?)
-        .bind(sample.sync_skew_ns)
-        .bind(sample.status.as_str())
-        .bind(sample.status.reject_reason().map(RejectReason::as_str))
-        .bind(i64::from(sample.attempts))
-        .execute(&mut *tx)
-        .await
-        .map_err(query_err("inserting a sample"))?;
-        if inserted.rows_affected() == 0 {
+        if !rows::insert_sample(&mut tx, run_id, sample).await? {
             tx.rollback()
                 .await
                 .map_err(query_err("rolling back a duplicate sample"))?;
             return Ok(Appended::AlreadyPresent);
         }
-
         // A sample rejected before any frame came (frame timeout, arm fault) has none.
         if let Some(frame) = frame {
-            sqlx::query(
-                "INSERT INTO frames (run_id, sample_index, format, width, height, sequence, t_ns, data)
-                 VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-            )
-            .bind(run_id)
-            .bind(index)
-            .bind(frame.meta.format.as_str())
-            .bind(i64::from(frame.meta.width))
-            .bind(i64::from(frame.meta.height))
-            .bind(to_i64("frame sequence", frame.meta.sequence)?)
-            .bind(to_i64("frame time", frame.meta.t.0)?)
-            .bind(frame.data)
-            .execute(&mut *tx)
-            .await
-            .map_err(query_err("inserting a frame"))?;
+            rows::insert_frame(&mut tx, run_id, sample.index, frame).await?;
         }
-
-        sqlx::query(
-            "INSERT INTO ft_windows (run_id, sample_index, encoding, reading_count, data) VALUES (?, ?, ?, ?, ?)",
-        )
-        .bind(run_id)
-        .bind(index)
-        .bind(WINDOW_ENCODING)
-        .bind(window_count)
-        .bind(window_blob.as_slice())
-        .execute(&mut *tx)
-        .await
-        .map_err(query_err("inserting a force/torque window"))?;
-
+        rows::insert_ft_window(&mut tx, run_id, sample.index, window).await?;
         sqlx::query(concat!(
             "UPDATE runs SET updated_at = ",
             now_sql!(),
@@ -477,7 +270,6 @@ impl Store {
         .execute(&mut *tx)
         .await
         .map_err(query_err("touching the run"))?;
-
         tx.commit()
             .await
             .map_err(query_err("committing a sample"))?;
@@ -494,50 +286,12 @@ impl Store {
         kind: &str,
         message: &str,
     ) -> Result<(), StoreError> {
-        let sql = concat!(
-            "INSERT INTO events (run_id, sample_index, t_ns, created_at, level, kind, message) VALUES (?, ?, ?, ",
-            now_sql!(),
-            ", ?, ?, ?)"
-        );
-        sqlx::query(sql)
-            .bind(run_id)
-            .bind(
-                sample_index
-                    .map(|i| to_i64("sample index", i))
-                    .transpose()?,
-            )
-            .bind(t.map(|t| to_i64("event time", t.0)).transpose()?)
-            .bind(level.as_str())
-            .bind(kind)
-            .bind(message)
-            .execute(&self.pool)
+        let mut conn = self
+            .pool
+            .acquire()
             .await
             .map_err(query_err("logging an event"))?;
-        Ok(())
-    }
-
-    /// Every run with its counts, oldest first.
-    pub async fn runs(&self) -> Result<Vec<RunSummary>, StoreError> {
-        sqlx::query_as::<_, RunSummary>(
-            "SELECT r.run_id, r.status, r.seed, r.scene_name, r.medium, r.samples_planned,
-                    COALESCE(s.ok, 0) AS ok, COALESCE(s.rejected, 0) AS rejected,
-                    COALESCE(s.retried, 0) AS retried,
-                    COALESCE(e.events, 0) AS events, COALESCE(e.faults, 0) AS faults,
-                    r.created_at, r.updated_at,
-                    (julianday(r.updated_at) - julianday(r.created_at)) * 24.0 AS hours
-             FROM runs r
-             LEFT JOIN (SELECT run_id,
-                               SUM(status = 'ok') AS ok,
-                               SUM(status = 'rejected') AS rejected,
-                               SUM(attempts - 1) AS retried
-                        FROM samples GROUP BY run_id) s ON s.run_id = r.run_id
-             LEFT JOIN (SELECT run_id, COUNT(*) AS events, SUM(level <> 'info') AS faults
-                        FROM events GROUP BY run_id) e ON e.run_id = r.run_id
-             ORDER BY r.run_id",
-        )
-        .fetch_all(&self.pool)
-        .await
-        .map_err(query_err("listing runs"))
+        rows::insert_event(&mut conn, run_id, sample_index, t, level, kind, message).await
     }
 
     /// The last `limit` events of a run, oldest first.
@@ -591,50 +345,6 @@ impl Store {
             .await
             .map_err(query_err("checking integrity"))?;
         Ok(rows.join("; "))
-    }
-}
-
-/// What a run recorded about itself: enough to resume or replay it.
-#[derive(Debug, Clone, PartialEq, FromRow)]
-pub struct RunRecord {
-    /// The run.
-    pub run_id: RunId,
-    /// Status.
-    pub status: String,
-    /// Seed, as the bit pattern of a u64.
-    pub seed: i64,
-    /// Samples planned.
-    pub samples_planned: i64,
-    /// Rod names, comma-separated.
-    pub rod_schedule: String,
-    /// Samples per rod block.
-    pub rod_block: i64,
-    /// Resolved rig config.
-    pub rig_toml: String,
-    /// Resolved scene.
-    pub scene_toml: String,
-}
-
-impl RunRecord {
-    /// The seed as given.
-    #[must_use]
-    pub fn seed_u64(&self) -> u64 {
-        u64::from_ne_bytes(self.seed.to_ne_bytes())
-    }
-}
-
-impl Store {
-    /// The run's provenance, for resume.
-    pub async fn run_record(&self, run_id: RunId) -> Result<RunRecord, StoreError> {
-        sqlx::query_as::<_, RunRecord>(
-            "SELECT run_id, status, seed, samples_planned, rod_schedule, rod_block, rig_toml, scene_toml
-             FROM runs WHERE run_id = ?",
-        )
-        .bind(run_id)
-        .fetch_optional(&self.pool)
-        .await
-        .map_err(query_err("reading a run"))?
-        .ok_or(StoreError::NoSuchRun(run_id))
     }
 }
 

@@ -1,31 +1,17 @@
 use super::*;
+use crate::testing::{RunPlan, SampleBuilder, temp_store, tempdir};
 use softtouch_schemas::{ContactPose, FrameFormat, FtStatus, TimestampNs, Wrench};
 
+/// The builder's default sample, measured and with a negative skew.
 pub(crate) fn sample(index: u64) -> Sample {
-    Sample {
-        index,
-        rod: "circle-10".into(),
-        medium: Medium::Air,
-        commanded: ContactPose {
-            x_m: 0.01,
-            z_m: -0.02,
-            theta_rad: 0.5,
-        },
-        measured: Some(ContactPose {
+    SampleBuilder::new(index)
+        .measured(ContactPose {
             x_m: 0.0101,
-            z_m: -0.0199,
-            theta_rad: 0.5001,
-        }),
-        wrench_mean_in_sensor: Wrench::from_array([1.0, -2.0, 3.0, 0.1, -0.2, 0.3]),
-        wrench_std_in_sensor: Wrench::from_array([0.01; 6]),
-        reading_count: 2,
-        frame_t: TimestampNs(1_000_000),
-        window_start: TimestampNs(975_000),
-        window_end: TimestampNs(1_025_000),
-        sync_skew_ns: -500,
-        status: SampleStatus::Ok,
-        attempts: 1,
-    }
+            z_m: 0.0001,
+            theta_rad: 0.0001,
+        })
+        .skew_ns(-500)
+        .build()
 }
 
 pub(crate) fn window() -> Vec<FtReading> {
@@ -50,35 +36,13 @@ fn meta() -> FrameMeta {
     }
 }
 
-async fn store_in(dir: &tempfile::TempDir) -> Store {
-    Store::open(&dir.path().join("test.db"))
-        .await
-        .unwrap_or_else(|e| panic!("{e}"))
-}
-
 async fn new_run(store: &Store) -> RunId {
-    store
-        .create_run(&NewRun {
-            seed: u64::MAX,
-            samples_planned: 10,
-            rod_schedule: &["circle-10".to_owned()],
-            rod_block: 10,
-            scene_name: "on-land",
-            medium: Medium::Air,
-            rig_toml: "[arm]",
-            scene_toml: "name = 'on-land'",
-        })
-        .await
-        .unwrap_or_else(|e| panic!("{e}"))
+    RunPlan::new(u64::MAX, 10).create(store).await
 }
 
 #[tokio::test]
 async fn a_new_database_is_migrated_in_wal_mode_with_foreign_keys_on() -> Result<(), StoreError> {
-    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
-        what: "tempdir",
-        why: e.to_string(),
-    })?;
-    let store = store_in(&dir).await;
+    let (_dir, store) = temp_store("test.db").await;
     let mode: String = sqlx::query_scalar("PRAGMA journal_mode")
         .fetch_one(store.pool())
         .await
@@ -97,11 +61,7 @@ async fn a_new_database_is_migrated_in_wal_mode_with_foreign_keys_on() -> Result
 #[tokio::test]
 async fn a_sample_is_written_with_its_frame_and_window_and_a_second_write_changes_nothing()
 -> Result<(), StoreError> {
-    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
-        what: "tempdir",
-        why: e.to_string(),
-    })?;
-    let store = store_in(&dir).await;
+    let (_dir, store) = temp_store("test.db").await;
     let run = new_run(&store).await;
     let frame = Some(FrameRecord {
         meta: meta(),
@@ -146,11 +106,7 @@ async fn a_sample_is_written_with_its_frame_and_window_and_a_second_write_change
 #[tokio::test]
 async fn a_transaction_that_fails_midway_leaves_nothing_half_written() -> Result<(), StoreError> {
     // Given a store with one good sample
-    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
-        what: "tempdir",
-        why: e.to_string(),
-    })?;
-    let store = store_in(&dir).await;
+    let (_dir, store) = temp_store("test.db").await;
     let run = new_run(&store).await;
     store
         .append_sample(
@@ -218,11 +174,7 @@ async fn a_transaction_that_fails_midway_leaves_nothing_half_written() -> Result
 
 #[tokio::test]
 async fn runs_list_counts_ok_rejected_retries_and_faults() -> Result<(), StoreError> {
-    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
-        what: "tempdir",
-        why: e.to_string(),
-    })?;
-    let store = store_in(&dir).await;
+    let (_dir, store) = temp_store("test.db").await;
     let run = new_run(&store).await;
     let frame = Some(FrameRecord {
         meta: meta(),
@@ -292,30 +244,24 @@ async fn runs_list_counts_ok_rejected_retries_and_faults() -> Result<(), StoreEr
 
 #[tokio::test]
 async fn a_store_dropped_without_closing_reopens_intact() -> Result<(), StoreError> {
-    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
-        what: "tempdir",
-        why: e.to_string(),
-    })?;
-    let run = {
-        let store = store_in(&dir).await;
-        let run = new_run(&store).await;
-        for i in 0..20 {
-            store
-                .append_sample(
-                    run,
-                    &sample(i),
-                    Some(FrameRecord {
-                        meta: meta(),
-                        data: &[1, 2],
-                    }),
-                    &window(),
-                )
-                .await?;
-        }
-        run
-        // dropped here without close(): the WAL is not checkpointed
-    };
-    let store = store_in(&dir).await;
+    let (_dir, store) = temp_store("test.db").await;
+    let path = store.path().to_owned();
+    let run = new_run(&store).await;
+    for i in 0..20 {
+        store
+            .append_sample(
+                run,
+                &sample(i),
+                Some(FrameRecord {
+                    meta: meta(),
+                    data: &[1, 2],
+                }),
+                &window(),
+            )
+            .await?;
+    }
+    drop(store); // without close(): the WAL is not checkpointed
+    let store = Store::open(&path).await?;
     assert_eq!(store.integrity_check().await?, "ok");
     assert_eq!(
         store.row_counts(run).await?,
@@ -330,11 +276,7 @@ async fn a_store_dropped_without_closing_reopens_intact() -> Result<(), StoreErr
 
 #[tokio::test]
 async fn a_sample_rejected_before_any_frame_is_stored_without_one() -> Result<(), StoreError> {
-    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
-        what: "tempdir",
-        why: e.to_string(),
-    })?;
-    let store = store_in(&dir).await;
+    let (_dir, store) = temp_store("test.db").await;
     let run = new_run(&store).await;
     let mut s = sample(0);
     s.status = SampleStatus::Rejected(RejectReason::FrameTimeout);
@@ -371,10 +313,7 @@ fn stored_statuses_parse_back_or_fail_clearly() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn two_processes_opening_a_new_database_at_once_both_succeed() -> Result<(), StoreError> {
-    let dir = tempfile::tempdir().map_err(|e| StoreError::Invalid {
-        what: "tempdir",
-        why: e.to_string(),
-    })?;
+    let dir = tempdir();
     let path = dir.path().join("fresh.db");
     for _ in 0..5 {
         let _ = std::fs::remove_file(&path);

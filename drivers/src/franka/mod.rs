@@ -153,115 +153,6 @@ fn gone() -> DeviceError {
     }
 }
 
-/// Column-major 4×4 transform of a pose.
-#[must_use]
-pub fn pose_to_matrix(p: &ArmPose) -> [f64; 16] {
-    let [w, x, y, z] = normalise(p.rotation_wxyz);
-    let r = [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ];
-    let t = p.translation_m;
-    [
-        r[0][0], r[1][0], r[2][0], 0.0, r[0][1], r[1][1], r[2][1], 0.0, r[0][2], r[1][2], r[2][2],
-        0.0, t[0], t[1], t[2], 1.0,
-    ]
-}
-
-/// The pose of a column-major 4×4 transform.
-#[must_use]
-pub fn matrix_to_pose(m: &[f64; 16]) -> ArmPose {
-    let r = |row: usize, col: usize| m[col * 4 + row];
-    let trace = r(0, 0) + r(1, 1) + r(2, 2);
-    let q = if trace > 0.0 {
-        let s = (trace + 1.0).sqrt() * 2.0;
-        [
-            0.25 * s,
-            (r(2, 1) - r(1, 2)) / s,
-            (r(0, 2) - r(2, 0)) / s,
-            (r(1, 0) - r(0, 1)) / s,
-        ]
-    } else if r(0, 0) > r(1, 1) && r(0, 0) > r(2, 2) {
-        let s = (1.0 + r(0, 0) - r(1, 1) - r(2, 2)).sqrt() * 2.0;
-        [
-            (r(2, 1) - r(1, 2)) / s,
-            0.25 * s,
-            (r(0, 1) + r(1, 0)) / s,
-            (r(0, 2) + r(2, 0)) / s,
-        ]
-    } else if r(1, 1) > r(2, 2) {
-        let s = (1.0 + r(1, 1) - r(0, 0) - r(2, 2)).sqrt() * 2.0;
-        [
-            (r(0, 2) - r(2, 0)) / s,
-            (r(0, 1) + r(1, 0)) / s,
-            0.25 * s,
-            (r(1, 2) + r(2, 1)) / s,
-        ]
-    } else {
-        let s = (1.0 + r(2, 2) - r(0, 0) - r(1, 1)).sqrt() * 2.0;
-        [
-            (r(1, 0) - r(0, 1)) / s,
-            (r(0, 2) + r(2, 0)) / s,
-            (r(1, 2) + r(2, 1)) / s,
-            0.25 * s,
-        ]
-    };
-    ArmPose {
-        translation_m: [m[12], m[13], m[14]],
-        rotation_wxyz: normalise(q),
-    }
-}
-
-fn normalise(q: [f64; 4]) -> [f64; 4] {
-    let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-    if n > 0.0 && n.is_finite() {
-        q.map(|v| v / n)
-    } else {
-        [1.0, 0.0, 0.0, 0.0]
-    }
-}
-
-/// Spherical interpolation from `a` to `b` at `s` ∈ [0, 1] (shortest way).
-#[must_use]
-pub fn slerp(a: [f64; 4], b: [f64; 4], s: f64) -> [f64; 4] {
-    let (a, mut b) = (normalise(a), normalise(b));
-    let mut dot: f64 = (0..4).map(|i| a[i] * b[i]).sum();
-    if dot < 0.0 {
-        b = b.map(|v| -v);
-        dot = -dot;
-    }
-    if dot > 0.9995 {
-        return normalise(std::array::from_fn(|i| a[i] + s * (b[i] - a[i])));
-    }
-    let theta = dot.clamp(-1.0, 1.0).acos();
-    let (wa, wb) = (
-        ((1.0 - s) * theta).sin() / theta.sin(),
-        (s * theta).sin() / theta.sin(),
-    );
-    normalise(std::array::from_fn(|i| wa * a[i] + wb * b[i]))
-}
-
-/// Angle between two orientations, rad.
-#[must_use]
-pub fn angle_between(a: [f64; 4], b: [f64; 4]) -> f64 {
-    let (a, b) = (normalise(a), normalise(b));
-    let dot: f64 = (0..4).map(|i| a[i] * b[i]).sum::<f64>().abs().min(1.0);
-    2.0 * dot.acos()
-}
-
 /// Limits of the path parameter s ∈ [0, 1] for a move of `dist_m` and `angle_rad`,
 /// such that translation and rotation both stay within theirs.
 #[must_use]
@@ -296,7 +187,7 @@ fn state_of(s: &franka::RobotState, clock: &dyn Clock) -> ArmState {
     let f = s.O_F_ext_hat_K;
     ArmState {
         t: clock.now(),
-        base_from_finger: matrix_to_pose(&s.O_T_EE),
+        base_from_finger: ArmPose::from_matrix(&s.O_T_EE),
         external_wrench: Some(Wrench {
             force_n: [f[0], f[1], f[2]],
             torque_nm: [f[3], f[4], f[5]],
@@ -313,12 +204,12 @@ fn run_move(
     abort: &AtomicBool,
 ) -> Result<(), DeviceError> {
     let start = robot.read_once().map_err(err)?;
-    let from = matrix_to_pose(&start.O_T_EE_c);
+    let from = ArmPose::from_matrix(&start.O_T_EE_c);
     let dist = (0..3)
         .map(|i| (target.translation_m[i] - from.translation_m[i]).powi(2))
         .sum::<f64>()
         .sqrt();
-    let angle = angle_between(from.rotation_wxyz, target.rotation_wxyz);
+    let angle = from.angle_to(target);
     let mut otg = franka::Otg::new(0.0, path_limits(dist, angle, speed, limits)).map_err(err)?;
     otg.set_target(1.0).map_err(err)?;
     let mut seed: Option<ArmPose> = None;
@@ -327,19 +218,13 @@ fn run_move(
         .control_cartesian_pose(
             |state, dt| {
                 // Seed from the commanded pose of the first cycle.
-                let a = *seed.get_or_insert_with(|| matrix_to_pose(&state.O_T_EE_c));
+                let a = *seed.get_or_insert_with(|| ArmPose::from_matrix(&state.O_T_EE_c));
                 let s = if abort.load(Ordering::SeqCst) {
                     otg.position()
                 } else {
                     otg.step(dt.as_secs_f64())
                 };
-                let p = ArmPose {
-                    translation_m: std::array::from_fn(|i| {
-                        a.translation_m[i] + s * (target.translation_m[i] - a.translation_m[i])
-                    }),
-                    rotation_wxyz: slerp(a.rotation_wxyz, target.rotation_wxyz, s),
-                };
-                let cmd = franka::CartesianPose::new(pose_to_matrix(&p));
+                let cmd = franka::CartesianPose::new(a.slerp(&target, s).to_matrix());
                 let done = (s >= 1.0 - 1e-9 && otg.velocity().abs() < 1e-9)
                     || abort.load(Ordering::SeqCst);
                 if done {
@@ -509,28 +394,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn poses_and_matrices_convert_both_ways() {
-        let p = ArmPose {
-            translation_m: [0.4, -0.1, 0.3],
-            rotation_wxyz: normalise([0.3, 0.8, -0.2, 0.4]),
-        };
-        let back = matrix_to_pose(&pose_to_matrix(&p));
-        assert!(angle_between(p.rotation_wxyz, back.rotation_wxyz) < 1e-9);
-        assert!((0..3).all(|i| (p.translation_m[i] - back.translation_m[i]).abs() < 1e-12));
-        for q in [
-            [0.0, 1.0, 0.0, 0.0],
-            [0.0, 0.0, 1.0, 0.0],
-            [0.0, 0.0, 0.0, 1.0],
-        ] {
-            let p = ArmPose {
-                translation_m: [0.0; 3],
-                rotation_wxyz: q,
-            };
-            assert!(angle_between(q, matrix_to_pose(&pose_to_matrix(&p)).rotation_wxyz) < 1e-9);
-        }
-    }
-
-    #[test]
     fn path_limits_keep_translation_and_rotation_within_theirs() {
         let l = MotionLimits::default();
         let p = path_limits(0.2, 0.5, 0.1, &l);
@@ -542,10 +405,6 @@ mod tests {
         assert!(p.max_jerk * 0.5 <= l.rot_jerk_rad_s3 + 1e-12);
         let p = path_limits(0.0, 0.0, 0.1, &l);
         assert!(p.max_velocity.is_finite());
-        let s = slerp([1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0], 0.5);
-        assert!(
-            (angle_between([1.0, 0.0, 0.0, 0.0], s) - std::f64::consts::FRAC_PI_2).abs() < 1e-9
-        );
     }
 
     #[tokio::test]

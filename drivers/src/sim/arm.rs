@@ -64,32 +64,10 @@ pub(crate) fn interpolate(a: &ArmPose, b: &ArmPose, s: f64) -> ArmPose {
     }
 }
 
-fn unit(q: [f64; 4]) -> [f64; 4] {
-    let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-    if n > 1e-12 && n.is_finite() {
-        q.map(|v| v / n)
-    } else {
-        [1.0, 0.0, 0.0, 0.0]
-    }
-}
-
-/// Rotation angle between two poses, rad.
-fn angle_between(a: &ArmPose, b: &ArmPose) -> f64 {
-    let (qa, qb) = (unit(a.rotation_wxyz), unit(b.rotation_wxyz));
-    let d: f64 = qa
-        .iter()
-        .zip(&qb)
-        .map(|(x, y)| x * y)
-        .sum::<f64>()
-        .abs()
-        .min(1.0);
-    2.0 * d.acos()
-}
-
 /// The contact pose of a finger pose: `rod_from_finger = base_from_rod⁻¹ · base_from_finger`,
 /// read as `Trans(x, y, z) · RotZ(θ)`; the off-plane offset `y` is ignored.
 pub(crate) fn contact_from_arm(base_from_rod: &ArmPose, base_from_finger: &ArmPose) -> ContactPose {
-    let [w, x, y, z] = unit(base_from_rod.rotation_wxyz);
+    let [w, x, y, z] = base_from_rod.normalised().rotation_wxyz;
     let inv_rot = ArmPose {
         translation_m: [0.0; 3],
         rotation_wxyz: [w, -x, -y, -z],
@@ -178,10 +156,7 @@ impl Arm for SimArm {
             return Err(self.fault("in reflex: call recover() before moving".into()));
         }
         let now = self.clock.now();
-        let target = ArmPose {
-            translation_m: target.translation_m,
-            rotation_wxyz: unit(target.rotation_wxyz),
-        };
+        let target = target.normalised();
         let (t_end, fault_at) = {
             let mut w = lock(&self.world)?;
             let from = w.pose_at(now);
@@ -193,7 +168,7 @@ impl Arm for SimArm {
                 .sum::<f64>()
                 .sqrt();
             let secs = duration(d, speed_m_s.min(MAX_SPEED_M_S), MAX_ACCEL_M_S2).max(duration(
-                angle_between(&from, &target),
+                from.angle_to(&target),
                 MAX_ROT_SPEED_RAD_S,
                 MAX_ROT_ACCEL_RAD_S2,
             ));

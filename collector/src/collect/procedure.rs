@@ -1,0 +1,378 @@
+//! One sample: `approach → settle → record → retreat`, with its retries, and storing
+//! it (accepted or rejected).
+
+use super::window::{WindowStats, window_bounds, window_stats};
+use super::{CollectError, Job, recovery_backoff};
+use crate::store::{EventKind, EventLevel};
+use softtouch_drivers::{Clock as _, DeviceError, Frame};
+use softtouch_schemas::sample::RejectReason;
+use softtouch_schemas::{
+    ArmPose, ContactPose, DurationNs, FtReading, Sample, SampleStatus, TimestampNs, Wrench,
+};
+use std::time::Duration;
+
+/// How a sample ended.
+pub(super) enum SampleEnd {
+    /// Stored, accepted or rejected.
+    Stored(SampleStatus),
+    /// A forced stop: not stored.
+    Interrupted,
+    /// The job cannot go on: stop safely.
+    Fatal(String),
+}
+
+/// Why one attempt at a sample failed.
+#[derive(Debug)]
+enum AttemptError {
+    /// Reflex or other arm fault: recover and retry.
+    ArmFault(DeviceError),
+    /// The arm's link failed: stop safely.
+    ArmLink(DeviceError),
+    /// The force guard tripped during the approach; the arm was told to stop, which
+    /// may have failed too.
+    ForceLimit {
+        reading: FtReading,
+        stop_failed: Option<DeviceError>,
+    },
+    /// No frame came.
+    FrameTimeout(DeviceError),
+    /// The sensor failed while recording.
+    Sensor(DeviceError),
+    /// A target outside the workspace: never sent. A bug or a bad config.
+    Unsafe(String),
+    /// A forced stop (second Ctrl-C) interrupted the attempt.
+    Interrupted,
+}
+
+/// A finished attempt: the pieces of a sample.
+struct Taken {
+    measured: Option<ContactPose>,
+    frame: Frame,
+    stats: WindowStats,
+    window: Vec<FtReading>,
+    start: TimestampNs,
+    end: TimestampNs,
+}
+
+impl Job<'_> {
+    fn forced(&self) -> bool {
+        *self.stop.borrow() >= 2
+    }
+
+    /// Take sample `index`, retrying as the procedure allows, and store it.
+    pub(super) async fn sample(
+        &mut self,
+        index: u64,
+        rod: &str,
+        pose: ContactPose,
+    ) -> Result<SampleEnd, CollectError> {
+        let max_attempts = self.plan.rig.procedure.max_attempts;
+        let mut recoveries = 0u32;
+        let mut last_reject = RejectReason::ArmFault;
+        for attempt in 1..=max_attempts {
+            if attempt > 1 {
+                self.counters.retries += 1;
+            }
+            let result = self.attempt(pose).await;
+            // Always end an attempt at home, whatever happened.
+            // (A reflex is recovered below first.)
+            if !matches!(
+                result,
+                Err(AttemptError::ArmLink(_)
+                    | AttemptError::Interrupted
+                    | AttemptError::ArmFault(_))
+            ) && let Err(e) = self.go_home(Some(index)).await
+            {
+                return Ok(SampleEnd::Fatal(format!(
+                    "cannot retreat home after sample {index}: {e}"
+                )));
+            }
+            match result {
+                Ok(taken) => match taken.stats.reject {
+                    None => {
+                        return self.store_sample(
+                            index,
+                            rod,
+                            pose,
+                            attempt,
+                            SampleStatus::Ok,
+                            Some(taken),
+                        );
+                    }
+                    Some(reason) => {
+                        self.counters.bad_windows += 1;
+                        last_reject = reason;
+                        // A saturated window comes back the same at the same pose.
+                        let retry = reason != RejectReason::Saturated && attempt < max_attempts;
+                        self.events.log(
+                            EventKind::WindowRejected(reason),
+                            EventLevel::Warn,
+                            Some(index),
+                            &format!(
+                                "attempt {attempt}: window rejected ({reason}: {} readings){}",
+                                taken.stats.count,
+                                if retry { ", retrying" } else { "" }
+                            ),
+                        )?;
+                        if !retry {
+                            return self.store_sample(
+                                index,
+                                rod,
+                                pose,
+                                attempt,
+                                SampleStatus::Rejected(reason),
+                                Some(taken),
+                            );
+                        }
+                    }
+                },
+                Err(AttemptError::ArmFault(e)) => {
+                    self.counters.arm_faults += 1;
+                    last_reject = RejectReason::ArmFault;
+                    self.events.log(
+                        EventKind::ArmFault,
+                        EventLevel::Warn,
+                        Some(index),
+                        &format!("attempt {attempt}: {e}"),
+                    )?;
+                    recoveries += 1;
+                    tokio::time::sleep(recovery_backoff(recoveries)).await;
+                    match self.arm.recover().await {
+                        Ok(()) => self.events.log(
+                            EventKind::ArmRecovered,
+                            EventLevel::Info,
+                            Some(index),
+                            "automatic error recovery succeeded",
+                        )?,
+                        Err(e) => return Ok(SampleEnd::Fatal(format!("arm recovery failed: {e}"))),
+                    }
+                    if let Err(e) = self.go_home(Some(index)).await {
+                        return Ok(SampleEnd::Fatal(format!(
+                            "cannot retreat home after a reflex: {e}"
+                        )));
+                    }
+                }
+                Err(AttemptError::ForceLimit {
+                    reading,
+                    stop_failed,
+                }) => {
+                    self.events.log(
+                        EventKind::ForceLimit,
+                        EventLevel::Warn,
+                        Some(index),
+                        &format!(
+                            "attempt {attempt}: approach aborted at {}",
+                            reading.wrench_in_sensor
+                        ),
+                    )?;
+                    if let Some(e) = stop_failed {
+                        self.events.log(
+                            EventKind::ArmStopFailed,
+                            EventLevel::Error,
+                            Some(index),
+                            &format!(
+                                "attempt {attempt}: could not stop the arm at the force limit: {e}"
+                            ),
+                        )?;
+                    }
+                    // The same pose would press as hard again: reject at once.
+                    return self.store_sample(
+                        index,
+                        rod,
+                        pose,
+                        attempt,
+                        SampleStatus::Rejected(RejectReason::ForceLimit),
+                        None,
+                    );
+                }
+                Err(AttemptError::FrameTimeout(e)) => {
+                    self.counters.frame_timeouts += 1;
+                    last_reject = RejectReason::FrameTimeout;
+                    self.events.log(
+                        EventKind::FrameTimeout,
+                        EventLevel::Warn,
+                        Some(index),
+                        &format!("attempt {attempt}: {e}"),
+                    )?;
+                }
+                Err(AttemptError::Sensor(e)) => {
+                    last_reject = RejectReason::SensorFault;
+                    self.events.log(
+                        EventKind::SensorFault,
+                        EventLevel::Warn,
+                        Some(index),
+                        &format!("attempt {attempt}: {e}"),
+                    )?;
+                }
+                Err(AttemptError::ArmLink(e)) => {
+                    return Ok(SampleEnd::Fatal(format!("lost the arm: {e}")));
+                }
+                Err(AttemptError::Unsafe(msg)) => return Ok(SampleEnd::Fatal(msg)),
+                Err(AttemptError::Interrupted) => {
+                    if let Err(e) = self.arm.stop().await {
+                        self.events.log(
+                            EventKind::ArmStopFailed,
+                            EventLevel::Error,
+                            Some(index),
+                            &format!("could not stop the arm at a forced stop: {e}"),
+                        )?;
+                    }
+                    self.events.log(
+                        EventKind::Interrupted,
+                        EventLevel::Info,
+                        Some(index),
+                        "forced stop during the sample; not stored",
+                    )?;
+                    return Ok(SampleEnd::Interrupted);
+                }
+            }
+        }
+        self.events.log(
+            EventKind::Rejected,
+            EventLevel::Warn,
+            Some(index),
+            &format!("gave up after {max_attempts} attempts ({last_reject})"),
+        )?;
+        self.store_sample(
+            index,
+            rod,
+            pose,
+            max_attempts,
+            SampleStatus::Rejected(last_reject),
+            None,
+        )
+    }
+
+    fn store_sample(
+        &mut self,
+        index: u64,
+        rod: &str,
+        pose: ContactPose,
+        attempts: u32,
+        status: SampleStatus,
+        taken: Option<Taken>,
+    ) -> Result<SampleEnd, CollectError> {
+        let (measured, stats, frame, window, start, end) = match taken {
+            Some(t) => (
+                t.measured,
+                Some(t.stats),
+                Some(t.frame),
+                t.window,
+                t.start,
+                t.end,
+            ),
+            None => (
+                None,
+                None,
+                None,
+                Vec::new(),
+                TimestampNs::ZERO,
+                TimestampNs::ZERO,
+            ),
+        };
+        let sample = Sample {
+            index,
+            rod: rod.to_owned(),
+            medium: self.plan.scene.medium,
+            commanded: pose,
+            measured,
+            wrench_mean_in_sensor: stats.as_ref().map_or(Wrench::ZERO, |s| s.mean),
+            wrench_std_in_sensor: stats.as_ref().map_or(Wrench::ZERO, |s| s.std),
+            reading_count: stats.as_ref().map_or(0, |s| s.count),
+            frame_t: frame.as_ref().map_or(TimestampNs::ZERO, |f| f.meta.t),
+            window_start: start,
+            window_end: end,
+            sync_skew_ns: stats.as_ref().map_or(0, |s| s.skew_ns),
+            status,
+            attempts,
+        };
+        self.store
+            .submit_sample(self.plan.run_id, sample, frame, window)?;
+        match status {
+            SampleStatus::Ok => self.counters.ok += 1,
+            SampleStatus::Rejected(_) => self.counters.rejected += 1,
+        }
+        Ok(SampleEnd::Stored(status))
+    }
+
+    /// One try: approach, settle, record. Leaves the arm wherever it ended.
+    async fn attempt(&mut self, pose: ContactPose) -> Result<Taken, AttemptError> {
+        let w = &self.plan.rig.workspace;
+        let p = &self.plan.rig.procedure;
+        let l = &self.plan.rig.limits;
+        let target = ArmPose::from_contact(&w.base_from_rod, &pose);
+        // Every command is checked before it reaches the arm.
+        if !pose.is_finite() || !w.contains_contact(&pose) || !w.contains_arm(&target) {
+            return Err(AttemptError::Unsafe(format!(
+                "pose {pose:?} (flange at {:?} m) lies outside the workspace; not sent",
+                target.translation_m
+            )));
+        }
+        if self.forced() {
+            return Err(AttemptError::Interrupted);
+        }
+
+        // approach, guarded
+        let guard = self.ft.wait_over_limit(l.max_force_n, l.max_torque_nm);
+        let moved = tokio::select! {
+            moved = self.arm.move_to(&target, p.approach_speed_m_s) => moved,
+            reading = guard => {
+                // Reported with the force limit by the caller, who can log it.
+                return Err(AttemptError::ForceLimit {
+                    reading,
+                    stop_failed: self.arm.stop().await.err(),
+                });
+            }
+        };
+        match moved {
+            Ok(_) => {}
+            Err(e) if e.is_fault() => return Err(AttemptError::ArmFault(e)),
+            Err(e @ DeviceError::InvalidCommand { .. }) => {
+                return Err(AttemptError::Unsafe(e.to_string()));
+            }
+            Err(e) => return Err(AttemptError::ArmLink(e)),
+        }
+
+        // settle
+        tokio::time::sleep(Duration::from_secs_f64(p.settle_s)).await;
+        if self.forced() {
+            return Err(AttemptError::Interrupted);
+        }
+        let measured = match self.arm.state().await {
+            Ok(s) if s.faulted => {
+                return Err(AttemptError::ArmFault(DeviceError::Fault {
+                    device: "arm".into(),
+                    code: None,
+                    message: "faulted while settling".into(),
+                }));
+            }
+            Ok(s) => Some(ContactPose::from_arm(&w.base_from_rod, &s.base_from_finger)),
+            Err(e) if e.is_fault() => return Err(AttemptError::ArmFault(e)),
+            Err(e) => return Err(AttemptError::ArmLink(e)),
+        };
+
+        // record: the first frame after settling, and the readings around its time
+        let timeout_ms = (p.frame_timeout_s * 1000.0).ceil() as u64;
+        let frame = self
+            .camera
+            .frame_after(self.clock.now(), timeout_ms)
+            .await
+            .map_err(AttemptError::FrameTimeout)?;
+        let (start, end) = window_bounds(frame.meta.t, DurationNs::from_secs_f64(p.ft_window_s));
+        let deadline = self.clock.instant_at(end) + Duration::from_secs_f64(p.frame_timeout_s);
+        match self.ft.wait_until(end, deadline).await {
+            Ok(_) => {}
+            Err(e) => return Err(AttemptError::Sensor(e)),
+        }
+        let readings = self.ft.take_window(start, end);
+        let stats = window_stats(&readings, frame.meta.t, &self.rules);
+        Ok(Taken {
+            measured,
+            frame,
+            stats,
+            window: readings,
+            start,
+            end,
+        })
+    }
+}

@@ -1,0 +1,101 @@
+//! Progress for long work: the one progress-bar style (stderr, hidden when stderr is not
+//! a terminal) and the training observer that prints a line per epoch with its ETA.
+//!
+//! Dataset export and import, the training verbs, sweeps and benchmarks all report
+//! through here, so every long job looks the same to an operator.
+
+use softtouch_trainer::train::{EpochReport, Observer};
+use std::io::Write;
+use std::time::Instant;
+
+/// A progress bar on stderr, hidden when stderr is not a terminal.
+pub(crate) fn progress_bar(len: u64, enabled: bool, what: &str) -> indicatif::ProgressBar {
+    use std::io::IsTerminal as _;
+    if !enabled || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(len);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(&format!(
+        "{what} {{bar:40}} {{pos}}/{{len}} {{per_sec}} eta {{eta}}"
+    )) {
+        bar.set_style(style);
+    }
+    bar
+}
+
+/// Prints one line per epoch (loss, validation R², throughput, ETA) and drives a
+/// progress bar over the batches.
+pub(crate) struct TrainProgress<'a> {
+    out: &'a mut dyn Write,
+    bar: indicatif::ProgressBar,
+    epochs: usize,
+    started: Instant,
+    first_epoch: usize,
+    show_bar: bool,
+}
+
+impl std::fmt::Debug for TrainProgress<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TrainProgress")
+            .field("epochs", &self.epochs)
+            .field("first_epoch", &self.first_epoch)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<'a> TrainProgress<'a> {
+    /// Report to `out` over up to `epochs` epochs.
+    pub(crate) fn new(out: &'a mut dyn Write, epochs: usize, show_bar: bool) -> Self {
+        Self {
+            out,
+            bar: indicatif::ProgressBar::hidden(),
+            epochs,
+            started: Instant::now(),
+            first_epoch: 0,
+            show_bar,
+        }
+    }
+}
+
+// Lines are best effort: a closed output must not stop a training that is storing its
+// checkpoints, so write errors are ignored here (the verb's own writes report them).
+impl Observer for TrainProgress<'_> {
+    fn resumed(&mut self, completed: usize) {
+        self.first_epoch = completed;
+        writeln!(
+            self.out,
+            "resuming from the checkpoint after epoch {completed}"
+        )
+        .ok();
+    }
+    fn batch(&mut self, epoch: usize, step: usize, steps: usize) {
+        if step == 1 {
+            self.bar.finish_and_clear();
+            self.bar = progress_bar(steps as u64, self.show_bar, &format!("epoch {epoch}"));
+        }
+        self.bar.set_position(step as u64);
+    }
+    fn epoch(&mut self, r: &EpochReport) {
+        self.bar.finish_and_clear();
+        let done = r.epoch.saturating_sub(self.first_epoch).max(1);
+        let per_epoch = self.started.elapsed().as_secs_f64() / done as f64;
+        let eta = per_epoch * self.epochs.saturating_sub(r.epoch) as f64;
+        let opt = |v: Option<f64>| v.map_or_else(|| "–".to_owned(), |v| format!("{v:.4}"));
+        writeln!(
+            self.out,
+            "epoch {:>3}/{}  loss {:.4}  val R² mean {} min {}  val image MSE {}  {:.0} img/s  {:.1} s  eta ≤ {:.0} s{}",
+            r.epoch,
+            self.epochs,
+            r.train_loss,
+            opt(r.val_r2_mean),
+            opt(r.val_r2_min),
+            r.val_image_mse
+                .map_or_else(|| "–".to_owned(), |v| format!("{v:.2e}")),
+            r.train_images_per_s,
+            r.seconds,
+            eta,
+            if r.best { "  (best)" } else { "" }
+        )
+        .ok();
+    }
+}

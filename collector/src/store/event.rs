@@ -1,0 +1,94 @@
+//! What an event is about: the `kind` column of the events table.
+
+use softtouch_schemas::sample::RejectReason;
+use std::fmt;
+
+/// The kind of an event, stored as [`EventKind::as_str`]. Queries and reports match on
+/// these strings, so a variant's text never changes once stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EventKind {
+    /// A run was resumed.
+    Resumed,
+    /// A rod was put in place.
+    RodChange,
+    /// An arm reflex or other recoverable arm fault.
+    ArmFault,
+    /// Automatic recovery after an arm fault succeeded.
+    ArmRecovered,
+    /// A stop command to the arm failed: it may still be moving.
+    ArmStopFailed,
+    /// A window was refused; stored under the reason's own name.
+    WindowRejected(RejectReason),
+    /// The force guard aborted an approach.
+    ForceLimit,
+    /// No frame came in time.
+    FrameTimeout,
+    /// The force/torque sensor failed while recording.
+    SensorFault,
+    /// A forced stop interrupted a sample.
+    Interrupted,
+    /// A sample was stored as rejected once its attempts ran out.
+    Rejected,
+    /// The arm could not retreat home at the end of a run.
+    RetreatFailed,
+    /// Reading, loss and drop counts of the streams at the end of a run.
+    StreamCounts,
+    /// The force/torque sensor did not stop cleanly.
+    SensorStop,
+    /// Every planned sample is stored.
+    Completed,
+    /// The operator stopped the run.
+    Stopped,
+    /// The run stopped safely after faults.
+    SafeStop,
+}
+
+impl EventKind {
+    /// As stored.
+    #[must_use]
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            Self::Resumed => "resumed",
+            Self::RodChange => "rod_change",
+            Self::ArmFault => "arm_fault",
+            Self::ArmRecovered => "arm_recovered",
+            Self::ArmStopFailed => "arm_stop_failed",
+            Self::WindowRejected(reason) => reason.as_str(),
+            Self::ForceLimit => "force_limit",
+            Self::FrameTimeout => "frame_timeout",
+            Self::SensorFault => "sensor_fault",
+            Self::Interrupted => "interrupted",
+            Self::Rejected => "rejected",
+            Self::RetreatFailed => "retreat_failed",
+            Self::StreamCounts => "stream_counts",
+            Self::SensorStop => "sensor_stop",
+            Self::Completed => "completed",
+            Self::Stopped => "stopped",
+            Self::SafeStop => "safe_stop",
+        }
+    }
+}
+
+impl fmt::Display for EventKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stored_kinds_are_unchanged() {
+        // Existing databases and the tests' queries use these strings.
+        assert_eq!(EventKind::ArmFault.as_str(), "arm_fault");
+        assert_eq!(EventKind::ArmRecovered.as_str(), "arm_recovered");
+        assert_eq!(EventKind::StreamCounts.as_str(), "stream_counts");
+        assert_eq!(
+            EventKind::WindowRejected(RejectReason::ShortWindow).as_str(),
+            "short_window"
+        );
+        assert_eq!(EventKind::SafeStop.to_string(), "safe_stop");
+    }
+}
