@@ -66,6 +66,20 @@ fn model_query(doing: &'static str) -> impl FnOnce(sqlx::Error) -> ModelError {
     move |source| ModelError::Query { doing, source }
 }
 
+/// A dataset's members with their labels and frames ([`MemberRow`]); the caller adds
+/// the order. A macro, because sqlx takes `&'static str` and `concat!` takes literals.
+macro_rules! member_rows_sql {
+    () => {
+        "SELECT m.split, m.run_id, m.sample_index,
+                s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
+                f.format, f.width, f.height, f.data
+         FROM dataset_members m
+         JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
+         JOIN frames f ON f.run_id = m.run_id AND f.sample_index = m.sample_index
+         WHERE m.dataset_id = ?"
+    };
+}
+
 #[derive(Debug, FromRow)]
 struct MemberRow {
     split: String,
@@ -126,13 +140,7 @@ pub async fn load_splits(
     let info = dataset::get(store, name).await?;
     let total = u64::try_from(info.sample_count).unwrap_or(0);
     let mut rows = sqlx::query_as::<_, MemberRow>(
-        "SELECT m.split, m.run_id, m.sample_index,
-                s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
-                f.format, f.width, f.height, f.data
-         FROM dataset_members m
-         JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
-         JOIN frames f ON f.run_id = m.run_id AND f.sample_index = m.sample_index
-         WHERE m.dataset_id = ? ORDER BY m.position",
+        concat!(member_rows_sql!(), " ORDER BY m.position"),
     )
     .bind(info.dataset_id)
     .fetch(store.pool());
@@ -177,13 +185,10 @@ pub async fn first_test_frame(
 ) -> Result<(usize, usize, Vec<u8>), ModelError> {
     let info = dataset::get(store, name).await?;
     let row = sqlx::query_as::<_, MemberRow>(
-        "SELECT m.split, m.run_id, m.sample_index,
-                s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
-                f.format, f.width, f.height, f.data
-         FROM dataset_members m
-         JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
-         JOIN frames f ON f.run_id = m.run_id AND f.sample_index = m.sample_index
-         WHERE m.dataset_id = ? ORDER BY m.split = 'test' DESC, m.position LIMIT 1",
+        concat!(
+            member_rows_sql!(),
+            " ORDER BY m.split = 'test' DESC, m.position LIMIT 1"
+        ),
     )
     .bind(info.dataset_id)
     .fetch_optional(store.pool())
