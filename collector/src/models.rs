@@ -139,11 +139,10 @@ pub async fn load_splits(
 ) -> Result<Splits, ModelError> {
     let info = dataset::get(store, name).await?;
     let total = u64::try_from(info.sample_count).unwrap_or(0);
-    let mut rows = sqlx::query_as::<_, MemberRow>(
-        concat!(member_rows_sql!(), " ORDER BY m.position"),
-    )
-    .bind(info.dataset_id)
-    .fetch(store.pool());
+    let mut rows =
+        sqlx::query_as::<_, MemberRow>(concat!(member_rows_sql!(), " ORDER BY m.position"))
+            .bind(info.dataset_id)
+            .fetch(store.pool());
     // The colour threshold as a lookup, built once for the whole dataset.
     let table = FingerTable::new(preprocess);
     let mut splits = Splits::default();
@@ -184,12 +183,10 @@ pub async fn first_test_frame(
     name: &str,
 ) -> Result<(usize, usize, Vec<u8>), ModelError> {
     let info = dataset::get(store, name).await?;
-    let row = sqlx::query_as::<_, MemberRow>(
-        concat!(
-            member_rows_sql!(),
-            " ORDER BY m.split = 'test' DESC, m.position LIMIT 1"
-        ),
-    )
+    let row = sqlx::query_as::<_, MemberRow>(concat!(
+        member_rows_sql!(),
+        " ORDER BY m.split = 'test' DESC, m.position LIMIT 1"
+    ))
     .bind(info.dataset_id)
     .fetch_optional(store.pool())
     .await
