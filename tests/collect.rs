@@ -251,3 +251,111 @@ fn a_scene_with_packet_loss_frame_drops_and_reflexes_completes_and_logs_every_fa
         assert!(retried > 0);
     });
 }
+
+/// The label error against the simulator's truth in a scene with a sensor offset and
+/// zero drift (no noise): a tare per sample removes both, no tare leaves them in.
+#[test]
+fn a_tare_per_sample_removes_offset_and_drift_from_the_labels() {
+    let dir = tempdir();
+    let rig = common::ok(&softtouch(dir.path(), &["config", "show", "rig"]));
+    let mut scene = common::ok(&softtouch(dir.path(), &["config", "show", "scene"]));
+    scene.push_str(
+        "\n[[effects]]\nkind = \"buoyancy_offset\"\nforce_n = [0.0, 0.0, 0.3]\ntorque_nm = [0.0, 0.0, 0.002]\n\
+         \n[[effects]]\nkind = \"ft_drift\"\nforce_n_per_h = 3.0\ntorque_nm_per_h = 0.03\n",
+    );
+    std::fs::write(dir.path().join("scene.toml"), scene).unwrap_or_else(|e| panic!("{e}"));
+    let rmse = |tare: &str| -> (f64, f64) {
+        let with = rig.replacen(
+            "[procedure]\n",
+            &format!("[procedure]\ntare = \"{tare}\"\n"),
+            1,
+        );
+        assert_ne!(with, rig, "the rig has a [procedure] table");
+        std::fs::write(dir.path().join(format!("rig-{tare}.toml")), with)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let rig_arg = format!("rig-{tare}.toml");
+        let out_arg = format!("out-{tare}");
+        let out = common::ok(&softtouch(
+            dir.path(),
+            &[
+                "bench",
+                "collection",
+                "--samples",
+                "20",
+                "--settle",
+                "0.3",
+                "--window",
+                "0.05",
+                "--rig",
+                &rig_arg,
+                "--scene",
+                "scene.toml",
+                "--out",
+                &out_arg,
+            ],
+        ));
+        // The table row: settle window accepted force_rmse_N torque_rmse_Nmm ...
+        let row = out
+            .lines()
+            .find(|l| l.trim_start().starts_with("0.3 "))
+            .unwrap_or_else(|| panic!("no table row in:\n{out}"));
+        let cols: Vec<&str> = row.split_whitespace().collect();
+        let num = |i: usize| {
+            cols.get(i)
+                .and_then(|c| c.parse::<f64>().ok())
+                .unwrap_or_else(|| panic!("column {i} of `{row}`"))
+        };
+        (num(3), num(4))
+    };
+    let (none_n, none_nmm) = rmse("none");
+    let (tared_n, tared_nmm) = rmse("per-sample");
+    // Untared: 0.3 N on Fz alone is 0.17 N RMS over three axes; 2 N·mm on Tz 1.15 N·mm.
+    assert!(
+        none_n > 0.15 && none_nmm > 1.0,
+        "no tare: {none_n} N, {none_nmm} N·mm"
+    );
+    // Tared: what is left is the settling error of the default procedure (≈ 2 mN).
+    assert!(
+        tared_n < 0.01 && tared_nmm < 0.2,
+        "tare per sample: {tared_n} N, {tared_nmm} N·mm"
+    );
+}
+
+/// A collection appends to the log beside its database: the start, every run event
+/// (here the rod change and the completion) and the outcome; not to stderr.
+#[test]
+fn a_collection_writes_its_log_beside_the_database() {
+    let dir = tempdir();
+    let out = softtouch(dir.path(), &["collect", "--samples", "3", "--seed", "2"]);
+    common::ok(&out);
+    let log = std::fs::read_to_string(dir.path().join("softtouch.db.log"))
+        .unwrap_or_else(|e| panic!("no softtouch.db.log: {e}"));
+    assert!(
+        log.contains("softtouch collect --samples 3 --seed 2 started"),
+        "{log}"
+    );
+    assert!(
+        log.contains("kind=\"rod_change\"") || log.contains("kind=rod_change"),
+        "{log}"
+    );
+    assert!(log.contains("completed"), "{log}");
+    assert!(
+        log.lines().last().is_some_and(|l| l.contains("finished")),
+        "{log}"
+    );
+    assert!(
+        !text(&out.stderr).contains("rod_change"),
+        "events stay off stderr"
+    );
+    // A second run appends.
+    common::ok(&softtouch(
+        dir.path(),
+        &["collect", "--samples", "1", "--seed", "3"],
+    ));
+    let again = std::fs::read_to_string(dir.path().join("softtouch.db.log")).unwrap_or_default();
+    assert!(again.starts_with(&log) && again.len() > log.len());
+    // Read-only verbs write none.
+    let other = tempdir();
+    common::ok(&softtouch(other.path(), &["config", "show", "rig"]));
+    assert!(!other.path().join("softtouch.db.log").exists());
+}

@@ -1032,3 +1032,61 @@ fn malformed_paper_files_are_refused_naming_line_and_column() {
     assert_eq!(count_rows(&d.join("cases.db"), "samples"), 0);
     assert_eq!(count_rows(&d.join("cases.db"), "runs"), 0);
 }
+
+/// Imports check what would otherwise break the database later: a run's `created_at`
+/// in a manifest must be a UTC timestamp (one bad value broke `runs` and `status` for
+/// every run), and the paper's images, which carry no checksum, must decode in full
+/// (a PNG cut short after an intact header was taken).
+#[test]
+fn imports_refuse_a_bad_created_at_and_a_truncated_paper_image() {
+    let (dir, db) = lab();
+    let d = dir.path();
+    ok(&softtouch(
+        d,
+        &[
+            "--db", "lab.db", "dataset", "create", "all", "--runs", "1,2",
+        ],
+    ));
+    ok(&softtouch(
+        d,
+        &["--db", "lab.db", "dataset", "export", "all", "--out", "exp"],
+    ));
+    let runs_before = count_rows(&db, "runs");
+    let manifest_path = d.join("exp/manifest.json");
+    let mut manifest: serde_json::Value =
+        serde_json::from_slice(&read(&manifest_path)).unwrap_or_else(|e| panic!("{e}"));
+    manifest["runs"][0]["created_at"] = serde_json::Value::from("yesterday");
+    write(
+        &manifest_path,
+        serde_json::to_vec_pretty(&manifest).unwrap_or_default(),
+    );
+    fails_with(
+        &softtouch(
+            d,
+            &[
+                "--db", "lab.db", "dataset", "import", "exp", "--name", "again",
+            ],
+        ),
+        2,
+        "field `created_at`: `yesterday` is not a UTC timestamp YYYY-MM-DDTHH:MM:SS[.fff]Z",
+    );
+    assert_eq!(count_rows(&db, "runs"), runs_before);
+    ok(&softtouch(d, &["--db", "lab.db", "runs"]));
+
+    let paper = d.join("paper");
+    std::fs::create_dir(&paper).unwrap_or_else(|e| panic!("{e}"));
+    write_case_images(&paper);
+    let whole = png(7, 64, 48);
+    write(&paper.join("img3.png"), &whole[..whole.len() * 2 / 3]);
+    let mut csv = String::from("image,Fx,Fy,Fz,Tx,Ty,Tz\n");
+    for i in 0..20 {
+        csv.push_str(&format!("img{}.png,1,2,3,4,5,6\n", i % 4));
+    }
+    write(&paper.join("data_frame.csv"), &csv);
+    fails_with(
+        &softtouch(d, &["--db", "lab.db", "dataset", "import", "paper"]),
+        2,
+        "image `img3.png` does not decode",
+    );
+    assert_eq!(count_rows(&db, "runs"), runs_before);
+}

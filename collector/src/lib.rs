@@ -14,6 +14,8 @@
 //!   CSV and plots, shared by the verbs and reports.
 //! - [`configs`]: resolving the rig and scene from files or the embedded defaults.
 //! - [`plot`]: PNG histograms and x–y charts (plotters).
+//! - [`report`]: `softtouch report`, one self-contained HTML page (inline SVG, maud
+//!   templates) of runs, datasets, models and sweeps, read from a read-only database.
 //! - `progress`: the progress bar and the per-epoch training lines.
 //! - [`synthetic`]: synthetic samples and windows (`bench ingest`, tests, examples).
 //! - `testing` (the `testing` feature, on in tests and examples): test fixtures.
@@ -30,6 +32,7 @@ pub mod experiments;
 pub mod models;
 pub mod plot;
 pub(crate) mod progress;
+pub mod report;
 pub mod store;
 pub mod synthetic;
 #[cfg(any(test, feature = "testing"))]

@@ -105,6 +105,15 @@ pub async fn netft_config(
     Ok(c)
 }
 
+/// A sensor's configured latency (validated to `[0, 1]` s with the rig).
+fn latency(latency_s: Option<f64>) -> std::time::Duration {
+    latency_s
+        .filter(|s| s.is_finite() && *s > 0.0)
+        .map_or(std::time::Duration::ZERO, |s| {
+            std::time::Duration::from_secs_f64(s.min(1.0))
+        })
+}
+
 /// A real force/torque sensor (`None` for `sim`).
 pub async fn real_force_sensor(
     d: &ForceSensorDevice,
@@ -117,8 +126,11 @@ pub async fn real_force_sensor(
             rate_hz,
             counts_per_force,
             counts_per_torque,
+            latency_s,
         } => {
-            let c = netft_config(address, *rate_hz, *counts_per_force, *counts_per_torque).await?;
+            let mut c =
+                netft_config(address, *rate_hz, *counts_per_force, *counts_per_torque).await?;
+            c.latency = latency(*latency_s);
             Some(Box::new(
                 crate::netft::NetFtClient::connect(c, clock).await?,
             ))
@@ -128,9 +140,12 @@ pub async fn real_force_sensor(
             baud,
             counts_per_force,
             counts_per_torque,
+            latency_s,
         } => {
             let io = crate::ati_serial::open_port(port, *baud)?;
-            let c = crate::ati_serial::AtiSerialConfig::new(*counts_per_force, *counts_per_torque);
+            let mut c =
+                crate::ati_serial::AtiSerialConfig::new(*counts_per_force, *counts_per_torque);
+            c.latency = latency(*latency_s);
             Some(Box::new(
                 crate::ati_serial::AtiSerial::new(io, c, clock).await?,
             ))

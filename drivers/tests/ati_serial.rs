@@ -106,6 +106,15 @@ async fn streams_from_the_simulated_controller_over_a_pty_pair() {
 
 /// A hand-made controller: answers the configuration commands, then runs `script`.
 async fn scripted(script: &'static [u8], then_silent: bool) -> AtiSerial<DuplexStream> {
+    scripted_with(script, then_silent, config()).await
+}
+
+/// [`scripted`] with a client config of the caller's.
+async fn scripted_with(
+    script: &'static [u8],
+    then_silent: bool,
+    config: AtiSerialConfig,
+) -> AtiSerial<DuplexStream> {
     let (a, mut b) = tokio::io::duplex(4096);
     tokio::spawn(async move {
         let mut buf = [0u8; 64];
@@ -125,9 +134,7 @@ async fn scripted(script: &'static [u8], then_silent: bool) -> AtiSerial<DuplexS
             tokio::time::sleep(Duration::from_secs(3600)).await;
         }
     });
-    AtiSerial::new(a, config(), clock())
-        .await
-        .expect("configure")
+    AtiSerial::new(a, config, clock()).await.expect("configure")
 }
 
 #[tokio::test(start_paused = true)]
@@ -202,4 +209,50 @@ async fn a_controller_that_never_prompts_fails_to_configure_with_a_timeout() {
         .await
         .expect_err("closed");
     assert!(e.is_link(), "{e}");
+}
+
+/// Vendor bytes, not our formatter: a resolved ASCII record as the controller prints it
+/// (error field, then Fx … Tz in counts, right-aligned in comma-separated fields, CR LF),
+/// decoded by our client with the rig's counts per unit.
+#[tokio::test(start_paused = true)]
+async fn a_literal_ascii_record_decodes_through_our_client() {
+    let mut c = scripted(
+        b"   0,   -123,    456,  -7890,     12,    -34,     56\r\n",
+        true,
+    )
+    .await;
+    c.start().await.expect("start");
+    let mut out = Vec::new();
+    while out.is_empty() {
+        c.read(&mut out).await.expect("read");
+    }
+    let r = out[0];
+    assert!(r.status.is_ok());
+    assert_eq!(r.wrench_in_sensor.force_n, [-0.123, 0.456, -7.89]);
+    assert_eq!(
+        r.wrench_in_sensor.torque_nm,
+        [12.0 / CPT, -34.0 / CPT, 56.0 / CPT]
+    );
+    assert_eq!(c.lost_readings(), 0);
+}
+
+/// The rig's latency is taken off every stamp: a record that arrives at 1 s on the
+/// client's clock, from a link with 7 ms of latency, is stamped 0.993 s.
+#[tokio::test(start_paused = true)]
+async fn a_configured_latency_is_subtracted_from_the_stamps() {
+    let mut stamps = Vec::new();
+    for latency_ms in [0, 7] {
+        let mut cfg = config();
+        cfg.latency = Duration::from_millis(latency_ms);
+        let mut c = scripted_with(b"0,1,2,3,4,5,6\r\n", true, cfg).await;
+        c.start().await.expect("start");
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        let mut out = Vec::new();
+        while out.is_empty() {
+            c.read(&mut out).await.expect("read");
+        }
+        stamps.push(out[0].t.0);
+    }
+    assert!(stamps[0] >= 1_000_000_000, "{stamps:?}");
+    assert_eq!(stamps[0] - stamps[1], 7_000_000, "{stamps:?}");
 }

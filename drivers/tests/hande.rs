@@ -233,3 +233,45 @@ async fn the_simulated_hand_e_refuses_registers_outside_its_map() {
     let r = ctx.read_coils(0, 1).await.expect("transport");
     assert_eq!(r, Err(ExceptionCode::IllegalFunction));
 }
+
+/// Vendor bytes, not our encoder: the Hand-E manual's close command (slave 9, function
+/// 16 at 0x03E8: rACT|rGTO, position, speed and force 0xFF) and its echo reply, then
+/// the manual's status example "object detected while closing" (B9 00 00 FF BD 00),
+/// answered to our function-04 read. Every CRC is literal.
+#[tokio::test(start_paused = true)]
+async fn the_manuals_close_command_and_status_reply_match_our_client_byte_for_byte() {
+    const CLOSE_REQUEST: [u8; 15] = [
+        0x09, 0x10, 0x03, 0xE8, 0x00, 0x03, 0x06, 0x09, 0x00, 0x00, 0xFF, 0xFF, 0xFF, 0x42, 0x29,
+    ];
+    const CLOSE_REPLY: [u8; 8] = [0x09, 0x10, 0x03, 0xE8, 0x00, 0x03, 0x01, 0x30];
+    const STATUS_REQUEST: [u8; 8] = [0x09, 0x04, 0x07, 0xD0, 0x00, 0x03, 0xB1, 0xCE];
+    const STATUS_REPLY: [u8; 11] = [
+        0x09, 0x04, 0x06, 0xB9, 0x00, 0x00, 0xFF, 0xBD, 0x00, 0x5C, 0x9A,
+    ];
+    let (a, mut b) = tokio::io::duplex(1024);
+    let peer = tokio::spawn(async move {
+        let mut seen = Vec::new();
+        for (request, reply) in [
+            (&CLOSE_REQUEST[..], &CLOSE_REPLY[..]),
+            (&STATUS_REQUEST[..], &STATUS_REPLY[..]),
+        ] {
+            let mut got = vec![0u8; request.len()];
+            b.read_exact(&mut got).await.expect("request");
+            seen.push(got);
+            b.write_all(reply).await.expect("reply");
+        }
+        seen
+    });
+    let mut g = HandE::new(a, HandEConfig::default(), Arc::new(TokioClock::new()));
+    g.command(CLOSE)
+        .await
+        .expect("the manual's echo is accepted");
+    let s = g.status().await.expect("the manual's status decodes");
+    let seen = peer.await.expect("peer");
+    assert_eq!(seen[0], CLOSE_REQUEST, "close command bytes");
+    assert_eq!(seen[1], STATUS_REQUEST, "status request bytes");
+    assert!(s.activated, "gACT and gSTA = 3");
+    assert_eq!(s.object, ObjectStatus::ContactClosing, "gOBJ = 2");
+    assert_eq!((s.fault, s.requested_position, s.position), (0, 0xFF, 0xBD));
+    assert_eq!(s.current_ma, 0);
+}

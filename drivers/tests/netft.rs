@@ -267,7 +267,10 @@ async fn a_lost_start_command_is_sent_again() {
         peer
     });
     c.start().await.expect("start after retries");
-    assert_eq!(c.stats().start_commands, 4);
+    // At least the three lost ones and the answered one. On a loaded machine the peer
+    // may answer after the 50 ms reply timeout, so the client may have sent more.
+    let sent = c.stats().start_commands;
+    assert!((4..=10).contains(&sent), "{sent} start commands");
     let mut out = Vec::new();
     assert_eq!(
         c.read(&mut out).await.expect("read"),
@@ -289,7 +292,12 @@ async fn a_sensor_that_never_answers_times_out_clearly() {
     assert!(matches!(e, DeviceError::Timeout { .. }), "{e}");
     assert!(e.is_link() && !e.is_fault());
     assert_eq!(c.stats().start_commands, 3);
-    assert!(t0.elapsed() < Duration::from_secs(2));
+    // It waited out every attempt, and gave up: bounds that hold on a loaded machine.
+    let waited = t0.elapsed();
+    assert!(
+        waited >= Duration::from_millis(60) && waited < Duration::from_secs(30),
+        "{waited:?}"
+    );
 }
 
 #[tokio::test]
@@ -371,11 +379,15 @@ async fn status_words_are_decoded_as_warning_or_fault_and_still_delivered() {
     assert_eq!(c.latched_status(), FtStatus::OK);
 }
 
+/// Malformed datagrams among good ones are counted and skipped: the good readings of
+/// the same read are kept. A read that gets nothing but malformed datagrams until its
+/// timeout reports the protocol error.
 #[tokio::test]
-async fn truncated_oversized_partial_and_random_datagrams_are_protocol_errors() {
+async fn malformed_datagrams_are_counted_and_skipped_keeping_the_good_readings() {
     let (peer, mut c) = peer_and_client(200, 1).await;
     let fake = tokio::spawn(async move {
         let to = accept_start(&peer, 1).await;
+        peer.send_to(&rec(2, 0), to).await.expect("valid");
         peer.send_to(&[0u8; 10], to).await.expect("truncated");
         peer.send_to(
             &vec![0u8; codec::RECORD_LEN * (codec::MAX_RECORDS_PER_DATAGRAM + 1)],
@@ -387,26 +399,30 @@ async fn truncated_oversized_partial_and_random_datagrams_are_protocol_errors() 
         peer.send_to(b"GET / HTTP/1.0\r\n\r\n", to)
             .await
             .expect("random");
-        peer.send_to(&rec(2, 0), to).await.expect("valid");
-        peer
+        peer.send_to(&rec(3, 0), to).await.expect("valid");
+        (peer, to)
     });
     c.start().await.expect("start");
-    let _peer = fake.await.expect("peer");
+    let (peer, to) = fake.await.expect("peer");
+    // Loopback datagrams are queued when `send_to` returns; wait for the last anyway.
     let mut out = Vec::new();
-    let mut errors = 0;
-    while out.len() < 2 {
-        match c.read(&mut out).await {
-            Ok(_) => {}
-            Err(DeviceError::Protocol { .. }) => errors += 1,
-            Err(e) => panic!("unexpected {e}"),
-        }
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(5);
+    while out.len() < 3 && tokio::time::Instant::now() < deadline {
+        c.read(&mut out)
+            .await
+            .expect("no error: bad datagrams are skipped");
     }
-    assert_eq!(errors, 4);
+    let seqs: Vec<u32> = out.iter().map(|r| r.rdt_sequence).collect();
+    assert_eq!(seqs, [1, 2, 3]);
     assert_eq!(c.stats().bad_datagrams, 4);
-    assert_eq!(
-        out[1].rdt_sequence, 2,
-        "the stream goes on after bad datagrams"
-    );
+    assert_eq!(c.stats().lost, 0);
+
+    // Only garbage, then silence: the read fails with the protocol error, counted.
+    peer.send_to(&[1u8; 5], to).await.expect("garbage");
+    let e = c.read(&mut out).await.expect_err("nothing valid came");
+    assert!(matches!(e, DeviceError::Protocol { .. }), "{e}");
+    assert_eq!(c.stats().bad_datagrams, 5);
+    assert_eq!(out.len(), 3);
 }
 
 async fn fake_tcp(reply: Vec<u8>, answer: bool) -> SocketAddr {
@@ -508,4 +524,49 @@ async fn the_server_ignores_garbage_requests_and_serves_a_sample_count() {
     let _ = srv.stop.send(());
     let stats = srv.task.await.expect("join").expect("server");
     assert_eq!((stats.bad_requests, stats.commands), (2, 1));
+}
+
+/// Vendor bytes, not our encoder (network byte order, per ATI's Net F/T manual): the
+/// calibration reply of a Nano17 in N and N·mm (header 0x1234, units 2 and 4, CpF 1e6,
+/// CpT 1000 per N·mm, scale 1s), the start request our client must send (header,
+/// command 0x0002, count 0), and one RDT record; decoded by our client.
+#[tokio::test]
+async fn a_literal_calibration_reply_and_rdt_record_decode_through_our_client() {
+    const CALIBRATION_REPLY: [u8; 24] = [
+        0x12, 0x34, 0x02, 0x04, 0x00, 0x0F, 0x42, 0x40, 0x00, 0x00, 0x03, 0xE8, 0x00, 0x01, 0x00,
+        0x01, 0x00, 0x01, 0x00, 0x01, 0x00, 0x01, 0x00, 0x01,
+    ];
+    const START_REQUEST: [u8; 8] = [0x12, 0x34, 0x00, 0x02, 0x00, 0x00, 0x00, 0x00];
+    const RECORD: [u8; 36] = [
+        0x00, 0x00, 0x00, 0x01, // rdt_sequence 1
+        0x00, 0x00, 0x0A, 0x2B, // ft_sequence 2603
+        0x00, 0x00, 0x00, 0x00, // status OK
+        0x00, 0x0F, 0x42, 0x40, // Fx 1 000 000 counts
+        0xFF, 0xF8, 0x5E, 0xE0, // Fy −500 000
+        0x00, 0x26, 0x25, 0xA0, // Fz 2 500 000
+        0x00, 0x00, 0x03, 0xE8, // Tx 1000
+        0xFF, 0xFF, 0xFC, 0x18, // Ty −1000
+        0x00, 0x00, 0x00, 0x00, // Tz 0
+    ];
+    let cal = fake_tcp(CALIBRATION_REPLY.to_vec(), true).await;
+    let peer = UdpSocket::bind(local()).await.expect("peer");
+    let mut cfg = NetFtConfig::new(peer.local_addr().expect("addr"), 1000.0);
+    cfg.scaling = Scaling::CalibrationRequest(cal);
+    cfg.reply_timeout = Duration::from_secs(2);
+    let mut c = NetFtClient::connect(cfg, clock()).await.expect("connect");
+    assert_eq!(c.scaling(), (1e6, 1e6), "counts per N and per N·m");
+    let fake = tokio::spawn(async move {
+        let mut b = [0u8; 64];
+        let (n, from) = peer.recv_from(&mut b).await.expect("start");
+        peer.send_to(&RECORD, from).await.expect("record");
+        b[..n].to_vec()
+    });
+    c.start().await.expect("start");
+    assert_eq!(fake.await.expect("peer"), START_REQUEST);
+    let r = read_at_least(&mut c, 1).await;
+    assert_eq!((r[0].rdt_sequence, r[0].ft_sequence), (1, 2603));
+    assert!(r[0].status.is_ok());
+    let w = r[0].wrench_in_sensor;
+    assert_eq!(w.force_n, [1.0, -0.5, 2.5]);
+    assert_eq!(w.torque_nm, [0.001, -0.001, 0.0]);
 }

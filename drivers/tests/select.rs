@@ -36,6 +36,7 @@ async fn a_net_ft_entry_connects_to_a_server_at_host_port() {
         rate_hz: 1000.0,
         counts_per_force: Some(1e6),
         counts_per_torque: Some(1e6),
+        latency_s: None,
     };
     let mut d = select::build(&rig, &defaults::scene(), 1, TokioClock::new())
         .await

@@ -3,6 +3,7 @@
 
 use crate::config::{Check, Validate};
 use crate::geometry::{ArmPose, ContactPose, Range};
+use crate::scene::Medium;
 use serde::{Deserialize, Serialize};
 
 /// A whole rig.
@@ -65,6 +66,12 @@ pub enum ForceSensorDevice {
         /// Counts per N·m; read from the sensor when absent.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         counts_per_torque: Option<f64>,
+        /// Fixed delay from a reading's sample instant to the host receiving it, s
+        /// (network/serial transfer and the box's filtering; measure it once, e.g. by
+        /// tapping the finger in view of the camera). Subtracted from every reading's
+        /// stamp, so readings and frames share one time base. Absent: 0.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        latency_s: Option<f64>,
     },
     /// ATI serial F/T controller (ASCII protocol).
     AtiSerial {
@@ -76,6 +83,12 @@ pub enum ForceSensorDevice {
         counts_per_force: f64,
         /// Counts per N·m.
         counts_per_torque: f64,
+        /// Fixed delay from a reading's sample instant to the host receiving it, s
+        /// (network/serial transfer and the box's filtering; measure it once, e.g. by
+        /// tapping the finger in view of the camera). Subtracted from every reading's
+        /// stamp, so readings and frames share one time base. Absent: 0.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        latency_s: Option<f64>,
     },
 }
 
@@ -186,6 +199,86 @@ pub struct Procedure {
     pub max_attempts: u32,
     /// Consecutive failed samples that trigger a safe stop.
     pub max_consecutive_failures: u32,
+    /// The approach guard stops the arm when no force/torque reading arrives for this
+    /// long, s (the stream is stale). Absent: [`DEFAULT_FT_STALE_S`].
+    #[serde(default = "default_ft_stale_s")]
+    pub ft_stale_s: f64,
+    /// When the force/torque sensor is zeroed at home: `none`, `per-run` or
+    /// `per-sample`. Absent: what suits the scene's medium ([`Tare::for_medium`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tare: Option<Tare>,
+}
+
+/// When the force/torque sensor is zeroed (tared, "biased"): always at home, clear of
+/// the rod, so that the labels carry no offset (buoyancy, pressure, mounting) and no
+/// zero drift accumulated since the last tare.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Tare {
+    /// Never: labels keep the sensor's offset and drift.
+    None,
+    /// Once, at home before the first sample of a run (or of a resumed run).
+    PerRun,
+    /// At home before every attempt at a sample: removes drift as it accumulates.
+    PerSample,
+}
+
+impl Tare {
+    /// The default for a medium: underwater the zero drifts and the buoyancy/pressure
+    /// offset changes with depth, so every sample is tared; in air once per run.
+    #[must_use]
+    pub const fn for_medium(medium: Medium) -> Self {
+        match medium {
+            Medium::Air => Self::PerRun,
+            Medium::Water => Self::PerSample,
+        }
+    }
+
+    /// Name as in the config.
+    #[must_use]
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::PerRun => "per-run",
+            Self::PerSample => "per-sample",
+        }
+    }
+}
+
+impl Procedure {
+    /// The tare policy of a run in `medium`: the configured one, else the medium's default.
+    #[must_use]
+    pub fn tare_for(&self, medium: Medium) -> Tare {
+        self.tare.unwrap_or(Tare::for_medium(medium))
+    }
+}
+
+/// Seconds of readings the collector's force/torque ring holds (at the sensor's rate).
+/// A label window must fit in half of it, leaving the rest for the wait for a frame.
+pub const FT_BUFFER_S: f64 = 4.0;
+
+/// Longest duration a config may give, s (one day). Far beyond any sensible wait, and
+/// far below what overflows a `std::time::Duration` or a nanosecond timestamp.
+pub const MAX_DURATION_S: f64 = 86_400.0;
+
+impl ForceSensorDevice {
+    /// Readings per second: the configured rate, or for an ATI serial box (which does
+    /// not report its rate) the most it streams, 7000.
+    #[must_use]
+    pub fn rate_hz(&self) -> f64 {
+        match self {
+            Self::Sim { rate_hz } | Self::NetFt { rate_hz, .. } => *rate_hz,
+            Self::AtiSerial { .. } => 7000.0,
+        }
+    }
+}
+
+/// Default of [`Procedure::ft_stale_s`], s: 100 readings at 1 kHz, five times the
+/// longest packet of the simulated sensor (20 ms) and of a Net F/T's RDT burst.
+pub const DEFAULT_FT_STALE_S: f64 = 0.1;
+
+const fn default_ft_stale_s() -> f64 {
+    DEFAULT_FT_STALE_S
 }
 
 /// The Franka's translational velocity limit (FCI), m/s.
@@ -214,7 +307,9 @@ impl Validate for RigConfig {
                 rate_hz,
                 counts_per_force,
                 counts_per_torque,
+                latency_s,
             } => {
+                latency(c, *latency_s);
                 non_empty(c, "force_sensor.address", address);
                 c.within("force_sensor.rate_hz", *rate_hz, 1.0, 7000.0, "Hz");
                 if let Some(v) = counts_per_force {
@@ -229,7 +324,9 @@ impl Validate for RigConfig {
                 baud,
                 counts_per_force,
                 counts_per_torque,
+                latency_s,
             } => {
+                latency(c, *latency_s);
                 non_empty(c, "force_sensor.port", port);
                 if *baud == 0 {
                     c.fail(
@@ -347,21 +444,62 @@ impl Validate for RigConfig {
             FRANKA_MAX_SPEED_M_S,
             "m/s",
         );
-        c.non_negative("procedure.settle_s", p.settle_s, "s");
-        c.within("procedure.ft_window_s", p.ft_window_s, 1e-4, 10.0, "s");
+        c.within("procedure.settle_s", p.settle_s, 0.0, MAX_DURATION_S, "s");
+        c.within(
+            "procedure.ft_window_s",
+            p.ft_window_s,
+            1e-4,
+            FT_BUFFER_S / 2.0,
+            "s (half the force/torque buffer)",
+        );
         c.positive("procedure.frame_timeout_s", p.frame_timeout_s, "s");
+        if p.frame_timeout_s > MAX_DURATION_S {
+            c.fail(
+                "procedure.frame_timeout_s",
+                format!(
+                    "expected at most {MAX_DURATION_S} s, found {}",
+                    p.frame_timeout_s
+                ),
+            );
+        }
         if p.min_window_readings == 0 {
             c.fail(
                 "procedure.min_window_readings",
                 "expected at least 1 reading",
             );
         }
+        // A window of length w on a grid of period 1/rate holds at most rate·w + 1
+        // readings: more can never be met, and every sample would be rejected.
+        let rate_hz = self.force_sensor.rate_hz();
+        if rate_hz.is_finite() && p.ft_window_s.is_finite() && rate_hz > 0.0 {
+            let most = (rate_hz * p.ft_window_s).floor() + 1.0;
+            if f64::from(p.min_window_readings) > most {
+                c.fail(
+                    "procedure.min_window_readings",
+                    format!(
+                        "expected at most {most} readings (force_sensor rate {rate_hz} Hz × procedure.ft_window_s {} s, + 1), found {}",
+                        p.ft_window_s, p.min_window_readings
+                    ),
+                );
+            }
+        }
+        c.within("procedure.ft_stale_s", p.ft_stale_s, 1e-3, 10.0, "s");
         if p.max_attempts == 0 {
             c.fail("procedure.max_attempts", "expected at least 1 attempt");
         }
         if p.max_consecutive_failures == 0 {
             c.fail("procedure.max_consecutive_failures", "expected at least 1");
         }
+    }
+}
+
+/// The most a sensor's configured latency may be, s: far beyond any real link, and a
+/// bound that keeps stamps from being moved by seconds through a typo.
+pub const MAX_SENSOR_LATENCY_S: f64 = 1.0;
+
+fn latency(c: &mut Check, v: Option<f64>) {
+    if let Some(v) = v {
+        c.within("force_sensor.latency_s", v, 0.0, MAX_SENSOR_LATENCY_S, "s");
     }
 }
 

@@ -79,6 +79,11 @@ pub enum RejectReason {
     ArmFault,
     /// The approach was aborted: contact force or torque over the rig's limit.
     ForceLimit,
+    /// The force/torque stream stalled: no reading came in time to fill the window,
+    /// or the approach guard saw none within `procedure.ft_stale_s`.
+    StreamStalled,
+    /// A reading held NaN or infinity: never a label, never stored as one.
+    NonFinite,
 }
 
 impl RejectReason {
@@ -93,6 +98,8 @@ impl RejectReason {
             Self::FrameTimeout => "frame_timeout",
             Self::ArmFault => "arm_fault",
             Self::ForceLimit => "force_limit",
+            Self::StreamStalled => "stream_stalled",
+            Self::NonFinite => "non_finite",
         }
     }
 }
@@ -114,6 +121,8 @@ impl FromStr for RejectReason {
             Self::FrameTimeout,
             Self::ArmFault,
             Self::ForceLimit,
+            Self::StreamStalled,
+            Self::NonFinite,
         ]
         .into_iter()
         .find(|r| r.as_str() == s)

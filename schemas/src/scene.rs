@@ -25,6 +25,39 @@ pub struct SceneSpec {
     /// Effects to simulate, with their parameters. Empty: an ideal scene.
     #[serde(default)]
     pub effects: Vec<Effect>,
+    /// Objects for grasp trials (`[[objects]]`); optional, and left out of printed
+    /// scenes without any so existing scenes print as before.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub objects: Vec<ObjectSpec>,
+}
+
+/// An object the gripper's soft fingers grasp. The face that meets each finger is read
+/// as a rod press (same contact model, lattice and renderer as the rods).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObjectSpec {
+    /// Name, unique among the objects.
+    pub name: String,
+    /// Cross-section of the face that meets the finger.
+    pub shape: RodShape,
+    /// Extent of that face along the finger, m (a cylinder's diameter).
+    pub size_m: f64,
+    /// Depth over extent of the face (ovals; 1 for the others).
+    #[serde(default = "one")]
+    pub aspect: f64,
+    /// Width across the fingers at the grasp height, m (below the 50 mm stroke).
+    pub width_m: f64,
+    /// Where along the finger the object sits: the contact pose's z, m, in
+    /// [−0.05, 0.05] (0: mid-finger).
+    #[serde(default)]
+    pub contact_z_m: f64,
+    /// Mass, kg.
+    pub mass_kg: f64,
+    /// Friction coefficient against the finger's skin.
+    pub friction: f64,
+    /// Squeeze on one finger that crushes it, N; absent for a rigid object.
+    #[serde(default)]
+    pub crush_force_n: Option<f64>,
 }
 
 /// What surrounds the finger.
@@ -334,6 +367,12 @@ impl SceneSpec {
         self.rods.iter().find(|r| r.name == name)
     }
 
+    /// The grasp object with this name.
+    #[must_use]
+    pub fn object(&self, name: &str) -> Option<&ObjectSpec> {
+        self.objects.iter().find(|o| o.name == name)
+    }
+
     /// Checks that need the rig too: the pose ranges must lie inside its workspace.
     pub fn validate_against(&self, rig: &RigConfig, c: &mut Check) {
         let w = &rig.workspace;
@@ -390,6 +429,32 @@ impl Validate for SceneSpec {
                     format!("rods[{i}].aspect"),
                     "only an oval rod takes an aspect other than 1",
                 );
+            }
+        }
+        let mut object_names = HashSet::new();
+        for (i, o) in self.objects.iter().enumerate() {
+            let f = |name: &str| format!("objects[{i}].{name}");
+            if o.name.trim().is_empty() {
+                c.fail(f("name"), "expected a non-empty name");
+            }
+            if !object_names.insert(o.name.as_str()) {
+                c.fail(f("name"), format!("object name `{}` is used twice", o.name));
+            }
+            c.within(&f("size_m"), o.size_m, 1e-3, 0.05, "m");
+            c.within(&f("aspect"), o.aspect, 0.2, 5.0, "");
+            if o.shape != RodShape::Oval && (o.aspect - 1.0).abs() > f64::EPSILON {
+                c.fail(
+                    f("aspect"),
+                    "only an oval face takes an aspect other than 1",
+                );
+            }
+            // The Hand-E opens 50 mm.
+            c.within(&f("width_m"), o.width_m, 1e-3, 0.049, "m");
+            c.within(&f("contact_z_m"), o.contact_z_m, -0.05, 0.05, "m");
+            c.within(&f("mass_kg"), o.mass_kg, 1e-4, 10.0, "kg");
+            c.within(&f("friction"), o.friction, 0.01, 2.0, "");
+            if let Some(crush) = o.crush_force_n {
+                c.positive(&f("crush_force_n"), crush, "N");
             }
         }
         let mut kinds = HashSet::new();

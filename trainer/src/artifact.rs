@@ -31,7 +31,9 @@ pub struct TrainingSummary {
     pub epochs_run: usize,
     pub best_epoch: usize,
     pub stopped_early: bool,
+    #[serde(deserialize_with = "crate::metrics::null_as_nan::deserialize")]
     pub seconds: f64,
+    #[serde(deserialize_with = "crate::metrics::null_as_nan::deserialize")]
     pub train_images_per_s: f64,
     pub val: Metrics,
     pub test: Metrics,
@@ -170,4 +172,58 @@ pub(crate) fn decode_weights(
         .init(device)
         .try_load_record(record)
         .map_err(|e| format!("the weights do not fit the config: {e}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::ModelConfig;
+
+    /// serde_json writes NaN and infinity as `null`; a model whose metrics were not
+    /// finite (a diverged run, an infinite prediction) still loads, with NaN there.
+    #[test]
+    fn a_model_with_non_finite_metrics_still_loads() {
+        let mut artifact = ModelArtifact::untrained(&ModelConfig::default(), 1).expect("model");
+        let t = [[0.0f32; 6], [1.0; 6]];
+        let p = [[f32::INFINITY; 6], [f32::NAN; 6]];
+        let mut test = Metrics::compute(Some(&p), &t, Some(f64::NAN));
+        if let Some(r2) = test.r2.as_mut() {
+            r2[0].r2 = f64::NAN;
+        }
+        test.r2_mean = Some(f64::NEG_INFINITY);
+        assert!(test.rmse.is_some_and(|r| r.iter().any(|v| !v.is_finite())));
+        assert!(
+            test.force_error_by_range
+                .iter()
+                .any(|b| !b.error_std.is_finite())
+        );
+        artifact.header.training = Some(TrainingSummary {
+            train: TrainConfig::default(),
+            train_samples: 2,
+            val_samples: 2,
+            test_samples: 2,
+            epochs_run: 1,
+            best_epoch: 1,
+            stopped_early: false,
+            seconds: f64::INFINITY,
+            train_images_per_s: f64::NAN,
+            val: test.clone(),
+            test,
+        });
+        let bytes = artifact.to_bytes().expect("encode");
+        let (header, _) = ModelArtifact::header_from_bytes(&bytes).expect("loads");
+        let summary = header.training.expect("summary");
+        assert!(summary.seconds.is_nan() && summary.train_images_per_s.is_nan());
+        let r2 = summary.test.r2.expect("r2");
+        assert!(r2[0].r2.is_nan());
+        assert!(
+            summary
+                .test
+                .rmse
+                .is_some_and(|r| r.iter().all(|v| v.is_nan()))
+        );
+        assert_eq!(summary.test.r2_mean, None, "null reads back as absent");
+        let device = crate::backend::device().expect("device");
+        ModelArtifact::from_bytes(&bytes, &device).expect("weights load too");
+    }
 }

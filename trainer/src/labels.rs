@@ -39,6 +39,27 @@ pub fn label_from_si(force_n: [f64; 3], torque_nm: [f64; 3]) -> WrenchLabel {
     ]
 }
 
+/// An axis whose spread is at most this, in its label unit (N or N·mm), is constant:
+/// far below the sensor's resolution (0.0125 N, 0.0625 N·mm).
+pub const CONSTANT_AXIS_ABS: f64 = 1e-6;
+/// ... or at most this fraction of its mean's magnitude: labels are `f32`, whose
+/// rounding alone spreads a constant value by up to 6e-8 of it.
+pub const CONSTANT_AXIS_REL: f64 = 1e-6;
+
+/// The one rule for a constant axis, used by the label standardisation and by R²: its
+/// standard deviation `std` (or root-mean-square error, for "a perfect prediction")
+/// is at most `max(CONSTANT_AXIS_ABS, CONSTANT_AXIS_REL · |mean|)`. Not finite: not
+/// constant.
+#[must_use]
+pub fn is_constant_axis(std: f64, mean: f64) -> bool {
+    let bound = if mean.is_finite() {
+        CONSTANT_AXIS_ABS.max(CONSTANT_AXIS_REL * mean.abs())
+    } else {
+        CONSTANT_AXIS_ABS
+    };
+    std <= bound
+}
+
 /// Per-axis standardisation; stored in every model artifact.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -75,9 +96,12 @@ impl LabelNorm {
                 / n;
             mean[axis] = m as f32;
             let s = var.sqrt();
-            // Below the sensor's resolution (0.0125 N / 0.0625 N·mm) an axis is
-            // constant for all purposes; dividing by its noise would blow it up.
-            std[axis] = if s > 1e-6 { s as f32 } else { 1.0 };
+            // A constant axis: dividing by its float noise would blow it up.
+            std[axis] = if is_constant_axis(s, m) {
+                1.0
+            } else {
+                s as f32
+            };
         }
         Ok(Self { mean, std })
     }

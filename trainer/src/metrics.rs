@@ -5,13 +5,39 @@
 //! R² is `1 − SS_res / SS_tot` with `SS_tot` taken about the **target's** mean. The
 //! reference code passes (label, prediction) to torchmetrics' `r2score(preds, target)`,
 //! which computes SS_tot about the prediction's mean instead; we do not copy that.
-//! When a target axis is constant (SS_tot = 0) R² is undefined; we follow
-//! scikit-learn and report 1 for a perfect prediction and 0 otherwise, so the value
-//! stays finite, and flag the axis as constant.
+//! When a target axis is constant R² is undefined; we follow scikit-learn and report
+//! 1 for a perfect prediction and 0 otherwise, so the value stays finite, and flag
+//! the axis as constant. "Constant" and "perfect" follow the one rule the label
+//! standardisation uses too, [`is_constant_axis`]: the target's standard deviation
+//! (resp. the root-mean-square error) is at most `max(1e-6, 1e-6 · |mean|)`.
+//!
+//! JSON has no NaN or infinity (serde_json writes them as `null`): every float of the
+//! metrics reads `null` back as NaN, so a non-finite metric never makes a stored model
+//! unloadable.
 
 use serde::{Deserialize, Serialize};
 
-use crate::labels::{AXES, WrenchLabel};
+use crate::labels::{AXES, WrenchLabel, is_constant_axis};
+
+/// Reads `null` (how serde_json writes NaN and infinity) back as NaN.
+pub(crate) mod null_as_nan {
+    use serde::{Deserialize, Deserializer};
+
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+    }
+}
+
+/// [`null_as_nan`] for an optional array of six.
+pub(crate) mod null_as_nan_6 {
+    use serde::{Deserialize, Deserializer};
+
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Option<[f64; 6]>, D::Error> {
+        Ok(Option::<[Option<f64>; 6]>::deserialize(d)?.map(|a| a.map(|v| v.unwrap_or(f64::NAN))))
+    }
+}
 
 /// Upper edges of the force ranges, N (the paper's table; values ≥ 10 N land in an
 /// overflow bin).
@@ -22,6 +48,7 @@ pub const TORQUE_BIN_EDGES_NMM: [f64; 5] = [120.0, 240.0, 360.0, 480.0, 600.0];
 /// R² of one axis.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct AxisR2 {
+    #[serde(deserialize_with = "null_as_nan::deserialize")]
     pub r2: f64,
     /// The target was constant on this set: R² is the scikit-learn convention.
     pub constant_target: bool,
@@ -45,11 +72,10 @@ pub fn r2_per_axis(predictions: &[WrenchLabel], targets: &[WrenchLabel]) -> [Axi
             ss_res += (t - p).powi(2);
             ss_tot += (t - mean).powi(2);
         }
-        // Relative to the values' own scale, so a float-noise spread counts as constant.
-        let scale = mean.abs().max(1e-12);
-        if ss_tot <= (scale * 1e-9).powi(2) * n as f64 {
+        let n = n as f64;
+        if is_constant_axis((ss_tot / n).sqrt(), mean) {
             AxisR2 {
-                r2: if ss_res <= (scale * 1e-6).powi(2) * n as f64 {
+                r2: if is_constant_axis((ss_res / n).sqrt(), mean) {
                     1.0
                 } else {
                     0.0
@@ -75,12 +101,15 @@ pub fn r2_per_axis(predictions: &[WrenchLabel], targets: &[WrenchLabel]) -> [Axi
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct RangeError {
     /// Range [lower, upper) of |target|; no `upper` for the overflow bin.
+    #[serde(deserialize_with = "null_as_nan::deserialize")]
     pub lower: f64,
     pub upper: Option<f64>,
     /// Labels in the range (pooled over the three axes).
     pub count: usize,
     /// Standard deviation of prediction − target; 0 for fewer than two values.
+    #[serde(deserialize_with = "null_as_nan::deserialize")]
     pub error_std: f64,
+    #[serde(deserialize_with = "null_as_nan::deserialize")]
     pub error_mean: f64,
 }
 
@@ -145,6 +174,7 @@ pub struct Metrics {
     pub force_error_by_range: Vec<RangeError>,
     pub torque_error_by_range: Vec<RangeError>,
     /// Root-mean-square error per axis, in the axis' unit.
+    #[serde(default, deserialize_with = "null_as_nan_6::deserialize")]
     pub rmse: Option<[f64; 6]>,
 }
 

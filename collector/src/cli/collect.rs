@@ -2,8 +2,8 @@
 
 use super::{Failure, io_failure, open_existing};
 use crate::collect::{
-    CollectPlan, Counters, NewRunRequest, Outcome, PlanError, Progress, Resumed, build_devices,
-    collect,
+    CollectPlan, Counters, NewRunRequest, Outcome, PlanError, Progress, Resumed, abandon,
+    build_devices, collect,
 };
 use crate::store::SyncStore;
 use anyhow::anyhow;
@@ -20,8 +20,10 @@ use std::time::Instant;
   softtouch collect --rig lab-rig.toml --scene rods.toml --rods circle-10 --samples 5000
   softtouch collect --resume 3                      # continue run 3 where it stopped
 
-Ctrl-C finishes the current sample, retreats and exits 0 (resume later with --resume);
-a second Ctrl-C stops at once. A log is written beside the database (DB.log).")]
+Ctrl-C, SIGTERM or SIGHUP finishes the current sample, retreats and exits 0 (resume later
+with --resume); a second one stops the arm at once, wherever it is. A run being collected
+is leased to its process: a second `collect --resume` of it is refused while that process
+lives. A log is written beside the database (DB.log).")]
 pub struct CollectArgs {
     /// Rig config (default: the embedded all-simulated rig).
     #[arg(long, conflicts_with = "resume")]
@@ -103,15 +105,56 @@ fn plan_failure(e: PlanError) -> Failure {
     }
 }
 
-/// Count Ctrl-C presses into `stop` (1: finish the sample, 2: stop at once).
-async fn count_ctrl_c(stop: tokio::sync::watch::Sender<u32>) {
-    let mut presses = 0;
-    while tokio::signal::ctrl_c().await.is_ok() {
-        presses += 1;
-        if presses == 1 {
-            eprintln!("\nstopping after this sample (Ctrl-C again to stop at once)");
+/// Count stop requests into `stop` (1: finish the sample, 2: stop at once): Ctrl-C
+/// (SIGINT), and on Unix SIGTERM and SIGHUP alike (a service manager, a closed
+/// terminal). Ends if no handler can be installed.
+async fn count_stop_signals(stop: tokio::sync::watch::Sender<u32>) {
+    #[cfg(unix)]
+    let (mut term, mut hup) = {
+        use tokio::signal::unix::{SignalKind, signal};
+        match (
+            signal(SignalKind::terminate()),
+            signal(SignalKind::hangup()),
+        ) {
+            (Ok(t), Ok(h)) => (t, h),
+            (Err(e), _) | (_, Err(e)) => {
+                eprintln!("warning: cannot watch SIGTERM/SIGHUP ({e}); only Ctrl-C stops the run");
+                return ctrl_c_only(stop).await;
+            }
         }
-        if stop.send(presses).is_err() {
+    };
+    let mut requests = 0;
+    loop {
+        #[cfg(unix)]
+        let name = tokio::select! {
+            r = tokio::signal::ctrl_c() => match r { Ok(()) => "Ctrl-C", Err(_) => break },
+            Some(()) = term.recv() => "SIGTERM",
+            Some(()) = hup.recv() => "SIGHUP",
+            else => break,
+        };
+        #[cfg(not(unix))]
+        let name = match tokio::signal::ctrl_c().await {
+            Ok(()) => "Ctrl-C",
+            Err(_) => break,
+        };
+        requests += 1;
+        if requests == 1 {
+            eprintln!("\n{name}: stopping after this sample (again to stop the arm at once)");
+        } else {
+            eprintln!("\n{name}: stopping the arm now");
+        }
+        if stop.send(requests).is_err() {
+            break;
+        }
+    }
+}
+
+#[cfg(unix)]
+async fn ctrl_c_only(stop: tokio::sync::watch::Sender<u32>) {
+    let mut requests = 0;
+    while tokio::signal::ctrl_c().await.is_ok() {
+        requests += 1;
+        if stop.send(requests).is_err() {
             break;
         }
     }
@@ -161,10 +204,18 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
         CollectPlan::new_run(&store, &request).map_err(plan_failure)?
     };
 
-    let (devices, clock) = build_devices(&plan.rig, &plan.scene, plan.seed)
-        .await
-        .map_err(|e| Failure::Runtime(anyhow!("cannot set up the rig: {e}")))?;
     let run_id = plan.run_id;
+    let (devices, clock) = match build_devices(&plan.rig, &plan.scene, plan.seed).await {
+        Ok(built) => built,
+        Err(e) => {
+            // No empty `running` run is left behind: the run says why it never started.
+            let reason = abandon(&store, &plan, &format!("cannot set up the rig: {e}"));
+            store.close();
+            return Err(Failure::Runtime(anyhow!("{reason}").context(format!(
+                "run {run_id}: failed before collecting (fix the cause, then --resume {run_id})"
+            ))));
+        }
+    };
     writeln!(
         out,
         "run {run_id}: samples {}..{} of scene `{}` ({}), seed {}",
@@ -173,19 +224,20 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
     .map_err(io_failure)?;
 
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
-    let signals = tokio::spawn(count_ctrl_c(stop_tx));
+    let signals = tokio::spawn(count_stop_signals(stop_tx));
     let mut progress = progress_reporter(plan.remaining());
     let started = Instant::now();
-    let result = collect(&store, &plan, devices, clock, stop_rx, progress.as_mut()).await;
+    let (outcome, counters) =
+        collect(&store, &plan, devices, clock, stop_rx, progress.as_mut()).await;
     signals.abort();
     drop(progress);
     store.close();
-    let (outcome, counters) = result.map_err(|e| Failure::Runtime(e.into()))?;
     let wall = started.elapsed().as_secs_f64();
     let summary = format!(
-        "run {run_id}: {} ok, {} rejected, {} retries, {} arm faults, {} frame timeouts in {wall:.1} s wall, {:.1} s on the rig's clock",
+        "run {run_id}: {} ok, {} rejected, {} already present, {} retries, {} arm faults, {} frame timeouts in {wall:.1} s wall, {:.1} s on the rig's clock",
         counters.ok,
         counters.rejected,
+        counters.already_present,
         counters.retries,
         counters.arm_faults,
         counters.frame_timeouts,

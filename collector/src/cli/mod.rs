@@ -9,6 +9,8 @@ pub mod config;
 pub mod dataset;
 pub mod db;
 pub mod eval;
+pub mod grasp;
+pub mod report;
 pub mod runs;
 pub mod sim;
 pub mod sweep;
@@ -78,6 +80,10 @@ pub enum Command {
     /// Look at the simulated scene.
     #[command(subcommand)]
     Sim(sim::SimCommand),
+    /// Force-controlled grasping with the learned touch (Algorithm 1) on the simulated
+    /// soft-finger Hand-E.
+    #[command(subcommand)]
+    Grasp(grasp::GraspCommand),
     /// Measure: what accuracy costs in time, where the time goes, store ingest.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -101,6 +107,13 @@ Interrupted? Run the same command again: it resumes from the last epoch's checkp
     /// Sweep a setting and train once per value: α (the paper's Table 1) or latent size.
     #[command(subcommand)]
     Sweep(sweep::SweepCommand),
+    /// Write one self-contained HTML page of the database: runs, datasets, models,
+    /// sweeps (read-only).
+    #[command(after_help = "Examples:
+  softtouch report --out report.html
+  softtouch report --out run3.html --runs 3 --models land-v1-svae
+  softtouch report --out report.html --sweep sweep-out/sweep-alpha.csv --bench-collection bench-out/collection-sweep.csv")]
+    Report(report::ReportArgs),
 }
 
 /// A failed command, with its class for the exit code.
@@ -185,11 +198,13 @@ pub async fn run(cli: Cli, out: &mut dyn std::io::Write) -> Result<(), Failure> 
         Command::Collect(args) => collect::run_collect(args, &cli.db, out).await,
         Command::Status { run } => collect::run_status(&cli.db, run, out).await,
         Command::Sim(cmd) => sim::run(cmd, out).await,
+        Command::Grasp(cmd) => grasp::run(cmd, &cli.db, out).await,
         Command::Bench(cmd) => bench::run(cmd, &cli.db, out).await,
         Command::Train(args) => train::run_train(args, &cli.db, out).await,
         Command::Eval(args) => eval::run_eval(args, &cli.db, out).await,
         Command::Models => eval::run_models(&cli.db, out).await,
         Command::Sweep(cmd) => sweep::run_sweep(cmd, &cli.db, out).await,
+        Command::Report(args) => report::run_report(args, &cli.db, out).await,
     }
 }
 

@@ -17,8 +17,9 @@
 //! Everything that goes wrong is an event in the store, a stop the arm refused included.
 //!
 //! # Layout
-//! - this module: the job loop (rods, samples in order, failures in a row) and the
-//!   safe stop at its end (stop, retreat, stream counts, the run's final status);
+//! - this module: the job loop (rods, samples in order, failures in a row);
+//! - `finish`: the safe stop at its end, whatever ended it (stop, retreat, stream
+//!   counts, completeness, the run's final status, the lease) and the retreat home;
 //! - `procedure`: one sample's state machine, its retries, and storing it;
 //! - [`plan`]: what to collect, for a new run or the rest of a stored one;
 //! - [`devices`]: the devices of a collection, built from the rig config;
@@ -29,6 +30,7 @@
 
 pub mod bench;
 pub mod devices;
+mod finish;
 pub mod plan;
 mod procedure;
 pub mod rods;
@@ -43,9 +45,11 @@ use procedure::SampleEnd;
 use rods::RodChanger;
 use sampler::PoseSampler;
 use softtouch_drivers::{Arm, Camera, Clock, DeviceError, TokioClock};
+use softtouch_schemas::rig::{FT_BUFFER_S, Tare};
 use softtouch_schemas::{ArmPose, SampleStatus};
 use std::time::Duration;
 use tokio::sync::watch;
+pub use window::GuardTrip;
 use window::{FtStream, WindowRules};
 
 /// How a collection ended.
@@ -144,6 +148,11 @@ struct Job<'a> {
     home: ArmPose,
     counters: Counters,
     stop: StopSignal,
+    /// The sample being taken (or the next one): where a forced stop cut in.
+    next_index: u64,
+    /// A store error met where the job could not stop for it (a retreat goes on
+    /// whatever the store does); the sample loop stops on it.
+    store_failed: Option<StoreError>,
 }
 
 /// Backoff before the `n`th recovery attempt (1-based): 0.5 s doubling, at most 8 s.
@@ -153,7 +162,15 @@ pub fn recovery_backoff(n: u32) -> Duration {
 }
 
 /// Run the collection `plan` on `devices`, storing into `store`. Returns how it ended;
-/// the run's status in the store says the same.
+/// the run's status in the store says the same where the store still accepted it.
+///
+/// Every way out goes through the same end: the arm is stopped and (unless a forced
+/// stop asked otherwise) sent home, the stream stopped, the end recorded (a
+/// `safe_stop` event and status `failed` after any fault, a store error included),
+/// and the run's lease given back. A second stop request (see [`StopSignal`])
+/// interrupts whatever the job awaits (a move, a wait, the operator's prompt) and
+/// stops the arm at once. A run ends `completed` only when the store holds every
+/// planned index.
 pub async fn collect(
     store: &SyncStore,
     plan: &CollectPlan,
@@ -161,15 +178,22 @@ pub async fn collect(
     clock: TokioClock,
     stop: StopSignal,
     progress: &mut dyn Progress,
-) -> Result<(Outcome, Counters), CollectError> {
+) -> (Outcome, Counters) {
     let rate_hz = match &plan.rig.force_sensor {
         softtouch_schemas::ForceSensorDevice::Sim { rate_hz }
         | softtouch_schemas::ForceSensorDevice::NetFt { rate_hz, .. } => *rate_hz,
         softtouch_schemas::ForceSensorDevice::AtiSerial { .. } => 7000.0,
     };
-    // Hold 4 s of readings: far more than any window, bounded whatever happens.
-    let capacity = (rate_hz * 4.0).ceil().max(1024.0) as usize;
-    let ft = FtStream::spawn(devices.force_sensor, capacity).await?;
+    // Hold seconds of readings: the rig check keeps every window within half of it.
+    let capacity = (rate_hz * FT_BUFFER_S).ceil().max(1024.0) as usize;
+    let ft = match FtStream::spawn(devices.force_sensor, capacity).await {
+        Ok(ft) => ft,
+        Err(e) => {
+            let reason = format!("force_sensor: cannot start the stream: {e}");
+            let reason = abandon(store, plan, &reason);
+            return (Outcome::SafeStop { reason }, Counters::default());
+        }
+    };
     let l = &plan.rig.limits;
     let w = &plan.rig.workspace;
     let mut job = Job {
@@ -190,12 +214,79 @@ pub async fn collect(
         },
         home: ArmPose::from_contact(&w.base_from_rod, &w.home),
         counters: Counters::default(),
-        stop,
+        stop: stop.clone(),
+        next_index: plan.indices().next().unwrap_or(plan.end_index),
+        store_failed: None,
     };
-    // A store error ends the job at once: nothing more could be recorded, not even
-    // the safe stop.
-    let (outcome, next_index) = job.run_samples(devices.rods, progress).await?;
-    job.finish(outcome, next_index).await
+    let ended = tokio::select! {
+        ended = job.run_samples(devices.rods, progress) => ended,
+        // Drops the sample loop wherever it waits; `finish` stops the arm first thing.
+        () = forced_stop(stop) => Ok((Outcome::Stopped, job.next_index)),
+    };
+    let outcome = match ended {
+        Ok((outcome, _)) => outcome,
+        Err(CollectError::Store(e)) => Outcome::SafeStop {
+            reason: format!("the store failed: {e}"),
+        },
+        Err(CollectError::Device(e)) => Outcome::SafeStop {
+            reason: format!("a device failed: {e}"),
+        },
+    };
+    job.finish(outcome).await
+}
+
+/// Log an event; a store error is kept in `failed` (the first one) instead of
+/// stopping the caller.
+fn keep_log(
+    events: &RunEvents<'_>,
+    failed: &mut Option<StoreError>,
+    kind: EventKind,
+    level: EventLevel,
+    sample: Option<u64>,
+    message: &str,
+) {
+    if let Err(e) = events.log(kind, level, sample, message) {
+        failed.get_or_insert(e);
+    }
+}
+
+/// Returns once a second stop request has come (never, if the sender is gone first).
+async fn forced_stop(mut stop: StopSignal) {
+    loop {
+        if *stop.borrow_and_update() >= 2 {
+            return;
+        }
+        if stop.changed().await.is_err() {
+            std::future::pending::<()>().await;
+        }
+    }
+}
+
+/// End a run whose devices could not be set up or started: nothing moved and nothing
+/// was collected. Records a `start_failed` event with `reason` (which names the
+/// device), marks the run failed and gives its lease back, so that no empty `running`
+/// run is left. Returns the reason to report (with the store's error, if it failed).
+pub fn abandon(store: &SyncStore, plan: &CollectPlan, reason: &str) -> String {
+    let recorded = store
+        .log_event(
+            plan.run_id,
+            None,
+            None,
+            EventLevel::Error,
+            EventKind::StartFailed.as_str(),
+            reason,
+        )
+        .and_then(|()| store.set_run_status(plan.run_id, RunStatus::Failed))
+        .and_then(|()| {
+            plan.lease
+                .as_ref()
+                .map_or(Ok(()), |l| store.release_lease(plan.run_id, l))
+        })
+        .and_then(|()| store.flush().map(drop));
+    match recorded {
+        Ok(()) => reason.to_owned(),
+        Err(e) => format!("{reason}; and the store could not record it: {e}"),
+    }
 }
 
 impl<'a> Job<'a> {
@@ -211,12 +302,22 @@ impl<'a> Job<'a> {
         let max_failures = plan.rig.procedure.max_consecutive_failures;
         let mut consecutive_failures = 0u32;
         let mut current_rod: Option<&str> = None;
-        let mut index = plan.start_index;
+        let mut indices = plan.indices().peekable();
+        let mut index = indices.peek().copied().unwrap_or(plan.end_index);
         if let Err(e) = self.go_home(None).await {
             let reason = format!("cannot move the arm home before starting: {e}");
             return Ok((Outcome::SafeStop { reason }, index));
         }
-        while index < plan.end_index {
+        if plan.rig.procedure.tare_for(plan.scene.medium) == Tare::PerRun
+            && let Err(e) = self.ft.bias().await
+        {
+            let reason = format!("cannot zero the force/torque sensor at home: {e}");
+            return Ok((Outcome::SafeStop { reason }, index));
+        }
+        self.check_store()?;
+        for i in indices {
+            index = i;
+            self.next_index = i;
             if *self.stop.borrow() > 0 {
                 return Ok((Outcome::Stopped, index));
             }
@@ -242,8 +343,14 @@ impl<'a> Job<'a> {
                 SampleEnd::Interrupted => return Ok((Outcome::Stopped, index)),
                 SampleEnd::Fatal(reason) => return Ok((Outcome::SafeStop { reason }, index)),
             }
+            // A retreat's store error, met where the job would not stop for it.
+            self.check_store()?;
+            // Renewed per sample; refused (and the job stopped) if another process took
+            // the lease over meanwhile.
+            if let Some(lease) = &plan.lease {
+                self.store.heartbeat(plan.run_id, lease)?;
+            }
             progress.sample_done(index, &self.counters);
-            index += 1;
             if consecutive_failures >= max_failures {
                 let reason = format!(
                     "{consecutive_failures} samples in a row failed (limit procedure.max_consecutive_failures = {max_failures})"
@@ -251,112 +358,38 @@ impl<'a> Job<'a> {
                 return Ok((Outcome::SafeStop { reason }, index));
             }
         }
-        Ok((Outcome::Completed, index))
+        Ok((Outcome::Completed, plan.end_index))
     }
 
-    /// Whatever happened: stop the arm, retreat, stop the sensor, record how the run
-    /// ended and flush.
-    async fn finish(
-        mut self,
-        outcome: Outcome,
-        next_index: u64,
-    ) -> Result<(Outcome, Counters), CollectError> {
-        let events = self.events;
-        if let Err(e) = self.arm.stop().await {
-            events.log(
-                EventKind::ArmStopFailed,
-                EventLevel::Error,
-                None,
-                &format!("could not stop the arm at the end: {e}"),
-            )?;
-        }
-        if let Err(e) = self.go_home(None).await {
-            events.log(
-                EventKind::RetreatFailed,
-                EventLevel::Error,
-                None,
-                &format!("could not retreat home at the end: {e}"),
-            )?;
-        }
-        let received = self.ft.received();
-        let ft_errors = self.ft.errors();
-        let ft_result = self.ft.shutdown().await;
-        let lost = ft_result.as_ref().map_or(0, |l| *l);
-        let dropped = self.camera.dropped_frames();
-        events.log(
-            EventKind::StreamCounts,
-            EventLevel::Info,
-            None,
-            &format!(
-                "force/torque: {received} readings received, {lost} lost on the link, {ft_errors} read errors; \
-                 camera: {dropped} frames dropped"
-            ),
-        )?;
-        if let Err(e) = ft_result {
-            events.log(
-                EventKind::SensorStop,
-                EventLevel::Warn,
-                None,
-                &e.to_string(),
-            )?;
-        }
-        let (status, level, kind, message) = match &outcome {
-            Outcome::Completed => (
-                RunStatus::Completed,
-                EventLevel::Info,
-                EventKind::Completed,
-                "all planned samples stored".to_owned(),
-            ),
-            Outcome::Stopped => (
-                RunStatus::Stopped,
-                EventLevel::Info,
-                EventKind::Stopped,
-                format!("stopped by the operator before sample {next_index}"),
-            ),
-            Outcome::SafeStop { reason } => (
-                RunStatus::Failed,
-                EventLevel::Error,
-                EventKind::SafeStop,
-                reason.clone(),
-            ),
-        };
-        events.log(kind, level, None, &message)?;
-        let store = self.store;
-        store.set_run_status(self.plan.run_id, status)?;
-        let written = store.flush()?;
-        let mut counters = self.counters;
-        counters.already_present = written.already_present;
-        Ok((outcome, counters))
+    /// A store error kept by [`Job::log_or_keep`], as an error now.
+    fn check_store(&mut self) -> Result<(), StoreError> {
+        self.store_failed.take().map_or(Ok(()), Err)
     }
 
-    /// Move home, recovering from reflexes on the way (with backoff, logged).
-    async fn go_home(&mut self, index: Option<u64>) -> Result<(), CollectError> {
-        let speed = self.plan.rig.procedure.retreat_speed_m_s;
-        let tries = self.plan.rig.procedure.max_attempts.max(1);
-        let mut n = 0;
-        loop {
-            n += 1;
-            match self.arm.move_to(&self.home, speed).await {
-                Ok(_) => return Ok(()),
-                Err(e) if e.is_fault() && n < tries => {
-                    self.counters.arm_faults += 1;
-                    self.events.log(
-                        EventKind::ArmFault,
-                        EventLevel::Warn,
-                        index,
-                        &format!("retreating: {e}"),
-                    )?;
-                    tokio::time::sleep(recovery_backoff(n)).await;
-                    self.arm.recover().await?;
-                    self.events.log(
-                        EventKind::ArmRecovered,
-                        EventLevel::Info,
-                        index,
-                        "automatic error recovery succeeded",
-                    )?;
-                }
-                Err(e) => return Err(e.into()),
-            }
+    /// Log an event; a store error is kept (the first one) for later instead of
+    /// stopping what the job is doing, for code that must go on (retreat, the end).
+    fn log_or_keep(
+        &mut self,
+        kind: EventKind,
+        level: EventLevel,
+        sample: Option<u64>,
+        message: &str,
+    ) {
+        keep_log(
+            &self.events,
+            &mut self.store_failed,
+            kind,
+            level,
+            sample,
+            message,
+        );
+    }
+
+    /// A store error that came back from an earlier submission, kept as for
+    /// [`Job::log_or_keep`].
+    fn keep_store_failure(&mut self) {
+        if let Some(e) = self.store.take_failure() {
+            self.store_failed.get_or_insert(e);
         }
     }
 }

@@ -5,7 +5,10 @@
 
 use super::sampler::RodSchedule;
 use crate::configs;
-use crate::store::{EventKind, EventLevel, OwnedNewRun, RunId, RunStatus, StoreError, SyncStore};
+use crate::store::{
+    EventKind, EventLevel, LeaseHolder, LeaseTaken, OwnedNewRun, RunId, RunStatus, StoreError,
+    SyncStore,
+};
 use softtouch_schemas::config::{ConfigError, ConfigSource, parse_toml, to_toml};
 use softtouch_schemas::{RigConfig, SceneSpec};
 use std::path::PathBuf;
@@ -21,6 +24,12 @@ pub struct CollectPlan {
     pub start_index: u64,
     /// One past the last index.
     pub end_index: u64,
+    /// Indices below `start_index` missing from the store (a write that failed, a
+    /// sample cut off by a forced stop), taken first.
+    pub gaps: Vec<u64>,
+    /// The run's lease, held by this job (`None`: a private run nobody else can see,
+    /// as a benchmark's).
+    pub lease: Option<LeaseHolder>,
     /// Rods in blocks.
     pub rods: RodSchedule,
     /// The rig.
@@ -102,8 +111,16 @@ impl PlanError {
 impl CollectPlan {
     /// Samples left to take.
     #[must_use]
-    pub const fn remaining(&self) -> u64 {
-        self.end_index.saturating_sub(self.start_index)
+    pub fn remaining(&self) -> u64 {
+        self.gaps.len() as u64 + self.end_index.saturating_sub(self.start_index)
+    }
+
+    /// The indices to take, in order: the gaps, then `start_index..end_index`.
+    pub fn indices(&self) -> impl Iterator<Item = u64> + '_ {
+        self.gaps
+            .iter()
+            .copied()
+            .chain(self.start_index..self.end_index)
     }
 
     /// Resolve the configs, check the request against the scene and create the run.
@@ -151,25 +168,35 @@ impl CollectPlan {
             rig_toml: to_toml(&resolved.rig),
             scene_toml: to_toml(&resolved.scene),
         })?;
+        // Nobody else knows the run yet: the lease is free.
+        let lease = LeaseHolder::this_process();
+        store.acquire_lease(run_id, &lease)?;
         Ok(Self {
             run_id,
             seed,
             start_index: 0,
             end_index: samples,
+            gaps: Vec::new(),
+            lease: Some(lease),
             rods: schedule,
             rig: resolved.rig,
             scene: resolved.scene,
         })
     }
 
-    /// The rest of stored run `run_id`, with its stored seed, rig, scene and rods, from
-    /// its next missing sample. Marks the run running and logs a `resumed` event.
+    /// The rest of stored run `run_id`, with its stored seed, rig, scene and rods:
+    /// every index below the planned count that the store lacks. Takes the run's lease
+    /// (refused while another live process holds it; a stale one is taken over, with
+    /// an event), marks the run running and logs a `resumed` event.
     ///
     /// # Errors
-    /// No such run, a stored config that no longer parses, or the store.
+    /// No such run, a run leased by another process, a stored config that no longer
+    /// parses, or the store.
     pub fn resume(store: &SyncStore, run_id: RunId) -> Result<Resumed, PlanError> {
         let record = store.run_record(run_id)?;
-        if record.status == RunStatus::Completed.as_str() {
+        let end = u64::try_from(record.samples_planned).unwrap_or(0);
+        let missing = store.missing_indices(run_id, end)?;
+        if record.status == RunStatus::Completed.as_str() && missing.is_empty() {
             return Ok(Resumed::AlreadyComplete);
         }
         let rig: RigConfig = parse_toml(
@@ -183,23 +210,43 @@ impl CollectPlan {
         let rods: Vec<String> = record.rod_schedule.split(',').map(str::to_owned).collect();
         let schedule = RodSchedule::new(rods, u64::try_from(record.rod_block).unwrap_or(1))
             .ok_or(PlanError::NoRodSchedule(run_id))?;
-        let start = store.next_index(run_id)?;
-        let end = u64::try_from(record.samples_planned).unwrap_or(0);
+        let start = store.next_index(run_id)?.min(end);
+        let gaps: Vec<u64> = missing.into_iter().filter(|&i| i < start).collect();
+        let lease = LeaseHolder::this_process();
+        // No rig clock yet: these events have no rig time.
+        if let LeaseTaken::TakenOver { previous, why } = store.acquire_lease(run_id, &lease)? {
+            store.log_event(
+                run_id,
+                None,
+                None,
+                EventLevel::Warn,
+                EventKind::LeaseTakenOver.as_str(),
+                &format!(
+                    "took the lease over from {previous}: {why}; now process {} on host `{}`",
+                    lease.pid, lease.host
+                ),
+            )?;
+        }
         store.set_run_status(run_id, RunStatus::Running)?;
-        // No rig clock yet: the event has no rig time.
+        let first = gaps.first().copied().unwrap_or(start);
         store.log_event(
             run_id,
-            Some(start),
+            Some(first),
             None,
             EventLevel::Info,
             EventKind::Resumed.as_str(),
-            &format!("resumed at sample {start}"),
+            &format!(
+                "resumed at sample {start}, after {} missing earlier samples",
+                gaps.len()
+            ),
         )?;
         Ok(Resumed::Plan(Box::new(Self {
             run_id,
             seed: record.seed_u64(),
             start_index: start,
             end_index: end,
+            gaps,
+            lease: Some(lease),
             rods: schedule,
             rig,
             scene,

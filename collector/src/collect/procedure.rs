@@ -1,10 +1,11 @@
 //! One sample: `approach → settle → record → retreat`, with its retries, and storing
 //! it (accepted or rejected).
 
-use super::window::{WindowStats, window_bounds, window_stats};
+use super::window::{GuardTrip, WindowStats, window_bounds, window_stats};
 use super::{CollectError, Job, recovery_backoff};
 use crate::store::{EventKind, EventLevel};
 use softtouch_drivers::{Clock as _, DeviceError, Frame};
+use softtouch_schemas::rig::Tare;
 use softtouch_schemas::sample::RejectReason;
 use softtouch_schemas::{
     ArmPose, ContactPose, DurationNs, FtReading, Sample, SampleStatus, TimestampNs, Wrench,
@@ -32,6 +33,12 @@ enum AttemptError {
     /// may have failed too.
     ForceLimit {
         reading: FtReading,
+        stop_failed: Option<DeviceError>,
+    },
+    /// The guard stopped the approach for the stream's sake (stale, failing or
+    /// non-finite); the arm was told to stop, which may have failed too.
+    Guard {
+        trip: GuardTrip,
         stop_failed: Option<DeviceError>,
     },
     /// No frame came.
@@ -185,6 +192,29 @@ impl Job<'_> {
                         None,
                     );
                 }
+                Err(AttemptError::Guard { trip, stop_failed }) => {
+                    last_reject = match trip {
+                        GuardTrip::NonFinite(_) => RejectReason::NonFinite,
+                        GuardTrip::Stale { .. } => RejectReason::StreamStalled,
+                        GuardTrip::SensorError(_) | GuardTrip::OverLimit(_) => {
+                            RejectReason::SensorFault
+                        }
+                    };
+                    self.events.log(
+                        EventKind::GuardStop,
+                        EventLevel::Warn,
+                        Some(index),
+                        &format!("attempt {attempt}: approach stopped: {trip}"),
+                    )?;
+                    if let Some(e) = stop_failed {
+                        self.events.log(
+                            EventKind::ArmStopFailed,
+                            EventLevel::Error,
+                            Some(index),
+                            &format!("attempt {attempt}: could not stop the arm at the guard: {e}"),
+                        )?;
+                    }
+                }
                 Err(AttemptError::FrameTimeout(e)) => {
                     self.counters.frame_timeouts += 1;
                     last_reject = RejectReason::FrameTimeout;
@@ -312,15 +342,26 @@ impl Job<'_> {
             return Err(AttemptError::Interrupted);
         }
 
+        // Zero the sensor at home, clear of the rod: the label then carries neither the
+        // sensor's offset nor the drift from before this attempt.
+        if p.tare_for(self.plan.scene.medium) == Tare::PerSample {
+            self.ft.bias().await.map_err(AttemptError::Sensor)?;
+        }
+
         // approach, guarded
-        let guard = self.ft.wait_over_limit(l.max_force_n, l.max_torque_nm);
+        let stale = Duration::from_secs_f64(p.ft_stale_s);
+        let guard = self.ft.guard(l.max_force_n, l.max_torque_nm, stale);
         let moved = tokio::select! {
             moved = self.arm.move_to(&target, p.approach_speed_m_s) => moved,
-            reading = guard => {
-                // Reported with the force limit by the caller, who can log it.
-                return Err(AttemptError::ForceLimit {
-                    reading,
-                    stop_failed: self.arm.stop().await.err(),
+            trip = guard => {
+                // Stop first; the caller logs what happened.
+                let stop_failed = self.arm.stop().await.err();
+                return Err(match trip {
+                    GuardTrip::OverLimit(reading) => AttemptError::ForceLimit {
+                        reading,
+                        stop_failed,
+                    },
+                    trip => AttemptError::Guard { trip, stop_failed },
                 });
             }
         };
@@ -360,12 +401,18 @@ impl Job<'_> {
             .map_err(AttemptError::FrameTimeout)?;
         let (start, end) = window_bounds(frame.meta.t, DurationNs::from_secs_f64(p.ft_window_s));
         let deadline = self.clock.instant_at(end) + Duration::from_secs_f64(p.frame_timeout_s);
-        match self.ft.wait_until(end, deadline).await {
-            Ok(_) => {}
-            Err(e) => return Err(AttemptError::Sensor(e)),
-        }
+        let complete = self
+            .ft
+            .wait_until(end, deadline)
+            .await
+            .map_err(AttemptError::Sensor)?;
         let readings = self.ft.take_window(start, end);
-        let stats = window_stats(&readings, frame.meta.t, &self.rules);
+        let mut stats = window_stats(&readings, frame.meta.t, &self.rules);
+        // No reading reached the window's end in time: the stream stalled and the
+        // window is cut short, whatever it holds.
+        if !complete && stats.reject != Some(RejectReason::NonFinite) {
+            stats.reject = Some(RejectReason::StreamStalled);
+        }
         Ok(Taken {
             measured,
             frame,

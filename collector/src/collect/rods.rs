@@ -52,17 +52,25 @@ impl RodChanger for TerminalOperator {
             });
         }
         let rod_owned = rod.to_owned();
-        let answered = tokio::task::spawn_blocking(move || {
-            let mut err = std::io::stderr().lock();
-            let _ = writeln!(
-                err,
-                "\n>>> Mount rod `{rod_owned}`, then press Enter (the arm is at home)."
-            );
-            let mut line = String::new();
-            std::io::stdin().lock().read_line(&mut line)
-        })
-        .await;
-        match answered {
+        // A detached thread, not `spawn_blocking`: a forced stop drops this future, and
+        // the runtime would otherwise wait for the blocked read before the process exits.
+        let (reply, answer) = tokio::sync::oneshot::channel();
+        std::thread::Builder::new()
+            .name("rod-prompt".into())
+            .spawn(move || {
+                let mut err = std::io::stderr().lock();
+                let _ = writeln!(
+                    err,
+                    "\n>>> Mount rod `{rod_owned}`, then press Enter (the arm is at home)."
+                );
+                let mut line = String::new();
+                let _ = reply.send(std::io::stdin().lock().read_line(&mut line));
+            })
+            .map_err(|e| DeviceError::Link {
+                device: "operator".into(),
+                message: e.to_string(),
+            })?;
+        match answer.await {
             Ok(Ok(_)) => {
                 self.current = Some(rod.to_owned());
                 Ok(())

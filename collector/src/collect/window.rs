@@ -11,7 +11,8 @@ use softtouch_schemas::sample::RejectReason;
 use softtouch_schemas::{DurationNs, FtReading, TimestampNs, Wrench};
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, MutexGuard};
-use tokio::sync::{Notify, watch};
+use std::time::Duration;
+use tokio::sync::{Notify, mpsc, oneshot, watch};
 use tokio::task::JoinHandle;
 
 #[derive(Debug, Default)]
@@ -30,6 +31,8 @@ pub struct FtStream {
     ring: Arc<Mutex<Ring>>,
     notify: Arc<Notify>,
     stop: watch::Sender<bool>,
+    /// Tare requests, served by the reader task, which owns the sensor.
+    bias: mpsc::Sender<oneshot::Sender<Result<(), DeviceError>>>,
     task: JoinHandle<Box<dyn ForceSensor>>,
 }
 
@@ -60,6 +63,7 @@ impl FtStream {
         }));
         let notify = Arc::new(Notify::new());
         let (stop, mut stopped) = watch::channel(false);
+        let (bias, mut bias_requests) = mpsc::channel::<oneshot::Sender<_>>(1);
         let task = {
             let ring = Arc::clone(&ring);
             let notify = Arc::clone(&notify);
@@ -69,6 +73,10 @@ impl FtStream {
                     tokio::select! {
                         biased;
                         _ = stopped.changed() => break,
+                        // Cancels a pending read, which has then appended nothing.
+                        Some(reply) = bias_requests.recv() => {
+                            let _ = reply.send(sensor.bias().await);
+                        }
                         result = sensor.read(&mut batch) => {
                             let failed = result.is_err();
                             {
@@ -108,8 +116,21 @@ impl FtStream {
             ring,
             notify,
             stop,
+            bias,
             task,
         })
+    }
+
+    /// Zero the sensor at its present load (tare): readings from now on are relative
+    /// to it. Readings already in the ring keep the old zero.
+    pub async fn bias(&self) -> Result<(), DeviceError> {
+        let gone = || DeviceError::Link {
+            device: "force/torque stream".into(),
+            message: "the reader task has ended".into(),
+        };
+        let (reply, answer) = oneshot::channel();
+        self.bias.send(reply).await.map_err(|_| gone())?;
+        answer.await.map_err(|_| gone())?
     }
 
     /// Stop the reader task and the sensor; returns the readings the sensor's link lost.
@@ -172,23 +193,52 @@ impl FtStream {
         }
     }
 
-    /// Wait until a reading's force magnitude exceeds `max_force_n` or any torque
-    /// exceeds `max_torque_nm`; returns that reading. Used as the approach guard.
-    pub async fn wait_over_limit(&self, max_force_n: f64, max_torque_nm: f64) -> FtReading {
+    /// The approach guard: returns as soon as a reading arriving from now on has a
+    /// force magnitude over `max_force_n`, a torque over `max_torque_nm` or a NaN or
+    /// infinite value; when no reading arrives for `stale`; or when the sensor reports
+    /// an error. Every reading of every packet is checked, not only the newest.
+    pub async fn guard(&self, max_force_n: f64, max_torque_nm: f64, stale: Duration) -> GuardTrip {
+        let mut seen = self.received();
+        let mut last_reading = tokio::time::Instant::now();
         loop {
             let notified = self.notify.notified();
             tokio::pin!(notified);
             notified.as_mut().enable();
-            if let Some(r) = self.latest()
-                && (r.wrench_in_sensor.force_norm_n() > max_force_n
-                    || r.wrench_in_sensor
-                        .torque_nm
-                        .iter()
-                        .any(|t| t.abs() > max_torque_nm))
             {
-                return r;
+                let r = lock(&self.ring);
+                if let Some(e) = &r.error {
+                    return GuardTrip::SensorError(e.clone());
+                }
+                let new = r.received.saturating_sub(seen);
+                if new > 0 {
+                    last_reading = tokio::time::Instant::now();
+                    // The newest `new` readings (all the ring holds, had it wrapped).
+                    let skip = r
+                        .readings
+                        .len()
+                        .saturating_sub(usize::try_from(new).unwrap_or(usize::MAX));
+                    for x in r.readings.iter().skip(skip) {
+                        let w = &x.wrench_in_sensor;
+                        if !w.to_array().iter().all(|v| v.is_finite()) {
+                            return GuardTrip::NonFinite(*x);
+                        }
+                        if w.force_norm_n() > max_force_n
+                            || w.torque_nm.iter().any(|t| t.abs() > max_torque_nm)
+                        {
+                            return GuardTrip::OverLimit(*x);
+                        }
+                    }
+                    seen = r.received;
+                }
             }
-            notified.await;
+            tokio::select! {
+                () = &mut notified => {}
+                () = tokio::time::sleep_until(last_reading + stale) => {
+                    if self.received() == seen {
+                        return GuardTrip::Stale { silent: stale };
+                    }
+                }
+            }
         }
     }
 
@@ -201,6 +251,42 @@ impl FtStream {
             .filter(|x| x.t >= start && x.t <= end)
             .copied()
             .collect()
+    }
+}
+
+/// Why the approach guard stopped the arm.
+#[derive(Debug, Clone, PartialEq)]
+pub enum GuardTrip {
+    /// A reading over the force or torque limit.
+    OverLimit(FtReading),
+    /// A reading holding NaN or infinity.
+    NonFinite(FtReading),
+    /// No reading arrived for this long.
+    Stale {
+        /// The configured limit (`procedure.ft_stale_s`).
+        silent: Duration,
+    },
+    /// The sensor reported an error.
+    SensorError(DeviceError),
+}
+
+impl std::fmt::Display for GuardTrip {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::OverLimit(r) => write!(f, "reading over the limit at {}", r.wrench_in_sensor),
+            Self::NonFinite(r) => write!(
+                f,
+                "non-finite reading (sequence {}): {:?}",
+                r.rdt_sequence,
+                r.wrench_in_sensor.to_array()
+            ),
+            Self::Stale { silent } => write!(
+                f,
+                "stale stream: no force/torque reading for {:.3} s (procedure.ft_stale_s)",
+                silent.as_secs_f64()
+            ),
+            Self::SensorError(e) => write!(f, "sensor error: {e}"),
+        }
     }
 }
 
@@ -243,16 +329,20 @@ pub fn window_stats(
     rules: &WindowRules,
 ) -> WindowStats {
     let count = u32::try_from(readings.len()).unwrap_or(u32::MAX);
-    let n = readings.len().max(1) as f64;
+    // Mean and spread over the finite readings only, so that they stay finite (they
+    // go to NOT NULL columns); a non-finite reading rejects the window below.
+    let is_finite = |r: &&FtReading| r.wrench_in_sensor.to_array().iter().all(|v| v.is_finite());
+    let non_finite = readings.iter().any(|r| !is_finite(&r));
+    let n = readings.iter().filter(is_finite).count().max(1) as f64;
     let mut sum = [0.0; 6];
-    for r in readings {
+    for r in readings.iter().filter(is_finite) {
         for (s, v) in sum.iter_mut().zip(r.wrench_in_sensor.to_array()) {
             *s += v;
         }
     }
     let mean = sum.map(|s| s / n);
     let mut var = [0.0; 6];
-    for r in readings {
+    for r in readings.iter().filter(is_finite) {
         for ((acc, v), m) in var.iter_mut().zip(r.wrench_in_sensor.to_array()).zip(mean) {
             *acc += (v - m) * (v - m);
         }
@@ -278,8 +368,16 @@ pub fn window_stats(
                 .zip(rules.range)
                 .any(|(v, lim)| v.abs() >= lim)
     });
+    // Finite readings can still overflow the sums (values near f64::MAX).
     let finite = mean.iter().chain(&std).all(|v| v.is_finite());
-    let reject = if count < rules.min_readings {
+    let (mean, std) = if finite {
+        (mean, std)
+    } else {
+        ([0.0; 6], [0.0; 6])
+    };
+    let reject = if non_finite {
+        Some(RejectReason::NonFinite)
+    } else if count < rules.min_readings {
         Some(RejectReason::ShortWindow)
     } else if gaps {
         Some(RejectReason::MissingReadings)
@@ -300,112 +398,4 @@ pub fn window_stats(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use softtouch_schemas::FtStatus;
-
-    fn reading(i: u32, f: f64) -> FtReading {
-        FtReading {
-            t: TimestampNs(u64::from(i) * 1_000_000),
-            rdt_sequence: i,
-            ft_sequence: i,
-            status: FtStatus::OK,
-            wrench_in_sensor: Wrench::from_array([f, 0.0, 0.0, 0.0, 0.0, 0.0]),
-        }
-    }
-
-    const RULES: WindowRules = WindowRules {
-        min_readings: 3,
-        range: [10.0, 10.0, 10.0, 1.0, 1.0, 1.0],
-    };
-
-    #[test]
-    fn a_clean_window_gives_mean_std_and_skew() {
-        let w: Vec<_> = (0..4).map(|i| reading(i, f64::from(i))).collect();
-        let s = window_stats(&w, TimestampNs(1_400_000), &RULES);
-        assert_eq!(s.reject, None);
-        assert!((s.mean.force_n[0] - 1.5).abs() < 1e-12);
-        assert!((s.std.force_n[0] - 1.25f64.sqrt()).abs() < 1e-12);
-        assert_eq!(s.skew_ns, 400_000);
-        assert_eq!(s.count, 4);
-    }
-
-    #[test]
-    fn each_defect_of_a_window_has_its_reason() {
-        let ok: Vec<_> = (0..4).map(|i| reading(i, 1.0)).collect();
-        assert_eq!(
-            window_stats(&ok[..2], TimestampNs(0), &RULES).reject,
-            Some(RejectReason::ShortWindow)
-        );
-        assert_eq!(
-            window_stats(&[], TimestampNs(0), &RULES).reject,
-            Some(RejectReason::ShortWindow)
-        );
-        let mut gap = ok.clone();
-        gap.remove(1);
-        assert_eq!(
-            window_stats(&gap, TimestampNs(0), &RULES).reject,
-            Some(RejectReason::MissingReadings)
-        );
-        let mut fault = ok.clone();
-        fault[2].status = FtStatus(0x0010_0000);
-        assert_eq!(
-            window_stats(&fault, TimestampNs(0), &RULES).reject,
-            Some(RejectReason::SensorFault)
-        );
-        let mut warn = ok.clone();
-        warn[2].status = FtStatus::MONITOR_LATCHED;
-        assert_eq!(
-            window_stats(&warn, TimestampNs(0), &RULES).reject,
-            None,
-            "a warning is not a fault"
-        );
-        let mut sat = ok.clone();
-        sat[3].wrench_in_sensor.torque_nm[2] = -1.0;
-        assert_eq!(
-            window_stats(&sat, TimestampNs(0), &RULES).reject,
-            Some(RejectReason::Saturated)
-        );
-        let mut nan = ok;
-        nan[0].wrench_in_sensor.force_n[1] = f64::NAN;
-        assert_eq!(
-            window_stats(&nan, TimestampNs(0), &RULES).reject,
-            Some(RejectReason::SensorFault)
-        );
-    }
-
-    #[test]
-    fn sequence_numbers_may_wrap_inside_a_window() {
-        let w: Vec<_> = [u32::MAX - 1, u32::MAX, 0, 1]
-            .iter()
-            .enumerate()
-            .map(|(k, &seq)| FtReading {
-                rdt_sequence: seq,
-                ..reading(u32::try_from(k).unwrap_or(0), 1.0)
-            })
-            .collect();
-        assert_eq!(window_stats(&w, TimestampNs(0), &RULES).reject, None);
-    }
-
-    #[test]
-    fn a_constant_window_has_zero_spread_not_nan() {
-        let w: Vec<_> = (0..5).map(|i| reading(i, 1e300)).collect();
-        let s = window_stats(
-            &w,
-            TimestampNs(0),
-            &WindowRules {
-                min_readings: 1,
-                range: [f64::INFINITY; 6],
-            },
-        );
-        assert!(s.std.to_array().iter().all(|v| v.is_finite()));
-    }
-
-    #[test]
-    fn window_bounds_saturate_at_the_epoch() {
-        assert_eq!(
-            window_bounds(TimestampNs(10), DurationNs(100)),
-            (TimestampNs(0), TimestampNs(60))
-        );
-    }
-}
+mod tests;

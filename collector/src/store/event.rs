@@ -41,6 +41,13 @@ pub enum EventKind {
     Stopped,
     /// The run stopped safely after faults.
     SafeStop,
+    /// The approach guard stopped the arm: the stream went stale, failed, or sent a
+    /// non-finite reading.
+    GuardStop,
+    /// The run's lease was taken over from a process that is gone.
+    LeaseTakenOver,
+    /// The devices could not be set up or started: nothing was collected.
+    StartFailed,
 }
 
 impl EventKind {
@@ -65,6 +72,9 @@ impl EventKind {
             Self::Completed => "completed",
             Self::Stopped => "stopped",
             Self::SafeStop => "safe_stop",
+            Self::GuardStop => "guard_stop",
+            Self::LeaseTakenOver => "lease_taken_over",
+            Self::StartFailed => "start_failed",
         }
     }
 }

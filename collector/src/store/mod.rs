@@ -17,7 +17,10 @@ mod sync;
 mod window;
 
 use rows::now_sql;
-pub use runs::{NewRun, RunRecord, RunStatus, RunSummary};
+pub use runs::{
+    LEASE_STALE_S, LeaseHolder, LeaseRow, LeaseTaken, NewRun, RunRecord, RunStatus, RunSummary,
+    host_name,
+};
 pub use sync::{LabelRow, OwnedNewRun, SyncStore, WriterStats, encode_for_store};
 
 pub use window::{WINDOW_ENCODING, decode_window, encode_window};
@@ -79,6 +82,26 @@ pub enum StoreError {
     /// No such run.
     #[error("no run {0} in this database")]
     NoSuchRun(RunId),
+    /// Another live process is collecting the run.
+    #[error(
+        "run {run_id} is being collected by {holder}; stop that process first \
+         (a lease is taken over once its process is gone, or after {} s without a heartbeat from another host)",
+        runs::LEASE_STALE_S
+    )]
+    Leased {
+        /// The run.
+        run_id: RunId,
+        /// Who holds it.
+        holder: LeaseRow,
+    },
+    /// Another process took this job's lease over (it found ours stale).
+    #[error(
+        "lost the lease on run {run_id} to another process; stopping so that one writer remains"
+    )]
+    LeaseLost {
+        /// The run.
+        run_id: RunId,
+    },
 }
 
 fn query_err(doing: &'static str) -> impl FnOnce(sqlx::Error) -> StoreError {

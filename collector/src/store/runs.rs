@@ -197,3 +197,241 @@ impl Store {
         .ok_or(StoreError::NoSuchRun(run_id))
     }
 }
+
+/// A lease whose heartbeat is older than this, held by a process on another host, is
+/// stale, s. (On the same host the holder's process is looked up instead: a lease is
+/// stale as soon as its process is gone, however recent its heartbeat.)
+pub const LEASE_STALE_S: f64 = 600.0;
+
+/// Who collects a run: one collection job of one process.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LeaseHolder {
+    /// Unique per job: `pid-host-nanos`.
+    pub token: String,
+    /// The process id.
+    pub pid: u32,
+    /// The host name.
+    pub host: String,
+}
+
+impl LeaseHolder {
+    /// A new holder for a job of this process.
+    #[must_use]
+    pub fn this_process() -> Self {
+        let pid = std::process::id();
+        let host = host_name();
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos());
+        Self {
+            token: format!("{pid}-{host}-{nanos}"),
+            pid,
+            host,
+        }
+    }
+}
+
+/// This machine's name (Linux: the kernel's; elsewhere `$HOSTNAME`), or `unknown-host`.
+#[must_use]
+pub fn host_name() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .map(|h| h.trim().to_owned())
+        .filter(|h| !h.is_empty())
+        .unwrap_or_else(|| "unknown-host".into())
+}
+
+/// Whether process `pid` of this host is alive; `None` where that cannot be told
+/// (no `/proc`).
+fn pid_alive(pid: i64) -> Option<bool> {
+    let proc = std::path::Path::new("/proc");
+    if !proc.join("self").exists() {
+        return None;
+    }
+    Some(pid > 0 && proc.join(pid.to_string()).exists())
+}
+
+/// A run's lease as stored.
+#[derive(Debug, Clone, PartialEq, FromRow)]
+pub struct LeaseRow {
+    /// The holder's token.
+    pub holder: String,
+    /// The holder's process id.
+    pub pid: i64,
+    /// The holder's host.
+    pub host: String,
+    /// When it was taken (UTC).
+    pub acquired_at: String,
+    /// The last heartbeat (UTC).
+    pub heartbeat_at: String,
+    /// Seconds since the last heartbeat.
+    pub age_s: f64,
+}
+
+impl std::fmt::Display for LeaseRow {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "process {} on host `{}` (lease taken {}, last heartbeat {:.0} s ago)",
+            self.pid, self.host, self.acquired_at, self.age_s
+        )
+    }
+}
+
+impl LeaseRow {
+    /// Why this lease may be taken over by `me`, or `None` while its holder lives.
+    fn stale_because(&self, me: &LeaseHolder) -> Option<String> {
+        if self.host == me.host
+            && let Some(alive) = pid_alive(self.pid)
+        {
+            return (!alive).then(|| format!("process {} is no longer running", self.pid));
+        }
+        (self.age_s > LEASE_STALE_S).then(|| {
+            format!(
+                "no heartbeat for {:.0} s (stale after {LEASE_STALE_S} s)",
+                self.age_s
+            )
+        })
+    }
+}
+
+/// How a lease was taken.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LeaseTaken {
+    /// Nobody held it (or we already did).
+    Free,
+    /// A stale lease was taken over.
+    TakenOver {
+        /// The previous holder.
+        previous: LeaseRow,
+        /// Why it was stale.
+        why: String,
+    },
+}
+
+const LEASE_SELECT: &str = "SELECT holder, pid, host, acquired_at, heartbeat_at,
+            (julianday('now') - julianday(heartbeat_at)) * 86400.0 AS age_s
+     FROM run_leases WHERE run_id = ?";
+
+impl Store {
+    /// Take run `run_id`'s lease for `me`: refused with [`StoreError::Leased`] while
+    /// another live process holds it; a stale one is taken over (see [`LEASE_STALE_S`]).
+    /// One `BEGIN IMMEDIATE` transaction, so two processes cannot both win.
+    pub async fn acquire_lease(
+        &self,
+        run_id: RunId,
+        me: &LeaseHolder,
+    ) -> Result<LeaseTaken, StoreError> {
+        let mut tx = self
+            .pool
+            .begin_with("BEGIN IMMEDIATE")
+            .await
+            .map_err(query_err("locking the run's lease"))?;
+        let existing = sqlx::query_as::<_, LeaseRow>(LEASE_SELECT)
+            .bind(run_id)
+            .fetch_optional(&mut *tx)
+            .await
+            .map_err(query_err("reading the run's lease"))?;
+        let taken = match existing {
+            None => LeaseTaken::Free,
+            Some(l) if l.holder == me.token => LeaseTaken::Free,
+            Some(l) => match l.stale_because(me) {
+                Some(why) => LeaseTaken::TakenOver { previous: l, why },
+                None => return Err(StoreError::Leased { run_id, holder: l }),
+            },
+        };
+        let sql = concat!(
+            "INSERT INTO run_leases (run_id, holder, pid, host, acquired_at, heartbeat_at)
+             VALUES (?1, ?2, ?3, ?4, ",
+            now_sql!(),
+            ", ",
+            now_sql!(),
+            ") ON CONFLICT (run_id) DO UPDATE SET holder = excluded.holder, pid = excluded.pid,
+               host = excluded.host, acquired_at = excluded.acquired_at,
+               heartbeat_at = excluded.heartbeat_at"
+        );
+        sqlx::query(sql)
+            .bind(run_id)
+            .bind(&me.token)
+            .bind(i64::from(me.pid))
+            .bind(&me.host)
+            .execute(&mut *tx)
+            .await
+            .map_err(query_err("taking the run's lease"))?;
+        tx.commit()
+            .await
+            .map_err(query_err("committing the run's lease"))?;
+        Ok(taken)
+    }
+
+    /// Renew `me`'s lease on `run_id`; [`StoreError::LeaseLost`] if another process
+    /// has taken it over meanwhile.
+    pub async fn heartbeat(&self, run_id: RunId, me: &LeaseHolder) -> Result<(), StoreError> {
+        let sql = concat!(
+            "UPDATE run_leases SET heartbeat_at = ",
+            now_sql!(),
+            " WHERE run_id = ? AND holder = ?"
+        );
+        let done = sqlx::query(sql)
+            .bind(run_id)
+            .bind(&me.token)
+            .execute(&self.pool)
+            .await
+            .map_err(query_err("renewing the run's lease"))?;
+        if done.rows_affected() == 0 {
+            return Err(StoreError::LeaseLost { run_id });
+        }
+        Ok(())
+    }
+
+    /// Give `me`'s lease on `run_id` back (nothing if it is not ours).
+    pub async fn release_lease(&self, run_id: RunId, me: &LeaseHolder) -> Result<(), StoreError> {
+        sqlx::query("DELETE FROM run_leases WHERE run_id = ? AND holder = ?")
+            .bind(run_id)
+            .bind(&me.token)
+            .execute(&self.pool)
+            .await
+            .map_err(query_err("releasing the run's lease"))?;
+        Ok(())
+    }
+
+    /// The lease on `run_id`, if any.
+    pub async fn lease(&self, run_id: RunId) -> Result<Option<LeaseRow>, StoreError> {
+        sqlx::query_as::<_, LeaseRow>(LEASE_SELECT)
+            .bind(run_id)
+            .fetch_optional(&self.pool)
+            .await
+            .map_err(query_err("reading the run's lease"))
+    }
+
+    /// The indices below `planned` with no stored sample, ascending: what a resume
+    /// must take, gaps included.
+    pub async fn missing_indices(
+        &self,
+        run_id: RunId,
+        planned: u64,
+    ) -> Result<Vec<u64>, StoreError> {
+        let stored: Vec<i64> = sqlx::query_scalar(
+            "SELECT sample_index FROM samples WHERE run_id = ? AND sample_index < ?
+             ORDER BY sample_index",
+        )
+        .bind(run_id)
+        .bind(super::to_i64("samples_planned", planned)?)
+        .fetch_all(&self.pool)
+        .await
+        .map_err(query_err("finding missing samples"))?;
+        let mut present = stored
+            .into_iter()
+            .filter_map(|i| u64::try_from(i).ok())
+            .peekable();
+        let mut missing = Vec::new();
+        for i in 0..planned {
+            if present.next_if_eq(&i).is_some() {
+                continue;
+            }
+            missing.push(i);
+        }
+        Ok(missing)
+    }
+}

@@ -12,10 +12,12 @@
 //! runs on the second core. The channel holds one operation, so at most two samples
 //! are uncommitted at any moment (the one being written and the one handed over); a
 //! kill loses those and nothing else, and never leaves a half-written sample. A write
-//! error is reported by the next call.
+//! error is reported by the next call, and no later sample is committed after it (a
+//! resume takes every missing index, so nothing is left out for good).
 
 use super::{
-    Appended, EventLevel, FrameRecord, NewRun, RunId, RunRecord, RunStatus, Store, StoreError,
+    Appended, EventLevel, FrameRecord, LeaseHolder, LeaseTaken, NewRun, RunId, RunRecord,
+    RunStatus, Store, StoreError,
 };
 use softtouch_drivers::Frame;
 use softtouch_schemas::{FrameFormat, FrameMeta, FtReading, Medium, Sample, TimestampNs};
@@ -39,6 +41,25 @@ enum Op {
     NextIndex {
         run_id: RunId,
         reply: Reply<u64>,
+    },
+    MissingIndices {
+        run_id: RunId,
+        planned: u64,
+        reply: Reply<Vec<u64>>,
+    },
+    AcquireLease {
+        run_id: RunId,
+        holder: LeaseHolder,
+        reply: Reply<LeaseTaken>,
+    },
+    Heartbeat {
+        run_id: RunId,
+        holder: LeaseHolder,
+    },
+    ReleaseLease {
+        run_id: RunId,
+        holder: LeaseHolder,
+        reply: Reply<()>,
     },
     Append {
         run_id: RunId,
@@ -135,6 +156,9 @@ pub struct WriterStats {
 struct Shared {
     /// The first error of a submitted operation, reported by the next call.
     failed: Option<StoreError>,
+    /// A sample failed to commit: later samples are refused, not committed past the
+    /// gap (events and status changes still go through, for the safe stop).
+    append_failed: bool,
     stats: WriterStats,
 }
 
@@ -241,6 +265,12 @@ impl SyncStore {
         })
     }
 
+    /// The error of a submitted operation not yet reported, if any (taking it: the
+    /// next call will not report it again).
+    pub fn take_failure(&self) -> Option<StoreError> {
+        lock(&self.shared).failed.take()
+    }
+
     fn check(&self) -> Result<(), StoreError> {
         match lock(&self.shared).failed.take() {
             Some(e) => Err(e),
@@ -280,6 +310,46 @@ impl SyncStore {
         self.call(|reply| Op::NextIndex { run_id, reply })
     }
 
+    /// See [`Store::missing_indices`] (after every submitted sample is committed).
+    pub fn missing_indices(&self, run_id: RunId, planned: u64) -> Result<Vec<u64>, StoreError> {
+        self.call(|reply| Op::MissingIndices {
+            run_id,
+            planned,
+            reply,
+        })
+    }
+
+    /// See [`Store::acquire_lease`].
+    pub fn acquire_lease(
+        &self,
+        run_id: RunId,
+        holder: &LeaseHolder,
+    ) -> Result<LeaseTaken, StoreError> {
+        self.call(|reply| Op::AcquireLease {
+            run_id,
+            holder: holder.clone(),
+            reply,
+        })
+    }
+
+    /// Hand a lease renewal to the writer (see [`Store::heartbeat`]); a lost lease is
+    /// reported by the next call.
+    pub fn heartbeat(&self, run_id: RunId, holder: &LeaseHolder) -> Result<(), StoreError> {
+        self.send(Op::Heartbeat {
+            run_id,
+            holder: holder.clone(),
+        })
+    }
+
+    /// See [`Store::release_lease`] (after everything submitted is written).
+    pub fn release_lease(&self, run_id: RunId, holder: &LeaseHolder) -> Result<(), StoreError> {
+        self.call(|reply| Op::ReleaseLease {
+            run_id,
+            holder: holder.clone(),
+            reply,
+        })
+    }
+
     /// Hand a sample to the writer: its frame is encoded and the sample, frame and
     /// window committed in one transaction (see [`Store::append_sample`]). Blocks only
     /// while the writer is busy with the previous one.
@@ -309,6 +379,20 @@ impl SyncStore {
         kind: &str,
         message: &str,
     ) -> Result<(), StoreError> {
+        // Also to the log file (before the store, which may be what failed); the
+        // binary keeps target `softtouch::event` off stderr.
+        let t_s = t.map(|t| t.as_secs_f64());
+        match level {
+            EventLevel::Info => {
+                tracing::info!(target: "softtouch::event", run = ?run_id, sample = ?index, t_s = ?t_s, kind, "{message}");
+            }
+            EventLevel::Warn => {
+                tracing::warn!(target: "softtouch::event", run = ?run_id, sample = ?index, t_s = ?t_s, kind, "{message}");
+            }
+            EventLevel::Error => {
+                tracing::error!(target: "softtouch::event", run = ?run_id, sample = ?index, t_s = ?t_s, kind, "{message}");
+            }
+        }
         self.send(Op::Event {
             run_id,
             index,
@@ -385,16 +469,55 @@ async fn serve(store: &Store, op: Op, shared: &Mutex<Shared>) {
         Op::NextIndex { run_id, reply } => {
             let _ = reply.send(store.next_index(run_id).await);
         }
+        Op::MissingIndices {
+            run_id,
+            planned,
+            reply,
+        } => {
+            let _ = reply.send(store.missing_indices(run_id, planned).await);
+        }
+        Op::AcquireLease {
+            run_id,
+            holder,
+            reply,
+        } => {
+            let _ = reply.send(store.acquire_lease(run_id, &holder).await);
+        }
+        Op::Heartbeat { run_id, holder } => {
+            if let Err(e) = store.heartbeat(run_id, &holder).await {
+                fail(e);
+            }
+        }
+        Op::ReleaseLease {
+            run_id,
+            holder,
+            reply,
+        } => {
+            let _ = reply.send(store.release_lease(run_id, &holder).await);
+        }
         Op::Append {
             run_id,
             sample,
             frame,
             window,
         } => {
+            if lock(shared).append_failed {
+                return fail(StoreError::Invalid {
+                    what: "sample",
+                    why: format!(
+                        "sample {} not written: an earlier sample failed to commit, and later ones \
+                         are not committed past the gap",
+                        sample.index
+                    ),
+                });
+            }
             let started = Instant::now();
             let encoded = match frame.as_ref().map(encode_for_store).transpose() {
                 Ok(e) => e,
-                Err(e) => return fail(e),
+                Err(e) => {
+                    lock(shared).append_failed = true;
+                    return fail(e);
+                }
             };
             let encoded_at = Instant::now();
             let record = encoded
@@ -408,6 +531,7 @@ async fn serve(store: &Store, op: Op, shared: &Mutex<Shared>) {
                 Ok(Appended::Inserted) => s.stats.inserted += 1,
                 Ok(Appended::AlreadyPresent) => s.stats.already_present += 1,
                 Err(e) => {
+                    s.append_failed = true;
                     drop(s);
                     fail(e);
                 }

@@ -24,10 +24,13 @@ pub struct AtiSerialConfig {
     pub reply_timeout: Duration,
     /// How long [`ForceSensor::read`] waits for a record.
     pub read_timeout: Duration,
+    /// Fixed delay from a record's sample instant to its arrival (serial transfer at
+    /// the baud rate, the box's averaging): subtracted from every stamp.
+    pub latency: Duration,
 }
 
 impl AtiSerialConfig {
-    /// 500 ms reply timeout, 1 s read timeout.
+    /// 500 ms reply timeout, 1 s read timeout, no latency correction.
     #[must_use]
     pub fn new(counts_per_force: f64, counts_per_torque: f64) -> Self {
         Self {
@@ -35,6 +38,7 @@ impl AtiSerialConfig {
             counts_per_torque,
             reply_timeout: Duration::from_millis(500),
             read_timeout: Duration::from_secs(1),
+            latency: Duration::ZERO,
         }
     }
 }
@@ -234,8 +238,9 @@ impl<T: AsyncRead + AsyncWrite + Unpin + Send> AtiSerial<T> {
         }
         self.stats.received += 1;
         let c = r.counts;
+        let latency_ns = u64::try_from(self.config.latency.as_nanos()).unwrap_or(u64::MAX);
         FtReading {
-            t,
+            t: TimestampNs(t.0.saturating_sub(latency_ns)),
             rdt_sequence: self.sequence,
             ft_sequence: self.sequence,
             status,

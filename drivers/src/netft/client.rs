@@ -58,12 +58,16 @@ pub struct NetFtConfig {
     pub reply_timeout: Duration,
     /// How long [`ForceSensor::read`] waits for a datagram before a timeout error.
     pub read_timeout: Duration,
+    /// Fixed delay from a record's sample instant to the datagram's arrival (the
+    /// sensor's filter and the network): subtracted from every stamp, so readings
+    /// share the frames' time base.
+    pub latency: Duration,
 }
 
 impl NetFtConfig {
     /// Defaults for a sensor at `rdt_addr`, calibration read over TCP at port 49151 of
     /// the same host: real-time mode, 10 start attempts, 100 ms reply timeout, 1 s read
-    /// timeout.
+    /// timeout, no latency correction.
     #[must_use]
     pub fn new(rdt_addr: SocketAddr, rate_hz: f64) -> Self {
         let cal = SocketAddr::new(rdt_addr.ip(), codec::CALIBRATION_PORT);
@@ -75,6 +79,7 @@ impl NetFtConfig {
             start_attempts: 10,
             reply_timeout: Duration::from_millis(100),
             read_timeout: Duration::from_secs(1),
+            latency: Duration::ZERO,
         }
     }
 }
@@ -297,6 +302,9 @@ impl NetFtClient {
         t: TimestampNs,
         out: &mut Vec<FtReading>,
     ) -> Result<usize, DeviceError> {
+        let t = TimestampNs(
+            t.0.saturating_sub(u64::try_from(self.config.latency.as_nanos()).unwrap_or(u64::MAX)),
+        );
         self.records.clear();
         let bytes = self.buf.get(..len).unwrap_or(&[]);
         if let Err(e) = codec::decode_records(bytes, &mut self.records) {
@@ -425,19 +433,31 @@ impl ForceSensor for NetFtClient {
                 message: "read before start".into(),
             });
         }
+        // A malformed datagram is counted (`bad_datagrams`) and skipped: it must not
+        // discard the good readings of the same read. Only a read that brings nothing
+        // but malformed datagrams until its timeout reports the protocol error.
         let mut appended = 0;
+        let mut malformed = None;
         if let Some(len) = self.pending.take() {
             let t = self.pending_t;
-            appended += self.accept_datagram(len, t, out)?;
+            match self.accept_datagram(len, t, out) {
+                Ok(n) => appended += n,
+                Err(e) => malformed = Some(e),
+            }
         }
         let deadline = tokio::time::Instant::now() + self.config.read_timeout;
         while appended == 0 {
             let left = deadline.saturating_duration_since(tokio::time::Instant::now());
             match self.recv_within(left).await? {
-                None => return Err(timeout(self.config.read_timeout)),
+                None => {
+                    return Err(malformed.unwrap_or_else(|| timeout(self.config.read_timeout)));
+                }
                 Some(len) => {
                     let t = self.clock.now();
-                    appended += self.accept_datagram(len, t, out)?;
+                    match self.accept_datagram(len, t, out) {
+                        Ok(n) => appended += n,
+                        Err(e) => malformed = Some(e),
+                    }
                 }
             }
         }
@@ -446,9 +466,14 @@ impl ForceSensor for NetFtClient {
             match self.socket.try_recv(&mut self.buf) {
                 Ok(len) => {
                     let t = self.clock.now();
-                    appended += self.accept_datagram(len, t, out)?;
+                    // Counted in `bad_datagrams` when malformed.
+                    if let Ok(n) = self.accept_datagram(len, t, out) {
+                        appended += n;
+                    }
                 }
                 Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
+                // The readings already decoded stand; the next read reports the link.
+                Err(_) if appended > 0 => break,
                 Err(e) => return Err(link(e)),
             }
         }

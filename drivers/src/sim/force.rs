@@ -234,6 +234,10 @@ impl ForceSensor for SimForceSensor {
         }
     }
 
+    /// Zero at the present load: the contact (none at home), the buoyancy offset and
+    /// the drift accumulated until now; later readings carry only the drift since.
+    /// Noise-free, as a sensor's tare over its low-pass filter is to within its
+    /// resolution.
     async fn bias(&mut self) -> Result<(), DeviceError> {
         let now = self.clock.now();
         let contact = lock(&self.world)?.wrench_at(now).map_err(Self::fault)?;

@@ -244,13 +244,26 @@ impl Lattice {
     }
 }
 
-/// Dense Cholesky `K = L Lᵀ`, `L` packed by rows. Fails on a non-positive or tiny pivot
-/// (a singular or near-singular lattice) instead of producing garbage.
+/// The largest condition number the lattice solve accepts. Every pivot `d` of the
+/// Cholesky factorisation is at least the smallest eigenvalue of `K`, and the largest
+/// diagonal entry at most the largest, so `max Kᵢᵢ / min d` is a lower bound of the
+/// condition number; above this bound displacements would keep fewer than about six
+/// of f64's sixteen significant digits, so the system is refused as near-singular.
+pub(crate) const MAX_CONDITION: f64 = 1e10;
+
+/// Dense Cholesky `K = L Lᵀ`, `L` packed by rows. Fails on a non-positive pivot (a
+/// singular lattice) or one small enough that the condition number exceeds
+/// [`MAX_CONDITION`] (near-singular) instead of producing garbage.
 fn cholesky(k: &[f64], n: usize) -> Result<Vec<f64>, SimError> {
     let idx = |i: usize, j: usize| i * (i + 1) / 2 + j;
     let mut l = vec![0.0; n * (n + 1) / 2];
     let max_diag = (0..n).map(|i| k[i * n + i]).fold(0.0_f64, f64::max);
-    let tol = max_diag * 1e-12;
+    if !(max_diag.is_finite() && max_diag > 0.0) {
+        return Err(SimError::Solver(format!(
+            "lattice stiffness has no positive finite diagonal (largest {max_diag:.3e})"
+        )));
+    }
+    let tol = max_diag / MAX_CONDITION;
     for i in 0..n {
         for j in 0..=i {
             let mut s = k[i * n + j];
@@ -261,8 +274,10 @@ fn cholesky(k: &[f64], n: usize) -> Result<Vec<f64>, SimError> {
             if i == j {
                 if s.is_nan() || s <= tol || !s.is_finite() {
                     return Err(SimError::Solver(format!(
-                        "lattice stiffness is singular or near-singular (pivot {s:.3e} at dof {i}, \
-                         tolerance {tol:.3e}): add diagonals or regularisation"
+                        "lattice stiffness is singular or near-singular (pivot {s:.3e} at dof {i}: \
+                         condition number above {:.1e}, the bound {MAX_CONDITION:.0e}): add \
+                         diagonals or regularisation",
+                        if s > 0.0 { max_diag / s } else { f64::INFINITY }
                     )));
                 }
                 l[idx(i, i)] = s.sqrt();
@@ -313,5 +328,34 @@ mod tests {
         let k = [1.0, 1.0, 1.0, 1.0];
         let err = cholesky(&k, 2).expect_err("singular");
         assert!(err.to_string().contains("singular"), "{err}");
+    }
+
+    /// Pivots just inside the documented bound are solved; just beyond, refused with
+    /// the bound in the message, whether the small pivot is on the diagonal or
+    /// appears only in the factorisation.
+    #[test]
+    fn near_singular_systems_beyond_the_bound_are_refused() {
+        for eps in [1e-9, 1e-11] {
+            let inside = 1.0 / eps < MAX_CONDITION;
+            for k in [[1.0, 0.0, 0.0, eps], [1.0, 1.0, 1.0, 1.0 + eps]] {
+                match cholesky(&k, 2) {
+                    Ok(l) => {
+                        assert!(inside, "{k:?} accepted");
+                        let mut b = [1.0, 2.0];
+                        solve(&l, &mut b);
+                        let r0 = k[0] * b[0] + k[1] * b[1] - 1.0;
+                        let r1 = k[2] * b[0] + k[3] * b[1] - 2.0;
+                        assert!(r0.abs() < 1e-5 && r1.abs() < 1e-5, "{k:?}: {b:?}");
+                    }
+                    Err(e) => {
+                        assert!(!inside, "{k:?} refused: {e}");
+                        let m = e.to_string();
+                        assert!(m.contains("near-singular") && m.contains("1e10"), "{m}");
+                    }
+                }
+            }
+        }
+        assert!(cholesky(&[f64::NAN], 1).is_err());
+        assert!(cholesky(&[0.0], 1).is_err());
     }
 }

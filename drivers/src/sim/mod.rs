@@ -70,7 +70,9 @@
 //!
 //! [`SimRig::new`] builds [`SimArm`], [`SimForceSensor`], [`SimCamera`] and
 //! [`SimGripper`] on one shared [`SimWorld`]; [`SimHandle`] changes the rod and puts
-//! objects in the gripper. All of them wait on tokio's clock: run them on a paused
+//! objects in the gripper. [`soft_grasp`] builds the Hand-E with soft, sensorised
+//! fingers ([`SoftGripper`], [`SoftFingerCamera`]): an object's contact on the finger
+//! goes through the same contact model, lattice and renderer as the rod presses. All of them wait on tokio's clock: run them on a paused
 //! runtime (`start_paused`) and a night of collection takes minutes, and the same seed
 //! gives the same bytes (every device and frame draws from its own ChaCha stream
 //! derived from `(seed, stream name)`).
@@ -83,6 +85,7 @@ mod camera;
 mod contact;
 mod effects;
 mod force;
+mod grasp;
 mod gripper;
 mod lattice;
 mod render;
@@ -93,6 +96,9 @@ pub use arm::{MAX_ACCEL_M_S2, MAX_ROT_ACCEL_RAD_S2, MAX_ROT_SPEED_RAD_S, MAX_SPE
 pub use camera::SimCamera;
 pub use contact::{ContactParams, FingerGeometry};
 pub use force::{BUFFER_READINGS, COUNTS_PER_FORCE, COUNTS_PER_TORQUE, SimForceSensor};
+pub use grasp::{
+    GraspObject, SoftFingerCamera, SoftGrasp, SoftGraspHandle, SoftGripper, soft_grasp,
+};
 pub use gripper::{
     ACTIVATION, FORCE_N, G_M_S2, SPEED_MM_S, SimGripper, SimObject, grasp_holds, grip_force_n,
 };

@@ -279,27 +279,47 @@ fn label_ranges_match_the_paper() {
     assert!(hi[2] > 0.5 && hi[5] > 0.005, "{hi:?}");
 }
 
+/// Extreme but well-posed parameters solve to finite wrenches and nodes; a truss
+/// whose regularisation is negligible next to its beams is near-singular beyond
+/// `lattice::MAX_CONDITION` and is refused with a solver error.
 #[test]
 fn stiff_and_soft_parameters_stay_finite() {
     let p = pose(0.05, 0.05, 1.0);
-    for (stiff, ea, reg) in [
-        (3.4e9, 7e3, 5.0),
-        (3.4e3, 7e-3, 5e-3),
-        (3.4e6, 1e6, 0.0),
-        (3.4e6, 1e-6, 1e-6),
+    // (contact stiffness, beam E·A, regularisation, diagonals, solvable)
+    for (stiff, ea, reg, diagonals, solvable) in [
+        (3.4e9, 7e3, 5.0, true, true),
+        (3.4e3, 7e-3, 5e-3, true, true),
+        // The diagonals make the truss rigid: no regularisation needed.
+        (3.4e6, 1e6, 0.0, true, true),
+        (3.4e6, 1e-6, 1e-6, true, true),
+        // A mechanism held only by regularisation: fine at 1e-3 N/m against 7 N
+        // beams, near-singular at 1e-6 N/m against 1000 N beams.
+        (3.4e6, 7.0, 1e-3, false, true),
+        (3.4e6, 1e3, 1e-6, false, false),
     ] {
         let mut params = SimParams::default();
         params.contact.stiffness = stiff;
         params.lattice.beam_ea_n = ea;
         params.lattice.regularisation_n_per_m = reg;
+        params.lattice.diagonals = diagonals;
+        let case = format!(
+            "stiffness {stiff}, E·A {ea} N, regularisation {reg} N/m, diagonals {diagonals}"
+        );
         match SceneSim::with_params(&bare(), 0, params) {
             Ok(sim) => {
+                assert!(solvable, "{case}: solved, expected a refusal");
                 let r = sim.render("circle-10", &p, 0, 0.0).expect("render");
-                assert!(r.wrench_in_sensor.is_finite());
+                assert!(r.wrench_in_sensor.is_finite(), "{case}");
                 let nodes = sim.lattice_nodes("circle-10", &p).expect("nodes");
-                assert!(nodes.iter().flatten().all(|v| v.is_finite()));
+                assert!(nodes.iter().flatten().all(|v| v.is_finite()), "{case}");
             }
-            Err(e) => assert!(matches!(e, SimError::Solver(_)), "{e}"),
+            Err(e) => {
+                assert!(!solvable, "{case}: refused: {e}");
+                assert!(
+                    matches!(e, SimError::Solver(_)) && e.to_string().contains("near-singular"),
+                    "{case}: {e}"
+                );
+            }
         }
     }
 }
@@ -664,6 +684,59 @@ async fn noise_drift_offset_and_bias() {
     let r = collect(&mut rig.force_sensor, TimestampNs(400_000_000), &clock).await;
     let mean_fz = r.iter().map(|r| r.wrench_in_sensor.force_n[2]).sum::<f64>() / r.len() as f64;
     assert!(mean_fz.abs() < 0.25, "{mean_fz}");
+}
+
+/// A tare at rest removes the buoyancy offset and the drift so far, to the count; the
+/// drift after it grows again at its rate (so a tare per sample keeps labels clean).
+#[tokio::test(start_paused = true)]
+async fn bias_removes_the_offset_and_the_drift_so_far() {
+    let clock = TokioClock::new();
+    let mut s = bare();
+    s.effects = vec![
+        Effect::BuoyancyOffset {
+            force_n: [0.0, 0.0, 0.12],
+            torque_nm: [0.0, 0.0, 0.001],
+        },
+        // 1 mN/s and 10 µN·m/s, on every axis, with a random sign and size in [0.5, 1].
+        Effect::FtDrift {
+            force_n_per_h: 3.6,
+            torque_nm_per_h: 0.036,
+        },
+    ];
+    let mut rig = SimRig::new(&defaults::rig(), &s, 3, clock).expect("rig");
+    rig.force_sensor.start().await.expect("start");
+    tokio::time::sleep(std::time::Duration::from_secs(100)).await;
+    let before = collect(&mut rig.force_sensor, TimestampNs(100_010_000_000), &clock).await;
+    let last = before.last().expect("readings").wrench_in_sensor.to_array();
+    // Offset 0.12 N plus up to 0.1 N of drift on Fz; drift alone on Fx (≥ 0.05 N).
+    assert!(
+        last[2] > 0.12 - 0.1 && last[2] < 0.12 + 0.1 + 1e-6,
+        "{last:?}"
+    );
+    assert!(last[0].abs() >= 0.05 - 1e-6, "{last:?}");
+
+    rig.force_sensor.bias().await.expect("bias");
+    let after = collect(&mut rig.force_sensor, TimestampNs(100_030_000_000), &clock).await;
+    let fresh: Vec<_> = after.iter().filter(|r| r.t.0 > 100_010_000_000).collect();
+    assert!(!fresh.is_empty());
+    for r in fresh {
+        for (i, v) in r.wrench_in_sensor.to_array().iter().enumerate() {
+            // 20 ms of drift (≤ 20 µN, 0.2 µN·m) and a count of quantisation.
+            let bound = if i < 3 { 2.2e-5 } else { 1.2e-6 };
+            assert!(v.abs() <= bound, "axis {i}: {v} after the tare");
+        }
+    }
+
+    // 100 s later the drift since the tare shows again, and only that.
+    tokio::time::sleep(std::time::Duration::from_secs(100)).await;
+    let until = TimestampNs(clock.now().0 + 30_000_000);
+    let later = collect(&mut rig.force_sensor, until, &clock).await;
+    let v = later.last().expect("readings").wrench_in_sensor.to_array();
+    for (i, x) in v.iter().enumerate() {
+        let per_s = if i < 3 { 1e-3 } else { 1e-5 };
+        let drifted = x.abs() / (100.0 * per_s);
+        assert!((0.49..=1.02).contains(&drifted), "axis {i}: {x}");
+    }
 }
 
 #[tokio::test(start_paused = true)]

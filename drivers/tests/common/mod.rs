@@ -132,10 +132,23 @@ impl Drop for PtyPair {
     }
 }
 
-/// Start socat and read the two pty paths it reports; `None` when socat is missing.
+/// Whether this runs under CI: the variable `CI` is set to anything but empty,
+/// `0` or `false` (GitHub Actions, GitLab and most others set `CI=true`).
+pub fn ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "0" && !v.eq_ignore_ascii_case("false"))
+}
+
+/// Start socat and read the two pty paths it reports; `None` when socat is missing on
+/// a developer's machine. Under CI (`CI` set) a missing socat fails the test instead:
+/// a skipped pty test there would pass without testing.
 pub fn pty_pair() -> Option<PtyPair> {
     use std::io::BufRead;
     if !have_socat() {
+        assert!(
+            !ci(),
+            "socat is not installed but CI is set: the pty tests must run in CI \
+             (apt-get install socat)"
+        );
         eprintln!("SKIPPED: socat is not installed (apt-get install socat); the pty test needs it");
         return None;
     }

@@ -32,7 +32,7 @@ pub(super) fn plan(
         "exported_at": manifest.exported_at,
         "software_version": manifest.software_version,
     }));
-    let runs = manifest_runs(&manifest, &items)?;
+    let runs = manifest_runs(&manifest, &items, &dir.join("manifest.json"))?;
     let splits = items
         .iter()
         .map(|i| i.split.unwrap_or(Split::Train))
@@ -175,7 +175,11 @@ fn read_export(dir: &Path) -> Result<(Manifest, Vec<Item>), DatasetError> {
     Ok((manifest, items))
 }
 
-fn manifest_runs(manifest: &Manifest, items: &[Item]) -> Result<Vec<NewImportedRun>, DatasetError> {
+fn manifest_runs(
+    manifest: &Manifest,
+    items: &[Item],
+    manifest_path: &Path,
+) -> Result<Vec<NewImportedRun>, DatasetError> {
     let used: HashSet<i64> = items.iter().map(|i| i.run).collect();
     let mut runs = Vec::new();
     let mut seen = HashSet::new();
@@ -184,6 +188,13 @@ fn manifest_runs(manifest: &Manifest, items: &[Item]) -> Result<Vec<NewImportedR
             continue;
         }
         let medium: Medium = r.medium.parse().map_err(DatasetError::Invalid)?;
+        let created_at = super::files::created_at(&r.created_at).map_err(|e| {
+            DatasetError::Invalid(format!(
+                "{}: run {}: field `created_at`: {e}",
+                manifest_path.display(),
+                r.run
+            ))
+        })?;
         runs.push(NewImportedRun {
             origin: Some(r.run),
             seed: r.seed,
@@ -193,7 +204,7 @@ fn manifest_runs(manifest: &Manifest, items: &[Item]) -> Result<Vec<NewImportedR
             scene_toml: r.scene_toml.clone(),
             software_version: r.software_version.clone(),
             schema_version: r.schema_version,
-            created_at: Some(r.created_at.clone()),
+            created_at: Some(created_at),
             provenance: serde_json::to_value(r)
                 .map(|mut v| {
                     // The configs are in the run row already.

@@ -1,0 +1,294 @@
+//! `softtouch report`: one self-contained HTML page of what a database holds, for a
+//! lab notebook or a paper draft.
+//!
+//! - `data.rs`: the queries, on a read-only connection (the report never writes).
+//! - `predict.rs`: predicted against true on a downsampled test split (Figure 2b).
+//! - `csv.rs`: sweep and benchmark results the database does not hold, from the CSV
+//!   files the verbs write.
+//! - `svg.rs`: the figures, inline SVG through plotters.
+//! - `page.rs`: the page, a maud template (type-checked, escapes every value).
+//!
+//! Sections: Runs, Datasets, Models, Sweeps, Land to water, Grasping; each gives its
+//! provenance (seeds, config hashes, software versions) and, when it has nothing to
+//! show, the command that would give it something.
+
+mod csv;
+mod data;
+mod page;
+mod predict;
+mod svg;
+
+use std::path::{Path, PathBuf};
+
+/// The report failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// No database file.
+    #[error("no database at {}: collect with `softtouch collect` (or pass --db PATH)", .0.display())]
+    NoDatabase(PathBuf),
+    /// The database cannot be opened.
+    #[error("cannot open database {} read-only: {source}", path.display())]
+    Open {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: sqlx::Error,
+    },
+    /// The database's schema is older than this build's (or it is not a softtouch one).
+    #[error(
+        "database {} is at schema {found}, this build reads schema {expected}: migrate it with `softtouch --db {} db init` (the report itself never writes)",
+        path.display(), path.display()
+    )]
+    Schema {
+        /// The file.
+        path: PathBuf,
+        /// Its newest migration (0: none).
+        found: i64,
+        /// This build's newest migration.
+        expected: i64,
+    },
+    /// A query failed.
+    #[error("database error while {doing}: {source}")]
+    Query {
+        /// What we were doing.
+        doing: &'static str,
+        /// Why.
+        #[source]
+        source: sqlx::Error,
+    },
+    /// `--runs` names a run that is not there.
+    #[error("--runs: no run {0} in this database (see `softtouch runs`)")]
+    NoSuchRun(i64),
+    /// `--models` names a model that is not there.
+    #[error("--models: no model named `{0}` in this database (see `softtouch models`)")]
+    NoSuchModel(String),
+    /// A stored model cannot be loaded.
+    #[error("model {model_id}: cannot load its artifact: {why}")]
+    Model {
+        /// Row id.
+        model_id: i64,
+        /// Why.
+        why: String,
+    },
+    /// A stored frame cannot be used.
+    #[error("run {run}, sample {index}: {why}")]
+    Frame {
+        /// Run id.
+        run: i64,
+        /// Sample index.
+        index: i64,
+        /// Why.
+        why: String,
+    },
+    /// A results file cannot be read.
+    #[error("cannot read {}: {source}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A results file is malformed.
+    #[error("{}:{line}: {why}", path.display())]
+    Csv {
+        /// The file.
+        path: PathBuf,
+        /// Line, from 1.
+        line: usize,
+        /// What is wrong.
+        why: String,
+    },
+    /// A figure cannot be drawn.
+    #[error("cannot draw the figure `{what}`: {why}")]
+    Plot {
+        /// Which figure.
+        what: String,
+        /// Why.
+        why: String,
+    },
+}
+
+impl ReportError {
+    /// Whether the user's input is at fault (exit code 2).
+    #[must_use]
+    pub const fn is_bad_input(&self) -> bool {
+        matches!(
+            self,
+            Self::NoDatabase(_)
+                | Self::Schema { .. }
+                | Self::NoSuchRun(_)
+                | Self::NoSuchModel(_)
+                | Self::Read { .. }
+                | Self::Csv { .. }
+        )
+    }
+}
+
+/// What to put in the report.
+#[derive(Debug, Clone)]
+pub struct ReportOptions {
+    /// Only these runs (and the datasets drawing on them); all when `None`.
+    pub runs: Option<Vec<i64>>,
+    /// Only these models; all when `None`.
+    pub models: Option<Vec<String>>,
+    /// Sweep and model-benchmark CSVs (`softtouch sweep …`, `softtouch bench model`).
+    pub sweeps: Vec<PathBuf>,
+    /// `collection-sweep.csv` of `softtouch bench collection`.
+    pub bench_collection: Option<PathBuf>,
+    /// Test samples per model in the predicted-against-true figures at most.
+    pub scatter_points: usize,
+}
+
+impl Default for ReportOptions {
+    fn default() -> Self {
+        Self {
+            runs: None,
+            models: None,
+            sweeps: Vec::new(),
+            bench_collection: None,
+            scatter_points: DEFAULT_SCATTER_POINTS,
+        }
+    }
+}
+
+/// Test samples per model drawn in Figure 2b by default: enough to see the spread,
+/// few enough that ten models stay well under a megabyte each.
+pub const DEFAULT_SCATTER_POINTS: usize = 300;
+
+/// A rendered report.
+#[derive(Debug, Clone)]
+pub struct Report {
+    /// The page.
+    pub html: String,
+    /// Runs, datasets and models shown.
+    pub counts: [usize; 3],
+}
+
+/// Builds the report of the database at `db`, reading only.
+///
+/// # Errors
+/// The database is missing, of another schema, or unreadable; an option names a run
+/// or model that is not there; a results file is unreadable or malformed; a stored
+/// model or frame cannot be used.
+pub async fn build(db: &Path, options: &ReportOptions) -> Result<Report, ReportError> {
+    let pool = data::open_read_only(db).await?;
+    let result = gather(&pool, db, options).await;
+    pool.close().await;
+    let content = result?;
+    let counts = [
+        content.runs.len(),
+        content.datasets.len(),
+        content.models.len(),
+    ];
+    Ok(Report {
+        html: page::render(&content)?,
+        counts,
+    })
+}
+
+/// A model with what the page shows of it beyond its row.
+#[derive(Debug, Clone)]
+pub(crate) struct ModelData {
+    pub row: data::ModelRow,
+    pub summary: Option<softtouch_trainer::TrainingSummary>,
+    pub history: Vec<softtouch_trainer::train::EpochReport>,
+    /// Predicted against true on a test subset (None: the VAE, no dataset, or no
+    /// test frames).
+    pub predictions: Option<predict::Predictions>,
+    /// What could not be read or run (stored JSON, the artifact, a test frame).
+    pub problems: Vec<String>,
+}
+
+/// Everything on the page.
+#[derive(Debug, Clone)]
+pub(crate) struct Content {
+    pub db: PathBuf,
+    pub generated_at: String,
+    pub schema_version: i64,
+    pub options: ReportOptions,
+    pub runs: Vec<data::RunData>,
+    pub datasets: Vec<data::DatasetData>,
+    pub models: Vec<ModelData>,
+    pub sweeps: Vec<csv::SweepFile>,
+    pub collection: Option<csv::CollectionFile>,
+}
+
+async fn gather(
+    pool: &sqlx::SqlitePool,
+    db: &Path,
+    options: &ReportOptions,
+) -> Result<Content, ReportError> {
+    // Files first: a typo in a path fails before any slow work.
+    let sweeps = options
+        .sweeps
+        .iter()
+        .map(|p| csv::read_sweep(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let collection = options
+        .bench_collection
+        .as_deref()
+        .map(csv::read_collection)
+        .transpose()?;
+    let runs = data::runs(pool, options.runs.as_deref()).await?;
+    let datasets = data::datasets(pool, options.runs.as_deref()).await?;
+    let rows = data::models(pool, options.models.as_deref()).await?;
+    let mut cache = predict::Cache::default();
+    let mut models = Vec::with_capacity(rows.len());
+    for row in rows {
+        let mut problems = Vec::new();
+        let summary =
+            serde_json::from_str::<Option<softtouch_trainer::TrainingSummary>>(&row.metrics_json)
+                .unwrap_or_else(|e| {
+                    problems.push(format!("metrics_json: {e}"));
+                    None
+                });
+        let history =
+            serde_json::from_str::<Vec<softtouch_trainer::train::EpochReport>>(&row.history_json)
+                .unwrap_or_else(|e| {
+                    problems.push(format!("history_json: {e}"));
+                    Vec::new()
+                });
+        let predictions = match row.dataset_id {
+            Some(dataset_id) if options.scatter_points > 0 => {
+                match predict::predict(
+                    pool,
+                    &mut cache,
+                    row.model_id,
+                    dataset_id,
+                    options.scatter_points,
+                )
+                .await
+                {
+                    Ok(p) => p,
+                    // One damaged model or frame costs its figure, not the page.
+                    Err(e @ (ReportError::Model { .. } | ReportError::Frame { .. })) => {
+                        problems.push(e.to_string());
+                        None
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
+            _ => None,
+        };
+        models.push(ModelData {
+            row,
+            summary,
+            history,
+            predictions,
+            problems,
+        });
+    }
+    Ok(Content {
+        db: db.to_owned(),
+        generated_at: data::now(pool).await?,
+        schema_version: crate::store::Store::schema_version(),
+        options: options.clone(),
+        runs,
+        datasets,
+        models,
+        sweeps,
+        collection,
+    })
+}

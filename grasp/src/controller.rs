@@ -1,0 +1,390 @@
+//! The force loop: one cycle per camera frame.
+//!
+//! Each cycle takes the next frame, runs the estimator on it (preprocessing and the
+//! inference net), projects the wrench on the gripping direction (Method S3), reads
+//! the gripper's measured position P_m, steps Algorithm 1 and sends the position
+//! request rPR when it changed. Every cycle is recorded: t, P_m, P_ref, F_ref, F_est
+//! and, where a [`TrueForce`] knows it (simulation, a reference sensor), F_true.
+//! Nothing in the loop reads the truth; it is recorded beside the estimate only.
+//!
+//! Hand-E facts the loop respects (PROTOCOLS.md §2, §2.x):
+//! - **Keep-alive.** The gripper faults (0x09) after about 1 s without a command, so
+//!   the current request is re-sent when [`ControllerConfig::keep_alive`] has passed.
+//! - **Handshake.** After a request the loop waits for its echo in gPR before it steps
+//!   again; when requests are sent back to back only the latest takes effect, and a
+//!   P_m read before the echo belongs to the previous request.
+//! - **Contact stops.** A contact-stopped Hand-E moves again only on an opposite
+//!   command or a new rGTO edge, and toggling rGTO fast can fault it. The loop does not
+//!   re-arm: it commands a grip force (rFR) whose current cap sits far above the
+//!   newtons it regulates, and counts the cycles where the gripper reported a stop.
+//! - **Stroke.** Requests never leave the calibrated stroke ([`crate::Stroke`]).
+//! - **Safe exit.** Whatever ends a run (done, a device error, an unreachable target),
+//!   the gripper is left as [`ExitAction`] says.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use softtouch_drivers::{Camera, Clock, Gripper, GripperCommand, GripperStatus, ObjectStatus};
+use softtouch_schemas::TimestampNs;
+
+use crate::GraspError;
+use crate::estimator::ForceEstimator;
+use crate::projection::Projection;
+use crate::stepper::{StepOutcome, Stepper, StepperConfig};
+
+/// How often [`Controller::approach`] reads the gripper (the Hand-E allows 200 Hz).
+const APPROACH_POLL: Duration = Duration::from_millis(10);
+
+fn check_fault(status: &GripperStatus) -> Result<(), GraspError> {
+    if status.fault == 0 {
+        return Ok(());
+    }
+    Err(GraspError::Device(softtouch_drivers::DeviceError::Fault {
+        device: "gripper".into(),
+        code: Some(u32::from(status.fault)),
+        message: "the gripper reported a fault during the force loop".into(),
+    }))
+}
+
+/// What the gripper does when a run ends, however it ends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExitAction {
+    /// Hold the measured position (keep the object).
+    Hold,
+    /// Open to the calibrated open end (release the object).
+    Open,
+}
+
+/// Settings of the loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ControllerConfig {
+    /// Algorithm 1.
+    pub stepper: StepperConfig,
+    /// Method S3.
+    pub projection: Projection,
+    /// rSP for every request.
+    pub speed: u8,
+    /// rFR for every request: high enough that a few newtons never trip a contact stop.
+    pub force: u8,
+    /// How long to wait for a frame before the run fails, ms.
+    pub frame_timeout_ms: u64,
+    /// Re-send the current request after this long without a command (< 1 s).
+    pub keep_alive: Duration,
+    /// What the gripper does at the end of a run.
+    pub on_exit: ExitAction,
+}
+
+impl ControllerConfig {
+    /// Defaults for a projection: K = 4 N/mm, δ = 0.1 N, whole Hand-E scale, half speed,
+    /// full force, 200 ms keep-alive, open on exit.
+    pub fn new(projection: Projection) -> Self {
+        Self {
+            stepper: StepperConfig::default(),
+            projection,
+            speed: 128,
+            force: 255,
+            frame_timeout_ms: 500,
+            keep_alive: Duration::from_millis(200),
+            on_exit: ExitAction::Open,
+        }
+    }
+
+    fn validate(&self) -> Result<(), GraspError> {
+        self.stepper.validate()?;
+        if self.keep_alive.is_zero() || self.keep_alive >= Duration::from_secs(1) {
+            return Err(GraspError::Config(format!(
+                "keep_alive {:?}: expected more than 0 and less than 1 s (the Hand-E faults after 1 s without a command)",
+                self.keep_alive
+            )));
+        }
+        if self.frame_timeout_ms == 0 {
+            return Err(GraspError::Config(
+                "frame_timeout_ms 0: expected at least 1 ms".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One control cycle, as recorded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cycle {
+    /// When the frame was exposed, ns on the injected clock.
+    pub t: TimestampNs,
+    /// The camera's frame counter.
+    pub frame_sequence: u64,
+    /// Which target of [`Controller::follow`] this cycle held (0-based).
+    pub hold: usize,
+    /// F_ref, N.
+    pub target_n: f64,
+    /// F_est, N: the projected estimate (`None`: the model gave none or a NaN).
+    pub estimate_n: Option<f64>,
+    /// F_true, N, where known (recorded only, never used by the loop).
+    pub true_n: Option<f64>,
+    /// P_m, counts.
+    pub measured_position: u8,
+    /// P_ref, counts (what the gripper has been asked for after this cycle).
+    pub position_request: u8,
+    /// What the stepper did; `None` while the loop waited for the gPR echo.
+    pub outcome: Option<StepOutcome>,
+    /// gOBJ at this cycle.
+    pub object: ObjectStatus,
+}
+
+/// The force truth, where one exists (the simulator, a reference force sensor).
+pub trait TrueForce: Send {
+    /// The true grip force at `t`, N, projected like the estimate.
+    fn true_force_n(&mut self, t: TimestampNs) -> Option<f64>;
+}
+
+/// No truth (a real gripper without a reference sensor).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoTruth;
+
+impl TrueForce for NoTruth {
+    fn true_force_n(&mut self, _t: TimestampNs) -> Option<f64> {
+        None
+    }
+}
+
+/// The loop over a gripper, a camera and an estimator.
+#[derive(Debug)]
+pub struct Controller<G, C, E, T = NoTruth> {
+    gripper: G,
+    camera: C,
+    estimator: E,
+    truth: T,
+    clock: Arc<dyn Clock>,
+    stepper: Stepper,
+    config: ControllerConfig,
+    /// The last request sent and when.
+    sent: Option<(u8, TimestampNs)>,
+    next_frame_t: TimestampNs,
+    contact_stops: u64,
+    activated: bool,
+    hold: usize,
+}
+
+impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E, T> {
+    /// A controller; settings are checked here.
+    pub fn new(
+        gripper: G,
+        camera: C,
+        estimator: E,
+        truth: T,
+        clock: Arc<dyn Clock>,
+        config: ControllerConfig,
+    ) -> Result<Self, GraspError> {
+        config.validate()?;
+        Ok(Self {
+            gripper,
+            camera,
+            estimator,
+            truth,
+            clock,
+            stepper: Stepper::new(config.stepper)?,
+            config,
+            sent: None,
+            next_frame_t: TimestampNs::ZERO,
+            contact_stops: 0,
+            activated: false,
+            hold: 0,
+        })
+    }
+
+    /// Settings.
+    pub fn config(&self) -> &ControllerConfig {
+        &self.config
+    }
+
+    /// Cycles in which the gripper reported a contact stop while the loop closed.
+    pub fn contact_stops(&self) -> u64 {
+        self.contact_stops
+    }
+
+    /// The devices back (for a caller that goes on using them).
+    pub fn into_parts(self) -> (G, C, E, T) {
+        (self.gripper, self.camera, self.estimator, self.truth)
+    }
+
+    /// Holds each `(target, duration)` in turn, from wherever the fingers are, and
+    /// returns every cycle. Targets are checked before anything moves. The gripper is
+    /// left as [`ControllerConfig::on_exit`] says on every path out.
+    pub async fn follow(&mut self, targets: &[(f64, Duration)]) -> Result<Vec<Cycle>, GraspError> {
+        for (target_n, _) in targets {
+            self.config.stepper.check_target(*target_n)?;
+        }
+        let result = self.follow_inner(targets).await;
+        let exit = self.exit().await;
+        let cycles = result?;
+        exit?;
+        Ok(cycles)
+    }
+
+    /// Moves the fingers to `position` (clamped to the stroke) without force control,
+    /// the pre-grasp before [`Self::follow`], and waits until the gripper echoes the
+    /// request and reports arrival or a contact stop. Re-sends within the keep-alive;
+    /// fails after `timeout` (then the gripper is left as [`ExitAction`] says).
+    pub async fn approach(
+        &mut self,
+        position: u8,
+        timeout: Duration,
+    ) -> Result<GripperStatus, GraspError> {
+        let result = self.approach_inner(position, timeout).await;
+        if result.is_err() {
+            // The move's error is the one to report; the exit is best effort.
+            let _ = self.exit().await;
+        }
+        result
+    }
+
+    async fn approach_inner(
+        &mut self,
+        position: u8,
+        timeout: Duration,
+    ) -> Result<GripperStatus, GraspError> {
+        self.activate().await?;
+        let position = self.config.stepper.stroke.clamp(i64::from(position));
+        let start = self.clock.now();
+        self.send(position, start).await?;
+        loop {
+            tokio::time::sleep(APPROACH_POLL).await;
+            let status = self.gripper.status().await?;
+            check_fault(&status)?;
+            let echoed = status.requested_position == position;
+            let stopped = matches!(
+                status.object,
+                ObjectStatus::ContactClosing | ObjectStatus::ContactOpening
+            );
+            if echoed && (status.position == position || stopped) {
+                return Ok(status);
+            }
+            let now = self.clock.now();
+            if now.0.saturating_sub(start.0) > timeout.as_nanos() as u64 {
+                return Err(GraspError::Device(
+                    softtouch_drivers::DeviceError::Timeout {
+                        device: "gripper".into(),
+                        timeout_ms: timeout.as_millis() as u64,
+                    },
+                ));
+            }
+            if self.sent.is_none_or(|(_, t)| {
+                now.0.saturating_sub(t.0) >= self.config.keep_alive.as_nanos() as u64
+            }) {
+                self.send(position, now).await?;
+            }
+        }
+    }
+
+    async fn activate(&mut self) -> Result<(), GraspError> {
+        if !self.activated {
+            self.gripper.activate().await?;
+            self.activated = true;
+        }
+        Ok(())
+    }
+
+    async fn follow_inner(
+        &mut self,
+        targets: &[(f64, Duration)],
+    ) -> Result<Vec<Cycle>, GraspError> {
+        self.activate().await?;
+        self.next_frame_t = self.clock.now();
+        let mut cycles = Vec::new();
+        for (hold, (target_n, duration)) in targets.iter().enumerate() {
+            self.hold = hold;
+            let end = TimestampNs(
+                self.clock
+                    .now()
+                    .0
+                    .saturating_add(duration.as_nanos() as u64),
+            );
+            while self.clock.now() < end {
+                cycles.push(self.cycle(*target_n).await?);
+            }
+        }
+        Ok(cycles)
+    }
+
+    /// One cycle: frame → estimate → projection → step → request.
+    pub async fn cycle(&mut self, target_n: f64) -> Result<Cycle, GraspError> {
+        let frame = self
+            .camera
+            .frame_after(self.next_frame_t, self.config.frame_timeout_ms)
+            .await?;
+        self.next_frame_t = TimestampNs(frame.meta.t.0 + 1);
+        let estimate_n = match self.estimator.estimate(&frame)? {
+            Some(w) if w.is_finite() && w.force_norm_n() >= self.config.stepper.saturation_n => {
+                // Beyond the trained range on some axis: report it as saturated.
+                Some(self.config.stepper.saturation_n)
+            }
+            Some(w) => self.config.projection.grip_force_n(&w),
+            None => None,
+        };
+        let true_n = self.truth.true_force_n(frame.meta.t);
+        let status = self.gripper.status().await?;
+        check_fault(&status)?;
+        let now = self.clock.now();
+        let echoed = self
+            .sent
+            .is_none_or(|(p, _)| status.requested_position == p);
+        let (position_request, outcome) = if echoed {
+            let step = self.stepper.step(status.position, target_n, estimate_n);
+            (step.position_request, Some(step.outcome))
+        } else {
+            let pending = self.sent.map_or(status.position, |(p, _)| p);
+            (pending, None)
+        };
+        if matches!(status.object, ObjectStatus::ContactClosing)
+            && position_request > status.position
+        {
+            self.contact_stops += 1;
+        }
+        let stale = self.sent.is_none_or(|(_, t)| {
+            now.0.saturating_sub(t.0) >= self.config.keep_alive.as_nanos() as u64
+        });
+        let changed = self.sent.is_none_or(|(p, _)| p != position_request);
+        if changed || stale {
+            self.send(position_request, now).await?;
+        }
+        Ok(Cycle {
+            t: frame.meta.t,
+            frame_sequence: frame.meta.sequence,
+            hold: self.hold,
+            target_n,
+            estimate_n,
+            true_n,
+            measured_position: status.position,
+            position_request,
+            outcome,
+            object: status.object,
+        })
+    }
+
+    async fn send(&mut self, position: u8, now: TimestampNs) -> Result<(), GraspError> {
+        let position = self.config.stepper.stroke.clamp(i64::from(position));
+        self.gripper
+            .command(GripperCommand {
+                position,
+                speed: self.config.speed,
+                force: self.config.force,
+            })
+            .await?;
+        self.sent = Some((position, now));
+        Ok(())
+    }
+
+    /// Leaves the gripper as configured.
+    async fn exit(&mut self) -> Result<(), GraspError> {
+        let position = match self.config.on_exit {
+            ExitAction::Open => self.config.stepper.stroke.open_count,
+            ExitAction::Hold => match self.gripper.status().await {
+                Ok(s) => self.config.stepper.stroke.clamp(i64::from(s.position)),
+                // Cannot read where it is: opening is the safe default.
+                Err(_) => self.config.stepper.stroke.open_count,
+            },
+        };
+        let now = self.clock.now();
+        self.send(position, now).await
+    }
+}

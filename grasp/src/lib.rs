@@ -1,0 +1,64 @@
+//! Grasping with the learned touch: the finger's own force estimate closes the loop on
+//! a parallel gripper (the paper's Results "Tactile Sensorimotor Grasping
+//! Adaptability", Algorithm 1, Methods S3 and S4).
+//!
+//! # Layout
+//! - [`projection`]: Method S3, the predicted wrench rotated from the finger-base frame
+//!   to the world frame and projected on the gripping direction.
+//! - [`stepper`]: Algorithm 1 as a pure stepper on gripper counts (gain K, tolerance
+//!   δ, clamped to the calibrated stroke; NaN or saturated estimates hold), and the
+//!   Method S4 checks on K and δ for a measured stiffness Λ.
+//! - [`estimator`]: camera frame → wrench, implemented for the trained
+//!   [`softtouch_trainer::Predictor`].
+//! - [`controller`]: one cycle per camera frame (frame → preprocess → inference →
+//!   projection → position request) behind the drivers' [`softtouch_drivers::Gripper`]
+//!   and [`softtouch_drivers::Camera`] traits and the injected clock, recording every
+//!   cycle; keep-alive, the gPR echo handshake and a safe exit on every path.
+//! - [`metrics`]: rise time, settling time, overshoot, steady-state and RMS error of a
+//!   held target.
+//!
+//! No SQL and no files: callers hand devices and a predictor in and take the trace out.
+
+pub mod controller;
+pub mod estimator;
+pub mod metrics;
+pub mod projection;
+pub mod stepper;
+
+pub use controller::{Controller, ControllerConfig, Cycle, ExitAction, NoTruth, TrueForce};
+pub use estimator::ForceEstimator;
+pub use metrics::{HoldMetrics, hold_metrics};
+pub use projection::Projection;
+pub use stepper::{
+    GainCheck, Step, StepOutcome, Stepper, StepperConfig, Stroke, check_gain, check_tolerance,
+};
+
+use softtouch_drivers::DeviceError;
+
+/// Everything that can go wrong in a grasp.
+#[derive(Debug, thiserror::Error)]
+pub enum GraspError {
+    /// Settings that cannot work (the message names the field and what it expects).
+    #[error("invalid grasp settings: {0}")]
+    Config(String),
+    /// A target force the finger cannot reach.
+    #[error(
+        "target {target_n} N is unreachable: expected a force in ({lo}, {hi}) N ({why})",
+        lo = reachable_n[0],
+        hi = reachable_n[1]
+    )]
+    UnreachableTarget {
+        /// The target asked for, N.
+        target_n: f64,
+        /// The open interval of reachable targets, N.
+        reachable_n: [f64; 2],
+        /// Why the limits are where they are.
+        why: &'static str,
+    },
+    /// A device refused, faulted or its link failed.
+    #[error(transparent)]
+    Device(#[from] DeviceError),
+    /// The model could not read a frame.
+    #[error("force estimate: {0}")]
+    Estimate(String),
+}

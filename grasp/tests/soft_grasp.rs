@@ -1,0 +1,509 @@
+//! The force loop on the simulated Hand-E with soft fingers, closed by a tiny model
+//! trained in-test on rod presses: the model's estimate is the only force the loop
+//! sees; the simulator's truth is only recorded. Virtual time throughout.
+
+use std::sync::{Arc, OnceLock};
+use std::time::Duration;
+
+use rand::{RngExt, SeedableRng};
+use softtouch_drivers::sim::{GraspObject, SoftGraspHandle, soft_grasp};
+use softtouch_drivers::{
+    Clock, DeviceError, Frame, Gripper, GripperCommand, GripperStatus, TokioClock,
+};
+use softtouch_grasp::{
+    Controller, ControllerConfig, Cycle, ExitAction, ForceEstimator, GainCheck, GraspError,
+    Projection, StepOutcome, StepperConfig, Stroke, TrueForce, check_gain, hold_metrics,
+};
+use softtouch_schemas::{ArmPose, ContactPose, TimestampNs, Wrench};
+use softtouch_trainer::labels::label_from_si;
+use softtouch_trainer::{
+    Example, ModelConfig, ModelKind, Predictor, Preprocess, Quiet, Splits, TrainConfig, train,
+};
+
+const ROD: &str = "circle-20";
+const DIAMETER_M: f64 = 0.02;
+
+/// The default scene with a 20 mm round rod added: the presses the model learns from.
+fn training_scene() -> softtouch_schemas::SceneSpec {
+    let mut scene = softtouch_schemas::defaults::scene();
+    scene.rods.push(softtouch_schemas::RodSpec {
+        name: ROD.into(),
+        shape: softtouch_schemas::RodShape::Circle,
+        size_m: DIAMETER_M,
+        aspect: 1.0,
+    });
+    scene
+}
+
+/// A tiny SVAE trained on 240 presses of the 20 mm round rod near the side the grasp
+/// uses (16×16, width 4; trained once per test binary, a few seconds).
+fn model_bytes() -> &'static [u8] {
+    static BYTES: OnceLock<Vec<u8>> = OnceLock::new();
+    BYTES.get_or_init(|| {
+        let sim = softtouch_drivers::sim::SceneSim::new(&training_scene(), 3).expect("scene");
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
+        let p = Preprocess {
+            size_px: 16,
+            ..Preprocess::default()
+        };
+        let mut all: Vec<Example> = (0..240)
+            .map(|i| {
+                let pose = ContactPose {
+                    x_m: rng.random_range(-0.004..=0.03),
+                    z_m: rng.random_range(-0.01..=0.01),
+                    theta_rad: rng.random_range(-0.3..=0.3),
+                };
+                let r = sim.render(ROD, &pose, i, 0.0).expect("renders");
+                let w = r.wrench_in_sensor;
+                Example {
+                    image: p.apply(640, 480, r.image.as_raw()).expect("preprocesses"),
+                    label: label_from_si(w.force_n, w.torque_nm),
+                }
+            })
+            .collect();
+        let test = all.split_off(200);
+        let val = all.split_off(180);
+        let splits = Splits {
+            train: all,
+            val,
+            test,
+        };
+        let config = ModelConfig {
+            kind: ModelKind::Svae,
+            width: 4,
+            latent: 8,
+            preprocess: p,
+            ..ModelConfig::default()
+        };
+        let t = TrainConfig {
+            epochs: 25,
+            batch_size: 16,
+            learning_rate: 3e-3,
+            lr_decay: 0.95,
+            patience: 0,
+            ..TrainConfig::default()
+        };
+        let trained = train(&config, &t, &splits, None, &mut Quiet).expect("trains");
+        trained.artifact.to_bytes().expect("serialises")
+    })
+}
+
+fn predictor() -> Predictor {
+    Predictor::from_bytes(model_bytes()).expect("loads")
+}
+
+/// The finger's sensor +x faces the object: its push (−x) is the world's +y.
+fn projection() -> Projection {
+    Projection::along_world_y(ArmPose::from_translation_yaw(
+        [0.0; 3],
+        -std::f64::consts::FRAC_PI_2,
+    ))
+    .expect("valid")
+}
+
+/// The simulator's truth, projected like the estimate: recorded, never fed back.
+#[derive(Debug)]
+struct SimTruth(SoftGraspHandle, Projection);
+
+impl TrueForce for SimTruth {
+    fn true_force_n(&mut self, t: TimestampNs) -> Option<f64> {
+        self.0
+            .true_wrench(t)
+            .ok()
+            .and_then(|w| self.1.grip_force_n(&w))
+    }
+}
+
+/// Counts commands and keeps the largest interval between two (keep-alive).
+#[derive(Debug)]
+struct Recording<G> {
+    inner: G,
+    clock: TokioClock,
+    commands: Vec<(TimestampNs, GripperCommand)>,
+}
+
+#[async_trait::async_trait]
+impl<G: Gripper> Gripper for Recording<G> {
+    async fn activate(&mut self) -> Result<(), DeviceError> {
+        self.inner.activate().await
+    }
+    async fn command(&mut self, cmd: GripperCommand) -> Result<(), DeviceError> {
+        self.commands.push((self.clock.now(), cmd));
+        self.inner.command(cmd).await
+    }
+    async fn status(&mut self) -> Result<GripperStatus, DeviceError> {
+        self.inner.status().await
+    }
+}
+
+fn config(gain_n_per_mm: f64, tolerance_n: f64) -> ControllerConfig {
+    ControllerConfig {
+        stepper: StepperConfig {
+            gain_n_per_mm,
+            tolerance_n,
+            saturation_n: 10.0,
+            stroke: Stroke {
+                open_count: 3,
+                closed_count: 230,
+                mm_per_count: softtouch_drivers::gripper::STROKE_MM / 255.0,
+            },
+        },
+        ..ControllerConfig::new(projection())
+    }
+}
+
+type Loop<E> = Controller<
+    Recording<softtouch_drivers::sim::SoftGripper>,
+    softtouch_drivers::sim::SoftFingerCamera,
+    E,
+    SimTruth,
+>;
+
+fn rig<E: ForceEstimator>(
+    estimator: E,
+    cfg: ControllerConfig,
+    fps: f64,
+) -> (Loop<E>, SoftGraspHandle, TokioClock) {
+    let clock = TokioClock::new();
+    let scene = softtouch_schemas::defaults::scene();
+    let (gripper, camera, handle) = soft_grasp(
+        &scene,
+        GraspObject::cylinder(ROD, DIAMETER_M),
+        fps,
+        7,
+        clock,
+    )
+    .expect("builds");
+    let gripper = Recording {
+        inner: gripper,
+        clock,
+        commands: Vec::new(),
+    };
+    let truth = SimTruth(handle.clone(), projection());
+    let c = Controller::new(gripper, camera, estimator, truth, Arc::new(clock), cfg)
+        .expect("valid settings");
+    (c, handle, clock)
+}
+
+/// Λ_max = ∂F/∂P, N/mm, over the counts from first touch to where the squeeze reaches
+/// `up_to_n`, measured on the simulator's contact physics.
+fn measured_stiffness(up_to_n: f64) -> f64 {
+    let (_, _, handle) = soft_grasp(
+        &softtouch_schemas::defaults::scene(),
+        GraspObject::cylinder(ROD, DIAMETER_M),
+        60.0,
+        7,
+        TokioClock::new(),
+    )
+    .expect("builds");
+    let touch = handle.contact_count(0.02).expect("curve").expect("touches");
+    let counts: Vec<u8> = (touch..=255).collect();
+    let curve = handle.grip_force_curve(&counts).expect("curve");
+    let end = curve
+        .iter()
+        .find(|(_, f)| *f > up_to_n)
+        .map_or(255, |(p, _)| *p);
+    handle.max_stiffness_n_per_mm(touch, end).expect("curve")
+}
+
+/// Pre-grasp: close to a few counts before the fingers touch the object.
+async fn pre_grasp<E: ForceEstimator>(c: &mut Loop<E>, handle: &SoftGraspHandle) {
+    let touch = handle.contact_count(0.02).expect("curve").expect("touches");
+    let s = c
+        .approach(touch.saturating_sub(4), Duration::from_secs(3))
+        .await
+        .expect("approaches");
+    assert_eq!(s.position, touch.saturating_sub(4));
+}
+
+fn within_stroke(cycles: &[Cycle], stroke: &Stroke) -> bool {
+    cycles
+        .iter()
+        .all(|c| (stroke.open_count..=stroke.closed_count).contains(&c.position_request))
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_learned_touch_holds_each_target_on_the_soft_grasp() {
+    // Method S4 on the simulator's measured stiffness, up to 4 N (past the targets).
+    let lambda_max = measured_stiffness(4.0);
+    assert!(lambda_max > 0.0 && lambda_max.is_finite(), "{lambda_max}");
+    let cfg = config(0.75 * lambda_max, 0.15);
+    assert!(
+        matches!(
+            check_gain(cfg.stepper.gain_n_per_mm, lambda_max),
+            Ok(GainCheck::Converges { .. })
+        ),
+        "K = {} vs Λ_max = {lambda_max}",
+        cfg.stepper.gain_n_per_mm
+    );
+    let (mut c, handle, _) = rig(predictor(), cfg, 60.0);
+    pre_grasp(&mut c, &handle).await;
+    let targets = [(1.0, Duration::from_secs(2)), (2.5, Duration::from_secs(2))];
+    let cycles = c.follow(&targets).await.expect("follows");
+    assert!(within_stroke(&cycles, &cfg.stepper.stroke));
+    // One cycle per frame at 60 Hz.
+    assert!((230..=250).contains(&cycles.len()), "{}", cycles.len());
+    assert!(
+        cycles
+            .windows(2)
+            .all(|w| w[1].frame_sequence == w[0].frame_sequence + 1)
+    );
+    for (target, _) in targets {
+        let hold: Vec<&Cycle> = cycles
+            .iter()
+            .filter(|c| (c.target_n - target).abs() < 1e-12)
+            .collect();
+        let est: Vec<(f64, f64)> = hold
+            .iter()
+            .filter_map(|c| Some((c.t.0 as f64 * 1e-9, c.estimate_n?)))
+            .collect();
+        let m = hold_metrics(&est, target, cfg.stepper.tolerance_n).expect("samples");
+        assert!(m.settling_time_s.is_some_and(|s| s < 1.5), "{m:?}");
+        assert!(
+            m.steady_state_error_n.abs() <= cfg.stepper.tolerance_n,
+            "{m:?}"
+        );
+        // The estimate is a 16×16 model's: the truth is close, not exact.
+        let truth: Vec<(f64, f64)> = hold
+            .iter()
+            .filter_map(|c| Some((c.t.0 as f64 * 1e-9, c.true_n?)))
+            .collect();
+        let mt = hold_metrics(&truth, target, cfg.stepper.tolerance_n).expect("truth");
+        assert!(
+            mt.steady_state_error_n.abs() < 0.35 * target.max(1.0),
+            "true force off target {target}: {mt:?}"
+        );
+    }
+    // The run ends open (on_exit = Open).
+    let (g, ..) = c.into_parts();
+    assert_eq!(g.commands.last().map(|(_, c)| c.position), Some(3));
+}
+
+/// Always the same wrench, whatever the frame (NaN and saturated cases).
+#[derive(Debug)]
+struct Fixed(Wrench);
+
+impl ForceEstimator for Fixed {
+    fn estimate(&mut self, _frame: &Frame) -> Result<Option<Wrench>, GraspError> {
+        Ok(Some(self.0))
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn with_no_object_the_fingers_stop_at_the_stroke_end() {
+    let cfg = config(4.0, 0.1);
+    let (mut c, handle, _) = rig(predictor(), cfg, 60.0);
+    handle.set_object(false).expect("removes");
+    pre_grasp(&mut c, &handle).await;
+    let cycles = c
+        .follow(&[(3.0, Duration::from_secs(3))])
+        .await
+        .expect("runs");
+    assert!(within_stroke(&cycles, &cfg.stepper.stroke));
+    let last = cycles.last().expect("cycles");
+    assert_eq!(last.measured_position, 230);
+    assert_eq!(last.outcome, Some(StepOutcome::ClampedClosed));
+    let (g, ..) = c.into_parts();
+    assert!(g.commands.iter().all(|(_, c)| c.position <= 230));
+}
+
+#[tokio::test(start_paused = true)]
+async fn an_object_lost_mid_hold_closes_to_the_stroke_end_and_no_further() {
+    let cfg = config(4.0, 0.15);
+    let (mut c, handle, clock) = rig(predictor(), cfg, 60.0);
+    pre_grasp(&mut c, &handle).await;
+    let held = c
+        .follow(&[(1.5, Duration::from_secs(2))])
+        .await
+        .expect("holds");
+    assert!(held.last().and_then(|c| c.true_n).is_some_and(|f| f > 0.5));
+    let cfg_hold = ControllerConfig {
+        on_exit: ExitAction::Hold,
+        ..cfg
+    };
+    let (g, cam, est, truth) = c.into_parts();
+    let mut c = Controller::new(g, cam, est, truth, Arc::new(clock), cfg_hold).expect("valid");
+    handle.set_object(false).expect("slips out");
+    let after = c
+        .follow(&[(1.5, Duration::from_secs(3))])
+        .await
+        .expect("runs");
+    assert!(within_stroke(&after, &cfg.stepper.stroke));
+    let last = after.last().expect("cycles");
+    assert_eq!(last.measured_position, 230, "{last:?}");
+    assert!(last.true_n.is_some_and(|f| f.abs() < 1e-9));
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_nan_or_saturated_estimate_never_moves_the_gripper() {
+    for (wrench, outcome) in [
+        (
+            Wrench::from_array([f64::NAN; 6]),
+            StepOutcome::HeldNonFinite,
+        ),
+        (
+            Wrench::from_array([-40.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+            StepOutcome::HeldSaturated,
+        ),
+    ] {
+        let cfg = config(4.0, 0.1);
+        let (mut c, handle, _) = rig(Fixed(wrench), cfg, 30.0);
+        let cycles = c
+            .follow(&[(1.0, Duration::from_secs(3))])
+            .await
+            .expect("runs");
+        assert!(
+            cycles
+                .iter()
+                .all(|c| c.outcome.is_none_or(|o| o == outcome))
+        );
+        assert!(cycles.iter().filter(|c| c.outcome == Some(outcome)).count() > 80);
+        // Held where it was (open), and kept alive: never a second apart.
+        let (g, ..) = c.into_parts();
+        let holds: Vec<_> = g.commands[..g.commands.len() - 1].iter().collect();
+        assert!(holds.iter().all(|(_, c)| c.position == 3), "{holds:?}");
+        let gaps = holds.windows(2).map(|w| w[1].0.0 - w[0].0.0);
+        assert!(gaps.clone().count() >= 10);
+        assert!(gaps.max().is_some_and(|g| g < 1_000_000_000));
+        assert!(handle.opening_mm().expect("opening") > 49.0);
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn an_unreachable_target_is_a_clear_error_and_nothing_moves() {
+    let cfg = config(4.0, 0.1);
+    let (mut c, _, clock) = rig(Fixed(Wrench::ZERO), cfg, 30.0);
+    for target in [12.0, -0.5, 0.0] {
+        let err = c
+            .follow(&[
+                (1.0, Duration::from_secs(1)),
+                (target, Duration::from_secs(1)),
+            ])
+            .await
+            .expect_err("unreachable");
+        assert!(matches!(err, GraspError::UnreachableTarget { .. }), "{err}");
+        assert!(
+            err.to_string().contains(&format!("target {target} N")),
+            "{err}"
+        );
+    }
+    assert_eq!(clock.now(), TimestampNs::ZERO, "time passed: something ran");
+    let bad = ControllerConfig {
+        keep_alive: Duration::from_secs(2),
+        ..cfg
+    };
+    let clock = TokioClock::new();
+    let (g, cam, h) = soft_grasp(
+        &softtouch_schemas::defaults::scene(),
+        GraspObject::cylinder(ROD, DIAMETER_M),
+        30.0,
+        1,
+        clock,
+    )
+    .expect("builds");
+    let err = Controller::new(
+        g,
+        cam,
+        Fixed(Wrench::ZERO),
+        SimTruth(h, projection()),
+        Arc::new(clock),
+        bad,
+    )
+    .expect_err("keep-alive too slow");
+    assert!(err.to_string().contains("keep_alive"), "{err}");
+}
+
+/// Method S4 on the simulator's measured Λ, with the contact physics as the plant
+/// (the position reached at once, the true squeeze read back): K > Λ_max/2 reaches the
+/// paper's targets within δ; K = Λ_max/4 keeps overshooting and never settles.
+#[test]
+fn method_s4_holds_on_the_simulators_measured_stiffness() {
+    let (_, _, handle) = soft_grasp(
+        &softtouch_schemas::defaults::scene(),
+        GraspObject::cylinder(ROD, DIAMETER_M),
+        60.0,
+        7,
+        TokioClock::new(),
+    )
+    .expect("builds");
+    let counts: Vec<u8> = (0..=255).collect();
+    let curve = handle.grip_force_curve(&counts).expect("curve");
+    let force = |p: u8| curve[usize::from(p)].1;
+    let lambda_max = measured_stiffness(4.0);
+    let stroke = config(1.0, 0.1).stepper.stroke;
+    // δ resolves one count at the stiffest point (else the loop dithers).
+    let delta = (lambda_max * stroke.mm_per_count / 2.0).max(0.05);
+    assert!(softtouch_grasp::check_tolerance(delta, lambda_max, &stroke));
+    let touch = handle.contact_count(0.02).expect("curve").expect("touches");
+    let run = |gain: f64, target: f64| -> Vec<f64> {
+        let s = softtouch_grasp::Stepper::new(config(gain, delta).stepper).expect("valid");
+        let mut p = touch.saturating_sub(4);
+        (0..300)
+            .map(|_| {
+                p = s.step(p, target, Some(force(p))).position_request;
+                target - force(p)
+            })
+            .collect()
+    };
+    for factor in [0.55, 1.0, 3.0] {
+        let gain = factor * lambda_max;
+        for target in [0.4, 1.6, 3.0] {
+            let errors = run(gain, target);
+            let first = errors.iter().position(|e| e.abs() <= delta);
+            let first = first.unwrap_or_else(|| panic!("K = {gain}, {target} N: never within δ"));
+            assert!(errors[first..].iter().all(|e| e.abs() <= delta));
+        }
+    }
+    let slow = 0.25 * lambda_max;
+    assert!(matches!(
+        check_gain(slow, lambda_max),
+        Ok(GainCheck::MayNotConverge { .. })
+    ));
+    let errors = run(slow, 3.0);
+    assert!(
+        errors.iter().all(|e| e.abs() > delta),
+        "K = Λ_max/4 settled: {errors:?}"
+    );
+}
+
+/// Objects come from the scene file; a fragile one is crushed by a grip past its limit
+/// (and then pushes back no more), a rigid one is not.
+#[tokio::test(start_paused = true)]
+async fn a_declared_object_is_grasped_and_a_fragile_one_crushes() {
+    let text = format!(
+        "{}\n[[objects]]\nname = \"tube\"\nshape = \"circle\"\nsize_m = 0.02\nwidth_m = 0.02\nmass_kg = 0.05\nfriction = 0.5\n\n[[objects]]\nname = \"cake\"\nshape = \"circle\"\nsize_m = 0.02\nwidth_m = 0.02\nmass_kg = 0.05\nfriction = 0.5\ncrush_force_n = 2.0\n",
+        softtouch_schemas::defaults::SCENE_TOML
+    );
+    let scene: softtouch_schemas::SceneSpec = softtouch_schemas::config::parse_toml(
+        &text,
+        &softtouch_schemas::ConfigSource::Embedded("scene"),
+    )
+    .expect("valid scene");
+    assert_eq!(scene.objects.len(), 2);
+    for (name, crushes) in [("tube", false), ("cake", true)] {
+        let clock = TokioClock::new();
+        let spec = scene.object(name).expect("declared");
+        let (mut gripper, _, handle) =
+            soft_grasp(&scene, GraspObject::from_spec(spec), 30.0, 1, clock).expect("builds");
+        gripper.activate().await.expect("activates");
+        let touch = handle.contact_count(0.02).expect("curve").expect("touches");
+        gripper
+            .command(GripperCommand {
+                position: touch + 25,
+                speed: 255,
+                force: 255,
+            })
+            .await
+            .expect("sent");
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        let s = gripper.status().await.expect("status");
+        assert_eq!(s.position, touch + 25);
+        assert_eq!(handle.crushed().expect("state"), crushes, "{name}");
+        let f = -handle.true_wrench(clock.now()).expect("truth").force_n[0];
+        if crushes {
+            assert!(f.abs() < 1e-9, "{name}: {f}");
+        } else {
+            assert!(f > 2.0, "{name}: {f}");
+        }
+    }
+}

@@ -1,0 +1,1207 @@
+//! The fault-injection matrix of collection: one test per way a run can go wrong.
+//!
+//! Each in-process test runs the real job ([`collect`]) on the simulated rig, with the
+//! devices wrapped behind their own traits by fault injectors (a sensor that spikes
+//! mid-packet, sends NaN, errs or stalls; a camera that times out; an arm that records
+//! its commands and lets the test read where it ended). Virtual time throughout. Each
+//! asserts the arm's final state, the run's status, its events, and that every
+//! sample the job reported done is in the database. The process-level paths (SIGTERM,
+//! a second process resuming a leased run) run the `softtouch` binary.
+
+mod common;
+use common::{runtime, softtouch, tempdir, text};
+
+use async_trait::async_trait;
+use softtouch_collector::collect::rods::RodChanger;
+use softtouch_collector::collect::{
+    CollectDevices, CollectPlan, Counters, NewRunRequest, Outcome, PlanError, Progress, Resumed,
+    build_devices, collect,
+};
+use softtouch_collector::store::{Store, StoreError, SyncStore};
+use softtouch_drivers::{Arm, ArmState, Camera, DeviceError, ForceSensor, Frame};
+use softtouch_schemas::{ArmPose, FtReading, TimestampNs};
+use sqlx::Row as _;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use tokio::sync::watch;
+
+// ---------------------------------------------------------------- injectors
+
+/// What the wrappers share: where the job is, and what the arm was told.
+#[derive(Debug, Default)]
+struct ProbeState {
+    /// An approach move is under way.
+    approaching: bool,
+    /// Approach moves started.
+    approaches: u32,
+    /// The camera was asked for a frame since the last approach (recording).
+    recording: bool,
+    /// Frames asked for.
+    frame_calls: u32,
+    /// Every move target, in order.
+    moves: Vec<ArmPose>,
+    /// Stop commands.
+    stops: u32,
+    /// Moves started before the last stop command.
+    moves_before_last_stop: usize,
+    /// Readings the sensor wrapper spiked or spoilt, with their place in the packet.
+    spoilt: Vec<(usize, usize)>,
+}
+
+type Probe = Arc<Mutex<ProbeState>>;
+
+fn probe(p: &Probe) -> std::sync::MutexGuard<'_, ProbeState> {
+    p.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+fn same_pose(a: &ArmPose, b: &ArmPose) -> bool {
+    a.translation_m
+        .iter()
+        .zip(&b.translation_m)
+        .all(|(x, y)| (x - y).abs() < 1e-9)
+}
+
+/// The arm, recording its commands; optionally sends a double stop request when an
+/// approach starts (a second Ctrl-C mid-move).
+struct ProbeArm {
+    inner: Arc<tokio::sync::Mutex<Box<dyn Arm>>>,
+    probe: Probe,
+    home: ArmPose,
+    stop_on_approach: Option<(u32, watch::Sender<u32>)>,
+}
+
+/// Clears `approaching` however the move ends (done, failed, or dropped mid-way).
+struct Approaching(Probe);
+
+impl Drop for Approaching {
+    fn drop(&mut self) {
+        probe(&self.0).approaching = false;
+    }
+}
+
+#[async_trait]
+impl Arm for ProbeArm {
+    async fn move_to(&mut self, target: &ArmPose, speed_m_s: f64) -> Result<ArmState, DeviceError> {
+        let approach = !same_pose(target, &self.home);
+        let n = {
+            let mut p = probe(&self.probe);
+            p.moves.push(*target);
+            if approach {
+                p.approaches += 1;
+                p.approaching = true;
+                p.recording = false;
+            }
+            p.approaches
+        };
+        let _clear = Approaching(Arc::clone(&self.probe));
+        if approach
+            && let Some((at, tx)) = &self.stop_on_approach
+            && *at == n
+        {
+            // Well into the move (an approach takes about a second).
+            let tx = tx.clone();
+            tokio::spawn(async move {
+                tokio::time::sleep(Duration::from_millis(200)).await;
+                tx.send_replace(1);
+                tx.send_replace(2);
+            });
+        }
+        self.inner.lock().await.move_to(target, speed_m_s).await
+    }
+    async fn state(&mut self) -> Result<ArmState, DeviceError> {
+        self.inner.lock().await.state().await
+    }
+    async fn recover(&mut self) -> Result<(), DeviceError> {
+        self.inner.lock().await.recover().await
+    }
+    async fn stop(&mut self) -> Result<(), DeviceError> {
+        {
+            let mut p = probe(&self.probe);
+            p.stops += 1;
+            p.moves_before_last_stop = p.moves.len();
+        }
+        self.inner.lock().await.stop().await
+    }
+}
+
+/// A sensor fault to inject.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum SensorFault {
+    None,
+    /// During the first `n` approaches, one reading in the middle of a packet (never
+    /// its last) carries `fz_n`.
+    MidPacket {
+        approaches: u32,
+        fz_n: f64,
+    },
+    /// While recording, for the first `n` frames, the sensor reports a fault.
+    ErrorWhileRecording {
+        frames: u32,
+    },
+    /// During the first `n` approaches, no reading arrives.
+    StallOnApproach {
+        approaches: u32,
+    },
+    /// After frame call `frame`, no reading arrives for `secs`.
+    StallAfterFrame {
+        frame: u32,
+        secs: f64,
+    },
+    /// While recording, for the first `n` frames, readings hold NaN.
+    NanWhileRecording {
+        frames: u32,
+    },
+}
+
+struct FaultySensor {
+    inner: Box<dyn ForceSensor>,
+    probe: Probe,
+    fault: SensorFault,
+    stalled: bool,
+}
+
+#[async_trait]
+impl ForceSensor for FaultySensor {
+    async fn start(&mut self) -> Result<(), DeviceError> {
+        self.inner.start().await
+    }
+    async fn read(&mut self, out: &mut Vec<FtReading>) -> Result<usize, DeviceError> {
+        loop {
+            let (approaching, approaches, recording, frames) = {
+                let p = probe(&self.probe);
+                (p.approaching, p.approaches, p.recording, p.frame_calls)
+            };
+            match self.fault {
+                SensorFault::StallOnApproach { approaches: n }
+                    if approaching && approaches <= n =>
+                {
+                    tokio::time::sleep(Duration::from_millis(5)).await;
+                }
+                SensorFault::StallAfterFrame { frame, secs }
+                    if !self.stalled && frames == frame && recording =>
+                {
+                    self.stalled = true;
+                    tokio::time::sleep(Duration::from_secs_f64(secs)).await;
+                }
+                SensorFault::ErrorWhileRecording { frames: n } if recording && frames <= n => {
+                    // Once per frame: the reader task retries after 10 ms.
+                    probe(&self.probe).recording = false;
+                    return Err(DeviceError::Fault {
+                        device: "injected sensor".into(),
+                        code: Some(0x20),
+                        message: "status word: gauge fault".into(),
+                    });
+                }
+                _ => break,
+            }
+        }
+        let start = out.len();
+        let n = self.inner.read(out).await?;
+        let packet = &mut out[start..];
+        let mut p = probe(&self.probe);
+        match self.fault {
+            SensorFault::MidPacket { approaches, fz_n }
+                if p.approaching && p.approaches <= approaches && packet.len() >= 3 =>
+            {
+                let mid = packet.len() / 2;
+                packet[mid].wrench_in_sensor.force_n[2] = fz_n;
+                p.spoilt.push((mid, packet.len()));
+            }
+            SensorFault::NanWhileRecording { frames }
+                if p.recording && p.frame_calls <= frames && !packet.is_empty() =>
+            {
+                let mid = packet.len() / 2;
+                packet[mid].wrench_in_sensor.force_n[0] = f64::NAN;
+                p.spoilt.push((mid, packet.len()));
+            }
+            _ => {}
+        }
+        Ok(n)
+    }
+    async fn bias(&mut self) -> Result<(), DeviceError> {
+        self.inner.bias().await
+    }
+    async fn stop(&mut self) -> Result<(), DeviceError> {
+        self.inner.stop().await
+    }
+    fn lost_readings(&self) -> u64 {
+        self.inner.lost_readings()
+    }
+}
+
+/// A camera that times out on the frame calls `timeouts` says.
+struct FaultyCamera {
+    inner: Box<dyn Camera>,
+    probe: Probe,
+    timeout: fn(u32) -> bool,
+}
+
+#[async_trait]
+impl Camera for FaultyCamera {
+    async fn frame_after(&mut self, t: TimestampNs, timeout_ms: u64) -> Result<Frame, DeviceError> {
+        let call = {
+            let mut p = probe(&self.probe);
+            p.frame_calls += 1;
+            p.recording = true;
+            p.frame_calls
+        };
+        if (self.timeout)(call) {
+            tokio::time::sleep(Duration::from_millis(timeout_ms)).await;
+            return Err(DeviceError::Timeout {
+                device: "injected camera".into(),
+                timeout_ms,
+            });
+        }
+        self.inner.frame_after(t, timeout_ms).await
+    }
+    fn dropped_frames(&self) -> u64 {
+        self.inner.dropped_frames()
+    }
+}
+
+/// Rods changed by an operator who never answers, and presses Ctrl-C twice instead.
+struct AbsentOperator {
+    first: bool,
+    stop: watch::Sender<u32>,
+}
+
+#[async_trait]
+impl RodChanger for AbsentOperator {
+    async fn change_rod(&mut self, _rod: &str) -> Result<(), DeviceError> {
+        if self.first {
+            self.first = false;
+            return Ok(());
+        }
+        self.stop.send_replace(1);
+        self.stop.send_replace(2);
+        std::future::pending().await
+    }
+}
+
+/// Records which samples the job reported done.
+#[derive(Default)]
+struct Done(Vec<u64>);
+
+impl Progress for Done {
+    fn sample_done(&mut self, index: u64, _c: &Counters) {
+        self.0.push(index);
+    }
+    fn note(&mut self, _message: &str) {}
+}
+
+// ---------------------------------------------------------------- one faulty run
+
+/// What to inject.
+struct Faults {
+    sensor: SensorFault,
+    camera_timeout: fn(u32) -> bool,
+    /// A double stop request at the start of this approach.
+    stop_on_approach: Option<u32>,
+    /// An absent operator at the first rod change (with two rods of `block` samples).
+    absent_operator: bool,
+    /// Before collecting: change the plan (e.g. poses outside the workspace).
+    edit_plan: fn(&mut CollectPlan),
+    /// Before collecting: SQL run on the database from another connection.
+    sql: &'static str,
+}
+
+impl Default for Faults {
+    fn default() -> Self {
+        Self {
+            sensor: SensorFault::None,
+            camera_timeout: |_| false,
+            stop_on_approach: None,
+            absent_operator: false,
+            edit_plan: |_| {},
+            sql: "",
+        }
+    }
+}
+
+/// How a faulty run ended.
+struct Ended {
+    outcome: Outcome,
+    counters: Counters,
+    done: Vec<u64>,
+    probe: ProbeState,
+    home: ArmPose,
+    /// The arm's pose at the end, and 5 s (virtual) later.
+    final_pose: ArmPose,
+    later_pose: ArmPose,
+    run_id: i64,
+}
+
+impl Ended {
+    fn at_home(&self) -> bool {
+        same_pose(&self.final_pose, &self.home)
+    }
+    /// The arm is not moving: the world's pose did not change in 5 s.
+    fn still(&self) -> bool {
+        same_pose(&self.final_pose, &self.later_pose)
+    }
+}
+
+fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
+    if !faults.sql.is_empty() {
+        runtime().block_on(async {
+            let store = Store::open(db).await.unwrap_or_else(|e| panic!("{e}"));
+            sqlx::raw_sql(sqlx::AssertSqlSafe(faults.sql))
+                .execute(store.pool())
+                .await
+                .unwrap_or_else(|e| panic!("{e}"));
+            store.close().await;
+        });
+    }
+    let store = SyncStore::open(db).unwrap_or_else(|e| panic!("{e}"));
+    let request = NewRunRequest {
+        samples,
+        seed: Some(3),
+        rods: if faults.absent_operator {
+            vec!["circle-10".into(), "square-10".into()]
+        } else {
+            Vec::new()
+        },
+        block: Some(if faults.absent_operator {
+            2
+        } else {
+            samples.max(1)
+        }),
+        ..NewRunRequest::default()
+    };
+    let mut plan = CollectPlan::new_run(&store, &request).unwrap_or_else(|e| panic!("{e}"));
+    (faults.edit_plan)(&mut plan);
+    let ended = softtouch_collector::testing::block_on(async {
+        let (devices, clock) = build_devices(&plan.rig, &plan.scene, plan.seed)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        let w = &plan.rig.workspace;
+        let home = ArmPose::from_contact(&w.base_from_rod, &w.home);
+        let shared: Probe = Probe::default();
+        let arm = Arc::new(tokio::sync::Mutex::new(devices.arm));
+        let (stop_tx, stop_rx) = watch::channel(0u32);
+        let wrapped = CollectDevices {
+            arm: Box::new(ProbeArm {
+                inner: Arc::clone(&arm),
+                probe: Arc::clone(&shared),
+                home,
+                stop_on_approach: faults.stop_on_approach.map(|n| (n, stop_tx.clone())),
+            }),
+            force_sensor: Box::new(FaultySensor {
+                inner: devices.force_sensor,
+                probe: Arc::clone(&shared),
+                fault: faults.sensor,
+                stalled: false,
+            }),
+            camera: Box::new(FaultyCamera {
+                inner: devices.camera,
+                probe: Arc::clone(&shared),
+                timeout: faults.camera_timeout,
+            }),
+            rods: if faults.absent_operator {
+                Box::new(AbsentOperator {
+                    first: true,
+                    stop: stop_tx.clone(),
+                })
+            } else {
+                devices.rods
+            },
+        };
+        let mut done = Done::default();
+        let (outcome, counters) = collect(&store, &plan, wrapped, clock, stop_rx, &mut done).await;
+        drop(stop_tx);
+        let pose = |arm: Arc<tokio::sync::Mutex<Box<dyn Arm>>>| async move {
+            arm.lock()
+                .await
+                .state()
+                .await
+                .unwrap_or_else(|e| panic!("{e}"))
+                .base_from_finger
+        };
+        let final_pose = pose(Arc::clone(&arm)).await;
+        tokio::time::sleep(Duration::from_secs(5)).await;
+        let later_pose = pose(arm).await;
+        let state = std::mem::take(&mut *probe(&shared));
+        Ended {
+            outcome,
+            counters,
+            done: done.0,
+            probe: state,
+            home,
+            final_pose,
+            later_pose,
+            run_id: plan.run_id,
+        }
+    });
+    store.close();
+    ended
+}
+
+/// The run's status, its events `(kind, message)`, and its stored samples
+/// `(index, status, reject_reason, attempts)`.
+struct Stored {
+    status: String,
+    events: Vec<(String, String)>,
+    samples: Vec<(u64, String, Option<String>, i64)>,
+    lease_held: bool,
+}
+
+impl Stored {
+    fn kinds(&self, kind: &str) -> Vec<&str> {
+        self.events
+            .iter()
+            .filter(|(k, _)| k == kind)
+            .map(|(_, m)| m.as_str())
+            .collect()
+    }
+    fn indices(&self) -> Vec<u64> {
+        self.samples.iter().map(|s| s.0).collect()
+    }
+}
+
+fn stored(db: &Path, run: i64) -> Stored {
+    runtime().block_on(async {
+        let store = Store::open(db).await.unwrap_or_else(|e| panic!("{e}"));
+        let status = store
+            .run_record(run)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"))
+            .status;
+        let events = store
+            .events(run, 10_000)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"))
+            .into_iter()
+            .map(|e| (e.kind, e.message))
+            .collect();
+        let samples = sqlx::query(
+            "SELECT sample_index, status, reject_reason, attempts FROM samples
+             WHERE run_id = ? ORDER BY sample_index",
+        )
+        .bind(run)
+        .fetch_all(store.pool())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"))
+        .iter()
+        .map(|r| {
+            (
+                u64::try_from(r.get::<i64, _>(0)).unwrap_or(u64::MAX),
+                r.get(1),
+                r.get(2),
+                r.get(3),
+            )
+        })
+        .collect();
+        let lease_held = store
+            .lease(run)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"))
+            .is_some();
+        store.close().await;
+        Stored {
+            status,
+            events,
+            samples,
+            lease_held,
+        }
+    })
+}
+
+/// Every sample the job reported done is stored, and nothing else.
+fn nothing_lost(ended: &Ended, s: &Stored) {
+    let mut done = ended.done.clone();
+    done.sort_unstable();
+    assert_eq!(
+        s.indices(),
+        done,
+        "stored samples = samples the job reported done"
+    );
+    assert!(!s.lease_held, "the lease is given back at the end");
+}
+
+// ---------------------------------------------------------------- the matrix
+
+#[test]
+fn a_force_spike_in_the_middle_of_a_packet_trips_the_guard() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        4,
+        Faults {
+            sensor: SensorFault::MidPacket {
+                approaches: 1,
+                fz_n: 30.0,
+            },
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    assert_eq!(e.outcome, Outcome::Completed);
+    assert_eq!(s.status, "completed");
+    let (mid, len) = e.probe.spoilt[0];
+    assert!(
+        mid + 1 < len,
+        "the spike was not the packet's newest reading"
+    );
+    assert_eq!(s.kinds("force_limit").len(), 1, "{:?}", s.events);
+    assert!(
+        s.kinds("force_limit")[0].contains("30"),
+        "{:?}",
+        s.kinds("force_limit")
+    );
+    assert_eq!(
+        s.samples[0],
+        (0, "rejected".into(), Some("force_limit".into()), 1)
+    );
+    assert!(s.samples[1..].iter().all(|x| x.1 == "ok"));
+    assert!(e.probe.stops >= 1, "the arm was told to stop at the trip");
+    assert!(e.at_home() && e.still(), "the arm ends at home, still");
+    nothing_lost(&e, &s);
+}
+
+#[test]
+fn a_pose_outside_the_workspace_is_never_sent_and_stops_the_run() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        3,
+        Faults {
+            edit_plan: |plan| {
+                plan.scene.poses.x_m = softtouch_schemas::Range::new(5.0, 5.0);
+            },
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    let Outcome::SafeStop { reason } = &e.outcome else {
+        panic!("{:?}", e.outcome)
+    };
+    assert!(reason.contains("outside the workspace"), "{reason}");
+    assert_eq!(s.status, "failed");
+    assert_eq!(s.kinds("safe_stop").len(), 1);
+    assert!(
+        e.probe.moves.iter().all(|m| same_pose(m, &e.home)),
+        "only home was ever commanded"
+    );
+    assert!(e.at_home() && e.still());
+    assert!(s.samples.is_empty());
+    nothing_lost(&e, &s);
+}
+
+#[test]
+fn consecutive_failures_end_in_a_safe_stop() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    // Every frame times out: each sample is rejected after its attempts.
+    let e = faulty_run(
+        &db,
+        30,
+        Faults {
+            camera_timeout: |_| true,
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    let Outcome::SafeStop { reason } = &e.outcome else {
+        panic!("{:?}", e.outcome)
+    };
+    assert!(reason.contains("10 samples in a row failed"), "{reason}");
+    assert_eq!(s.status, "failed");
+    assert_eq!(s.kinds("safe_stop"), [reason.as_str()]);
+    assert_eq!(s.samples.len(), 10);
+    assert!(
+        s.samples
+            .iter()
+            .all(|x| x.1 == "rejected" && x.2.as_deref() == Some("frame_timeout") && x.3 == 3)
+    );
+    assert_eq!(s.kinds("frame_timeout").len(), 30);
+    assert!(e.at_home() && e.still());
+    nothing_lost(&e, &s);
+}
+
+#[test]
+fn a_frame_timeout_is_retried_and_logged() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        3,
+        Faults {
+            camera_timeout: |call| call == 2,
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    assert_eq!(e.outcome, Outcome::Completed);
+    assert_eq!(s.status, "completed");
+    assert_eq!(e.counters.frame_timeouts, 1);
+    assert_eq!(s.kinds("frame_timeout").len(), 1);
+    assert_eq!(s.samples[1], (1, "ok".into(), None, 2), "retried once");
+    assert!(e.at_home() && e.still());
+    nothing_lost(&e, &s);
+}
+
+#[test]
+fn a_sensor_fault_while_recording_is_retried_and_logged() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        3,
+        Faults {
+            sensor: SensorFault::ErrorWhileRecording { frames: 1 },
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    assert_eq!(e.outcome, Outcome::Completed);
+    assert_eq!(s.status, "completed");
+    let faults = s.kinds("sensor_fault");
+    assert_eq!(faults.len(), 1, "{:?}", s.events);
+    assert!(faults[0].contains("gauge fault"), "{faults:?}");
+    assert_eq!(s.samples[0], (0, "ok".into(), None, 2));
+    assert!(s.kinds("stream_counts")[0].contains("1 read errors"));
+    assert!(e.at_home() && e.still());
+    nothing_lost(&e, &s);
+}
+
+#[test]
+fn a_stream_stalled_during_the_approach_stops_the_arm() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        3,
+        Faults {
+            sensor: SensorFault::StallOnApproach { approaches: 1 },
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    assert_eq!(e.outcome, Outcome::Completed);
+    let stops = s.kinds("guard_stop");
+    assert_eq!(stops.len(), 1, "{:?}", s.events);
+    assert!(stops[0].contains("stale stream"), "{stops:?}");
+    assert!(e.probe.stops >= 1, "the arm was told to stop");
+    assert_eq!(s.samples[0], (0, "ok".into(), None, 2));
+    assert!(e.at_home() && e.still());
+    nothing_lost(&e, &s);
+}
+
+#[test]
+fn a_window_cut_short_by_a_stalled_stream_is_rejected_with_its_reason() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        3,
+        Faults {
+            sensor: SensorFault::StallAfterFrame {
+                frame: 1,
+                secs: 2.0,
+            },
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    assert_eq!(e.outcome, Outcome::Completed);
+    let stalled = s.kinds("stream_stalled");
+    assert_eq!(stalled.len(), 1, "{:?}", s.events);
+    assert!(stalled[0].contains("attempt 1"), "{stalled:?}");
+    assert_eq!(s.samples[0], (0, "ok".into(), None, 2), "retried");
+    assert!(e.at_home() && e.still());
+    nothing_lost(&e, &s);
+}
+
+#[test]
+fn non_finite_readings_reject_the_window_and_never_reach_a_label_column() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    // NaN in every attempt of sample 0 (3 frames): stored rejected, the run goes on.
+    let e = faulty_run(
+        &db,
+        3,
+        Faults {
+            sensor: SensorFault::NanWhileRecording { frames: 3 },
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    assert_eq!(e.outcome, Outcome::Completed);
+    assert_eq!(s.status, "completed");
+    assert_eq!(
+        s.samples[0],
+        (0, "rejected".into(), Some("non_finite".into()), 3)
+    );
+    assert_eq!(s.kinds("non_finite").len(), 3);
+    assert!(s.samples[1..].iter().all(|x| x.1 == "ok"));
+    runtime().block_on(async {
+        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
+        let fx: f64 = sqlx::query_scalar("SELECT fx_n FROM samples WHERE sample_index = 0")
+            .fetch_one(store.pool())
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(fx.is_finite());
+        store.close().await;
+    });
+    assert!(e.at_home() && e.still());
+    nothing_lost(&e, &s);
+}
+
+#[test]
+fn a_second_stop_request_mid_move_stops_the_arm_where_it_is() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        5,
+        Faults {
+            stop_on_approach: Some(3),
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    assert_eq!(e.outcome, Outcome::Stopped);
+    assert_eq!(s.status, "stopped");
+    let interrupted = s.kinds("interrupted");
+    assert_eq!(interrupted.len(), 1, "{:?}", s.events);
+    assert!(interrupted[0].contains("not sent home"));
+    // The third approach was cut: the last command was that approach, then a stop.
+    let last = e.probe.moves.last().copied().unwrap_or(e.home);
+    assert!(!same_pose(&last, &e.home), "no retreat after a forced stop");
+    assert_eq!(e.probe.moves_before_last_stop, e.probe.moves.len());
+    assert!(
+        !e.at_home() && !same_pose(&e.final_pose, &last),
+        "stopped mid-path"
+    );
+    assert!(e.still(), "and it stays there");
+    assert_eq!(
+        s.indices(),
+        [0, 1],
+        "two samples done, the third not stored"
+    );
+    nothing_lost(&e, &s);
+}
+
+#[test]
+fn a_second_stop_request_interrupts_the_rod_change_prompt() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        4,
+        Faults {
+            absent_operator: true,
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    assert_eq!(e.outcome, Outcome::Stopped);
+    assert_eq!(s.status, "stopped");
+    assert_eq!(s.kinds("interrupted").len(), 1);
+    assert!(
+        e.at_home() && e.still(),
+        "the prompt waits with the arm at home"
+    );
+    assert_eq!(s.indices(), [0, 1]);
+    nothing_lost(&e, &s);
+}
+
+/// Sample inserts fail from index 2 on (as a full disk would: the trigger aborts the
+/// insert; events and status still go through).
+const FAIL_FROM_SAMPLE_2: &str = "CREATE TRIGGER injected_full BEFORE INSERT ON samples
+     WHEN NEW.sample_index >= 2 BEGIN SELECT RAISE(ABORT, 'database or disk is full (injected)'); END;";
+
+#[test]
+fn a_store_that_fails_mid_run_ends_in_a_safe_stop_and_resume_fills_the_gap() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        6,
+        Faults {
+            sql: FAIL_FROM_SAMPLE_2,
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    let Outcome::SafeStop { reason } = &e.outcome else {
+        panic!("{:?}", e.outcome)
+    };
+    assert!(
+        reason.contains("the store failed") && reason.contains("disk is full"),
+        "{reason}"
+    );
+    assert_eq!(s.status, "failed");
+    assert_eq!(s.kinds("safe_stop"), [reason.as_str()]);
+    assert_eq!(
+        s.indices(),
+        [0, 1],
+        "nothing committed past the failed sample"
+    );
+    assert!(
+        e.at_home() && e.still(),
+        "the arm went home despite the store"
+    );
+    assert!(!s.lease_held);
+    // Whether the job saw sample 2 as done depends on when the writer failed (the
+    // commit runs beside the job); either way it is not stored, and resume takes it.
+    assert!(e.done.starts_with(&[0, 1]), "{:?}", e.done);
+
+    // The disk is freed; a resume takes every missing index.
+    runtime().block_on(async {
+        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
+        sqlx::query("DROP TRIGGER injected_full")
+            .execute(store.pool())
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        store.close().await;
+    });
+    let out = softtouch(
+        dir.path(),
+        &["--db", "t.db", "collect", "--resume", &e.run_id.to_string()],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let s = stored(&db, e.run_id);
+    assert_eq!(s.status, "completed");
+    assert_eq!(s.indices(), (0..6).collect::<Vec<_>>());
+}
+
+#[test]
+fn a_run_whose_store_holds_a_gap_is_not_completed_until_the_gap_is_filled() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let out = softtouch(
+        dir.path(),
+        &["--db", "t.db", "collect", "--samples", "6", "--seed", "4"],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    // A hole below the highest index (as a write lost mid-run leaves).
+    runtime().block_on(async {
+        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
+        sqlx::query("DELETE FROM samples WHERE sample_index IN (1, 3)")
+            .execute(store.pool())
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        store.close().await;
+    });
+    let store = SyncStore::open(&db).unwrap_or_else(|e| panic!("{e}"));
+    let Resumed::Plan(plan) = CollectPlan::resume(&store, 1).unwrap_or_else(|e| panic!("{e}"))
+    else {
+        panic!("a run with gaps is not complete")
+    };
+    assert_eq!(plan.indices().collect::<Vec<_>>(), [1, 3]);
+    assert_eq!(plan.remaining(), 2);
+    drop(plan);
+    store.close();
+    // This (live) test process now holds the run's lease: another process is refused.
+    let out = softtouch(dir.path(), &["--db", "t.db", "collect", "--resume", "1"]);
+    common::fails_with(
+        &out,
+        1,
+        &format!("being collected by process {}", std::process::id()),
+    );
+    runtime().block_on(async {
+        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
+        // Given back, as the job would at its end.
+        sqlx::query("DELETE FROM run_leases")
+            .execute(store.pool())
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        store.close().await;
+    });
+    let out = softtouch(dir.path(), &["--db", "t.db", "collect", "--resume", "1"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("2 ok"), "{}", text(&out.stdout));
+    let s = stored(&db, 1);
+    assert_eq!(s.status, "completed");
+    assert_eq!(s.indices(), (0..6).collect::<Vec<_>>());
+}
+
+#[test]
+fn a_failed_start_leaves_no_running_run() {
+    let dir = tempdir();
+    // A real serial sensor on a port that does not exist: the devices cannot be built.
+    let rig = common::ok(&softtouch(dir.path(), &["config", "show", "rig"]));
+    // (Past the commented example at the top of the file.)
+    let at = 1 + rig
+        .find("\n[force_sensor]")
+        .unwrap_or_else(|| panic!("{rig}"));
+    let end = rig[at + 1..].find("\n[").map_or(rig.len(), |i| at + 1 + i);
+    let broken = format!(
+        "{}[force_sensor]\ndriver = \"ati-serial\"\nport = \"/nonexistent/ttySOFTTOUCH\"\nbaud = 9600\n\
+         counts_per_force = 1000000.0\ncounts_per_torque = 1000000.0\n{}",
+        &rig[..at],
+        &rig[end..]
+    );
+    std::fs::write(dir.path().join("rig.toml"), broken).unwrap_or_else(|e| panic!("{e}"));
+    let out = softtouch(
+        dir.path(),
+        &[
+            "--db",
+            "t.db",
+            "collect",
+            "--rig",
+            "rig.toml",
+            "--samples",
+            "3",
+        ],
+    );
+    common::fails_with(&out, 1, "force_sensor");
+    let s = stored(&dir.path().join("t.db"), 1);
+    assert_eq!(s.status, "failed");
+    let failed = s.kinds("start_failed");
+    assert_eq!(failed.len(), 1, "{:?}", s.events);
+    assert!(failed[0].contains("force_sensor"), "{failed:?}");
+    assert!(s.samples.is_empty() && !s.lease_held);
+}
+
+// ---------------------------------------------------------------- processes
+
+/// Samples of `run` so far, read without migrating (a child owns the database).
+fn count_samples(db: &Path, run: i64) -> i64 {
+    runtime().block_on(async {
+        let options = sqlx::sqlite::SqliteConnectOptions::new()
+            .filename(db)
+            .read_only(true);
+        let Ok(mut conn) = sqlx::ConnectOptions::connect(&options).await else {
+            return 0;
+        };
+        sqlx::query_scalar("SELECT COUNT(*) FROM samples WHERE run_id = ?")
+            .bind(run)
+            .fetch_one(&mut conn)
+            .await
+            .unwrap_or(0)
+    })
+}
+
+/// Start `softtouch collect ARGS` in `dir` and wait until `run` has `at_least` samples.
+fn collect_until(dir: &Path, args: &[&str], at_least: i64) -> std::process::Child {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_softtouch"))
+        .args(args)
+        .current_dir(dir)
+        .env_remove("SOFTTOUCH_DB")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{e}"));
+    while count_samples(&dir.join("softtouch.db"), 1) < at_least {
+        if let Ok(Some(status)) = child.try_wait() {
+            panic!("collect ended early: {status}");
+        }
+        std::thread::yield_now();
+    }
+    child
+}
+
+fn signal(child: &std::process::Child, name: &str) {
+    let ok = Command::new("kill")
+        .args([&format!("-{name}"), &child.id().to_string()])
+        .status()
+        .unwrap_or_else(|e| panic!("kill: {e}"))
+        .success();
+    assert!(ok, "kill -{name} failed");
+}
+
+#[test]
+fn sigterm_finishes_the_sample_retreats_and_stops_the_run() {
+    let dir = tempdir();
+    let child = collect_until(
+        dir.path(),
+        &["collect", "--samples", "100000", "--seed", "8"],
+        3,
+    );
+    signal(&child, "TERM");
+    let out = child.wait_with_output().unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        out.status.success(),
+        "exit {:?}: {}",
+        out.status.code(),
+        text(&out.stderr)
+    );
+    assert!(
+        text(&out.stdout).contains("stopped (resume with --resume 1)"),
+        "{}",
+        text(&out.stdout)
+    );
+    assert!(
+        text(&out.stderr).contains("SIGTERM"),
+        "{}",
+        text(&out.stderr)
+    );
+    let s = stored(&dir.path().join("softtouch.db"), 1);
+    assert_eq!(s.status, "stopped");
+    assert_eq!(s.kinds("stopped").len(), 1);
+    assert!(
+        s.kinds("interrupted").is_empty(),
+        "one signal lets the sample finish"
+    );
+    let n = s.samples.len() as u64;
+    assert!(n >= 3);
+    assert_eq!(s.indices(), (0..n).collect::<Vec<_>>(), "no gap");
+    assert!(!s.lease_held);
+}
+
+#[test]
+fn a_second_process_is_refused_a_leased_run_and_takes_it_over_once_the_holder_is_gone() {
+    let dir = tempdir();
+    let mut child = collect_until(
+        dir.path(),
+        &["collect", "--samples", "100000", "--seed", "9"],
+        2,
+    );
+    let holder = child.id();
+    let refused = softtouch(dir.path(), &["collect", "--resume", "1"]);
+    common::fails_with(&refused, 1, &format!("being collected by process {holder}"));
+    assert!(
+        count_samples(&dir.path().join("softtouch.db"), 1) >= 2,
+        "the holder goes on"
+    );
+
+    // The holder dies without a word (kill -9): its lease goes stale with it.
+    let _ = child.kill();
+    let _ = child.wait();
+    let db = dir.path().join("softtouch.db");
+    let before = stored(&db, 1);
+    assert!(before.lease_held && before.status == "running");
+    let committed = before.indices();
+    // Shrink the run so that the takeover finishes quickly.
+    let planned = committed.len() as i64 + 3;
+    runtime().block_on(async {
+        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
+        sqlx::query("UPDATE runs SET samples_planned = ? WHERE run_id = 1")
+            .bind(planned)
+            .execute(store.pool())
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        store.close().await;
+    });
+    let out = softtouch(dir.path(), &["collect", "--resume", "1"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let s = stored(&db, 1);
+    let taken = s.kinds("lease_taken_over");
+    assert_eq!(taken.len(), 1, "{:?}", s.events);
+    assert!(
+        taken[0].contains(&format!("process {holder}")) && taken[0].contains("no longer running")
+    );
+    assert_eq!(s.status, "completed");
+    let all: Vec<u64> = (0..u64::try_from(planned).unwrap_or(0)).collect();
+    assert_eq!(s.indices(), all);
+    assert!(
+        committed.iter().all(|i| s.indices().contains(i)),
+        "no committed sample lost"
+    );
+    assert!(!s.lease_held);
+}
+
+#[test]
+fn a_live_lease_refuses_a_resume_in_the_same_api() {
+    let dir = tempdir();
+    let store = SyncStore::open(&dir.path().join("t.db")).unwrap_or_else(|e| panic!("{e}"));
+    let plan = CollectPlan::new_run(
+        &store,
+        &NewRunRequest {
+            samples: 2,
+            seed: Some(1),
+            ..NewRunRequest::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    match CollectPlan::resume(&store, plan.run_id) {
+        Err(PlanError::Store(StoreError::Leased { run_id, holder })) => {
+            assert_eq!(run_id, plan.run_id);
+            assert_eq!(holder.pid, i64::from(std::process::id()));
+        }
+        other => panic!("expected a refusal, got {other:?}"),
+    }
+    store.close();
+}
+
+#[test]
+fn a_lease_from_another_host_is_taken_over_only_once_its_heartbeat_is_stale() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let out = softtouch(
+        dir.path(),
+        &["--db", "t.db", "collect", "--samples", "2", "--seed", "6"],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let lease = |age_s: u32| {
+        runtime().block_on(async {
+            let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
+            sqlx::query("UPDATE runs SET status = 'stopped', samples_planned = 3 WHERE run_id = 1")
+                .execute(store.pool())
+                .await
+                .unwrap_or_else(|e| panic!("{e}"));
+            sqlx::query(
+                "INSERT OR REPLACE INTO run_leases (run_id, holder, pid, host, acquired_at, heartbeat_at)
+                 VALUES (1, 'elsewhere', 4242, 'another-host',
+                         strftime('%Y-%m-%dT%H:%M:%fZ', 'now', ?1),
+                         strftime('%Y-%m-%dT%H:%M:%fZ', 'now', ?1))",
+            )
+            .bind(format!("-{age_s} seconds"))
+            .execute(store.pool())
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+            store.close().await;
+        });
+    };
+    // Fresh: its process may well be alive over there.
+    lease(30);
+    let out = softtouch(dir.path(), &["--db", "t.db", "collect", "--resume", "1"]);
+    common::fails_with(
+        &out,
+        1,
+        "being collected by process 4242 on host `another-host`",
+    );
+    // Silent for longer than LEASE_STALE_S: taken over.
+    lease(3600);
+    let out = softtouch(dir.path(), &["--db", "t.db", "collect", "--resume", "1"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("1 ok, 0 rejected, 0 already present"),
+        "{}",
+        text(&out.stdout)
+    );
+    let s = stored(&db, 1);
+    let taken = s.kinds("lease_taken_over");
+    assert_eq!(taken.len(), 1);
+    assert!(taken[0].contains("no heartbeat for 3600 s"), "{taken:?}");
+    assert_eq!(s.status, "completed");
+    assert_eq!(s.indices(), [0, 1, 2]);
+}
+
+#[test]
+fn sighup_then_a_second_signal_stops_the_binary_at_once() {
+    let dir = tempdir();
+    let child = collect_until(
+        dir.path(),
+        &["collect", "--samples", "100000", "--seed", "10"],
+        2,
+    );
+    signal(&child, "HUP");
+    signal(&child, "TERM");
+    let out = child.wait_with_output().unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        out.status.success(),
+        "exit {:?}: {}",
+        out.status.code(),
+        text(&out.stderr)
+    );
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("SIGHUP") && err.contains("stopping the arm now"),
+        "{err}"
+    );
+    let s = stored(&dir.path().join("softtouch.db"), 1);
+    assert_eq!(s.status, "stopped");
+    let interrupted = s.kinds("interrupted");
+    assert_eq!(interrupted.len(), 1, "{:?}", s.events);
+    assert!(interrupted[0].contains("not sent home"));
+    let n = s.samples.len() as u64;
+    assert_eq!(s.indices(), (0..n).collect::<Vec<_>>(), "no gap");
+    assert!(!s.lease_held);
+}

@@ -1,0 +1,382 @@
+//! End-to-end tests of `softtouch report`: on a small simulated collection with a
+//! dataset and two tiny models, the page parses as HTML5, has every section, shows the
+//! database's numbers, escapes names and leaves the database untouched; an empty
+//! database gives a page of verbs to run; bad options exit 2.
+
+mod common;
+use common::{fails_with, ok, runtime, softtouch, tempdir};
+
+use scraper::{Html, Selector};
+use sqlx::Row as _;
+use sqlx::sqlite::{SqliteConnectOptions, SqlitePoolOptions};
+use std::path::Path;
+
+const TINY: [&str; 12] = [
+    "--size",
+    "16",
+    "--width",
+    "4",
+    "--latent",
+    "8",
+    "--epochs",
+    "2",
+    "--batch",
+    "32",
+    "--patience",
+    "0",
+];
+
+/// `samples` simulated samples, dataset `air` over them, and `models` tiny models.
+fn lab(dir: &Path, samples: &str, models: &[&str]) {
+    ok(&softtouch(dir, &["db", "init"]));
+    ok(&softtouch(
+        dir,
+        &["collect", "--samples", samples, "--seed", "4"],
+    ));
+    ok(&softtouch(
+        dir,
+        &["dataset", "create", "air", "--runs", "1"],
+    ));
+    for kind in models {
+        let mut args = vec!["train", "--dataset", "air", "--model", kind];
+        args.extend(TINY);
+        ok(&softtouch(dir, &args));
+    }
+}
+
+/// The page, which must parse as HTML5 without a single parse error.
+fn parse(path: &Path) -> (String, Html) {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{e}"));
+    let html = Html::parse_document(&text);
+    assert!(
+        html.errors.is_empty(),
+        "HTML5 parse errors: {:?}",
+        html.errors
+    );
+    (text, html)
+}
+
+fn select(html: &Html, css: &str) -> Vec<String> {
+    let selector = Selector::parse(css).unwrap_or_else(|e| panic!("{css}: {e}"));
+    html.select(&selector)
+        .map(|e| e.text().collect::<String>().trim().to_owned())
+        .collect()
+}
+
+/// The text of the element with `data-k="key"`.
+fn value(html: &Html, key: &str) -> String {
+    let found = select(html, &format!("[data-k=\"{key}\"]"));
+    assert_eq!(found.len(), 1, "one element with data-k={key}: {found:?}");
+    found[0].clone()
+}
+
+fn sha256_of(path: &Path) -> String {
+    softtouch_collector::dataset::export::sha256_hex(
+        &std::fs::read(path).unwrap_or_else(|e| panic!("{e}")),
+    )
+}
+
+/// Runs SQL against the database (read-write, for setting up cases).
+fn sql(db: &Path, statement: &str) {
+    runtime().block_on(async {
+        let pool = SqlitePoolOptions::new()
+            .connect_with(SqliteConnectOptions::new().filename(db))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        sqlx::query(sqlx::AssertSqlSafe(statement.to_owned()))
+            .execute(&pool)
+            .await
+            .unwrap_or_else(|e| panic!("{statement}: {e}"));
+        pool.close().await;
+    });
+}
+
+/// One row of integers.
+fn ints(db: &Path, query: &str) -> Vec<i64> {
+    runtime().block_on(async {
+        let pool = SqlitePoolOptions::new()
+            .connect_with(SqliteConnectOptions::new().filename(db).read_only(true))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        let row = sqlx::query(sqlx::AssertSqlSafe(query.to_owned()))
+            .fetch_one(&pool)
+            .await
+            .unwrap_or_else(|e| panic!("{query}: {e}"));
+        let out = (0..row.len()).map(|i| row.get::<i64, _>(i)).collect();
+        pool.close().await;
+        out
+    })
+}
+
+const SWEEP_CSV: &str = "label,model,alpha,beta,latent,width,size_px,epochs,seconds_per_epoch,train_images_per_s,latency_ms,frame_latency_ms,image_mse,r2_mean,r2_fx,r2_fy,r2_fz,r2_tx,r2_ty,r2_tz
+ConvNet,convnet,1,0.1,32,16,32,12,26.855,813.0,–,–,–,0.997958,0.998837,0.998474,0.996635,0.998842,0.998938,0.996021
+SVAE α=1,svae,1,0.1,32,16,32,12,35.869,602.4,–,–,1.362125e-2,0.998041,0.998781,0.998420,0.996722,0.999016,0.998832,0.996476
+VAE,vae,1,0.1,32,16,32,12,30.1,700.0,–,–,1.1e-3,–,–,–,–,–,–,–
+";
+
+const COLLECTION_CSV: &str =
+    "settle_s,window_s,samples,accepted,force_rmse_n,torque_rmse_nmm,samples_per_hour,wall_s
+0,0.005,40,40,0.1547,6.796,912.9,0.18
+0.1,0.005,40,40,0.0547,2.796,812.9,0.18
+0,0.02,40,40,0.1468,6.455,911.2,0.17
+";
+
+#[test]
+fn the_page_parses_has_every_section_and_shows_the_databases_numbers() {
+    let dir = tempdir();
+    let d = dir.path();
+    lab(d, "120", &["svae", "convnet"]);
+    std::fs::write(d.join("sweep-alpha.csv"), SWEEP_CSV).unwrap_or_else(|e| panic!("{e}"));
+    std::fs::write(d.join("collection.csv"), COLLECTION_CSV).unwrap_or_else(|e| panic!("{e}"));
+    let db = d.join("softtouch.db");
+    let before = sha256_of(&db);
+
+    let said = ok(&softtouch(
+        d,
+        &[
+            "report",
+            "--out",
+            "report.html",
+            "--sweep",
+            "sweep-alpha.csv",
+            "--bench-collection",
+            "collection.csv",
+        ],
+    ));
+    assert!(said.contains("1 runs, 1 datasets, 2 models"), "{said}");
+    // It reads and never writes.
+    assert_eq!(sha256_of(&db), before, "the database changed");
+
+    let (text, html) = parse(&d.join("report.html"));
+    for id in [
+        "runs",
+        "datasets",
+        "models",
+        "sweeps",
+        "land-to-water",
+        "grasping",
+    ] {
+        assert_eq!(
+            select(&html, &format!("section#{id} > h2")).len(),
+            1,
+            "section {id}"
+        );
+    }
+    // Self-contained: no scripts, no external resources.
+    assert!(select(&html, "script, link, img, iframe").is_empty());
+    assert!(!text.contains("src=") && !text.contains("href=\"http"));
+    assert!(select(&html, "svg").len() >= 12, "figures inline");
+
+    // Runs: the counts as stored.
+    let run = ints(
+        &db,
+        "SELECT SUM(status = 'ok'), SUM(status = 'rejected'), SUM(attempts - 1),
+                (SELECT COUNT(*) FROM events WHERE run_id = 1), (SELECT seed FROM runs WHERE run_id = 1)
+         FROM samples WHERE run_id = 1",
+    );
+    assert_eq!(value(&html, "run-1-ok"), run[0].to_string());
+    assert_eq!(value(&html, "run-1-rejected"), run[1].to_string());
+    assert_eq!(value(&html, "run-1-retried"), run[2].to_string());
+    assert_eq!(value(&html, "run-1-events"), run[3].to_string());
+    assert_eq!(value(&html, "run-1-seed"), "4");
+    assert_eq!(run[4], 4);
+
+    // Datasets: the splits as stored.
+    let splits = ints(
+        &db,
+        "SELECT SUM(split = 'train'), SUM(split = 'val'), SUM(split = 'test'), COUNT(*)
+         FROM dataset_members WHERE dataset_id = 1",
+    );
+    assert_eq!(splits, [84, 12, 24, 120]);
+    assert_eq!(value(&html, "dataset-1-train"), "84");
+    assert_eq!(value(&html, "dataset-1-val"), "12");
+    assert_eq!(value(&html, "dataset-1-test"), "24");
+    assert_eq!(value(&html, "dataset-1-samples"), "120");
+
+    // Models: test R² per axis as stored in metrics_json.
+    runtime().block_on(async {
+        let pool = SqlitePoolOptions::new()
+            .connect_with(SqliteConnectOptions::new().filename(&db).read_only(true))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        let rows: Vec<(i64, String, String)> =
+            sqlx::query_as("SELECT model_id, name, metrics_json FROM models ORDER BY model_id")
+                .fetch_all(&pool)
+                .await
+                .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(rows.len(), 2);
+        for (id, name, metrics) in rows {
+            assert_eq!(value(&html, &format!("model-{id}-name")), name);
+            let m: serde_json::Value =
+                serde_json::from_str(&metrics).unwrap_or_else(|e| panic!("{e}"));
+            let mean = m["test"]["r2_mean"].as_f64().unwrap_or(f64::NAN);
+            assert_eq!(
+                value(&html, &format!("model-{id}-r2")),
+                format!("{mean:.4}")
+            );
+            for (i, axis) in ["fx", "fy", "fz", "tx", "ty", "tz"].iter().enumerate() {
+                let r2 = m["test"]["r2"][i]["r2"].as_f64().unwrap_or(f64::NAN);
+                assert_eq!(
+                    value(&html, &format!("model-{id}-r2-{axis}")),
+                    format!("{r2:.4}")
+                );
+            }
+            // Figure 2b: every one of the 24 test samples (fewer than the default cap).
+            let scatter = value(&html, &format!("model-{id}-scatter"));
+            assert!(
+                scatter.starts_with("24 of the 24 test samples"),
+                "{scatter}"
+            );
+        }
+        pool.close().await;
+    });
+
+    // Sweeps: Table 1 beside the paper; the collection benchmark's figures.
+    assert_eq!(value(&html, "sweep-alpha-1-r2"), "99.80");
+    assert_eq!(value(&html, "sweep-alpha-1-mse"), "1.36e-2");
+    assert!(text.contains("99.45"), "the paper's α = 1 row beside");
+    assert!(text.contains("Force label error against speed"));
+    // Units on the axes.
+    for label in [
+        "true Fx, N",
+        "predicted Tz, N·mm",
+        "force RMSE, N",
+        "Tx, N·mm",
+    ] {
+        assert!(text.contains(label), "axis label `{label}`");
+    }
+
+    // A smaller page: one model, no scatter.
+    ok(&softtouch(
+        d,
+        &[
+            "report",
+            "--out",
+            "one.html",
+            "--runs",
+            "1",
+            "--models",
+            "air-convnet",
+            "--scatter-points",
+            "0",
+        ],
+    ));
+    let (_, one) = parse(&d.join("one.html"));
+    assert_eq!(
+        select(&one, "[data-k$=\"-name\"]").len(),
+        2,
+        "one dataset and one model"
+    );
+    assert!(select(&one, "[data-k$=\"-scatter\"]").is_empty());
+    assert_eq!(sha256_of(&db), before, "the database changed");
+}
+
+#[test]
+fn names_with_markup_characters_are_escaped() {
+    let dir = tempdir();
+    let d = dir.path();
+    lab(d, "60", &["svae"]);
+    let db = d.join("softtouch.db");
+    let nasty = r#"<b>A&B "q" 'r'</b>"#;
+    let quoted = nasty.replace('\'', "''");
+    sql(&db, &format!("UPDATE runs SET scene_name = '{quoted}'"));
+    sql(&db, &format!("UPDATE datasets SET name = 'd{quoted}'"));
+    sql(
+        &db,
+        &format!("UPDATE models SET name = 'm{quoted}', dataset_name = 'd{quoted}'"),
+    );
+    ok(&softtouch(d, &["report", "--out", "r.html"]));
+    let (text, html) = parse(&d.join("r.html"));
+    assert!(select(&html, "b").is_empty(), "no element came from a name");
+    assert_eq!(value(&html, "run-1-scene"), nasty);
+    assert_eq!(value(&html, "dataset-1-name"), format!("d{nasty}"));
+    assert_eq!(value(&html, "model-1-name"), format!("m{nasty}"));
+    assert!(text.contains("&lt;b&gt;A&amp;B"));
+    assert!(!text.contains(nasty));
+
+    // A damaged artifact costs the model its figure, not the page.
+    sql(&db, "UPDATE models SET artifact = zeroblob(64)");
+    ok(&softtouch(d, &["report", "--out", "r.html"]));
+    let (_, html) = parse(&d.join("r.html"));
+    let todo = select(&html, "#models .todo").join("\n");
+    assert!(todo.contains("cannot load its artifact"), "{todo}");
+    assert_eq!(value(&html, "model-1-name"), format!("m{nasty}"));
+}
+
+#[test]
+fn an_empty_database_gives_a_page_saying_which_verbs_to_run() {
+    let dir = tempdir();
+    let d = dir.path();
+    ok(&softtouch(d, &["db", "init"]));
+    let said = ok(&softtouch(d, &["report", "--out", "empty.html"]));
+    assert!(said.contains("0 runs, 0 datasets, 0 models"), "{said}");
+    let (_, html) = parse(&d.join("empty.html"));
+    let todo = select(&html, ".todo").join("\n");
+    for verb in [
+        "softtouch collect",
+        "softtouch dataset create",
+        "softtouch train",
+        "softtouch sweep alpha",
+        "softtouch sweep latent",
+        "softtouch bench collection",
+        "softtouch eval",
+    ] {
+        assert!(todo.contains(verb), "`{verb}` in: {todo}");
+    }
+    assert!(todo.contains("#16") && todo.contains("#18"), "{todo}");
+}
+
+#[test]
+fn bad_input_exits_2_naming_what_is_wrong() {
+    let dir = tempdir();
+    let d = dir.path();
+    fails_with(
+        &softtouch(d, &["report", "--out", "r.html"]),
+        2,
+        "no database at",
+    );
+    ok(&softtouch(d, &["db", "init"]));
+    fails_with(
+        &softtouch(d, &["report", "--out", "r.html", "--runs", "9"]),
+        2,
+        "no run 9",
+    );
+    fails_with(
+        &softtouch(d, &["report", "--out", "r.html", "--models", "nope"]),
+        2,
+        "no model named `nope`",
+    );
+    fails_with(
+        &softtouch(d, &["report", "--out", "r.html", "--sweep", "missing.csv"]),
+        2,
+        "cannot read missing.csv",
+    );
+    std::fs::write(d.join("bad.csv"), "settle_s,window_s\n0,1\n").unwrap_or_else(|e| panic!("{e}"));
+    fails_with(
+        &softtouch(
+            d,
+            &["report", "--out", "r.html", "--bench-collection", "bad.csv"],
+        ),
+        2,
+        "bad.csv:1: no column `samples`",
+    );
+    fails_with(
+        &softtouch(d, &["report", "--out", "softtouch.db"]),
+        2,
+        "is the database itself",
+    );
+    assert!(!d.join("r.html").exists(), "nothing written on bad input");
+    // Not a softtouch database (or one older than this build): refused, not migrated.
+    std::fs::write(d.join("other.db"), b"").unwrap_or_else(|e| panic!("{e}"));
+    fails_with(
+        &softtouch(d, &["--db", "other.db", "report", "--out", "r.html"]),
+        2,
+        "is at schema 0",
+    );
+    assert_eq!(
+        std::fs::metadata(d.join("other.db"))
+            .map(|m| m.len())
+            .unwrap_or(1),
+        0
+    );
+}
