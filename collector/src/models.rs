@@ -81,20 +81,20 @@ macro_rules! member_rows_sql {
 }
 
 #[derive(Debug, FromRow)]
-struct MemberRow {
-    split: String,
-    run_id: i64,
-    sample_index: i64,
-    fx_n: f64,
-    fy_n: f64,
-    fz_n: f64,
-    tx_nm: f64,
-    ty_nm: f64,
-    tz_nm: f64,
-    format: String,
-    width: i64,
-    height: i64,
-    data: Vec<u8>,
+pub(crate) struct MemberRow {
+    pub(crate) split: String,
+    pub(crate) run_id: i64,
+    pub(crate) sample_index: i64,
+    pub(crate) fx_n: f64,
+    pub(crate) fy_n: f64,
+    pub(crate) fz_n: f64,
+    pub(crate) tx_nm: f64,
+    pub(crate) ty_nm: f64,
+    pub(crate) tz_nm: f64,
+    pub(crate) format: String,
+    pub(crate) width: i64,
+    pub(crate) height: i64,
+    pub(crate) data: Vec<u8>,
 }
 
 /// Decodes a stored frame into RGB8.
@@ -205,8 +205,9 @@ pub async fn first_test_frame(
     })
 }
 
-/// Decodes and preprocesses rows on every core, keeping their order.
-fn preprocess_parallel(
+/// Decodes and preprocesses rows on every core, keeping their order. Training and the
+/// report's predicted-against-true figures both read frames through here.
+pub(crate) fn preprocess_parallel(
     rows: Vec<MemberRow>,
     table: &FingerTable,
 ) -> Result<Vec<(String, Example)>, ModelError> {

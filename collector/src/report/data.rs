@@ -6,7 +6,9 @@
 
 use super::ReportError;
 use crate::dataset::export::sha256_hex;
+use crate::models::MemberRow;
 use crate::store::Store;
+use crate::store::{run_counts_columns, run_counts_from};
 use sqlx::sqlite::{SqliteConnectOptions, SqlitePool, SqlitePoolOptions};
 use sqlx::{FromRow, Row as _};
 use std::collections::BTreeMap;
@@ -115,26 +117,13 @@ pub(crate) async fn runs(
     pool: &SqlitePool,
     only: Option<&[i64]>,
 ) -> Result<Vec<RunData>, ReportError> {
-    let rows = sqlx::query_as::<_, RunRow>(
-        "SELECT r.run_id, r.status, r.seed, r.scene_name, r.medium, r.samples_planned,
-                COALESCE(s.ok, 0) AS ok, COALESCE(s.rejected, 0) AS rejected,
-                COALESCE(s.retried, 0) AS retried,
-                COALESCE(e.events, 0) AS events, COALESCE(e.faults, 0) AS faults,
-                r.software_version, r.rig_toml, r.scene_toml,
-                r.created_at, r.updated_at,
-                (julianday(r.updated_at) - julianday(r.created_at)) * 24.0 AS hours,
-                s.first_t_ns, s.last_t_ns
-         FROM runs r
-         LEFT JOIN (SELECT run_id,
-                           SUM(status = 'ok') AS ok,
-                           SUM(status = 'rejected') AS rejected,
-                           SUM(attempts - 1) AS retried,
-                           MIN(frame_t_ns) AS first_t_ns, MAX(frame_t_ns) AS last_t_ns
-                    FROM samples GROUP BY run_id) s ON s.run_id = r.run_id
-         LEFT JOIN (SELECT run_id, COUNT(*) AS events, SUM(level <> 'info') AS faults
-                    FROM events GROUP BY run_id) e ON e.run_id = r.run_id
-         ORDER BY r.run_id",
-    )
+    let rows = sqlx::query_as::<_, RunRow>(concat!(
+        "SELECT ",
+        run_counts_columns!(),
+        ", r.software_version, r.rig_toml, r.scene_toml, s.first_t_ns, s.last_t_ns",
+        run_counts_from!(),
+        " ORDER BY r.run_id"
+    ))
     .fetch_all(pool)
     .await
     .map_err(query("listing runs"))?;
@@ -394,30 +383,14 @@ pub(crate) async fn test_members(
     .map_err(query("listing a dataset's test split"))
 }
 
-/// One stored frame with its label.
-#[derive(Debug, Clone, FromRow)]
-pub(crate) struct FrameRow {
-    pub run_id: i64,
-    pub sample_index: i64,
-    pub fx_n: f64,
-    pub fy_n: f64,
-    pub fz_n: f64,
-    pub tx_nm: f64,
-    pub ty_nm: f64,
-    pub tz_nm: f64,
-    pub format: String,
-    pub width: i64,
-    pub height: i64,
-    pub data: Vec<u8>,
-}
-
-/// Sample `(run, index)`'s label and frame, if it has a frame.
+/// Test sample `(run, index)`'s label and frame, if it has a frame.
 pub(crate) async fn frame(
     pool: &SqlitePool,
     (run, index): (i64, i64),
-) -> Result<Option<FrameRow>, ReportError> {
-    sqlx::query_as::<_, FrameRow>(
-        "SELECT s.run_id, s.sample_index, s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
+) -> Result<Option<MemberRow>, ReportError> {
+    sqlx::query_as::<_, MemberRow>(
+        "SELECT 'test' AS split, s.run_id, s.sample_index,
+                s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
                 f.format, f.width, f.height, f.data
          FROM samples s JOIN frames f ON f.run_id = s.run_id AND f.sample_index = s.sample_index
          WHERE s.run_id = ? AND s.sample_index = ?",

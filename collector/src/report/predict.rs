@@ -6,9 +6,8 @@
 //! preprocessing.
 
 use super::ReportError;
-use super::data::{self, FrameRow};
-use softtouch_schemas::FrameFormat;
-use softtouch_trainer::labels::label_from_si;
+use super::data;
+use crate::models::ModelError;
 use softtouch_trainer::{Example, FingerTable, ModelArtifact, Preprocess, WrenchLabel, evaluate};
 use sqlx::SqlitePool;
 use std::collections::HashMap;
@@ -30,33 +29,6 @@ pub(crate) struct Cache {
     subsets: HashMap<(i64, String), (Vec<Example>, usize)>,
 }
 
-/// Decodes a stored frame into RGB8 `(width, height, bytes)`.
-fn decode(row: &FrameRow) -> Result<(usize, usize, Vec<u8>), String> {
-    let format: FrameFormat = row.format.parse()?;
-    let (w, h) = (
-        usize::try_from(row.width).map_err(|_| format!("bad width {}", row.width))?,
-        usize::try_from(row.height).map_err(|_| format!("bad height {}", row.height))?,
-    );
-    let image_format = match format {
-        FrameFormat::Rgb8 => {
-            if row.data.len() != w * h * 3 {
-                return Err(format!(
-                    "rgb8 frame holds {} bytes, {w}×{h} needs {}",
-                    row.data.len(),
-                    w * h * 3
-                ));
-            }
-            return Ok((w, h, row.data.clone()));
-        }
-        FrameFormat::Png => image::ImageFormat::Png,
-        FrameFormat::Jpeg => image::ImageFormat::Jpeg,
-    };
-    let img = image::load_from_memory_with_format(&row.data, image_format)
-        .map_err(|e| format!("cannot decode its {} frame: {e}", row.format))?
-        .into_rgb8();
-    Ok((img.width() as usize, img.height() as usize, img.into_raw()))
-}
-
 /// Reads, decodes and preprocesses up to `max` evenly spaced test samples of a dataset.
 async fn subset(
     pool: &SqlitePool,
@@ -72,43 +44,18 @@ async fn subset(
         }
     }
     let table = FingerTable::new(preprocess);
-    let one = |row: &FrameRow| -> Result<Example, ReportError> {
-        let bad = |why: String| ReportError::Frame {
-            run: row.run_id,
-            index: row.sample_index,
-            why,
-        };
-        let (w, h, rgb) = decode(row).map_err(bad)?;
-        let image = table.apply(w, h, &rgb).map_err(|e| bad(e.to_string()))?;
-        let label = label_from_si(
-            [row.fx_n, row.fy_n, row.fz_n],
-            [row.tx_nm, row.ty_nm, row.tz_nm],
-        );
-        Ok(Example { image, label })
-    };
-    // PNG decoding dominates: one chunk per core.
-    let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
-    let per = rows.len().div_ceil(threads).max(1);
-    let examples = std::thread::scope(|scope| {
-        let handles: Vec<_> = rows
-            .chunks(per)
-            .map(|part| scope.spawn(move || part.iter().map(one).collect::<Result<Vec<_>, _>>()))
-            .collect();
-        let mut out = Vec::with_capacity(rows.len());
-        for h in handles {
-            match h.join() {
-                Ok(part) => out.extend(part?),
-                Err(_) => {
-                    return Err(ReportError::Frame {
-                        run: 0,
-                        index: 0,
-                        why: "a decoding thread panicked".into(),
-                    });
-                }
-            }
-        }
-        Ok(out)
-    })?;
+    let examples = crate::models::preprocess_parallel(rows, &table)
+        .map_err(|e| match e {
+            ModelError::Frame { run, index, why } => ReportError::Frame { run, index, why },
+            other => ReportError::Frame {
+                run: 0,
+                index: 0,
+                why: other.to_string(),
+            },
+        })?
+        .into_iter()
+        .map(|(_, example)| example)
+        .collect();
     Ok((examples, members.len()))
 }
 

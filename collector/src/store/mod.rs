@@ -13,6 +13,7 @@ mod event;
 pub use event::EventKind;
 pub(crate) mod rows;
 mod runs;
+pub(crate) use runs::{run_counts_columns, run_counts_from};
 mod sync;
 mod window;
 

@@ -52,6 +52,38 @@ pub struct NewRun<'a> {
     pub scene_toml: &'a str,
 }
 
+/// A run's counts as `runs`, `status` and the report show them: the columns (of `r`, `s`
+/// and `e`) and the `FROM` that computes them. One definition, so that what counts as
+/// ok, rejected, retried or a fault cannot drift between listings. Macros, because sqlx
+/// takes `&'static str` and `concat!` takes literals.
+macro_rules! run_counts_columns {
+    () => {
+        "r.run_id, r.status, r.seed, r.scene_name, r.medium, r.samples_planned,
+         COALESCE(s.ok, 0) AS ok, COALESCE(s.rejected, 0) AS rejected,
+         COALESCE(s.retried, 0) AS retried,
+         COALESCE(e.events, 0) AS events, COALESCE(e.faults, 0) AS faults,
+         r.created_at, r.updated_at,
+         (julianday(r.updated_at) - julianday(r.created_at)) * 24.0 AS hours"
+    };
+}
+pub(crate) use run_counts_columns;
+
+/// See [`run_counts_columns`]; `s` also carries the first and last frame time.
+macro_rules! run_counts_from {
+    () => {
+        " FROM runs r
+         LEFT JOIN (SELECT run_id,
+                           SUM(status = 'ok') AS ok,
+                           SUM(status = 'rejected') AS rejected,
+                           SUM(attempts - 1) AS retried,
+                           MIN(frame_t_ns) AS first_t_ns, MAX(frame_t_ns) AS last_t_ns
+                    FROM samples GROUP BY run_id) s ON s.run_id = r.run_id
+         LEFT JOIN (SELECT run_id, COUNT(*) AS events, SUM(level <> 'info') AS faults
+                    FROM events GROUP BY run_id) e ON e.run_id = r.run_id"
+    };
+}
+pub(crate) use run_counts_from;
+
 /// One run with its counts, for listings.
 #[derive(Debug, Clone, PartialEq, FromRow)]
 pub struct RunSummary {
@@ -162,23 +194,12 @@ impl Store {
 
     /// Every run with its counts, oldest first.
     pub async fn runs(&self) -> Result<Vec<RunSummary>, StoreError> {
-        sqlx::query_as::<_, RunSummary>(
-            "SELECT r.run_id, r.status, r.seed, r.scene_name, r.medium, r.samples_planned,
-                    COALESCE(s.ok, 0) AS ok, COALESCE(s.rejected, 0) AS rejected,
-                    COALESCE(s.retried, 0) AS retried,
-                    COALESCE(e.events, 0) AS events, COALESCE(e.faults, 0) AS faults,
-                    r.created_at, r.updated_at,
-                    (julianday(r.updated_at) - julianday(r.created_at)) * 24.0 AS hours
-             FROM runs r
-             LEFT JOIN (SELECT run_id,
-                               SUM(status = 'ok') AS ok,
-                               SUM(status = 'rejected') AS rejected,
-                               SUM(attempts - 1) AS retried
-                        FROM samples GROUP BY run_id) s ON s.run_id = r.run_id
-             LEFT JOIN (SELECT run_id, COUNT(*) AS events, SUM(level <> 'info') AS faults
-                        FROM events GROUP BY run_id) e ON e.run_id = r.run_id
-             ORDER BY r.run_id",
-        )
+        sqlx::query_as::<_, RunSummary>(concat!(
+            "SELECT ",
+            run_counts_columns!(),
+            run_counts_from!(),
+            " ORDER BY r.run_id"
+        ))
         .fetch_all(&self.pool)
         .await
         .map_err(query_err("listing runs"))
