@@ -3,18 +3,13 @@
 //! prints one row per target and writes the CSV and the PNG; bad input exits 2.
 
 mod common;
-use common::{fails_with, ok, softtouch, tempdir};
+use common::{fails_with, ok, simulated_dataset, softtouch, tempdir};
 
 #[test]
 fn grasp_follow_prints_a_row_per_target_and_writes_csv_and_png() {
     let dir = tempdir();
     let d = dir.path();
-    ok(&softtouch(d, &["db", "init"]));
-    ok(&softtouch(
-        d,
-        &["collect", "--samples", "120", "--seed", "5"],
-    ));
-    ok(&softtouch(d, &["dataset", "create", "air", "--runs", "1"]));
+    simulated_dataset(d, "120", "5", "air");
     ok(&softtouch(
         d,
         &[

@@ -4,7 +4,7 @@
 //! database gives a page of verbs to run; bad options exit 2.
 
 mod common;
-use common::{fails_with, ok, runtime, softtouch, tempdir};
+use common::{fails_with, ok, runtime, simulated_dataset, softtouch, tempdir};
 
 use scraper::{Html, Selector};
 use sqlx::Row as _;
@@ -28,15 +28,7 @@ const TINY: [&str; 12] = [
 
 /// `samples` simulated samples, dataset `air` over them, and `models` tiny models.
 fn lab(dir: &Path, samples: &str, models: &[&str]) {
-    ok(&softtouch(dir, &["db", "init"]));
-    ok(&softtouch(
-        dir,
-        &["collect", "--samples", samples, "--seed", "4"],
-    ));
-    ok(&softtouch(
-        dir,
-        &["dataset", "create", "air", "--runs", "1"],
-    ));
+    simulated_dataset(dir, samples, "4", "air");
     for kind in models {
         let mut args = vec!["train", "--dataset", "air", "--model", kind];
         args.extend(TINY);

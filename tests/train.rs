@@ -3,21 +3,13 @@
 //! metrics and evaluates from the store or a file, and bad input exits 2.
 
 mod common;
-use common::{fails_with, ok, softtouch, tempdir};
+use common::{fails_with, ok, simulated_dataset, softtouch, tempdir};
 
 use std::path::Path;
 
 /// A database with 240 simulated samples and a dataset `air` of them.
 fn collected(dir: &Path) {
-    ok(&softtouch(dir, &["db", "init"]));
-    ok(&softtouch(
-        dir,
-        &["collect", "--samples", "240", "--seed", "4"],
-    ));
-    ok(&softtouch(
-        dir,
-        &["dataset", "create", "air", "--runs", "1"],
-    ));
+    simulated_dataset(dir, "240", "4", "air");
 }
 
 const TINY: [&str; 12] = [
@@ -210,15 +202,7 @@ fn sweeps_and_the_model_benchmark_write_tables_csv_and_png() {
 fn full_size_svae_reaches_r2_0_99_on_every_test_axis() {
     let dir = tempdir();
     let d = dir.path();
-    ok(&softtouch(d, &["db", "init"]));
-    ok(&softtouch(
-        d,
-        &["collect", "--samples", "30000", "--seed", "1"],
-    ));
-    ok(&softtouch(
-        d,
-        &["dataset", "create", "air30k", "--runs", "1"],
-    ));
+    simulated_dataset(d, "30000", "1", "air30k");
     let out = ok(&softtouch(d, &["train", "--dataset", "air30k"]));
     println!("{out}");
     let r2: Vec<f64> = out

@@ -54,3 +54,14 @@ pub(crate) fn fails_with(out: &Output, code: i32, needle: &str) {
     );
     assert!(err.contains(needle), "expected `{needle}` in: {err}");
 }
+
+/// A database in `dir` with `samples` simulated samples (seed `seed`, run 1) and a
+/// dataset `name` over them: what the training, grasp and report tests start from.
+pub(crate) fn simulated_dataset(dir: &Path, samples: &str, seed: &str, name: &str) {
+    ok(&softtouch(dir, &["db", "init"]));
+    ok(&softtouch(
+        dir,
+        &["collect", "--samples", samples, "--seed", seed],
+    ));
+    ok(&softtouch(dir, &["dataset", "create", name, "--runs", "1"]));
+}
