@@ -2,7 +2,7 @@
 //! kill -9 and resume, and fault injection.
 
 mod common;
-use common::{runtime, softtouch, tempdir, text};
+use common::{fails_with, ok, runtime, softtouch, tempdir, text};
 
 use softtouch_collector::collect::sampler::PoseSampler;
 use softtouch_collector::store::{Store, decode_window};
@@ -358,4 +358,307 @@ fn a_collection_writes_its_log_beside_the_database() {
     let other = tempdir();
     common::ok(&softtouch(other.path(), &["config", "show", "rig"]));
     assert!(!other.path().join("softtouch.db.log").exists());
+}
+
+/// Every sample's rod, by index.
+async fn sample_rods(store: &Store, run: i64) -> Vec<(i64, String)> {
+    sqlx::query("SELECT sample_index, rod FROM samples WHERE run_id = ? ORDER BY sample_index")
+        .bind(run)
+        .fetch_all(store.pool())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"))
+        .iter()
+        .map(|r| (r.get(0), r.get(1)))
+        .collect()
+}
+
+/// Forget samples from `from` on and mark the run stopped: what a run stopped early
+/// leaves for `--resume`.
+async fn cut_run(store: &Store, run: i64, from: i64) {
+    for sql in [
+        "DELETE FROM samples WHERE run_id = ?1 AND sample_index >= ?2",
+        "UPDATE runs SET status = 'stopped' WHERE run_id = ?1 AND ?2 = ?2",
+    ] {
+        sqlx::query(sql)
+            .bind(run)
+            .bind(from)
+            .execute(store.pool())
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+}
+
+#[test]
+fn rod_names_with_commas_quotes_and_unicode_survive_collection_status_and_resume() {
+    let dir = tempdir();
+    let comma = "circle, 10 mm";
+    let quoted = "sq \"q\" ü";
+    let scene = defaults::SCENE_TOML
+        .replace("name = \"circle-10\"", "name = \"circle, 10 mm\"")
+        .replace("name = \"square-10\"", "name = \"sq \\\"q\\\" ü\"");
+    assert_ne!(scene, defaults::SCENE_TOML);
+    std::fs::write(dir.path().join("scene.toml"), scene).unwrap_or_else(|e| panic!("{e}"));
+    ok(&softtouch(
+        dir.path(),
+        &[
+            "collect",
+            "--scene",
+            "scene.toml",
+            "--samples",
+            "10",
+            "--seed",
+            "4",
+            "--block",
+            "2",
+        ],
+    ));
+    let schedule = [comma, quoted, "triangle-12", "hexagon-10", "oval-12"];
+    let expected: Vec<(i64, String)> = (0..10)
+        .map(|i: i64| (i, schedule[usize::try_from(i / 2).unwrap_or(0)].to_owned()))
+        .collect();
+    let db = dir.path().join("softtouch.db");
+    let rt = runtime();
+    rt.block_on(async {
+        let store = open(&db).await;
+        assert_eq!(sample_rods(&store, 1).await, expected);
+        let record = store.run_record(1).await.unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(record.rod_schedule, schedule);
+        cut_run(&store, 1, 1).await;
+        store.close().await;
+    });
+    // The resume takes samples 1..10 with the stored schedule, read back exactly.
+    ok(&softtouch(dir.path(), &["collect", "--resume", "1"]));
+    rt.block_on(async {
+        let store = open(&db).await;
+        assert_eq!(sample_rods(&store, 1).await, expected);
+        store.close().await;
+    });
+    let status = ok(&softtouch(dir.path(), &["status", "1"]));
+    assert!(
+        status.contains(
+            r#"rods ["circle, 10 mm","sq \"q\" ü","triangle-12","hexagon-10","oval-12"], 2 samples each"#
+        ),
+        "{status}"
+    );
+}
+
+#[test]
+fn a_comma_joined_rod_schedule_of_an_old_database_is_migrated_and_reads_back() {
+    let dir = tempdir();
+    ok(&softtouch(
+        dir.path(),
+        &["collect", "--samples", "4", "--seed", "2", "--block", "2"],
+    ));
+    let db = dir.path().join("softtouch.db");
+    let rt = runtime();
+    rt.block_on(async {
+        let store = open(&db).await;
+        // Back to the old format: the schedule comma-joined, the migration not applied.
+        for sql in [
+            "UPDATE runs SET rod_schedule = 'circle-10,square-10,,oval-12' WHERE run_id = 1",
+            "DELETE FROM _sqlx_migrations WHERE version = 20261124120000",
+        ] {
+            sqlx::query(sql)
+                .execute(store.pool())
+                .await
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        cut_run(&store, 1, 2).await;
+        store.close().await;
+        // Opening migrates it.
+        let store = open(&db).await;
+        let record = store.run_record(1).await.unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            record.rod_schedule,
+            ["circle-10", "square-10", "", "oval-12"]
+        );
+        let stored: String = sqlx::query_scalar("SELECT rod_schedule FROM runs WHERE run_id = 1")
+            .fetch_one(store.pool())
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(stored, r#"["circle-10","square-10","","oval-12"]"#);
+        // Damaged text is refused with what was found, never split or guessed.
+        sqlx::query("UPDATE runs SET rod_schedule = 'circle-10,square-10' WHERE run_id = 1")
+            .execute(store.pool())
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        let status = ok(&softtouch(dir.path(), &["status", "1"]));
+        assert!(
+            status.contains(
+                "rods: damaged rod schedule in the database: run 1: expected a JSON array"
+            ),
+            "{status}"
+        );
+        let e = store.run_record(1).await.expect_err("not JSON");
+        assert!(
+            e.to_string()
+                .contains("run 1: expected a JSON array of rod names, found `circle-10,square-10`"),
+            "{e}"
+        );
+        sqlx::query(
+            r#"UPDATE runs SET rod_schedule = '["circle-10","square-10"]' WHERE run_id = 1"#,
+        )
+        .execute(store.pool())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"));
+        store.close().await;
+    });
+    // The migrated run resumes on its schedule: samples 2 and 3 on square-10.
+    ok(&softtouch(dir.path(), &["collect", "--resume", "1"]));
+    rt.block_on(async {
+        let store = open(&db).await;
+        let rods = sample_rods(&store, 1).await;
+        assert_eq!(
+            rods.iter().map(|(_, r)| r.as_str()).collect::<Vec<_>>(),
+            ["circle-10", "circle-10", "square-10", "square-10"]
+        );
+        store.close().await;
+    });
+}
+
+#[test]
+fn a_resume_with_a_mistyped_db_exits_2_and_creates_nothing() {
+    let dir = tempdir();
+    let out = softtouch(dir.path(), &["--db", "typo.db", "collect", "--resume", "1"]);
+    fails_with(&out, 2, "--resume: no database at typo.db");
+    assert!(!dir.path().join("typo.db").exists());
+    // A new run still creates its database.
+    ok(&softtouch(
+        dir.path(),
+        &["--db", "new.db", "collect", "--samples", "1"],
+    ));
+    assert!(dir.path().join("new.db").exists());
+}
+
+#[test]
+fn a_resume_refuses_a_rig_that_changes_more_than_where_devices_are() {
+    let dir = tempdir();
+    ok(&softtouch(
+        dir.path(),
+        &["collect", "--samples", "2", "--seed", "1"],
+    ));
+    runtime().block_on(async {
+        let store = open(&dir.path().join("softtouch.db")).await;
+        cut_run(&store, 1, 1).await;
+        store.close().await;
+    });
+    let write = |name: &str, rig: String| {
+        std::fs::write(dir.path().join(name), rig).unwrap_or_else(|e| panic!("{e}"));
+    };
+    write(
+        "settle.toml",
+        defaults::RIG_TOML.replace("settle_s = 0.3", "settle_s = 0.5"),
+    );
+    let out = softtouch(
+        dir.path(),
+        &["collect", "--resume", "1", "--rig", "settle.toml"],
+    );
+    fails_with(&out, 2, "settle.toml");
+    fails_with(
+        &out,
+        2,
+        "field `procedure.settle_s`: differs from run 1's stored rig (stored 0.3, here 0.5)",
+    );
+    write(
+        "driver.toml",
+        defaults::RIG_TOML.replace(
+            "[force_sensor]\ndriver = \"sim\"",
+            "[force_sensor]\ndriver = \"net-ft\"\naddress = \"127.0.0.1\"\n#",
+        ),
+    );
+    let out = softtouch(
+        dir.path(),
+        &["collect", "--resume", "1", "--rig", "driver.toml"],
+    );
+    fails_with(
+        &out,
+        2,
+        "field `force_sensor.driver`: differs from run 1's stored rig",
+    );
+    let out = softtouch(
+        dir.path(),
+        &["collect", "--resume", "1", "--rig", "missing.toml"],
+    );
+    fails_with(&out, 2, "missing.toml: cannot read");
+    // The same rig again is no change: the run completes.
+    write("same.toml", defaults::RIG_TOML.to_owned());
+    let done = ok(&softtouch(
+        dir.path(),
+        &["collect", "--resume", "1", "--rig", "same.toml"],
+    ));
+    assert!(done.contains("complete"), "{done}");
+}
+
+#[test]
+fn a_resume_on_a_rig_with_a_moved_device_uses_and_records_the_new_port() {
+    let dir = tempdir();
+    let port = |name: &str| dir.path().join(name).display().to_string();
+    let rig = |gripper_port: &str| {
+        defaults::RIG_TOML.replace(
+            "[gripper]\ndriver = \"sim\"",
+            &format!("[gripper]\ndriver = \"hand-e\"\nport = \"{gripper_port}\"\nslave_id = 9\n#"),
+        )
+    };
+    let old_port = port("ttyOLD");
+    let new_port = port("ttyNEW");
+    assert_ne!(rig(&old_port), defaults::RIG_TOML);
+    std::fs::write(dir.path().join("old.toml"), rig(&old_port)).unwrap_or_else(|e| panic!("{e}"));
+    std::fs::write(dir.path().join("new.toml"), rig(&new_port)).unwrap_or_else(|e| panic!("{e}"));
+    // The gripper's port does not exist: the run fails before collecting, exit 1.
+    let out = softtouch(
+        dir.path(),
+        &["collect", "--rig", "old.toml", "--samples", "2"],
+    );
+    fails_with(&out, 1, &old_port);
+    // The resume reaches the gripper on the new port (which fails the same way here:
+    // no Hand-E in a test), and the run records the new rig.
+    let out = softtouch(
+        dir.path(),
+        &["collect", "--resume", "1", "--rig", "new.toml"],
+    );
+    fails_with(&out, 1, &new_port);
+    runtime().block_on(async {
+        let store = open(&dir.path().join("softtouch.db")).await;
+        let record = store.run_record(1).await.unwrap_or_else(|e| panic!("{e}"));
+        assert!(record.rig_toml.contains(&new_port), "{}", record.rig_toml);
+        let events = store.events(1, 100).await.unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            events.iter().any(|e| e.kind == "resumed"
+                && e.message
+                    .contains(&format!("gripper.port: \"{old_port}\" -> \"{new_port}\""))),
+            "{events:?}"
+        );
+        store.close().await;
+    });
+    // Without --rig the resume now uses the recorded (new) port.
+    let out = softtouch(dir.path(), &["collect", "--resume", "1"]);
+    fails_with(&out, 1, &new_port);
+}
+
+#[test]
+fn a_resume_checks_the_stored_scene_against_the_rig_again() {
+    let dir = tempdir();
+    ok(&softtouch(
+        dir.path(),
+        &["collect", "--samples", "2", "--seed", "1"],
+    ));
+    runtime().block_on(async {
+        let store = open(&dir.path().join("softtouch.db")).await;
+        cut_run(&store, 1, 1).await;
+        // A scene whose poses the rig cannot reach (stored by an older build, say).
+        let scene = defaults::SCENE_TOML.replace("x_m = [0.0, 0.05]", "x_m = [0.0, 0.09]");
+        sqlx::query("UPDATE runs SET scene_toml = ? WHERE run_id = 1")
+            .bind(scene)
+            .execute(store.pool())
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        store.close().await;
+    });
+    let out = softtouch(dir.path(), &["collect", "--resume", "1"]);
+    fails_with(&out, 2, "run 1 scene, on rig <run 1 rig>");
+    fails_with(
+        &out,
+        2,
+        "field `poses.x_m`: range [0, 0.09] lies outside the rig's workspace",
+    );
 }

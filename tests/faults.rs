@@ -699,9 +699,11 @@ fn a_window_cut_short_by_a_stalled_stream_is_rejected_with_its_reason() {
         &db,
         3,
         Faults {
+            // Past the window's deadline (its end + frame_timeout_s = 0.525 s), over
+            // before the retreat (≥ 0.56 s) brings the next attempt's guard.
             sensor: SensorFault::StallAfterFrame {
                 frame: 1,
-                secs: 2.0,
+                secs: 1.0,
             },
             ..Faults::default()
         },
@@ -1204,4 +1206,33 @@ fn sighup_then_a_second_signal_stops_the_binary_at_once() {
     let n = s.samples.len() as u64;
     assert_eq!(s.indices(), (0..n).collect::<Vec<_>>(), "no gap");
     assert!(!s.lease_held);
+}
+
+#[test]
+fn a_frame_not_covered_by_readings_within_the_skew_limit_is_rejected_as_clock_skew() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    // 120 fps frames against 1 kHz readings: with a 1 µs limit (below what the rig's
+    // validation accepts, set on the plan) almost no frame has a reading that close on
+    // both sides, as when camera and sensor stamps drift apart.
+    let e = faulty_run(
+        &db,
+        4,
+        Faults {
+            edit_plan: |p| p.rig.procedure.max_skew_s = Some(1e-6),
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    assert_eq!(e.outcome, Outcome::Completed);
+    let skewed = s.kinds("clock_skew");
+    assert!(!skewed.is_empty(), "{:?}", s.events);
+    let rejected: Vec<_> = s.samples.iter().filter(|x| x.1 == "rejected").collect();
+    assert!(!rejected.is_empty(), "{:?}", s.samples);
+    for x in &rejected {
+        assert_eq!(x.2.as_deref(), Some("clock_skew"), "{x:?}");
+        assert_eq!(x.3, 3, "retried to the attempt limit: {x:?}");
+    }
+    assert!(e.at_home() && e.still());
+    nothing_lost(&e, &s);
 }

@@ -1,6 +1,6 @@
-//! End-to-end test of `softtouch grasp follow`: a tiny model trained on a small
-//! simulated collection closes the loop on the simulated soft-finger Hand-E; the verb
-//! prints one row per target and writes the CSV and the PNG; bad input exits 2.
+//! End-to-end tests of `softtouch grasp follow|disturb|twist`: a tiny model trained on
+//! a small simulated collection closes the loop on the simulated soft-finger Hand-E;
+//! the verbs print their tables and write the CSV and the PNG; bad input exits 2.
 
 mod common;
 use common::{fails_with, ok, simulated_dataset, softtouch, tempdir};
@@ -68,6 +68,8 @@ fn grasp_follow_prints_a_row_per_target_and_writes_csv_and_png() {
     let png = std::fs::read(d.join("g/grasp-follow.png")).expect("png");
     assert!(png.starts_with(b"\x89PNG"));
 
+    disturb_and_twist(d);
+
     fails_with(
         &softtouch(
             d,
@@ -88,5 +90,136 @@ fn grasp_follow_prints_a_row_per_target_and_writes_csv_and_png() {
         ),
         2,
         "--object vase",
+    );
+}
+
+/// `grasp disturb` (two fingers) and `grasp twist` on the model trained above, short.
+fn disturb_and_twist(d: &std::path::Path) {
+    let out = ok(&softtouch(
+        d,
+        &[
+            "grasp",
+            "disturb",
+            "--model",
+            "air-svae",
+            "--fps",
+            "30",
+            "--settle-s",
+            "0.5",
+            "--turn-s",
+            "0.3",
+            "--phase-s",
+            "1",
+            "--fingers",
+            "2",
+            "--out-dir",
+            "g",
+        ],
+    ));
+    assert!(
+        out.contains("holding 0.4 N (air medium) on `oval-tube`"),
+        "{out}"
+    );
+    assert!(out.contains("2 finger(s)"), "{out}");
+    for (row, turn) in [("    1 ", "45.0"), ("    2 ", "60.0"), ("    3 ", "-90.0")] {
+        assert!(
+            out.lines().any(|l| l.starts_with(row) && l.contains(turn)),
+            "no phase row {row:?}: {out}"
+        );
+    }
+    let csv = std::fs::read_to_string(d.join("g/grasp-disturb.csv")).expect("csv");
+    let rows: Vec<&str> = csv.lines().collect();
+    assert!(rows[0].starts_with("t_s,target_n,estimate_n,true_n,object_yaw_deg"));
+    // 3.5 s at 30 Hz, one row per frame; the tube ends at 45 + 60 − 90 = 15°.
+    assert!((100..=110).contains(&(rows.len() - 1)), "{}", rows.len());
+    let yaw = |r: &str| r.split(',').nth(4).and_then(|v| v.parse::<f64>().ok());
+    let max_yaw = rows[1..].iter().filter_map(|r| yaw(r)).fold(0.0, f64::max);
+    assert!((max_yaw - 105.0).abs() < 1.0, "{max_yaw}");
+    assert!((yaw(rows[rows.len() - 1]).expect("yaw") - 15.0).abs() < 1e-6);
+    // Both fingers' estimates are recorded.
+    assert!(
+        rows[1..]
+            .iter()
+            .all(|r| r.split(',').nth(6).is_some_and(|v| !v.is_empty()))
+    );
+    assert!(
+        std::fs::read(d.join("g/grasp-disturb.png"))
+            .expect("png")
+            .starts_with(b"\x89PNG")
+    );
+
+    let out = ok(&softtouch(
+        d,
+        &[
+            "grasp",
+            "twist",
+            "--model",
+            "air-svae",
+            "--fps",
+            "30",
+            "--settle-s",
+            "0.5",
+            "--turn-s",
+            "0.5",
+            "--hold-s",
+            "0.5",
+            "--out-dir",
+            "g",
+        ],
+    ));
+    for row in ["           off ", "            on "] {
+        assert!(
+            out.lines().any(|l| l.starts_with(row)),
+            "no row {row:?}: {out}"
+        );
+    }
+    let csv = std::fs::read_to_string(d.join("g/grasp-twist.csv")).expect("csv");
+    let rows: Vec<&str> = csv.lines().collect();
+    assert!(rows[0].starts_with("wrist_loop,t_s,target_n,estimate_n,true_n,tz_estimate_nmm"));
+    let off = rows.iter().filter(|r| r.starts_with("off,")).count();
+    let on = rows.iter().filter(|r| r.starts_with("on,")).count();
+    assert!(
+        (70..=80).contains(&off) && (70..=80).contains(&on),
+        "{off} {on}"
+    );
+    // The turn made a true torque about z (measured from the shear).
+    let tz = |r: &str| r.split(',').nth(6).and_then(|v| v.parse::<f64>().ok());
+    let peak = rows[1..]
+        .iter()
+        .filter(|r| r.starts_with("off,"))
+        .filter_map(|r| tz(r))
+        .fold(0.0_f64, |m, t| m.max(t.abs()));
+    assert!(peak > 0.5, "true τz peak {peak} N·mm");
+    assert!(
+        std::fs::read(d.join("g/grasp-twist.png"))
+            .expect("png")
+            .starts_with(b"\x89PNG")
+    );
+
+    fails_with(
+        &softtouch(
+            d,
+            &["grasp", "disturb", "--model", "air-svae", "--fingers", "3"],
+        ),
+        2,
+        "--fingers 3",
+    );
+    fails_with(
+        &softtouch(
+            d,
+            &[
+                "grasp", "disturb", "--model", "air-svae", "--object", "vase",
+            ],
+        ),
+        2,
+        "--object vase",
+    );
+    fails_with(
+        &softtouch(
+            d,
+            &["grasp", "twist", "--model", "air-svae", "--turn-deg", "200"],
+        ),
+        2,
+        "--turn-deg 200",
     );
 }

@@ -12,6 +12,10 @@
 //!   trained models stored with their metrics.
 //! - [`experiments`]: Table 1, the latent sweep and the model benchmark: grids, rows,
 //!   CSV and plots, shared by the verbs and reports.
+//! - [`grasp_bench`]: `softtouch bench grasp`, the force loop measured over K, δ, camera
+//!   rate and model on the simulated soft grasp.
+//! - [`grasp_devices`]: a real Hand-E and the finger cameras from the rig config, end
+//!   calibration.
 //! - [`configs`]: resolving the rig and scene from files or the embedded defaults.
 //! - [`plot`]: PNG histograms and x–y charts (plotters).
 //! - [`report`]: `softtouch report`, one self-contained HTML page (inline SVG, maud
@@ -29,6 +33,8 @@ pub mod collect;
 pub mod configs;
 pub mod dataset;
 pub mod experiments;
+pub mod grasp_bench;
+pub mod grasp_devices;
 pub mod models;
 pub mod plot;
 pub(crate) mod progress;

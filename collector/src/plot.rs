@@ -5,6 +5,7 @@
 //! trainer sweeps):
 //! - [`histogram_grid`]: a grid of histogram panels, one per value series.
 //! - [`xy_chart`]: several labelled x–y series as lines, points or both.
+//! - [`bar_chart`]: grouped bars with interval whiskers and reference ticks.
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -342,6 +343,149 @@ pub fn xy_chart(path: &Path, chart: &XyChart<'_>, size: (u32, u32)) -> Result<()
     Ok(())
 }
 
+/// One series of bars: a value per group with its interval, and optionally a
+/// reference value per group (e.g. a paper's figure) drawn as a black tick.
+#[derive(Debug, Clone)]
+pub struct BarSeries {
+    /// Legend text.
+    pub label: String,
+    /// Per group: `(value, lo, hi)`; `None` leaves the slot empty.
+    pub bars: Vec<Option<(f64, f64, f64)>>,
+    /// Per group: a reference value, or `None`.
+    pub reference: Vec<Option<f64>>,
+}
+
+/// A grouped bar chart with interval whiskers.
+#[derive(Debug, Clone)]
+pub struct BarChart<'a> {
+    /// Title.
+    pub title: &'a str,
+    /// Label of the y axis, with the unit.
+    pub y_label: &'a str,
+    /// Group names along x.
+    pub groups: &'a [String],
+    /// The series (each gets a colour from [`PALETTE`]; bars side by side per group).
+    pub series: &'a [BarSeries],
+    /// The y range.
+    pub y_range: (f64, f64),
+}
+
+/// Draw a grouped bar chart with whiskers from `lo` to `hi` into a PNG of `size`
+/// pixels. Reference values are short black ticks across their bar.
+pub fn bar_chart(path: &Path, chart: &BarChart<'_>, size: (u32, u32)) -> Result<(), PlotError> {
+    register_font()?;
+    let invalid = |why: &str| PlotError::Invalid {
+        path: path.display().to_string(),
+        why: why.to_owned(),
+    };
+    if chart.groups.is_empty() || chart.series.is_empty() {
+        return Err(invalid("no groups or no series"));
+    }
+    let (y0, y1) = chart.y_range;
+    if !(y0.is_finite() && y1.is_finite() && y1 > y0) {
+        return Err(invalid("the y range is empty or not finite"));
+    }
+    let n = chart.groups.len() as f64;
+    // Room below the axis for the group names.
+    let label_y = y0 - 0.08 * (y1 - y0);
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    root.fill(&WHITE).map_err(draw_err(path))?;
+    let mut ctx = ChartBuilder::on(&root)
+        .caption(chart.title, (FONT_FAMILY, 22))
+        .margin(12)
+        .x_label_area_size(10)
+        .y_label_area_size(64)
+        .build_cartesian_2d(0f64..n, (label_y - 0.04 * (y1 - y0))..y1)
+        .map_err(draw_err(path))?;
+    ctx.configure_mesh()
+        .disable_x_mesh()
+        .x_labels(2)
+        .x_label_formatter(&|_| String::new())
+        .y_desc(chart.y_label)
+        .y_label_formatter(&|v| {
+            if *v < y0 - 1e-9 {
+                String::new()
+            } else {
+                format_tick_in(*v, y1 - y0)
+            }
+        })
+        .label_style((FONT_FAMILY, 13))
+        .axis_desc_style((FONT_FAMILY, 15))
+        .draw()
+        .map_err(draw_err(path))?;
+    let k = chart.series.len() as f64;
+    let slot = 0.8 / k;
+    for (si, s) in chart.series.iter().enumerate() {
+        let colour = PALETTE[si % PALETTE.len()];
+        let mut labelled = false;
+        for (gi, bar) in s.bars.iter().enumerate() {
+            let x0 = gi as f64 + 0.1 + si as f64 * slot;
+            let (x1, xc) = (x0 + slot * 0.9, x0 + slot * 0.45);
+            if let Some((v, lo, hi)) = bar.filter(|b| b.0.is_finite()) {
+                let drawn = ctx
+                    .draw_series(std::iter::once(Rectangle::new(
+                        [(x0, y0), (x1, v.clamp(y0, y1))],
+                        colour.filled(),
+                    )))
+                    .map_err(draw_err(path))?;
+                if !labelled {
+                    labelled = true;
+                    drawn.label(s.label.as_str()).legend(move |(x, y)| {
+                        Rectangle::new([(x, y - 5), (x + 14, y + 5)], colour.filled())
+                    });
+                }
+                if lo.is_finite() && hi.is_finite() {
+                    let (lo, hi) = (lo.clamp(y0, y1), hi.clamp(y0, y1));
+                    let cap = slot * 0.15;
+                    ctx.draw_series([
+                        PathElement::new(vec![(xc, lo), (xc, hi)], BLACK.stroke_width(2)),
+                        PathElement::new(
+                            vec![(xc - cap, lo), (xc + cap, lo)],
+                            BLACK.stroke_width(2),
+                        ),
+                        PathElement::new(
+                            vec![(xc - cap, hi), (xc + cap, hi)],
+                            BLACK.stroke_width(2),
+                        ),
+                    ])
+                    .map_err(draw_err(path))?;
+                }
+            }
+            if let Some(r) = s
+                .reference
+                .get(gi)
+                .copied()
+                .flatten()
+                .filter(|r| r.is_finite())
+            {
+                let r = r.clamp(y0, y1);
+                ctx.draw_series(std::iter::once(PathElement::new(
+                    vec![(x0 - slot * 0.05, r), (x1 + slot * 0.05, r)],
+                    RGBColor(0, 0, 0).stroke_width(4),
+                )))
+                .map_err(draw_err(path))?;
+            }
+        }
+    }
+    for (gi, g) in chart.groups.iter().enumerate() {
+        ctx.draw_series(std::iter::once(Text::new(
+            g.clone(),
+            (gi as f64 + 0.1, label_y),
+            (FONT_FAMILY, 13),
+        )))
+        .map_err(draw_err(path))?;
+    }
+    ctx.configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT_FAMILY, 14))
+        .draw()
+        .map_err(draw_err(path))?;
+    root.present().map_err(draw_err(path))?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -428,5 +572,26 @@ mod tests {
             assert!(img.width() > 100);
         }
         assert!(histogram_grid(&dir.path().join("x.png"), None, &[], 2, (10, 10)).is_err());
+        let bars = dir.path().join("b.png");
+        let groups = ["a".to_owned(), "b".to_owned()];
+        let series = [BarSeries {
+            label: "rate".into(),
+            bars: vec![Some((0.5, 0.2, 0.8)), None],
+            reference: vec![Some(0.44), None],
+        }];
+        let chart = BarChart {
+            title: "t",
+            y_label: "success rate",
+            groups: &groups,
+            series: &series,
+            y_range: (0.0, 1.0),
+        };
+        bar_chart(&bars, &chart, (480, 360)).unwrap_or_else(|e| panic!("{e}"));
+        assert!(image::open(&bars).is_ok_and(|i| i.width() == 480));
+        let empty = BarChart {
+            groups: &[],
+            ..chart
+        };
+        assert!(bar_chart(&dir.path().join("y.png"), &empty, (10, 10)).is_err());
     }
 }

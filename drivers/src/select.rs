@@ -105,7 +105,7 @@ pub async fn netft_config(
     Ok(c)
 }
 
-/// A sensor's configured latency (validated to `[0, 1]` s with the rig).
+/// A device's configured latency (validated to `[0, 1]` s with the rig).
 fn latency(latency_s: Option<f64>) -> std::time::Duration {
     latency_s
         .filter(|s| s.is_finite() && *s > 0.0)
@@ -184,11 +184,11 @@ pub async fn real_camera(
     match d {
         CameraDevice::Sim { .. } => Ok(None),
         #[cfg(feature = "v4l")]
-        CameraDevice::V4l { device } => Ok(Some(Box::new(crate::v4l_camera::V4lCamera::open(
-            device, clock,
-        )?))),
+        CameraDevice::V4l { device, latency_s } => Ok(Some(Box::new(
+            crate::v4l_camera::V4lCamera::open_with_latency(device, clock, latency(*latency_s))?,
+        ))),
         #[cfg(not(feature = "v4l"))]
-        CameraDevice::V4l { device } => {
+        CameraDevice::V4l { device, .. } => {
             let _ = clock;
             Err(DeviceError::InvalidCommand {
                 device: device.clone(),

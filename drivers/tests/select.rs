@@ -70,6 +70,7 @@ async fn real_devices_that_are_not_there_fail_with_the_device_named() {
     let mut rig = defaults::rig();
     rig.camera = CameraDevice::V4l {
         device: "/dev/does-not-exist".into(),
+        latency_s: None,
     };
     let e = select::build(&rig, &defaults::scene(), 1, TokioClock::new())
         .await

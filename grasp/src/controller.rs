@@ -31,6 +31,8 @@ use crate::GraspError;
 use crate::estimator::ForceEstimator;
 use crate::projection::Projection;
 use crate::stepper::{StepOutcome, Stepper, StepperConfig};
+use crate::wrist::{Wrist, WristLoop};
+use softtouch_schemas::Wrench;
 
 /// How often [`Controller::approach`] reads the gripper (the Hand-E allows 200 Hz).
 const APPROACH_POLL: Duration = Duration::from_millis(10);
@@ -129,6 +131,17 @@ pub struct Cycle {
     pub outcome: Option<StepOutcome>,
     /// gOBJ at this cycle.
     pub object: ObjectStatus,
+    /// Each sensorised finger's projected estimate, N (finger 1: `None` with one
+    /// finger). With two, F_est is their mean.
+    pub finger_estimates_n: [Option<f64>; 2],
+    /// With two fingers, the finger whose estimate alone made F_est because the other
+    /// gave none (flagged); `None` when both (or the only one) did.
+    pub single_finger: Option<usize>,
+    /// The model's torque about the finger's axis, N·m (mean over the fingers that
+    /// gave one), what the wrist loop works on.
+    pub torque_z_nm: Option<f64>,
+    /// The wrist target after this cycle, rad (only with a wrist loop).
+    pub wrist_target_rad: Option<f64>,
 }
 
 /// The force truth, where one exists (the simulator, a reference force sensor).
@@ -163,6 +176,57 @@ pub struct Controller<G, C, E, T = NoTruth> {
     contact_stops: u64,
     activated: bool,
     hold: usize,
+    /// A second sensorised finger: its camera and its own projection (its frame is
+    /// the first one's mirror).
+    second: Option<SecondFinger>,
+    /// The wrist loop on τz, when the arm's wrist takes part.
+    wrist: Option<(Box<dyn Wrist>, WristLoop)>,
+    last_frame_t: Option<TimestampNs>,
+}
+
+/// The second sensorised finger: its camera and projection.
+struct SecondFinger {
+    camera: Box<dyn Camera>,
+    projection: Projection,
+}
+
+impl std::fmt::Debug for SecondFinger {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SecondFinger")
+            .field("projection", &self.projection)
+            .finish_non_exhaustive()
+    }
+}
+
+/// One finger's force estimate from its wrench: saturated wrenches report the
+/// saturation limit (so the stepper holds), non-finite ones none.
+fn finger_force_n(
+    wrench: Option<&Wrench>,
+    projection: &Projection,
+    saturation_n: f64,
+) -> Option<f64> {
+    match wrench {
+        Some(w) if w.is_finite() && w.force_norm_n() >= saturation_n => Some(saturation_n),
+        Some(w) => projection.grip_force_n(w),
+        None => None,
+    }
+}
+
+/// F_est from the fingers' estimates: the mean of two, the one that is there if the
+/// other is missing (flagged with its index), none if both are; a saturated finger
+/// saturates the mean, so the loop holds.
+#[must_use]
+pub fn combine_fingers(
+    estimates_n: [Option<f64>; 2],
+    saturation_n: f64,
+) -> (Option<f64>, Option<usize>) {
+    match estimates_n {
+        [Some(a), Some(b)] if a >= saturation_n || b >= saturation_n => (Some(saturation_n), None),
+        [Some(a), Some(b)] => (Some(0.5 * (a + b)), None),
+        [Some(a), None] => (Some(a), Some(0)),
+        [None, Some(b)] => (Some(b), Some(1)),
+        [None, None] => (None, None),
+    }
 }
 
 impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E, T> {
@@ -189,7 +253,30 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
             contact_stops: 0,
             activated: false,
             hold: 0,
+            second: None,
+            wrist: None,
+            last_frame_t: None,
         })
+    }
+
+    /// Adds a second sensorised finger: its camera (on the same frame grid as the
+    /// first) and its projection. F_est becomes the mean of the two estimates.
+    #[must_use]
+    pub fn with_second_finger(mut self, camera: Box<dyn Camera>, projection: Projection) -> Self {
+        self.second = Some(SecondFinger { camera, projection });
+        self
+    }
+
+    /// Adds the wrist loop: each cycle turns `wrist` against the model's τz.
+    #[must_use]
+    pub fn with_wrist(mut self, wrist: Box<dyn Wrist>, wrist_loop: WristLoop) -> Self {
+        self.wrist = Some((wrist, wrist_loop));
+        self
+    }
+
+    /// How many sensorised fingers the loop reads.
+    pub fn fingers(&self) -> usize {
+        if self.second.is_some() { 2 } else { 1 }
     }
 
     /// Settings.
@@ -313,12 +400,46 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
             .frame_after(self.next_frame_t, self.config.frame_timeout_ms)
             .await?;
         self.next_frame_t = TimestampNs(frame.meta.t.0 + 1);
-        let estimate_n = match self.estimator.estimate(&frame)? {
-            Some(w) if w.is_finite() && w.force_norm_n() >= self.config.stepper.saturation_n => {
-                // Beyond the trained range on some axis: report it as saturated.
-                Some(self.config.stepper.saturation_n)
+        let saturation_n = self.config.stepper.saturation_n;
+        let first = self.estimator.estimate(&frame)?;
+        let mut wrenches = vec![first];
+        let mut finger_estimates_n = [
+            finger_force_n(first.as_ref(), &self.config.projection, saturation_n),
+            None,
+        ];
+        if let Some(SecondFinger { camera, projection }) = &mut self.second {
+            // The same exposure on the second finger's grid.
+            let other = camera
+                .frame_after(frame.meta.t, self.config.frame_timeout_ms)
+                .await?;
+            let w = self.estimator.estimate(&other)?;
+            finger_estimates_n[1] = finger_force_n(w.as_ref(), projection, saturation_n);
+            wrenches.push(w);
+        }
+        let (estimate_n, single_finger) = if self.second.is_some() {
+            combine_fingers(finger_estimates_n, saturation_n)
+        } else {
+            (finger_estimates_n[0], None)
+        };
+        let torques: Vec<f64> = wrenches
+            .iter()
+            .flatten()
+            .map(|w| w.torque_nm[2])
+            .filter(|t| t.is_finite())
+            .collect();
+        let torque_z_nm =
+            (!torques.is_empty()).then(|| torques.iter().sum::<f64>() / torques.len() as f64);
+        let dt_s = self
+            .last_frame_t
+            .map_or(0.0, |t0| frame.meta.t.0.saturating_sub(t0.0) as f64 * 1e-9);
+        self.last_frame_t = Some(frame.meta.t);
+        let wrist_target_rad = match &mut self.wrist {
+            Some((wrist, wrist_loop)) => {
+                if let Some(target) = wrist_loop.step(torque_z_nm, dt_s) {
+                    wrist.set_yaw_target(target)?;
+                }
+                Some(wrist_loop.target_rad())
             }
-            Some(w) => self.config.projection.grip_force_n(&w),
             None => None,
         };
         let true_n = self.truth.true_force_n(frame.meta.t);
@@ -358,6 +479,10 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
             position_request,
             outcome,
             object: status.object,
+            finger_estimates_n,
+            single_finger,
+            torque_z_nm,
+            wrist_target_rad,
         })
     }
 

@@ -14,24 +14,42 @@
 //!   projection → position request) behind the drivers' [`softtouch_drivers::Gripper`]
 //!   and [`softtouch_drivers::Camera`] traits and the injected clock, recording every
 //!   cycle; keep-alive, the gPR echo handshake and a safe exit on every path.
+//! - [`calibrate`]: end calibration (close and open fully with a low force, read the
+//!   reached counts, derive the [`Stroke`]).
+//! - [`wrist`]: the second, narrow loop that holds τz ≈ 0 by turning the wrist
+//!   ([`Wrist`], [`WristLoop`]).
+//! - [`trials`]: the success-rate trials of Figure 4 (perturbed grasp point, open or
+//!   closed loop, lift, hold, a judge's verdict) and the Wilson interval.
 //! - [`metrics`]: rise time, settling time, overshoot, steady-state and RMS error of a
 //!   held target.
 //!
 //! No SQL and no files: callers hand devices and a predictor in and take the trace out.
 
+pub mod calibrate;
 pub mod controller;
 pub mod estimator;
 pub mod metrics;
 pub mod projection;
 pub mod stepper;
+pub mod trials;
+pub mod wrist;
 
-pub use controller::{Controller, ControllerConfig, Cycle, ExitAction, NoTruth, TrueForce};
+pub use calibrate::{CalibrationConfig, EndCalibration, calibrate_ends};
+pub use controller::{
+    Controller, ControllerConfig, Cycle, ExitAction, NoTruth, TrueForce, combine_fingers,
+};
 pub use estimator::ForceEstimator;
 pub use metrics::{HoldMetrics, hold_metrics};
 pub use projection::Projection;
 pub use stepper::{
     GainCheck, Step, StepOutcome, Stepper, StepperConfig, Stroke, check_gain, check_tolerance,
 };
+pub use trials::{
+    FailReason, Judge, Lift, LiftPlan, Mode, Observation, RigJudge, SimJudge, SimLift, TraceRow,
+    TrialConfig, TrialDevices, TrialResult, Verdict, Z_95, perturbation_m, run_trial, trial_seed,
+    wilson_interval,
+};
+pub use wrist::{Wrist, WristConfig, WristLoop};
 
 use softtouch_drivers::DeviceError;
 

@@ -507,3 +507,202 @@ async fn a_declared_object_is_grasped_and_a_fragile_one_crushes() {
         }
     }
 }
+
+/// Every other call gives no estimate: with two fingers that is always finger 1.
+#[derive(Debug)]
+struct SecondBlind {
+    inner: Predictor,
+    calls: u64,
+}
+
+impl ForceEstimator for SecondBlind {
+    fn estimate(&mut self, frame: &Frame) -> Result<Option<Wrench>, GraspError> {
+        self.calls += 1;
+        if self.calls.is_multiple_of(2) {
+            Ok(Some(Wrench::from_array([f64::NAN; 6])))
+        } else {
+            self.inner.estimate(frame)
+        }
+    }
+}
+
+/// Finger 1's mirrored projection: its push (sensor −x) is the world's −y.
+fn second_projection() -> Projection {
+    Projection::new(
+        ArmPose::from_translation_yaw([0.0; 3], std::f64::consts::FRAC_PI_2),
+        [0.0, -1.0, 0.0],
+    )
+    .expect("valid")
+}
+
+#[tokio::test(start_paused = true)]
+async fn two_fingers_hold_on_their_mean_and_a_blind_finger_is_flagged() {
+    let lambda_max = measured_stiffness(4.0);
+    let cfg = config(0.75 * lambda_max, 0.15);
+    // Both fingers see: F_est is the mean of two estimates of the same squeeze.
+    let (c, handle, _) = rig(predictor(), cfg, 60.0);
+    let mut c = c.with_second_finger(
+        Box::new(handle.second_camera().expect("camera")),
+        second_projection(),
+    );
+    assert_eq!(c.fingers(), 2);
+    pre_grasp(&mut c, &handle).await;
+    let cycles = c
+        .follow(&[(1.5, Duration::from_secs(2))])
+        .await
+        .expect("follows");
+    for cy in &cycles {
+        let [a, b] = cy.finger_estimates_n;
+        let (a, b) = (a.expect("finger 0"), b.expect("finger 1"));
+        assert!(cy.single_finger.is_none());
+        let mean = cy.estimate_n.expect("estimate");
+        assert!(
+            (mean - 0.5 * (a + b)).abs() < 1e-12 || mean >= 10.0,
+            "{cy:?}"
+        );
+    }
+    let truth: Vec<(f64, f64)> = cycles
+        .iter()
+        .filter_map(|c| Some((c.t.0 as f64 * 1e-9, c.true_n?)))
+        .collect();
+    let m = hold_metrics(&truth, 1.5, 0.15).expect("truth");
+    assert!(m.steady_state_error_n.abs() < 0.5, "{m:?}");
+
+    // Finger 1 blind: the loop runs on finger 0 alone and says so every cycle.
+    let (c, handle, _) = rig(
+        SecondBlind {
+            inner: predictor(),
+            calls: 0,
+        },
+        cfg,
+        60.0,
+    );
+    let mut c = c.with_second_finger(
+        Box::new(handle.second_camera().expect("camera")),
+        second_projection(),
+    );
+    pre_grasp(&mut c, &handle).await;
+    let cycles = c
+        .follow(&[(1.5, Duration::from_secs(1))])
+        .await
+        .expect("follows");
+    assert!(cycles.iter().all(|c| c.single_finger == Some(0)));
+    assert!(
+        cycles
+            .iter()
+            .all(|c| c.estimate_n == c.finger_estimates_n[0])
+    );
+    assert!(
+        cycles
+            .iter()
+            .any(|c| c.outcome == Some(StepOutcome::Stepped))
+    );
+}
+
+#[test]
+fn the_fingers_combine_as_a_mean_and_both_missing_holds() {
+    use softtouch_grasp::combine_fingers;
+    assert_eq!(
+        combine_fingers([Some(1.0), Some(2.0)], 10.0),
+        (Some(1.5), None)
+    );
+    assert_eq!(
+        combine_fingers([None, Some(2.0)], 10.0),
+        (Some(2.0), Some(1))
+    );
+    assert_eq!(
+        combine_fingers([Some(1.0), None], 10.0),
+        (Some(1.0), Some(0))
+    );
+    assert_eq!(combine_fingers([None, None], 10.0), (None, None));
+    // A saturated finger saturates the pair: the stepper holds.
+    assert_eq!(
+        combine_fingers([Some(10.0), Some(1.0)], 10.0),
+        (Some(10.0), None)
+    );
+    let s = softtouch_grasp::Stepper::new(config(4.0, 0.1).stepper).expect("valid");
+    let (none, _) = combine_fingers([None, None], 10.0);
+    assert_eq!(s.step(100, 1.0, none).outcome, StepOutcome::HeldNonFinite);
+}
+
+/// The disturbance of `grasp disturb`: an oval tube (30 × 18 mm, standing) turned
+/// about its axis by 45°, then 60°, then −90° while the loop holds a force on the
+/// model's estimate. Each turn changes the true squeeze at the held opening (the
+/// disturbance is real), the requests never leave the stroke, and after each turn the
+/// loop brings its estimate back within δ.
+#[tokio::test(start_paused = true)]
+async fn turning_an_oval_tube_disturbs_the_hold_and_the_loop_recovers() {
+    let tube = GraspObject::standing(
+        "oval-tube",
+        softtouch_schemas::RodShape::Oval,
+        0.03,
+        0.6,
+        softtouch_schemas::scene::ObjectProfile::Prism { height_m: 0.05 },
+    );
+    let tube = GraspObject {
+        grasp_height_m: 0.043,
+        ..tube
+    };
+    let clock = TokioClock::new();
+    let (gripper, camera, handle) =
+        soft_grasp(&softtouch_schemas::defaults::scene(), tube, 60.0, 5, clock).expect("builds");
+    let touch = handle.contact_count(0.02).expect("curve").expect("touches");
+    let counts: Vec<u8> = (touch..=255).collect();
+    let curve = handle.grip_force_curve(&counts).expect("curve");
+    let end = curve
+        .iter()
+        .find(|(_, f)| *f > 3.0)
+        .map_or(255, |(p, _)| *p);
+    let lambda_max = handle.max_stiffness_n_per_mm(touch, end).expect("Λ");
+    let cfg = config(0.75 * lambda_max, 0.15);
+    let truth = SimTruth(handle.clone(), projection());
+    let mut c = Controller::new(gripper, camera, predictor(), truth, Arc::new(clock), cfg)
+        .expect("valid")
+        .with_second_finger(
+            Box::new(handle.second_camera().expect("camera")),
+            second_projection(),
+        );
+    c.approach(touch.saturating_sub(4), Duration::from_secs(3))
+        .await
+        .expect("approaches");
+    let start = clock.now();
+    let at = |s: f64| TimestampNs(start.0 + (s * 1e9) as u64);
+    let mut yaw = 0.0_f64;
+    for (i, turn) in [45.0_f64, 60.0, -90.0].iter().enumerate() {
+        yaw += turn;
+        handle
+            .schedule_object_yaw(at(1.5 + 2.0 * i as f64), yaw.to_radians(), 0.3)
+            .expect("turn");
+    }
+    let target = 1.0;
+    let cycles = c
+        .follow(&[(target, Duration::from_secs_f64(7.5))])
+        .await
+        .expect("follows");
+    assert!(within_stroke(&cycles, &cfg.stepper.stroke));
+    let t_s = |c: &Cycle| (c.t.0 - start.0) as f64 * 1e-9;
+    for i in 0..3 {
+        let (t0, t1) = (1.5 + 2.0 * i as f64, 3.5 + 2.0 * i as f64);
+        let phase: Vec<&Cycle> = cycles
+            .iter()
+            .filter(|c| t_s(c) >= t0 && t_s(c) < t1)
+            .collect();
+        // The disturbance moves the truth: its spread over the phase is real.
+        let truths: Vec<f64> = phase.iter().filter_map(|c| c.true_n).collect();
+        let spread = truths.iter().fold(f64::NEG_INFINITY, |m, f| m.max(*f))
+            - truths.iter().fold(f64::INFINITY, |m, f| m.min(*f));
+        assert!(spread > 0.1, "phase {i}: true force spread {spread} N");
+        // And the loop settles its estimate within δ again before the next turn.
+        let last = phase.last().expect("cycles");
+        let est: Vec<(f64, f64)> = phase
+            .iter()
+            .filter_map(|c| Some((t_s(c), c.estimate_n?)))
+            .collect();
+        let m = hold_metrics(&est, target, cfg.stepper.tolerance_n).expect("samples");
+        assert!(
+            m.settling_time_s.is_some(),
+            "phase {i}: estimate not back within δ by {}: {m:?}",
+            t_s(last)
+        );
+    }
+}

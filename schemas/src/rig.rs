@@ -18,6 +18,11 @@ pub struct RigConfig {
     pub camera: CameraDevice,
     /// The gripper for grasp trials.
     pub gripper: GripperDevice,
+    /// The camera of a second sensorised finger on the gripper (grasp trials only;
+    /// absent: one sensorised finger, whose camera is `camera`). Same driver as
+    /// `camera`, another device.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub second_camera: Option<CameraDevice>,
     /// Where the arm may go.
     pub workspace: WorkspaceBounds,
     /// Force limits and the sensor's range.
@@ -105,6 +110,12 @@ pub enum CameraDevice {
     V4l {
         /// Device path, e.g. `/dev/video0`.
         device: String,
+        /// Fixed delay from a frame's exposure to the driver's timestamp of it, s
+        /// (readout and USB transfer; measure it once, e.g. by tapping the finger in
+        /// view of the camera). Subtracted from every frame's stamp, as the force
+        /// sensor's `latency_s` is from its readings. Absent: 0.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        latency_s: Option<f64>,
     },
 }
 
@@ -203,6 +214,13 @@ pub struct Procedure {
     /// long, s (the stream is stale). Absent: [`DEFAULT_FT_STALE_S`].
     #[serde(default = "default_ft_stale_s")]
     pub ft_stale_s: f64,
+    /// Largest gap between a frame's time and the nearest reading on each side of it,
+    /// s: a sample whose frame is not covered by readings this close before and after
+    /// it is rejected (`clock_skew`): its label would come from another moment than
+    /// its image. Absent: [`Procedure::max_skew_s_for`], the larger of 2 sensor
+    /// periods and [`DEFAULT_MAX_SKEW_S`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_skew_s: Option<f64>,
     /// When the force/torque sensor is zeroed at home: `none`, `per-run` or
     /// `per-sample`. Absent: what suits the scene's medium ([`Tare::for_medium`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -217,7 +235,11 @@ pub struct Procedure {
 pub enum Tare {
     /// Never: labels keep the sensor's offset and drift.
     None,
-    /// Once, at home before the first sample of a run (or of a resumed run).
+    /// Once, at home before the first sample of a run (or of a resumed run). A
+    /// resumed run's tare is taken at another time than the run's first: with drift
+    /// declared (a scene's `ft_drift`) its labels then differ from an uninterrupted
+    /// run's by the drift between the two tares, where `per-sample` and `none` (and
+    /// `per-run` without drift) resume bit-identically.
     PerRun,
     /// At home before every attempt at a sample: removes drift as it accumulates.
     PerSample,
@@ -245,7 +267,24 @@ impl Tare {
     }
 }
 
+/// Floor of the default [`Procedure::max_skew_s`], s: at 1 kHz, 5 sensor periods.
+pub const DEFAULT_MAX_SKEW_S: f64 = 0.005;
+
 impl Procedure {
+    /// The skew limit for a sensor streaming at `rate_hz`: the configured one, else
+    /// the larger of 2 sensor periods and [`DEFAULT_MAX_SKEW_S`].
+    #[must_use]
+    pub fn max_skew_s_for(&self, rate_hz: f64) -> f64 {
+        self.max_skew_s.unwrap_or_else(|| {
+            let periods = if rate_hz.is_finite() && rate_hz > 0.0 {
+                2.0 / rate_hz
+            } else {
+                0.0
+            };
+            periods.max(DEFAULT_MAX_SKEW_S)
+        })
+    }
+
     /// The tare policy of a run in `medium`: the configured one, else the medium's default.
     #[must_use]
     pub fn tare_for(&self, medium: Medium) -> Tare {
@@ -309,7 +348,7 @@ impl Validate for RigConfig {
                 counts_per_torque,
                 latency_s,
             } => {
-                latency(c, *latency_s);
+                latency(c, "force_sensor.latency_s", *latency_s);
                 non_empty(c, "force_sensor.address", address);
                 c.within("force_sensor.rate_hz", *rate_hz, 1.0, 7000.0, "Hz");
                 if let Some(v) = counts_per_force {
@@ -326,7 +365,7 @@ impl Validate for RigConfig {
                 counts_per_torque,
                 latency_s,
             } => {
-                latency(c, *latency_s);
+                latency(c, "force_sensor.latency_s", *latency_s);
                 non_empty(c, "force_sensor.port", port);
                 if *baud == 0 {
                     c.fail(
@@ -348,7 +387,33 @@ impl Validate for RigConfig {
         }
         match &self.camera {
             CameraDevice::Sim { fps } => c.within("camera.fps", *fps, 1.0, 1000.0, "frames/s"),
-            CameraDevice::V4l { device } => non_empty(c, "camera.device", device),
+            CameraDevice::V4l { device, latency_s } => {
+                non_empty(c, "camera.device", device);
+                latency(c, "camera.latency_s", *latency_s);
+            }
+        }
+        match (&self.camera, &self.second_camera) {
+            (_, None) => {}
+            (CameraDevice::Sim { .. }, Some(CameraDevice::Sim { fps })) => {
+                c.within("second_camera.fps", *fps, 1.0, 1000.0, "frames/s");
+            }
+            (
+                CameraDevice::V4l { device: first, .. },
+                Some(CameraDevice::V4l { device, latency_s }),
+            ) => {
+                non_empty(c, "second_camera.device", device);
+                latency(c, "second_camera.latency_s", *latency_s);
+                if device == first {
+                    c.fail(
+                        "second_camera.device",
+                        format!("expected another device than camera.device ({first})"),
+                    );
+                }
+            }
+            (_, Some(_)) => c.fail(
+                "second_camera.driver",
+                "expected the same driver as camera (both \"sim\" or both \"v4l\")",
+            ),
         }
         match &self.gripper {
             GripperDevice::Sim {} => {}
@@ -484,6 +549,31 @@ impl Validate for RigConfig {
             }
         }
         c.within("procedure.ft_stale_s", p.ft_stale_s, 1e-3, 10.0, "s");
+        if let Some(skew_s) = p.max_skew_s {
+            let problems = c.problems().len();
+            c.within(
+                "procedure.max_skew_s",
+                skew_s,
+                1e-5,
+                FT_BUFFER_S / 2.0,
+                "s (half the force/torque buffer)",
+            );
+            // Readings 1/rate apart cover a frame between them within half a period
+            // at best: a smaller limit would reject most frames.
+            if c.problems().len() == problems
+                && rate_hz.is_finite()
+                && rate_hz > 0.0
+                && skew_s * rate_hz < 0.5
+            {
+                c.fail(
+                    "procedure.max_skew_s",
+                    format!(
+                        "expected at least half a sensor period (0.5 / force_sensor rate {rate_hz} Hz = {} s), found {skew_s}",
+                        0.5 / rate_hz
+                    ),
+                );
+            }
+        }
         if p.max_attempts == 0 {
             c.fail("procedure.max_attempts", "expected at least 1 attempt");
         }
@@ -497,9 +587,9 @@ impl Validate for RigConfig {
 /// bound that keeps stamps from being moved by seconds through a typo.
 pub const MAX_SENSOR_LATENCY_S: f64 = 1.0;
 
-fn latency(c: &mut Check, v: Option<f64>) {
+fn latency(c: &mut Check, field: &str, v: Option<f64>) {
     if let Some(v) = v {
-        c.within("force_sensor.latency_s", v, 0.0, MAX_SENSOR_LATENCY_S, "s");
+        c.within(field, v, 0.0, MAX_SENSOR_LATENCY_S, "s");
     }
 }
 

@@ -84,6 +84,9 @@ pub enum RejectReason {
     StreamStalled,
     /// A reading held NaN or infinity: never a label, never stored as one.
     NonFinite,
+    /// The frame's time is not covered by readings on both sides of it within
+    /// `procedure.max_skew_s`: the label would come from another moment than the image.
+    ClockSkew,
 }
 
 impl RejectReason {
@@ -100,6 +103,7 @@ impl RejectReason {
             Self::ForceLimit => "force_limit",
             Self::StreamStalled => "stream_stalled",
             Self::NonFinite => "non_finite",
+            Self::ClockSkew => "clock_skew",
         }
     }
 }
@@ -123,6 +127,7 @@ impl FromStr for RejectReason {
             Self::ForceLimit,
             Self::StreamStalled,
             Self::NonFinite,
+            Self::ClockSkew,
         ]
         .into_iter()
         .find(|r| r.as_str() == s)

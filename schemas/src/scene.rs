@@ -31,23 +31,37 @@ pub struct SceneSpec {
     pub objects: Vec<ObjectSpec>,
 }
 
-/// An object the gripper's soft fingers grasp. The face that meets each finger is read
-/// as a rod press (same contact model, lattice and renderer as the rods).
+/// An object the gripper's soft fingers grasp.
+///
+/// Geometry in the gripper's terms: the fingers close along x (the gripping
+/// direction), y runs across the fingers' faces and the fingers point down along z,
+/// so an object's height runs along the finger. Without a `profile` the object lies
+/// across the finger (a rod held crosswise, as in the rod presses): the face that meets
+/// each finger is `shape`/`size_m`/`aspect` along the finger and `width_m` is its width
+/// across the fingers. With a `profile` the object stands on a support with its height
+/// along the finger: `shape` is its horizontal section (circle, oval with `aspect` =
+/// depth across y over width, square, hexagon, triangle), `width_m` that section's width
+/// across the fingers (a taper's bottom width, a sphere's diameter) and the profile how
+/// the section changes with height.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ObjectSpec {
     /// Name, unique among the objects.
     pub name: String,
-    /// Cross-section of the face that meets the finger.
+    /// Cross-section: of the face along the finger (lying objects) or the horizontal
+    /// section (standing objects, with a `profile`).
     pub shape: RodShape,
-    /// Extent of that face along the finger, m (a cylinder's diameter).
-    pub size_m: f64,
-    /// Depth over extent of the face (ovals; 1 for the others).
+    /// Extent of the face along the finger, m (a lying cylinder's diameter); only for
+    /// objects without a `profile`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub size_m: Option<f64>,
+    /// Depth over width of an oval section or face (1 for the others).
     #[serde(default = "one")]
     pub aspect: f64,
-    /// Width across the fingers at the grasp height, m (below the 50 mm stroke).
+    /// Width across the fingers, m (below the 50 mm stroke): at the grasp height for a
+    /// lying object or a prism, at the bottom for a taper, the diameter of a sphere.
     pub width_m: f64,
-    /// Where along the finger the object sits: the contact pose's z, m, in
+    /// Where along the finger the grasp point sits: the contact pose's z, m, in
     /// [−0.05, 0.05] (0: mid-finger).
     #[serde(default)]
     pub contact_z_m: f64,
@@ -58,6 +72,68 @@ pub struct ObjectSpec {
     /// Squeeze on one finger that crushes it, N; absent for a rigid object.
     #[serde(default)]
     pub crush_force_n: Option<f64>,
+    /// How the section changes along the height (standing objects); absent: the object
+    /// lies across the finger.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub profile: Option<ObjectProfile>,
+    /// Height of the predefined grasp point above the support, m (standing objects;
+    /// default: mid-height, a sphere's centre).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grasp_height_m: Option<f64>,
+    /// Opening the open-loop grasp closes the fingers to, m (the paper's Figure 4e;
+    /// default: the width at the grasp point less 2 mm).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grasp_width_m: Option<f64>,
+    /// Volume of fluid displaced, m³ (buoyancy; default: from the geometry).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub volume_m3: Option<f64>,
+    /// Drag coefficient C_d of the object in a fluid (default 1.0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drag_coefficient: Option<f64>,
+    /// Area the fluid's drag acts on, m² (default: from the geometry).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drag_area_m2: Option<f64>,
+}
+
+/// How a standing object's section changes along its height (the finger's z).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ObjectProfile {
+    /// The same section all the way up: a cylinder, an oval tube, a box.
+    Prism {
+        /// Height, m.
+        height_m: f64,
+    },
+    /// A ball of diameter `width_m`: the fingers meet its chord at each height.
+    Sphere,
+    /// The section scales linearly from `width_m` at the bottom to `top_width_m` at the
+    /// top: a tapered bottle.
+    Taper {
+        /// Height, m.
+        height_m: f64,
+        /// Width across the fingers at the top, m.
+        top_width_m: f64,
+    },
+}
+
+impl ObjectProfile {
+    /// The object's height, m (a sphere's is its diameter `width_m`).
+    #[must_use]
+    pub fn height_m(&self, width_m: f64) -> f64 {
+        match *self {
+            Self::Prism { height_m } | Self::Taper { height_m, .. } => height_m,
+            Self::Sphere => width_m,
+        }
+    }
+
+    /// The widest width across the fingers over the height, m.
+    #[must_use]
+    pub fn max_width_m(&self, width_m: f64) -> f64 {
+        match *self {
+            Self::Prism { .. } | Self::Sphere => width_m,
+            Self::Taper { top_width_m, .. } => width_m.max(top_width_m),
+        }
+    }
 }
 
 /// What surrounds the finger.
@@ -224,6 +300,29 @@ pub enum Effect {
         /// Flow speed of the fluid, m/s.
         flow_m_s: f64,
     },
+    /// Buoyancy on a grasped object: the fluid carries ρ·g·V of its weight.
+    ObjectBuoyancy {
+        /// Density of the fluid, kg/m³ (water ≈ 1000).
+        fluid_density_kg_m3: f64,
+    },
+    /// Drag on a grasped object while it is lifted: ½·ρ·C_d·A·v², against the motion.
+    ObjectDrag {
+        /// Density of the fluid, kg/m³.
+        fluid_density_kg_m3: f64,
+    },
+    /// A current pushing on a grasped object along the gripping direction:
+    /// ½·ρ·C_d·A·u·|u| with a seeded, time-varying speed u(t) = mean + gust·(a sum of
+    /// three seeded sines around `period_s`), so the squeeze on the fingers changes.
+    ObjectFlow {
+        /// Density of the fluid, kg/m³.
+        fluid_density_kg_m3: f64,
+        /// Mean flow speed along the gripping direction, m/s.
+        mean_m_s: f64,
+        /// Amplitude of the gusts, m/s.
+        gust_m_s: f64,
+        /// Typical period of the gusts, s.
+        period_s: f64,
+    },
     /// Camera frames lost.
     FrameDrops {
         /// Probability each frame is dropped.
@@ -265,6 +364,9 @@ impl Effect {
             Self::FtDrift { .. } => "ft_drift",
             Self::BuoyancyOffset { .. } => "buoyancy_offset",
             Self::FluidDrag { .. } => "fluid_drag",
+            Self::ObjectBuoyancy { .. } => "object_buoyancy",
+            Self::ObjectDrag { .. } => "object_drag",
+            Self::ObjectFlow { .. } => "object_flow",
             Self::FrameDrops { .. } => "frame_drops",
             Self::FtPacketLoss { .. } => "ft_packet_loss",
             Self::Latency { .. } => "latency",
@@ -340,6 +442,35 @@ impl Effect {
             } => {
                 c.non_negative(&f("coefficient"), *coefficient, "N·s²/m²");
                 c.within(&f("flow_m_s"), *flow_m_s, -10.0, 10.0, "m/s");
+            }
+            Self::ObjectBuoyancy {
+                fluid_density_kg_m3,
+            }
+            | Self::ObjectDrag {
+                fluid_density_kg_m3,
+            } => c.within(
+                &f("fluid_density_kg_m3"),
+                *fluid_density_kg_m3,
+                0.0,
+                20_000.0,
+                "kg/m³",
+            ),
+            Self::ObjectFlow {
+                fluid_density_kg_m3,
+                mean_m_s,
+                gust_m_s,
+                period_s,
+            } => {
+                c.within(
+                    &f("fluid_density_kg_m3"),
+                    *fluid_density_kg_m3,
+                    0.0,
+                    20_000.0,
+                    "kg/m³",
+                );
+                c.within(&f("mean_m_s"), *mean_m_s, -10.0, 10.0, "m/s");
+                c.within(&f("gust_m_s"), *gust_m_s, 0.0, 10.0, "m/s");
+                c.within(&f("period_s"), *period_s, 0.01, 1000.0, "s");
             }
             Self::FrameDrops { probability }
             | Self::FtPacketLoss { probability }
@@ -440,7 +571,18 @@ impl Validate for SceneSpec {
             if !object_names.insert(o.name.as_str()) {
                 c.fail(f("name"), format!("object name `{}` is used twice", o.name));
             }
-            c.within(&f("size_m"), o.size_m, 1e-3, 0.05, "m");
+            match (&o.profile, o.size_m) {
+                (None, Some(size)) => c.within(&f("size_m"), size, 1e-3, 0.05, "m"),
+                (None, None) => c.fail(
+                    f("size_m"),
+                    "expected the face's extent along the finger, m, for an object lying across the finger (or a `profile` for a standing one)",
+                ),
+                (Some(_), Some(_)) => c.fail(
+                    f("size_m"),
+                    "a standing object (with a `profile`) takes no size_m: its section is width_m across and width_m × aspect deep",
+                ),
+                (Some(_), None) => {}
+            }
             c.within(&f("aspect"), o.aspect, 0.2, 5.0, "");
             if o.shape != RodShape::Oval && (o.aspect - 1.0).abs() > f64::EPSILON {
                 c.fail(
@@ -452,9 +594,50 @@ impl Validate for SceneSpec {
             c.within(&f("width_m"), o.width_m, 1e-3, 0.049, "m");
             c.within(&f("contact_z_m"), o.contact_z_m, -0.05, 0.05, "m");
             c.within(&f("mass_kg"), o.mass_kg, 1e-4, 10.0, "kg");
-            c.within(&f("friction"), o.friction, 0.01, 2.0, "");
+            c.within(&f("friction"), o.friction, 0.0, 2.0, "");
             if let Some(crush) = o.crush_force_n {
                 c.positive(&f("crush_force_n"), crush, "N");
+            }
+            match o.profile {
+                Some(ObjectProfile::Prism { height_m }) => {
+                    c.within(&f("profile.height_m"), height_m, 0.005, 0.5, "m");
+                }
+                Some(ObjectProfile::Taper {
+                    height_m,
+                    top_width_m,
+                }) => {
+                    c.within(&f("profile.height_m"), height_m, 0.005, 0.5, "m");
+                    c.within(&f("profile.top_width_m"), top_width_m, 1e-3, 0.049, "m");
+                }
+                Some(ObjectProfile::Sphere) if o.shape != RodShape::Circle => c.fail(
+                    f("shape"),
+                    "a sphere's section is a circle: expected shape = \"circle\"",
+                ),
+                Some(ObjectProfile::Sphere) | None => {}
+            }
+            if let Some(h) = o.grasp_height_m {
+                match o.profile {
+                    Some(p) => {
+                        let top = p.height_m(o.width_m);
+                        c.within(&f("grasp_height_m"), h, 0.0, top, "m");
+                    }
+                    None => c.fail(
+                        f("grasp_height_m"),
+                        "only a standing object (with a `profile`) takes a grasp height",
+                    ),
+                }
+            }
+            if let Some(g) = o.grasp_width_m {
+                c.within(&f("grasp_width_m"), g, 0.0, 0.05, "m");
+            }
+            if let Some(v) = o.volume_m3 {
+                c.within(&f("volume_m3"), v, 1e-9, 0.01, "m³");
+            }
+            if let Some(cd) = o.drag_coefficient {
+                c.within(&f("drag_coefficient"), cd, 0.0, 10.0, "");
+            }
+            if let Some(a) = o.drag_area_m2 {
+                c.within(&f("drag_area_m2"), a, 1e-8, 0.1, "m²");
             }
         }
         let mut kinds = HashSet::new();

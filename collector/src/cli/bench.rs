@@ -21,6 +21,13 @@ use std::time::Instant;
 
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {
+    /// The force loop on the simulated soft grasp: settling time, overshoot and
+    /// steady-state error (estimate and truth) against K (below Λ/2 too), δ, camera
+    /// rate and model; a table, CSV and PNG. `--wall-clock` also runs it on real time.
+    #[command(after_help = "Examples:
+  softtouch bench grasp --model air-svae
+  softtouch bench grasp --model air-svae,air-small --gains 0.3,0.75,1.5 --wall-clock")]
+    Grasp(super::bench_grasp::BenchGraspArgs),
     /// Accuracy costs time, for the model: over input size, encoder width and latent
     /// size, train on a dataset and report test R², training time per epoch and
     /// inference latency at batch 1 on one core; a table, CSV and a PNG of R² against
@@ -89,6 +96,7 @@ fn scratch_db(out: &Path) -> Result<PathBuf, Failure> {
 
 pub async fn run(cmd: BenchCommand, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
     match cmd {
+        BenchCommand::Grasp(args) => super::bench_grasp::run(args, db, out).await,
         BenchCommand::Model(args) => run_bench_model(args, db, out).await,
         BenchCommand::Collection {
             samples,

@@ -3,7 +3,7 @@
 use super::{Failure, io_failure, open_existing};
 use crate::collect::{
     CollectPlan, Counters, NewRunRequest, Outcome, PlanError, Progress, Resumed, abandon,
-    build_devices, collect,
+    build_run_devices, collect,
 };
 use crate::store::SyncStore;
 use anyhow::anyhow;
@@ -19,14 +19,17 @@ use std::time::Instant;
   softtouch collect --scene scenes/water.toml --samples 30000
   softtouch collect --rig lab-rig.toml --scene rods.toml --rods circle-10 --samples 5000
   softtouch collect --resume 3                      # continue run 3 where it stopped
+  softtouch collect --resume 3 --rig lab-rig.toml   # ... with the F/T box on a new port
 
 Ctrl-C, SIGTERM or SIGHUP finishes the current sample, retreats and exits 0 (resume later
 with --resume); a second one stops the arm at once, wherever it is. A run being collected
 is leased to its process: a second `collect --resume` of it is refused while that process
 lives. A log is written beside the database (DB.log).")]
 pub struct CollectArgs {
-    /// Rig config (default: the embedded all-simulated rig).
-    #[arg(long, conflicts_with = "resume")]
+    /// Rig config (default: the embedded all-simulated rig). With --resume: the run's
+    /// rig with devices reached elsewhere (addresses, ports, device paths may differ
+    /// from the stored rig, nothing else); default the stored rig.
+    #[arg(long)]
     pub rig: Option<PathBuf>,
     /// Scene (default: the embedded on-land scene).
     #[arg(long, conflicts_with = "resume")]
@@ -44,7 +47,8 @@ pub struct CollectArgs {
     /// Samples per rod before changing to the next (default: an equal share each).
     #[arg(long, conflicts_with = "resume")]
     pub block: Option<u64>,
-    /// Continue run RUN at its next sample, with its stored seed, rig and scene.
+    /// Continue run RUN at its next sample, with its stored seed, rig and scene (the
+    /// database must exist).
     #[arg(long, value_name = "RUN")]
     pub resume: Option<i64>,
 }
@@ -183,9 +187,18 @@ fn progress_reporter(total: u64) -> Box<dyn Progress> {
 }
 
 pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    if args.resume.is_some() && !db.exists() {
+        // A mistyped --db would otherwise become a new, empty database.
+        return Err(Failure::BadInput(anyhow!(
+            "--resume: no database at {} (check --db; only a new run creates one)",
+            db.display()
+        )));
+    }
     let store = SyncStore::open(db)?;
     let plan = if let Some(run_id) = args.resume {
-        match CollectPlan::resume(&store, run_id).map_err(plan_failure)? {
+        match CollectPlan::resume_with_rig(&store, run_id, args.rig.as_deref())
+            .map_err(plan_failure)?
+        {
             Resumed::AlreadyComplete => {
                 writeln!(out, "run {run_id} is already complete").map_err(io_failure)?;
                 return Ok(());
@@ -205,7 +218,8 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
     };
 
     let run_id = plan.run_id;
-    let (devices, clock) = match build_devices(&plan.rig, &plan.scene, plan.seed).await {
+    // A resumed run's clock continues the run's device time.
+    let (devices, clock) = match build_run_devices(&store, &plan).await {
         Ok(built) => built,
         Err(e) => {
             // No empty `running` run is left behind: the run says why it never started.
@@ -272,6 +286,21 @@ pub async fn run_status(db: &Path, run: Option<i64>, out: &mut dyn Write) -> Res
             "run {} [{}] scene {} ({}): {done}/{} samples, {} ok, {} rejected, {} retries, {} faults; {rate}; updated {}\n",
             r.run_id, r.status, r.scene_name, r.medium, r.samples_planned, r.ok, r.rejected, r.retried, r.faults, r.updated_at
         ));
+        if run.is_some() {
+            // JSON, so that every name reads back exactly (commas, quotes, blanks). A
+            // damaged schedule is shown as such: the rest of the status still helps.
+            match store.run_record(r.run_id).await {
+                Ok(record) => text.push_str(&format!(
+                    "    rods {}, {} samples each\n",
+                    serde_json::to_string(&record.rod_schedule).unwrap_or_default(),
+                    record.rod_block
+                )),
+                Err(e @ crate::store::StoreError::Damaged { .. }) => {
+                    text.push_str(&format!("    rods: {e}\n"));
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
         let limit = if run.is_some() { 20 } else { 3 };
         for e in store.events(r.run_id, limit).await? {
             let at = e

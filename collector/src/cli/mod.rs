@@ -4,13 +4,17 @@
 //! (arguments, config or scene files, a missing database or run).
 
 pub mod bench;
+pub mod bench_grasp;
 pub mod collect;
 pub mod config;
 pub mod dataset;
 pub mod db;
 pub mod eval;
 pub mod grasp;
+pub mod grasp_trials;
+pub mod live;
 pub mod report;
+pub mod rig;
 pub mod runs;
 pub mod sim;
 pub mod sweep;
@@ -84,6 +88,16 @@ pub enum Command {
     /// soft-finger Hand-E.
     #[command(subcommand)]
     Grasp(grasp::GraspCommand),
+    /// Watch the model's estimate at camera rate beside the force/torque sensor; on a
+    /// simulated arm (or with `--press`) the arm runs a scripted press. Terminal lines
+    /// and a CSV of every frame.
+    #[command(after_help = "Examples:
+  softtouch live --model air-svae                       # simulated rig: scripted press
+  softtouch live --model air-svae --rig lab.toml --duration-s 30   # real rig: watch only")]
+    Live(live::LiveArgs),
+    /// Check the rig: exercise every configured device briefly, print a pass/fail table.
+    #[command(subcommand)]
+    Rig(rig::RigCommand),
     /// Measure: what accuracy costs in time, where the time goes, store ingest.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -200,6 +214,8 @@ pub async fn run(cli: Cli, out: &mut dyn std::io::Write) -> Result<(), Failure> 
         Command::Sim(cmd) => sim::run(cmd, out).await,
         Command::Grasp(cmd) => grasp::run(cmd, &cli.db, out).await,
         Command::Bench(cmd) => bench::run(cmd, &cli.db, out).await,
+        Command::Live(args) => live::run(args, &cli.db, out).await,
+        Command::Rig(cmd) => rig::run(cmd, out).await,
         Command::Train(args) => train::run_train(args, &cli.db, out).await,
         Command::Eval(args) => eval::run_eval(args, &cli.db, out).await,
         Command::Models => eval::run_models(&cli.db, out).await,

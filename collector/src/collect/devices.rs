@@ -3,7 +3,9 @@
 use super::rods::{RodChanger, TerminalOperator};
 use softtouch_drivers::select::SelectError;
 use softtouch_drivers::{Arm, Camera, ForceSensor, TokioClock};
-use softtouch_schemas::{ArmDevice, CameraDevice, ForceSensorDevice, RigConfig, SceneSpec};
+use softtouch_schemas::{
+    ArmDevice, CameraDevice, ForceSensorDevice, RigConfig, SceneSpec, TimestampNs,
+};
 
 /// The devices a collection needs.
 pub struct CollectDevices {
@@ -48,10 +50,27 @@ pub async fn build_devices(
     scene: &SceneSpec,
     seed: u64,
 ) -> Result<(CollectDevices, TokioClock), SelectError> {
+    build_devices_at(rig, scene, seed, TimestampNs::ZERO).await
+}
+
+/// [`build_devices`] on a clock that reads `start` now: a resumed run's clock, which
+/// continues the run's device time (see [`super::clock_start`]).
+///
+/// # Errors
+/// As [`build_devices`].
+///
+/// # Panics
+/// As [`build_devices`].
+pub async fn build_devices_at(
+    rig: &RigConfig,
+    scene: &SceneSpec,
+    seed: u64,
+    start: TimestampNs,
+) -> Result<(CollectDevices, TokioClock), SelectError> {
     if all_simulated(rig) {
         tokio::time::pause();
     }
-    let clock = TokioClock::new();
+    let clock = TokioClock::starting_at(start);
     let devices = softtouch_drivers::select::build(rig, scene, seed, clock).await?;
     // The rod is part of the simulated world when the arm is simulated; on a real rig
     // an operator changes it.

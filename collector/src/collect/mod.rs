@@ -16,6 +16,14 @@
 //! failed samples in a row the run stops safely (stop, retreat, flush, event, error).
 //! Everything that goes wrong is an event in the store, a stop the arm refused included.
 //!
+//! Time: a run's device time continues across a resume. Each sample is stored with the
+//! run's time base (the clock when its retreat ended, where the next sample begins);
+//! a resumed job's clock starts [`RESUME_STARTUP_NS`] before it ([`clock_start`]), does
+//! its startup (stream, home, a per-run tare) and waits until the time base before its
+//! first sample. On a simulated rig (virtual time) that wait is free and the resumed
+//! run is bit-identical to an uninterrupted one; on a real rig it is a few seconds
+//! once per resume, and a run's timestamps stay monotonic.
+//!
 //! # Layout
 //! - this module: the job loop (rods, samples in order, failures in a row);
 //! - `finish`: the safe stop at its end, whatever ended it (stop, retreat, stream
@@ -37,16 +45,17 @@ pub mod rods;
 pub mod sampler;
 pub mod window;
 
-pub use devices::{CollectDevices, build_devices};
+pub use devices::{CollectDevices, build_devices, build_devices_at};
 pub use plan::{CollectPlan, NewRunRequest, PlanError, Resumed};
 
 use crate::store::{EventKind, EventLevel, RunId, RunStatus, StoreError, SyncStore};
 use procedure::SampleEnd;
 use rods::RodChanger;
 use sampler::PoseSampler;
+use softtouch_drivers::select::SelectError;
 use softtouch_drivers::{Arm, Camera, Clock, DeviceError, TokioClock};
 use softtouch_schemas::rig::{FT_BUFFER_S, Tare};
-use softtouch_schemas::{ArmPose, SampleStatus};
+use softtouch_schemas::{ArmPose, SampleStatus, TimestampNs};
 use std::time::Duration;
 use tokio::sync::watch;
 pub use window::GuardTrip;
@@ -153,6 +162,49 @@ struct Job<'a> {
     /// A store error met where the job could not stop for it (a retreat goes on
     /// whatever the store does); the sample loop stops on it.
     store_failed: Option<StoreError>,
+}
+
+/// How long before a resumed run's time base its job's clock starts, ns: room for the
+/// startup before the first sample (the sensor's stream, the move home, a per-run
+/// tare). A startup that takes longer makes the resumed samples begin late (logged).
+pub const RESUME_STARTUP_NS: u64 = 10_000_000_000;
+
+/// Where the clock of a job collecting `run` starts: 0 for a run with nothing stored,
+/// else [`RESUME_STARTUP_NS`] before the run's time base (clamped at 0).
+///
+/// # Errors
+/// The store failed, or has no such run.
+pub fn clock_start(store: &SyncStore, run: RunId) -> Result<TimestampNs, StoreError> {
+    Ok(store.run_time_base(run)?.map_or(TimestampNs::ZERO, |base| {
+        TimestampNs(base.0.saturating_sub(RESUME_STARTUP_NS))
+    }))
+}
+
+/// Why the devices of a job could not be set up.
+#[derive(Debug, thiserror::Error)]
+pub enum SetupError {
+    /// A device could not be opened, or the simulator built.
+    #[error(transparent)]
+    Devices(#[from] SelectError),
+    /// The run's time base could not be read.
+    #[error("cannot read where the run's device time continues: {0}")]
+    Store(#[from] StoreError),
+}
+
+/// The devices of `plan` on a clock that continues the run's device time
+/// ([`clock_start`]); what `softtouch collect` uses, for new and resumed runs alike.
+///
+/// # Errors
+/// A device that cannot be opened, a simulator that cannot be built, a store error.
+///
+/// # Panics
+/// As [`build_devices`].
+pub async fn build_run_devices(
+    store: &SyncStore,
+    plan: &CollectPlan,
+) -> Result<(CollectDevices, TokioClock), SetupError> {
+    let start = clock_start(store, plan.run_id)?;
+    Ok(build_devices_at(&plan.rig, &plan.scene, plan.seed, start).await?)
 }
 
 /// Backoff before the `n`th recovery attempt (1-based): 0.5 s doubling, at most 8 s.
@@ -315,6 +367,7 @@ impl<'a> Job<'a> {
             return Ok((Outcome::SafeStop { reason }, index));
         }
         self.check_store()?;
+        self.continue_run_time().await?;
         for i in indices {
             index = i;
             self.next_index = i;
@@ -359,6 +412,61 @@ impl<'a> Job<'a> {
             }
         }
         Ok((Outcome::Completed, plan.end_index))
+    }
+
+    /// Before the first sample: wait until the run's time base (where its device time
+    /// left off), so that a resumed run's samples are taken at the device times an
+    /// uninterrupted run takes them (no wait for a new run, or when the clock is
+    /// already past the time base).
+    async fn continue_run_time(&mut self) -> Result<(), CollectError> {
+        let base = self.store.run_time_base(self.plan.run_id)?;
+        let now = self.clock.now();
+        let mut until = None;
+        match base {
+            None => {}
+            Some(base) if now <= base && base.0 - now.0 <= RESUME_STARTUP_NS => {
+                self.events.log(
+                    EventKind::Resumed,
+                    EventLevel::Info,
+                    None,
+                    &format!(
+                        "device time continues at the run's time base {:.6} s (startup done at {:.6} s)",
+                        base.as_secs_f64(),
+                        now.as_secs_f64()
+                    ),
+                )?;
+                until = Some(self.clock.instant_at(base));
+            }
+            // A clock not started by `clock_start` (a caller's own): waiting could take
+            // hours on a rig, so the run's timestamps restart earlier instead.
+            Some(base) if now < base => self.events.log(
+                EventKind::Resumed,
+                EventLevel::Warn,
+                None,
+                &format!(
+                    "the rig's clock reads {:.6} s, long before the run's time base {:.6} s: \
+                     not waiting; this job's timestamps are earlier than the run's last ones",
+                    now.as_secs_f64(),
+                    base.as_secs_f64()
+                ),
+            )?,
+            Some(base) => self.events.log(
+                EventKind::Resumed,
+                EventLevel::Info,
+                None,
+                &format!(
+                    "the startup ended at {:.6} s, after the run's time base {:.6} s: the \
+                     resumed samples begin {:.3} s later than an uninterrupted run's would",
+                    now.as_secs_f64(),
+                    base.as_secs_f64(),
+                    (now.0 - base.0) as f64 * 1e-9
+                ),
+            )?,
+        }
+        if let Some(until) = until {
+            tokio::time::sleep_until(until).await;
+        }
+        Ok(())
     }
 
     /// A store error kept by [`Job::log_or_keep`], as an error now.

@@ -9,9 +9,9 @@ use crate::store::{
     EventKind, EventLevel, LeaseHolder, LeaseTaken, OwnedNewRun, RunId, RunStatus, StoreError,
     SyncStore,
 };
-use softtouch_schemas::config::{ConfigError, ConfigSource, parse_toml, to_toml};
+use softtouch_schemas::config::{Check, ConfigError, ConfigSource, parse_toml, to_toml};
 use softtouch_schemas::{RigConfig, SceneSpec};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// What to collect.
 #[derive(Debug, Clone)]
@@ -193,13 +193,30 @@ impl CollectPlan {
     /// No such run, a run leased by another process, a stored config that no longer
     /// parses, or the store.
     pub fn resume(store: &SyncStore, run_id: RunId) -> Result<Resumed, PlanError> {
+        Self::resume_with_rig(store, run_id, None)
+    }
+
+    /// [`CollectPlan::resume`] on the rig in file `rig_file` (`None`: the run's stored rig).
+    /// The file may differ from the stored rig only where a device is reached
+    /// ([`CONNECTION_FIELDS`]: a moved serial port, a new address); it then becomes the
+    /// run's stored rig, and the `resumed` event names what changed. Either way the
+    /// run's scene is checked against the rig again, as for a new run.
+    ///
+    /// # Errors
+    /// As [`CollectPlan::resume`]; a rig file that does not load, or that differs from
+    /// the stored rig in any other field (the error names the field).
+    pub fn resume_with_rig(
+        store: &SyncStore,
+        run_id: RunId,
+        rig_file: Option<&Path>,
+    ) -> Result<Resumed, PlanError> {
         let record = store.run_record(run_id)?;
         let end = u64::try_from(record.samples_planned).unwrap_or(0);
         let missing = store.missing_indices(run_id, end)?;
         if record.status == RunStatus::Completed.as_str() && missing.is_empty() {
             return Ok(Resumed::AlreadyComplete);
         }
-        let rig: RigConfig = parse_toml(
+        let stored_rig: RigConfig = parse_toml(
             &record.rig_toml,
             &ConfigSource::Stored(format!("run {run_id} rig")),
         )?;
@@ -207,9 +224,30 @@ impl CollectPlan {
             &record.scene_toml,
             &ConfigSource::Stored(format!("run {run_id} scene")),
         )?;
-        let rods: Vec<String> = record.rod_schedule.split(',').map(str::to_owned).collect();
-        let schedule = RodSchedule::new(rods, u64::try_from(record.rod_block).unwrap_or(1))
-            .ok_or(PlanError::NoRodSchedule(run_id))?;
+        let (rig, rig_source, changed) = match rig_file {
+            None => (
+                stored_rig,
+                ConfigSource::Stored(format!("run {run_id} rig")),
+                Vec::new(),
+            ),
+            Some(path) => {
+                let (rig, source) = configs::rig(Some(path))?;
+                let changed = connection_changes(&stored_rig, &rig, run_id, &source)?;
+                (rig, source, changed)
+            }
+        };
+        // The checks may have grown since the run began: a scene the rig cannot take
+        // is refused before the arm moves, as for a new run.
+        let mut check = Check::default();
+        scene.validate_against(&rig, &mut check);
+        check.finish(&ConfigSource::Stored(format!(
+            "run {run_id} scene, on rig {rig_source}"
+        )))?;
+        let schedule = RodSchedule::new(
+            record.rod_schedule.clone(),
+            u64::try_from(record.rod_block).unwrap_or(1),
+        )
+        .ok_or(PlanError::NoRodSchedule(run_id))?;
         let start = store.next_index(run_id)?.min(end);
         let gaps: Vec<u64> = missing.into_iter().filter(|&i| i < start).collect();
         let lease = LeaseHolder::this_process();
@@ -227,6 +265,10 @@ impl CollectPlan {
                 ),
             )?;
         }
+        // Only the lease holder changes the run.
+        if !changed.is_empty() {
+            store.set_run_rig(run_id, &to_toml(&rig))?;
+        }
         store.set_run_status(run_id, RunStatus::Running)?;
         let first = gaps.first().copied().unwrap_or(start);
         store.log_event(
@@ -236,8 +278,13 @@ impl CollectPlan {
             EventLevel::Info,
             EventKind::Resumed.as_str(),
             &format!(
-                "resumed at sample {start}, after {} missing earlier samples",
-                gaps.len()
+                "resumed at sample {start}, after {} missing earlier samples{}",
+                gaps.len(),
+                if changed.is_empty() {
+                    String::new()
+                } else {
+                    format!("; rig {rig_source}: {}", changed.join(", "))
+                }
             ),
         )?;
         Ok(Resumed::Plan(Box::new(Self {
@@ -251,5 +298,97 @@ impl CollectPlan {
             rig,
             scene,
         })))
+    }
+}
+
+/// Fields of a rig that only say where a device is reached (dotted paths; a field
+/// absent from a device's driver is skipped). A resume may change these and nothing
+/// else: every other field shapes the samples (geometry, limits, timings, calibration,
+/// latencies) or is a different device (`driver`).
+pub const CONNECTION_FIELDS: [&str; 8] = [
+    "arm.address",
+    "force_sensor.address",
+    "force_sensor.port",
+    "force_sensor.baud",
+    "camera.device",
+    "second_camera.device",
+    "gripper.port",
+    "gripper.slave_id",
+];
+
+/// What `new` changes of `stored`'s connection fields (`field: old -> new`), or the
+/// first other field that differs, as a config error naming `new`'s file.
+fn connection_changes(
+    stored: &RigConfig,
+    new: &RigConfig,
+    run_id: RunId,
+    source: &ConfigSource,
+) -> Result<Vec<String>, ConfigError> {
+    let as_json = |rig: &RigConfig| serde_json::to_value(rig).unwrap_or(serde_json::Value::Null);
+    let (mut old_v, mut new_v) = (as_json(stored), as_json(new));
+    let mut changed = Vec::new();
+    for field in CONNECTION_FIELDS {
+        let (table, key) = field.split_once('.').unwrap_or((field, ""));
+        let take = |v: &mut serde_json::Value| {
+            v.get_mut(table)
+                .and_then(serde_json::Value::as_object_mut)
+                .and_then(|t| t.remove(key))
+        };
+        match (take(&mut old_v), take(&mut new_v)) {
+            (Some(a), Some(b)) if a != b => changed.push(format!("{field}: {a} -> {b}")),
+            _ => {}
+        }
+    }
+    let mut check = Check::default();
+    if let Some((field, old, new)) = first_difference("", &old_v, &new_v) {
+        check.fail(
+            field,
+            format!(
+                "differs from run {run_id}'s stored rig (stored {old}, here {new}); a resumed run keeps its rig except where a device is reached ({})",
+                CONNECTION_FIELDS.join(", ")
+            ),
+        );
+    }
+    check.finish(source)?;
+    Ok(changed)
+}
+
+/// The first path at which `a` and `b` differ, with both values (`absent` where one
+/// has no such field).
+fn first_difference(
+    path: &str,
+    a: &serde_json::Value,
+    b: &serde_json::Value,
+) -> Option<(String, String, String)> {
+    use serde_json::Value;
+    let join = |key: &str| {
+        if path.is_empty() {
+            key.to_owned()
+        } else {
+            format!("{path}.{key}")
+        }
+    };
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            let mut keys: Vec<&String> = x.keys().chain(y.keys()).collect();
+            // A different driver is a different device: say so before its fields.
+            keys.sort_by_key(|k| (k.as_str() != "driver", k.as_str()));
+            keys.dedup();
+            keys.into_iter().find_map(|k| match (x.get(k), y.get(k)) {
+                (Some(p), Some(q)) => first_difference(&join(k), p, q),
+                (p, q) => {
+                    let show =
+                        |v: Option<&Value>| v.map_or_else(|| "absent".to_owned(), Value::to_string);
+                    Some((join(k), show(p), show(q)))
+                }
+            })
+        }
+        (Value::Array(x), Value::Array(y)) if x.len() == y.len() => x
+            .iter()
+            .zip(y)
+            .enumerate()
+            .find_map(|(i, (p, q))| first_difference(&format!("{path}[{i}]"), p, q)),
+        _ if a == b => None,
+        _ => Some((path.to_owned(), a.to_string(), b.to_string())),
     }
 }

@@ -1,7 +1,7 @@
 //! One sample: `approach → settle → record → retreat`, with its retries, and storing
 //! it (accepted or rejected).
 
-use super::window::{GuardTrip, WindowStats, window_bounds, window_stats};
+use super::window::{GuardTrip, WindowStats, frame_covered, window_bounds, window_stats};
 use super::{CollectError, Job, recovery_backoff};
 use crate::store::{EventKind, EventLevel};
 use softtouch_drivers::{Clock as _, DeviceError, Frame};
@@ -316,8 +316,15 @@ impl Job<'_> {
             status,
             attempts,
         };
-        self.store
-            .submit_sample(self.plan.run_id, sample, frame, window)?;
+        // Every sample is stored after its retreat: now is where the next one begins,
+        // the run's time base for a resume (see `collect::clock_start`).
+        self.store.submit_sample_at(
+            self.plan.run_id,
+            sample,
+            frame,
+            window,
+            Some(self.clock.now()),
+        )?;
         match status {
             SampleStatus::Ok => self.counters.ok += 1,
             SampleStatus::Rejected(_) => self.counters.rejected += 1,
@@ -412,6 +419,13 @@ impl Job<'_> {
         // window is cut short, whatever it holds.
         if !complete && stats.reject != Some(RejectReason::NonFinite) {
             stats.reject = Some(RejectReason::StreamStalled);
+        }
+        // A window that passes every other check must also hold readings close to
+        // the frame on both sides: otherwise its mean is not the force in the image.
+        let max_skew =
+            DurationNs::from_secs_f64(p.max_skew_s_for(self.plan.rig.force_sensor.rate_hz()));
+        if stats.reject.is_none() && !frame_covered(&readings, frame.meta.t, max_skew) {
+            stats.reject = Some(RejectReason::ClockSkew);
         }
         Ok(Taken {
             measured,

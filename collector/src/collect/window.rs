@@ -321,6 +321,22 @@ pub fn window_bounds(frame_t: TimestampNs, window: DurationNs) -> (TimestampNs, 
     (frame_t.saturating_sub(half), frame_t.saturating_add(half))
 }
 
+/// Whether `readings` cover the frame at `frame_t`: one at or before it and one at or
+/// after it, each within `max_skew`. Otherwise the frame fell in a hole of the stream
+/// (a stall with no lost sequence numbers, a host that stopped reading) or outside the
+/// readings' time span (camera and sensor stamps on different time bases): the window
+/// is not the force at the frame's moment.
+#[must_use]
+pub fn frame_covered(readings: &[FtReading], frame_t: TimestampNs, max_skew: DurationNs) -> bool {
+    let before = readings
+        .iter()
+        .any(|r| r.t <= frame_t && frame_t.0 - r.t.0 <= max_skew.0);
+    let after = readings
+        .iter()
+        .any(|r| r.t >= frame_t && r.t.0 - frame_t.0 <= max_skew.0);
+    before && after
+}
+
 /// Mean, spread, skew and verdict of a window of readings.
 #[must_use]
 pub fn window_stats(

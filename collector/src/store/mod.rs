@@ -10,6 +10,10 @@
 //! `runs.rs`, the writer thread in `sync.rs`.
 
 mod event;
+mod grasp;
+pub use grasp::{
+    GraspSessionRow, GraspTrace, GraspTrialKey, GraspTrialRow, TRACE_ENCODING, unpack_f32,
+};
 pub use event::EventKind;
 pub(crate) mod rows;
 mod runs;
@@ -78,6 +82,15 @@ pub enum StoreError {
         /// Which value.
         what: &'static str,
         /// Why.
+        why: String,
+    },
+    /// A stored value does not read back (a damaged database, or one written by
+    /// something else).
+    #[error("damaged {what} in the database: {why}")]
+    Damaged {
+        /// Which value.
+        what: &'static str,
+        /// Where, and what was found instead of what was expected.
         why: String,
     },
     /// No such run.
@@ -269,6 +282,22 @@ impl Store {
         frame: Option<FrameRecord<'_>>,
         window: &[FtReading],
     ) -> Result<Appended, StoreError> {
+        self.append_sample_at(run_id, sample, frame, window, None)
+            .await
+    }
+
+    /// [`Store::append_sample`], also recording the run's time base (its clock when
+    /// this sample was done, where the next sample begins) in the same transaction:
+    /// a resume then continues the run's device time exactly, whenever it was killed.
+    pub async fn append_sample_at(
+        &self,
+        run_id: RunId,
+        sample: &Sample,
+        frame: Option<FrameRecord<'_>>,
+        window: &[FtReading],
+        time_base: Option<softtouch_schemas::TimestampNs>,
+    ) -> Result<Appended, StoreError> {
+        let time_base_ns = time_base.map(|t| to_i64("time_base_ns", t.0)).transpose()?;
         let mut tx = self
             .pool
             .begin()
@@ -288,8 +317,9 @@ impl Store {
         sqlx::query(concat!(
             "UPDATE runs SET updated_at = ",
             now_sql!(),
-            " WHERE run_id = ?"
+            ", time_base_ns = COALESCE(?, time_base_ns) WHERE run_id = ?"
         ))
+        .bind(time_base_ns)
         .bind(run_id)
         .execute(&mut *tx)
         .await

@@ -32,6 +32,26 @@ pub(crate) const fn seed_from_sql(seed: i64) -> u64 {
     u64::from_ne_bytes(seed.to_ne_bytes())
 }
 
+/// A rod schedule as stored in `runs.rod_schedule`: a JSON array of the names, so that
+/// any name (commas, quotes, unicode, blanks) reads back exactly.
+#[must_use]
+pub(crate) fn rod_schedule_json<S: AsRef<str>>(rods: &[S]) -> String {
+    let names: Vec<&str> = rods.iter().map(AsRef::as_ref).collect();
+    // A list of strings always serialises.
+    serde_json::to_string(&names).unwrap_or_else(|_| String::from("[]"))
+}
+
+/// A stored rod schedule back as names (inverse of [`rod_schedule_json`]).
+pub(crate) fn rod_schedule_from_json(
+    run_id: RunId,
+    stored: &str,
+) -> Result<Vec<String>, StoreError> {
+    serde_json::from_str::<Vec<String>>(stored).map_err(|e| StoreError::Damaged {
+        what: "rod schedule",
+        why: format!("run {run_id}: expected a JSON array of rod names, found `{stored}` ({e})"),
+    })
+}
+
 /// A row of `runs`, collected or imported.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct RunRow<'a> {
@@ -39,7 +59,7 @@ pub(crate) struct RunRow<'a> {
     pub status: RunStatus,
     pub seed: u64,
     pub samples_planned: u64,
-    /// Rod names, comma-separated.
+    /// Rod names, a JSON array ([`rod_schedule_json`]).
     pub rod_schedule: &'a str,
     pub rod_block: u64,
     pub scene_name: &'a str,

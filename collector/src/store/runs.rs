@@ -118,7 +118,7 @@ pub struct RunSummary {
 }
 
 /// What a run recorded about itself: enough to resume or replay it.
-#[derive(Debug, Clone, PartialEq, FromRow)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RunRecord {
     /// The run.
     pub run_id: RunId,
@@ -128,14 +128,27 @@ pub struct RunRecord {
     pub seed: i64,
     /// Samples planned.
     pub samples_planned: i64,
-    /// Rod names, comma-separated.
-    pub rod_schedule: String,
+    /// Rod names in the order they are used, exactly as given.
+    pub rod_schedule: Vec<String>,
     /// Samples per rod block.
     pub rod_block: i64,
     /// Resolved rig config.
     pub rig_toml: String,
     /// Resolved scene.
     pub scene_toml: String,
+}
+
+/// [`RunRecord`] as stored (the rod schedule still JSON text).
+#[derive(FromRow)]
+struct RunRecordRow {
+    run_id: RunId,
+    status: String,
+    seed: i64,
+    samples_planned: i64,
+    rod_schedule: String,
+    rod_block: i64,
+    rig_toml: String,
+    scene_toml: String,
 }
 
 impl RunRecord {
@@ -158,7 +171,7 @@ impl Store {
             status: RunStatus::Running,
             seed: run.seed,
             samples_planned: run.samples_planned,
-            rod_schedule: &run.rod_schedule.join(","),
+            rod_schedule: &rows::rod_schedule_json(run.rod_schedule),
             rod_block: run.rod_block,
             scene_name: run.scene_name,
             medium: run.medium,
@@ -207,7 +220,7 @@ impl Store {
 
     /// The run's provenance, for resume.
     pub async fn run_record(&self, run_id: RunId) -> Result<RunRecord, StoreError> {
-        sqlx::query_as::<_, RunRecord>(
+        let row = sqlx::query_as::<_, RunRecordRow>(
             "SELECT run_id, status, seed, samples_planned, rod_schedule, rod_block, rig_toml, scene_toml
              FROM runs WHERE run_id = ?",
         )
@@ -215,7 +228,38 @@ impl Store {
         .fetch_optional(&self.pool)
         .await
         .map_err(query_err("reading a run"))?
-        .ok_or(StoreError::NoSuchRun(run_id))
+        .ok_or(StoreError::NoSuchRun(run_id))?;
+        Ok(RunRecord {
+            rod_schedule: rows::rod_schedule_from_json(row.run_id, &row.rod_schedule)?,
+            run_id: row.run_id,
+            status: row.status,
+            seed: row.seed,
+            samples_planned: row.samples_planned,
+            rod_block: row.rod_block,
+            rig_toml: row.rig_toml,
+            scene_toml: row.scene_toml,
+        })
+    }
+}
+
+impl Store {
+    /// Replace the rig stored with run `run_id` (a resume on a rig whose devices are
+    /// reached elsewhere; see `CollectPlan::resume_with_rig`).
+    pub async fn set_run_rig(&self, run_id: RunId, rig_toml: &str) -> Result<(), StoreError> {
+        let result = sqlx::query(concat!(
+            "UPDATE runs SET rig_toml = ?, updated_at = ",
+            now_sql!(),
+            " WHERE run_id = ?"
+        ))
+        .bind(rig_toml)
+        .bind(run_id)
+        .execute(&self.pool)
+        .await
+        .map_err(query_err("updating a run's rig"))?;
+        if result.rows_affected() == 0 {
+            return Err(StoreError::NoSuchRun(run_id));
+        }
+        Ok(())
     }
 }
 
@@ -454,5 +498,34 @@ impl Store {
             missing.push(i);
         }
         Ok(missing)
+    }
+    /// Where a resumed run's device time continues: the run's time base (its clock
+    /// when its latest stored sample was done), and never before any stored sample's
+    /// window or frame (a run stored before time bases were recorded). `None`: nothing
+    /// stored yet, the run starts at 0.
+    pub async fn run_time_base(
+        &self,
+        run_id: RunId,
+    ) -> Result<Option<softtouch_schemas::TimestampNs>, StoreError> {
+        let row: Option<(Option<i64>, Option<i64>)> = sqlx::query_as(
+            "SELECT r.time_base_ns,
+                    (SELECT MAX(MAX(s.window_end_ns, s.frame_t_ns)) FROM samples s
+                     WHERE s.run_id = r.run_id)
+             FROM runs r WHERE r.run_id = ?",
+        )
+        .bind(run_id)
+        .fetch_optional(&self.pool)
+        .await
+        .map_err(query_err("reading the run's time base"))?;
+        let (base, latest) = row.ok_or(StoreError::NoSuchRun(run_id))?;
+        let Some(ns) = base.into_iter().chain(latest).max() else {
+            return Ok(None);
+        };
+        u64::try_from(ns)
+            .map(|ns| Some(softtouch_schemas::TimestampNs(ns)))
+            .map_err(|_| StoreError::Invalid {
+                what: "time base",
+                why: format!("run {run_id}: negative device time {ns} ns in the store"),
+            })
     }
 }

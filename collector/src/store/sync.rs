@@ -66,6 +66,16 @@ enum Op {
         sample: Box<Sample>,
         frame: Option<Frame>,
         window: Vec<FtReading>,
+        time_base: Option<TimestampNs>,
+    },
+    RunTimeBase {
+        run_id: RunId,
+        reply: Reply<Option<TimestampNs>>,
+    },
+    SetRig {
+        run_id: RunId,
+        rig_toml: String,
+        reply: Reply<()>,
     },
     Event {
         run_id: RunId,
@@ -360,12 +370,40 @@ impl SyncStore {
         frame: Option<Frame>,
         window: Vec<FtReading>,
     ) -> Result<(), StoreError> {
+        self.submit_sample_at(run_id, sample, frame, window, None)
+    }
+
+    /// [`SyncStore::submit_sample`], also recording the run's time base in the same
+    /// transaction (see [`Store::append_sample_at`]).
+    pub fn submit_sample_at(
+        &self,
+        run_id: RunId,
+        sample: Sample,
+        frame: Option<Frame>,
+        window: Vec<FtReading>,
+        time_base: Option<TimestampNs>,
+    ) -> Result<(), StoreError> {
         self.send(Op::Append {
             run_id,
             sample: Box::new(sample),
             frame,
             window,
+            time_base,
         })
+    }
+
+    /// See [`Store::set_run_rig`].
+    pub fn set_run_rig(&self, run_id: RunId, rig_toml: &str) -> Result<(), StoreError> {
+        self.call(|reply| Op::SetRig {
+            run_id,
+            rig_toml: rig_toml.to_owned(),
+            reply,
+        })
+    }
+
+    /// See [`Store::run_time_base`] (after every submitted sample is committed).
+    pub fn run_time_base(&self, run_id: RunId) -> Result<Option<TimestampNs>, StoreError> {
+        self.call(|reply| Op::RunTimeBase { run_id, reply })
     }
 
     /// Hand an event to the writer (see [`Store::log_event`]); events and samples are
@@ -500,6 +538,7 @@ async fn serve(store: &Store, op: Op, shared: &Mutex<Shared>) {
             sample,
             frame,
             window,
+            time_base,
         } => {
             if lock(shared).append_failed {
                 return fail(StoreError::Invalid {
@@ -523,7 +562,9 @@ async fn serve(store: &Store, op: Op, shared: &Mutex<Shared>) {
             let record = encoded
                 .as_ref()
                 .map(|(meta, data)| FrameRecord { meta: *meta, data });
-            let result = store.append_sample(run_id, &sample, record, &window).await;
+            let result = store
+                .append_sample_at(run_id, &sample, record, &window, time_base)
+                .await;
             let mut s = lock(shared);
             s.stats.encode += encoded_at - started;
             s.stats.write += encoded_at.elapsed();
@@ -536,6 +577,16 @@ async fn serve(store: &Store, op: Op, shared: &Mutex<Shared>) {
                     fail(e);
                 }
             }
+        }
+        Op::RunTimeBase { run_id, reply } => {
+            let _ = reply.send(store.run_time_base(run_id).await);
+        }
+        Op::SetRig {
+            run_id,
+            rig_toml,
+            reply,
+        } => {
+            let _ = reply.send(store.set_run_rig(run_id, &rig_toml).await);
         }
         Op::Event {
             run_id,

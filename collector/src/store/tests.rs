@@ -223,10 +223,10 @@ async fn runs_list_counts_ok_rejected_retries_and_faults() -> Result<(), StoreEr
     assert_eq!(
         (
             record.seed_u64(),
-            record.rod_schedule.as_str(),
+            record.rod_schedule.as_slice(),
             record.rod_block
         ),
-        (u64::MAX, "circle-10", 10)
+        (u64::MAX, &["circle-10".to_owned()][..], 10)
     );
     assert!(matches!(
         store.run_record(7).await,

@@ -33,6 +33,11 @@ struct State {
     command: GripperCommand,
     fault: u8,
     requests: u64,
+    /// Raise 0x09 after this long without a write while active (the real gripper's
+    /// 1 s communication watchdog); `None`: no watchdog.
+    watchdog: Option<std::time::Duration>,
+    last_write: Option<tokio::time::Instant>,
+    watchdog_faults: u64,
 }
 
 /// The register-level Hand-E over a [`Gripper`].
@@ -70,6 +75,9 @@ impl<G: Gripper + 'static> HandEService<G> {
                 },
                 fault: 0,
                 requests: 0,
+                watchdog: None,
+                last_write: None,
+                watchdog_faults: 0,
             })),
             slave_id,
         }
@@ -81,6 +89,24 @@ impl<G: Gripper + 'static> HandEService<G> {
         if let Ok(mut s) = self.state.lock() {
             s.fault = code;
         }
+    }
+
+    /// Arms the communication watchdog: while activated with rGTO set, a request that
+    /// comes more than `after` since the last write raises fault 0x09 (a minor fault,
+    /// cleared by the next valid command), as a real Hand-E does after 1 s without a
+    /// command. Counted in [`Self::watchdog_faults`].
+    #[must_use]
+    pub fn with_watchdog(self, after: std::time::Duration) -> Self {
+        if let Ok(mut s) = self.state.lock() {
+            s.watchdog = Some(after);
+        }
+        self
+    }
+
+    /// How often the watchdog raised 0x09.
+    #[must_use]
+    pub fn watchdog_faults(&self) -> u64 {
+        self.state.lock().map_or(0, |s| s.watchdog_faults)
     }
 
     /// Requests answered so far.
@@ -97,6 +123,7 @@ impl<G: Gripper + 'static> HandEService<G> {
                 .state
                 .lock()
                 .map_err(|_| ExceptionCode::ServerDeviceFailure)?;
+            s.last_write = Some(tokio::time::Instant::now());
             let was = s.action & regs::R_ACT != 0;
             let now = action & regs::R_ACT != 0;
             s.action = action;
@@ -119,6 +146,13 @@ impl<G: Gripper + 'static> HandEService<G> {
             }
             if !now && action & regs::R_GTO != 0 {
                 s.fault = 0x07;
+            }
+            // A minor fault (0x08, 0x09) clears with the next valid command.
+            if go
+                && s.activation == Activation::Active
+                && regs::fault_class(s.fault) == FaultClass::Minor
+            {
+                s.fault = 0;
             }
             (
                 rising,
@@ -212,6 +246,18 @@ impl<G: Gripper + 'static> HandEService<G> {
         }
         if let Ok(mut s) = self.state.lock() {
             s.requests += 1;
+            let silent = match (s.watchdog, s.last_write) {
+                (Some(after), Some(last)) => last.elapsed() > after,
+                _ => false,
+            };
+            if silent
+                && s.fault == 0
+                && s.activation == Activation::Active
+                && s.action & regs::R_GTO != 0
+            {
+                s.fault = 0x09;
+                s.watchdog_faults += 1;
+            }
         }
         match req.request {
             Request::ReadInputRegisters(a, n) => {

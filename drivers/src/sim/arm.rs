@@ -9,7 +9,6 @@ use crate::clock::{Clock, TokioClock};
 use crate::error::DeviceError;
 use async_trait::async_trait;
 use rand::RngExt;
-use rand_chacha::ChaCha8Rng;
 use softtouch_schemas::{ArmPose, ContactPose, DurationNs, TimestampNs};
 use std::sync::{Arc, Mutex};
 
@@ -90,6 +89,19 @@ pub(crate) fn contact_from_arm(base_from_rod: &ArmPose, base_from_finger: &ArmPo
     }
 }
 
+/// The index of a move's random stream: its start time and its target's bits.
+fn move_key(t0: TimestampNs, target: &ArmPose) -> u64 {
+    target
+        .translation_m
+        .iter()
+        .chain(&target.rotation_wxyz)
+        .fold(t0.0, |h, v| {
+            (h ^ v.to_bits())
+                .rotate_left(23)
+                .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+        })
+}
+
 /// The simulated arm.
 #[derive(Debug)]
 pub struct SimArm {
@@ -97,7 +109,7 @@ pub struct SimArm {
     clock: TokioClock,
     reflex_force_n: f64,
     faulted: bool,
-    rng: ChaCha8Rng,
+    seed: u64,
 }
 
 impl SimArm {
@@ -112,7 +124,7 @@ impl SimArm {
             clock,
             reflex_force_n,
             faulted: false,
-            rng: rng::stream(seed, "arm"),
+            seed,
         }
     }
 
@@ -200,10 +212,14 @@ impl Arm for SimArm {
                     break;
                 }
             }
+            // Drawn from the stream of this move (its start time and target), not from
+            // one sequence: the same move at the same time of a run faults the same way
+            // however many moves came before it in this process (a resumed run).
+            let mut draws = rng::indexed(self.seed, "arm", move_key(now, &target));
             if let Some(p) = w.scene.effects.arm_reflex_probability
-                && self.rng.random_bool(p.clamp(0.0, 1.0))
+                && draws.random_bool(p.clamp(0.0, 1.0))
             {
-                let tau: f64 = self.rng.random_range(0.2..1.0);
+                let tau: f64 = draws.random_range(0.2..1.0);
                 let t = TimestampNs(now.0 + (span * tau) as u64);
                 if fault_at.as_ref().is_none_or(|(tf, _)| t < *tf) {
                     fault_at = Some((

@@ -35,6 +35,21 @@ pub(crate) struct Effects {
     pub camera_latency_ms: Option<f64>,
     pub arm_reflex_probability: Option<f64>,
     pub fluid_drag: Option<(f64, f64)>,
+    /// Buoyancy on a grasped object: the fluid's density, kg/m³.
+    pub object_buoyancy_kg_m3: Option<f64>,
+    /// Drag on a lifted object: the fluid's density, kg/m³.
+    pub object_drag_kg_m3: Option<f64>,
+    /// A current on a grasped object.
+    pub object_flow: Option<Flow>,
+}
+
+/// A current along the gripping direction (`Effect::ObjectFlow`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Flow {
+    pub density_kg_m3: f64,
+    pub mean_m_s: f64,
+    pub gust_m_s: f64,
+    pub period_s: f64,
 }
 
 impl Effects {
@@ -85,6 +100,25 @@ impl Effects {
                     e.ft.latency_ms = Some(ft_ms);
                 }
                 Effect::ArmReflex { probability } => e.arm_reflex_probability = Some(probability),
+                Effect::ObjectBuoyancy {
+                    fluid_density_kg_m3,
+                } => e.object_buoyancy_kg_m3 = Some(fluid_density_kg_m3),
+                Effect::ObjectDrag {
+                    fluid_density_kg_m3,
+                } => e.object_drag_kg_m3 = Some(fluid_density_kg_m3),
+                Effect::ObjectFlow {
+                    fluid_density_kg_m3,
+                    mean_m_s,
+                    gust_m_s,
+                    period_s,
+                } => {
+                    e.object_flow = Some(Flow {
+                        density_kg_m3: fluid_density_kg_m3,
+                        mean_m_s,
+                        gust_m_s,
+                        period_s,
+                    });
+                }
             }
         }
         e

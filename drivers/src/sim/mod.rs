@@ -75,7 +75,11 @@
 //! goes through the same contact model, lattice and renderer as the rod presses. All of them wait on tokio's clock: run them on a paused
 //! runtime (`start_paused`) and a night of collection takes minutes, and the same seed
 //! gives the same bytes (every device and frame draws from its own ChaCha stream
-//! derived from `(seed, stream name)`).
+//! derived from `(seed, stream name)`). Randomness is counter-based, never one
+//! sequence per device: a force/torque reading draws from `(seed, "ft", k)` by its
+//! grid index, a frame from its frame index, a move from its start time and target.
+//! With a clock that continues a run's device time ([`TokioClock::starting_at`]) a
+//! resumed run therefore reads, sees and moves exactly as an uninterrupted one.
 
 // Numeric code indexes several parallel arrays by axis; iterators would hide that.
 #![allow(clippy::needless_range_loop)]
@@ -99,6 +103,7 @@ pub use force::{BUFFER_READINGS, COUNTS_PER_FORCE, COUNTS_PER_TORQUE, SimForceSe
 pub use grasp::{
     GraspObject, SoftFingerCamera, SoftGrasp, SoftGraspHandle, SoftGripper, soft_grasp,
 };
+pub use grasp::{HoldState, WRIST_MAX_RAD_S};
 pub use gripper::{
     ACTIVATION, FORCE_N, G_M_S2, SPEED_MM_S, SimGripper, SimObject, grasp_holds, grip_force_n,
 };

@@ -195,10 +195,15 @@ impl SimWorld {
         }
     }
 
-    /// Where the finger is at `t`: in the latest segment that started by `t` (searched
-    /// from the newest, where the sensor and camera almost always look).
+    /// The latest segment that started by `t` (searched from the newest, where the
+    /// sensor and camera almost always look).
+    fn segment_at(&self, t: TimestampNs) -> Option<&Segment> {
+        self.segments.iter().rev().find(|seg| seg.t0 <= t)
+    }
+
+    /// Where the finger is at `t`: in the latest segment that started by `t`.
     pub(crate) fn pose_at(&self, t: TimestampNs) -> ArmPose {
-        let Some(seg) = self.segments.iter().rev().find(|seg| seg.t0 <= t) else {
+        let Some(seg) = self.segment_at(t) else {
             return self.initial;
         };
         if t >= seg.t1 || seg.t1 <= seg.t0 {
@@ -228,23 +233,44 @@ impl SimWorld {
         Ok(w)
     }
 
-    /// The contact wrench at `t`: the equilibrium wrench of the pose, raised by the
-    /// silicone's stress relaxation after the last move ended (the finger at rest).
+    /// The contact wrench at `t`: the equilibrium wrench of the pose
+    /// ([`SimWorld::equilibrium_at`]) raised by the silicone's stress relaxation
+    /// ([`SimWorld::relaxation_at`]).
     pub(crate) fn wrench_at(&mut self, t: TimestampNs) -> Result<Wrench, SimError> {
+        let equilibrium = self.equilibrium_at(t)?;
+        Ok(relaxed(&equilibrium, self.relaxation_at(t)))
+    }
+
+    /// The equilibrium contact wrench of the finger's pose at `t`: continuous in `t`
+    /// (the motion is), so it may be interpolated between nearby instants.
+    pub(crate) fn equilibrium_at(&mut self, t: TimestampNs) -> Result<Wrench, SimError> {
         let pose = self.pose_at(t);
-        let equilibrium = self.wrench_for(&pose)?;
+        self.wrench_for(&pose)
+    }
+
+    /// The factor (≥ 1) by which the stress relaxation raises the equilibrium wrench at
+    /// `t`: `1 + r·exp(−Δt/τ)` once the move under way at `t` has ended; `None` while
+    /// moving (or without relaxation).
+    /// It jumps when a move ends, so it is evaluated per reading, never interpolated. A
+    /// function of the motion and `t` alone: a move commanded after `t` does not change
+    /// it, however late a reader asks (a delayed packet, a resumed run's first packet).
+    pub(crate) fn relaxation_at(&self, t: TimestampNs) -> Option<f64> {
         let p = &self.scene.model.params.contact;
-        let arrived = self.segments.last().map(|s| s.t1).filter(|t1| *t1 <= t);
-        let Some(t1) = arrived else {
-            return Ok(equilibrium);
-        };
-        if !(p.relaxation_ratio > 0.0 && p.relaxation_time_s > 0.0) {
-            return Ok(equilibrium);
+        let arrived = self.segment_at(t).map(|s| s.t1).filter(|t1| *t1 <= t);
+        match arrived {
+            Some(t1) if p.relaxation_ratio > 0.0 && p.relaxation_time_s > 0.0 => {
+                let since_s = (t.0 - t1.0) as f64 * 1e-9;
+                Some(1.0 + p.relaxation_ratio * (-since_s / p.relaxation_time_s).exp())
+            }
+            _ => None,
         }
-        let since_s = (t.0 - t1.0) as f64 * 1e-9;
-        let factor = 1.0 + p.relaxation_ratio * (-since_s / p.relaxation_time_s).exp();
-        Ok(Wrench::from_array(
-            equilibrium.to_array().map(|v| v * factor),
-        ))
+    }
+}
+
+/// `w` raised by a relaxation factor (unchanged without one).
+pub(crate) fn relaxed(w: &Wrench, factor: Option<f64>) -> Wrench {
+    match factor {
+        Some(f) => Wrench::from_array(w.to_array().map(|v| v * f)),
+        None => *w,
     }
 }

@@ -120,6 +120,17 @@ impl Drop for V4lCamera {
 impl V4lCamera {
     /// Open `path`, pick the mode, and start capturing.
     pub fn open(path: &str, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        Self::open_with_latency(path, clock, Duration::ZERO)
+    }
+
+    /// [`V4lCamera::open`], stamping every frame `latency` earlier than the driver's
+    /// timestamp (the rig's `camera.latency_s`): frames and force/torque readings then
+    /// share one time base.
+    pub fn open_with_latency(
+        path: &str,
+        clock: Arc<dyn Clock>,
+        latency: Duration,
+    ) -> Result<Self, DeviceError> {
         let dev = Device::with_path(path).map_err(|e| link(path, e))?;
         let mode = best_mode(&dev).map_err(|m| DeviceError::InvalidCommand {
             device: path.into(),
@@ -145,7 +156,7 @@ impl V4lCamera {
         let (d2, s2, name) = (dropped.clone(), stop.clone(), path.to_string());
         std::thread::Builder::new()
             .name("v4l".into())
-            .spawn(move || capture(dev, mode, clock, tx, d2, s2, name))
+            .spawn(move || capture(dev, mode, clock, latency, tx, d2, s2, name))
             .map_err(|e| link(path, e))?;
         Ok(Self {
             rx,
@@ -180,10 +191,26 @@ fn sequence_gap(last: Option<u32>, sequence: u32) -> u64 {
     }
 }
 
+/// A frame's time on the injected clock: `now` less the frame's age (now on the
+/// monotonic clock minus the driver's timestamp, both ns) less the configured latency.
+/// Never before 0 (a clock just started, a latency longer than the run so far).
+fn frame_stamp(
+    now: TimestampNs,
+    monotonic_now_ns: u64,
+    driver_ns: u64,
+    latency: Duration,
+) -> TimestampNs {
+    let age = monotonic_now_ns.saturating_sub(driver_ns);
+    let latency_ns = u64::try_from(latency.as_nanos()).unwrap_or(u64::MAX);
+    TimestampNs(now.0.saturating_sub(age).saturating_sub(latency_ns))
+}
+
+#[allow(clippy::too_many_arguments)] // the capture thread's whole state, moved in once
 fn capture(
     dev: Device,
     mode: Mode,
     clock: Arc<dyn Clock>,
+    latency: Duration,
     tx: mpsc::Sender<Result<Frame, DeviceError>>,
     dropped: Arc<AtomicU64>,
     stop: Arc<AtomicBool>,
@@ -210,8 +237,7 @@ fn capture(
         // Map the driver's monotonic timestamp onto the injected clock.
         let ts = (meta.timestamp.sec.max(0) as u64) * 1_000_000_000
             + (meta.timestamp.usec.max(0) as u64) * 1000;
-        let age = monotonic_ns().saturating_sub(ts);
-        let t = TimestampNs(clock.now().0.saturating_sub(age));
+        let t = frame_stamp(clock.now(), monotonic_ns(), ts, latency);
         let bytes = buf.get(..meta.bytesused as usize).unwrap_or(buf);
         let rgb = if &mode.fourcc == b"MJPG" {
             image::load_from_memory_with_format(bytes, image::ImageFormat::Jpeg)
@@ -281,6 +307,32 @@ mod tests {
         assert_eq!(sequence_gap(Some(u32::MAX), 1), 1, "wraps");
         assert_eq!(sequence_gap(Some(7), 7), 0, "repeated");
         assert_eq!(sequence_gap(Some(1000), 3), 0, "restarted");
+    }
+
+    #[test]
+    fn frame_stamps_subtract_the_age_and_the_latency_and_never_go_below_zero() {
+        let ms = |v: u64| Duration::from_millis(v);
+        let now = TimestampNs(1_000_000_000);
+        // A frame 10 ms old, 5 ms latency: 15 ms before now.
+        assert_eq!(
+            frame_stamp(now, 50_000_000, 40_000_000, ms(5)),
+            TimestampNs(985_000_000)
+        );
+        assert_eq!(
+            frame_stamp(now, 50_000_000, 40_000_000, Duration::ZERO),
+            TimestampNs(990_000_000)
+        );
+        // A driver stamp ahead of the monotonic clock read: age 0.
+        assert_eq!(frame_stamp(now, 10, 20, ms(1)), TimestampNs(999_000_000));
+        // Latency longer than the clock has run: 0, not a wrapped stamp.
+        assert_eq!(
+            frame_stamp(TimestampNs(1_000), 0, 0, ms(1)),
+            TimestampNs::ZERO
+        );
+        assert_eq!(
+            frame_stamp(now, u64::MAX, 0, Duration::MAX),
+            TimestampNs::ZERO
+        );
     }
 
     #[test]

@@ -214,3 +214,56 @@ fn the_guard_trips_on_nan_and_on_a_stale_stream() {
     // The last packet came at 10 ms; stale 100 ms after it.
     assert!(after >= Duration::from_millis(110), "{after:?}");
 }
+
+#[test]
+fn a_frame_is_covered_only_by_readings_close_on_both_sides() {
+    // Readings every 1 ms at 0..=9 ms.
+    let w: Vec<_> = (0..10).map(|i| reading(i, 1.0)).collect();
+    let skew = DurationNs(1_000_000);
+    // Between two readings, or on one: covered.
+    assert!(frame_covered(&w, TimestampNs(4_500_000), skew));
+    assert!(frame_covered(&w, TimestampNs(4_000_000), DurationNs(0)));
+    // Half a period from each neighbour needs a limit of at least half a period.
+    assert!(!frame_covered(
+        &w,
+        TimestampNs(4_500_000),
+        DurationNs(400_000)
+    ));
+    // Past the newest reading or before the oldest: one side is missing.
+    assert!(!frame_covered(&w, TimestampNs(9_500_000), skew));
+    assert!(!frame_covered(&w[5..], TimestampNs(4_900_000), skew));
+    // A hole in the stream around the frame (sequence numbers intact, as when the
+    // host stalled): no reading within the limit before the frame.
+    let mut hole = w.clone();
+    hole.retain(|r| !(3..=6).contains(&r.rdt_sequence));
+    assert!(!frame_covered(&hole, TimestampNs(6_500_000), skew));
+    // The nearest reading before it is at 2 ms, 4.5 ms away.
+    assert!(!frame_covered(
+        &hole,
+        TimestampNs(6_500_000),
+        DurationNs(4_499_999)
+    ));
+    assert!(frame_covered(
+        &hole,
+        TimestampNs(6_500_000),
+        DurationNs(4_500_000)
+    ));
+    // No readings at all, and extreme stamps, neither panic nor count as covered.
+    assert!(!frame_covered(&[], TimestampNs(0), skew));
+    assert!(!frame_covered(
+        &w,
+        TimestampNs(u64::MAX),
+        DurationNs(u64::MAX - 1)
+    ));
+    assert!(!frame_covered(
+        &w,
+        TimestampNs(u64::MAX),
+        DurationNs(u64::MAX)
+    ));
+}
+
+#[test]
+fn the_clock_skew_reason_has_a_stored_name_that_reads_back() {
+    assert_eq!(RejectReason::ClockSkew.as_str(), "clock_skew");
+    assert_eq!("clock_skew".parse(), Ok(RejectReason::ClockSkew));
+}

@@ -214,7 +214,8 @@ pub async fn import(
             .iter()
             .filter(|i| run.origin.is_none() || Some(i.run) == run.origin)
             .count();
-        let id = write_run(&mut tx, run, layout, &source, &rods.join(","), count).await?;
+        let schedule = rows::rod_schedule_json(&rods);
+        let id = write_run(&mut tx, run, layout, &source, &schedule, count).await?;
         local_ids.insert(run.origin, id);
     }
     let bar = progress_bar(items.len() as u64, options.progress, "import");

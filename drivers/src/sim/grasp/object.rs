@@ -1,0 +1,467 @@
+//! The objects the soft fingers grasp: their width across the fingers along the
+//! finger (the object's height), their horizontal section (which turns with the
+//! object's yaw), mass, friction, crush limit and what a fluid needs (volume, drag
+//! coefficient and area).
+//!
+//! Gripper frame G: the fingers close along x (finger 0 on the −x side, finger 1 on
+//! the +x side), y runs across the fingers' faces, z runs along the fingers towards
+//! their tips (down, for a grasp from above). Yaw is the object's turn about G's z.
+
+use super::super::SimError;
+use super::super::contact::RodProfile;
+use crate::gripper::STROKE_MM;
+use softtouch_schemas::scene::{ObjectProfile, ObjectSpec};
+use softtouch_schemas::{RodShape, RodSpec};
+
+/// How far below the width at the grasp point the open-loop grasp closes by default, m.
+const DEFAULT_SQUEEZE_M: f64 = 0.002;
+/// Vertices within this of the support line share the contact (a flat face), m.
+const FACE_TOLERANCE_M: f64 = 2e-4;
+
+/// An object to grasp.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GraspObject {
+    /// Name.
+    pub name: String,
+    /// Cross-section: of the face along the finger (lying objects, `profile` `None`) or
+    /// the horizontal section (standing objects).
+    pub shape: RodShape,
+    /// Extent of the face along the finger, m (lying objects; a cylinder's diameter).
+    pub size_m: f64,
+    /// Depth over width of an oval face or section (1 otherwise).
+    pub aspect: f64,
+    /// Width across the fingers, m: at the grasp point (lying objects, prisms), at the
+    /// bottom (tapers), the diameter (spheres).
+    pub width_m: f64,
+    /// Where along the finger the grasp point sits (contact pose z, m, in [−0.05, 0.05]).
+    pub contact_z_m: f64,
+    /// Mass, kg.
+    pub mass_kg: f64,
+    /// Friction coefficient against the finger (0 is allowed: nothing can be lifted).
+    pub friction: f64,
+    /// Squeeze on one finger that crushes it, N (`None`: rigid).
+    pub crush_force_n: Option<f64>,
+    /// How a standing object's section changes along its height; `None`: it lies
+    /// across the finger.
+    pub profile: Option<ObjectProfile>,
+    /// Height of the grasp point above the support, m (standing objects).
+    pub grasp_height_m: f64,
+    /// Opening of the open-loop grasp, m (Figure 4e).
+    pub grasp_width_m: f64,
+    /// Volume of fluid it displaces, m³.
+    pub volume_m3: f64,
+    /// Drag coefficient C_d.
+    pub drag_coefficient: f64,
+    /// Area the fluid's drag acts on, m².
+    pub drag_area_m2: f64,
+    /// Where the grasp point sits from where the fingers meet it, m, in G (see
+    /// [`GraspObject::placed`]).
+    pub offset_m: [f64; 3],
+}
+
+impl GraspObject {
+    /// A rigid cylinder lying across the fingers (its axis along G's y), its round
+    /// face along the finger: the grasp the rod presses stand for.
+    #[must_use]
+    pub fn cylinder(name: &str, diameter_m: f64) -> Self {
+        let mut o = Self {
+            name: name.to_owned(),
+            shape: RodShape::Circle,
+            size_m: diameter_m,
+            aspect: 1.0,
+            width_m: diameter_m,
+            contact_z_m: 0.0,
+            mass_kg: 0.05,
+            friction: 0.5,
+            crush_force_n: None,
+            profile: None,
+            grasp_height_m: 0.0,
+            grasp_width_m: 0.0,
+            volume_m3: 0.0,
+            drag_coefficient: 1.0,
+            drag_area_m2: 0.0,
+            offset_m: [0.0; 3],
+        };
+        o.fill_defaults(None, None, None, None);
+        o
+    }
+
+    /// A standing object with `profile`: its section is `shape`, `width_m` across the
+    /// fingers and `width_m × aspect` deep, grasped at mid-height (a sphere at its
+    /// centre), mass 50 g, friction 0.5.
+    #[must_use]
+    pub fn standing(
+        name: &str,
+        shape: RodShape,
+        width_m: f64,
+        aspect: f64,
+        profile: ObjectProfile,
+    ) -> Self {
+        let mut o = Self {
+            profile: Some(profile),
+            shape,
+            width_m,
+            size_m: width_m,
+            aspect,
+            ..Self::cylinder(name, width_m)
+        };
+        o.fill_defaults(None, None, None, None);
+        o
+    }
+
+    /// The object a scene declares (`[[objects]]`), defaults filled in.
+    #[must_use]
+    pub fn from_spec(spec: &ObjectSpec) -> Self {
+        let mut o = Self {
+            name: spec.name.clone(),
+            shape: spec.shape,
+            size_m: spec.size_m.unwrap_or(spec.width_m),
+            aspect: spec.aspect,
+            width_m: spec.width_m,
+            contact_z_m: spec.contact_z_m,
+            mass_kg: spec.mass_kg,
+            friction: spec.friction,
+            crush_force_n: spec.crush_force_n,
+            profile: spec.profile,
+            grasp_height_m: 0.0,
+            grasp_width_m: 0.0,
+            volume_m3: 0.0,
+            drag_coefficient: spec.drag_coefficient.unwrap_or(1.0),
+            drag_area_m2: 0.0,
+            offset_m: [0.0; 3],
+        };
+        o.fill_defaults(
+            spec.grasp_height_m,
+            spec.grasp_width_m,
+            spec.volume_m3,
+            spec.drag_area_m2,
+        );
+        o
+    }
+
+    /// Fills the derived quantities from the geometry where they are not given.
+    fn fill_defaults(
+        &mut self,
+        grasp_height_m: Option<f64>,
+        grasp_width_m: Option<f64>,
+        volume_m3: Option<f64>,
+        drag_area_m2: Option<f64>,
+    ) {
+        self.grasp_height_m = grasp_height_m.unwrap_or(match self.profile {
+            Some(p) => 0.5 * p.height_m(self.width_m),
+            None => 0.0,
+        });
+        let at_grasp = 2.0
+            * self
+                .half_width_at(0.0, 0.0, 0)
+                .map_or(self.width_m, |s| s.0);
+        self.grasp_width_m = grasp_width_m.unwrap_or((at_grasp - DEFAULT_SQUEEZE_M).max(0.0));
+        // Section area of a unit-width section (scaled by width² below).
+        let unit_area = self.unit_section_area();
+        let w = self.width_m;
+        let (volume, area) = match self.profile {
+            // Lying: the face's section, as long as it is wide.
+            None => {
+                let face = unit_area * self.size_m * self.size_m;
+                (face * w, self.size_m * w)
+            }
+            Some(ObjectProfile::Prism { height_m }) => {
+                (unit_area * w * w * height_m, unit_area * w * w)
+            }
+            Some(ObjectProfile::Sphere) => {
+                let r = 0.5 * w;
+                (
+                    4.0 / 3.0 * std::f64::consts::PI * r.powi(3),
+                    std::f64::consts::PI * r * r,
+                )
+            }
+            Some(ObjectProfile::Taper {
+                height_m,
+                top_width_m,
+            }) => {
+                // A frustum of similar sections: area scales with width².
+                let k = top_width_m / w;
+                let bottom = unit_area * w * w;
+                (
+                    bottom * height_m * (1.0 + k + k * k) / 3.0,
+                    bottom * k.max(1.0).powi(2),
+                )
+            }
+        };
+        self.volume_m3 = volume_m3.unwrap_or(volume);
+        self.drag_area_m2 = drag_area_m2.unwrap_or(area);
+    }
+
+    /// Area of the section at width 1 (depth `aspect`).
+    fn unit_section_area(&self) -> f64 {
+        let a = self.section_aspect();
+        match self.shape {
+            RodShape::Circle | RodShape::Oval => std::f64::consts::PI / 4.0 * a,
+            RodShape::Square => a,
+            // Across-flats 1: side 1/√3.
+            RodShape::Hexagon => 3.0_f64.sqrt() / 2.0,
+            // Height 1: side 2/√3.
+            RodShape::Triangle => 1.0 / 3.0_f64.sqrt(),
+        }
+    }
+
+    fn section_aspect(&self) -> f64 {
+        if self.shape == RodShape::Oval {
+            self.aspect
+        } else {
+            1.0
+        }
+    }
+
+    pub(crate) fn validate(&self) -> Result<(), SimError> {
+        let bad = |field: &str, v: f64, expected: &str| {
+            Err(SimError::InvalidParameter(format!(
+                "object `{}`: {field} = {v}: expected {expected}",
+                self.name
+            )))
+        };
+        let positive = [
+            ("size_m", self.size_m),
+            ("aspect", self.aspect),
+            ("width_m", self.width_m),
+            ("mass_kg", self.mass_kg),
+            ("volume_m3", self.volume_m3),
+        ];
+        for (field, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(field, v, "a finite value above 0");
+            }
+        }
+        for (field, v) in [
+            ("friction", self.friction),
+            ("drag_coefficient", self.drag_coefficient),
+            ("drag_area_m2", self.drag_area_m2),
+            ("grasp_width_m", self.grasp_width_m),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(field, v, "a finite value ≥ 0");
+            }
+        }
+        if self.max_width_m() * 1000.0 >= STROKE_MM {
+            return bad(
+                "width_m",
+                self.max_width_m(),
+                &format!("less than the stroke, {} m", STROKE_MM / 1000.0),
+            );
+        }
+        if !(self.contact_z_m.is_finite() && self.contact_z_m.abs() <= 0.05) {
+            return bad(
+                "contact_z_m",
+                self.contact_z_m,
+                "a value in [−0.05, 0.05] m",
+            );
+        }
+        if let Some(c) = self.crush_force_n
+            && !(c.is_finite() && c > 0.0)
+        {
+            return bad("crush_force_n", c, "a finite value above 0");
+        }
+        if self.offset_m.iter().any(|v| !v.is_finite()) {
+            return Err(SimError::InvalidParameter(format!(
+                "object `{}`: offset_m = {:?}: expected finite values",
+                self.name, self.offset_m
+            )));
+        }
+        if let Some(p) = self.profile {
+            let h = p.height_m(self.width_m);
+            if !(h.is_finite() && h > 0.0) {
+                return bad("profile.height_m", h, "a finite value above 0");
+            }
+            if !(self.grasp_height_m.is_finite() && (0.0..=h).contains(&self.grasp_height_m)) {
+                return bad(
+                    "grasp_height_m",
+                    self.grasp_height_m,
+                    &format!("a height in [0, {h}] m"),
+                );
+            }
+            if let ObjectProfile::Taper { top_width_m, .. } = p
+                && !(top_width_m.is_finite() && top_width_m > 0.0)
+            {
+                return bad("profile.top_width_m", top_width_m, "a finite value above 0");
+            }
+        }
+        RodProfile::new(&self.face_rod()).map(|_| ())
+    }
+
+    /// The widest width across the fingers, m.
+    #[must_use]
+    pub fn max_width_m(&self) -> f64 {
+        let section = self.max_section_extent();
+        match self.profile {
+            None => self.width_m,
+            Some(p) => p.max_width_m(self.width_m) * section,
+        }
+    }
+
+    /// The largest extent of a unit-width section in any direction (it may turn).
+    fn max_section_extent(&self) -> f64 {
+        let a = self.section_aspect();
+        match self.shape {
+            RodShape::Circle | RodShape::Oval => a.max(1.0),
+            RodShape::Square => (1.0 + a * a).sqrt(),
+            RodShape::Hexagon => 2.0 / 3.0_f64.sqrt(),
+            RodShape::Triangle => 1.0,
+        }
+    }
+
+    /// The face of a lying object as a rod (the rod presses' gap profile).
+    pub(crate) fn face_rod(&self) -> RodSpec {
+        RodSpec {
+            name: self.name.clone(),
+            shape: self.shape,
+            size_m: self.size_m,
+            aspect: self.section_aspect(),
+        }
+    }
+
+    /// Height of the object, m (a lying object: the extent of its face).
+    #[must_use]
+    pub fn height_m(&self) -> f64 {
+        self.profile
+            .map_or(self.size_m, |p| p.height_m(self.width_m))
+    }
+
+    /// Width of a standing object's section across the fingers at height `u` above
+    /// the support (yaw 0), m; `None` above or below it.
+    fn width_at_height(&self, u: f64) -> Option<f64> {
+        let p = self.profile?;
+        let h = p.height_m(self.width_m);
+        if !(0.0..=h).contains(&u) {
+            return None;
+        }
+        Some(match p {
+            ObjectProfile::Prism { .. } => self.width_m,
+            ObjectProfile::Sphere => {
+                let r = 0.5 * self.width_m;
+                2.0 * (r * r - (u - r) * (u - r)).max(0.0).sqrt()
+            }
+            ObjectProfile::Taper { top_width_m, .. } => {
+                self.width_m + (top_width_m - self.width_m) * u / h
+            }
+        })
+    }
+
+    /// The object's surface facing finger `finger` (0: on G's −x side, 1: on +x) at
+    /// offset `q` along the finger from the grasp point (towards the tip), the object
+    /// turned by `yaw_rad` about z: `(half-width across the fingers, y of the contact
+    /// line in G)`, m, before the placement offset. `None` where there is no material.
+    /// A lying object's face is the rod presses' gap profile (its flanks slope away
+    /// steeply beyond its extent, so the half-width there is small or negative).
+    pub(crate) fn half_width_at(&self, q: f64, yaw_rad: f64, finger: usize) -> Option<(f64, f64)> {
+        let Some(_) = self.profile else {
+            let rod = RodProfile::new(&self.face_rod()).ok()?;
+            return Some((0.5 * self.width_m - rod.gap(q), 0.0));
+        };
+        let width = self.width_at_height(self.grasp_height_m - q)?;
+        if width <= 0.0 {
+            return None;
+        }
+        let (h, y) = self.section_support(yaw_rad, finger);
+        Some((h * width, y * width))
+    }
+
+    /// Support of the unit-width section turned by `yaw_rad`, towards finger `finger`:
+    /// `(half-width, y of the contact point in G)` per unit width.
+    fn section_support(&self, yaw_rad: f64, finger: usize) -> (f64, f64) {
+        let (s, c) = yaw_rad.sin_cos();
+        let sign = if finger == 0 { -1.0 } else { 1.0 };
+        // The direction towards the finger, in the object's own frame: R(−yaw)·(±1, 0).
+        let d = [sign * c, -sign * s];
+        let to_g = |p: [f64; 2]| s * p[0] + c * p[1];
+        let a = self.section_aspect();
+        match self.shape {
+            RodShape::Circle | RodShape::Oval => {
+                let (ax, by) = (0.5, 0.5 * a);
+                let h = (ax * ax * d[0] * d[0] + by * by * d[1] * d[1]).sqrt();
+                let p = [ax * ax * d[0] / h, by * by * d[1] / h];
+                (h, to_g(p))
+            }
+            shape => {
+                let verts = unit_polygon(shape, a);
+                let h = verts
+                    .iter()
+                    .map(|v| v[0] * d[0] + v[1] * d[1])
+                    .fold(f64::NEG_INFINITY, f64::max);
+                // A face flat against the finger: its middle carries the contact.
+                let tol = FACE_TOLERANCE_M / self.width_m.max(1e-6);
+                let near: Vec<&[f64; 2]> = verts
+                    .iter()
+                    .filter(|v| v[0] * d[0] + v[1] * d[1] >= h - tol)
+                    .collect();
+                let n = near.len() as f64;
+                let mid = [
+                    near.iter().map(|v| v[0]).sum::<f64>() / n,
+                    near.iter().map(|v| v[1]).sum::<f64>() / n,
+                ];
+                (h, to_g(mid))
+            }
+        }
+    }
+
+    /// The object as the fingers meet it when the grasp point is moved by `offset_m`
+    /// (x: along the gripping direction, y: across the fingers, z: along the finger
+    /// towards its tip), m. `None`: the fingers miss it — an open finger lands on it
+    /// (`|x|` beyond the room the open stroke leaves), or the closed fingers would not
+    /// touch it at all (off the fingers' faces across, above or below them along z).
+    /// Inside the stroke an x offset changes nothing once gripped: the first finger to
+    /// touch slides the object to the middle (its support is taken as frictionless).
+    #[must_use]
+    pub fn placed(&self, offset_m: [f64; 3]) -> Option<GraspObject> {
+        if offset_m.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        let mut o = self.clone();
+        for i in 0..3 {
+            o.offset_m[i] += offset_m[i];
+        }
+        let room_m = 0.5 * (STROKE_MM / 1000.0 - o.max_width_m());
+        if o.offset_m[0].abs() > room_m {
+            return None;
+        }
+        o.touches().then_some(o)
+    }
+
+    /// Whether fully closed fingers would touch it (with the default finger).
+    fn touches(&self) -> bool {
+        let finger = super::super::FingerGeometry::default();
+        (0..2).any(|k| super::touch::reaches_finger(&finger, self, k, 0.0))
+    }
+}
+
+/// Vertices of a unit-width polygonal section (width 1 along x at yaw 0, depth
+/// `aspect` along y for a box), centred on its centroid.
+fn unit_polygon(shape: RodShape, aspect: f64) -> Vec<[f64; 2]> {
+    match shape {
+        RodShape::Square => vec![
+            [0.5, 0.5 * aspect],
+            [-0.5, 0.5 * aspect],
+            [-0.5, -0.5 * aspect],
+            [0.5, -0.5 * aspect],
+        ],
+        RodShape::Hexagon => {
+            // Across-flats 1 along x: vertices at 30° + k·60°, circumradius 1/√3.
+            let r = 1.0 / 3.0_f64.sqrt();
+            (0..6)
+                .map(|k| {
+                    let a = std::f64::consts::PI / 6.0 + k as f64 * std::f64::consts::PI / 3.0;
+                    [r * a.cos(), r * a.sin()]
+                })
+                .collect()
+        }
+        RodShape::Triangle => {
+            // Height 1 along x, a vertex towards +x.
+            let side = 2.0 / 3.0_f64.sqrt();
+            vec![
+                [2.0 / 3.0, 0.0],
+                [-1.0 / 3.0, 0.5 * side],
+                [-1.0 / 3.0, -0.5 * side],
+            ]
+        }
+        RodShape::Circle | RodShape::Oval => Vec::new(),
+    }
+}

@@ -1,0 +1,539 @@
+//! Unit tests of the soft grasp's objects and physics (virtual time).
+
+use super::touch::{Grip, finger_contact};
+use super::*;
+use crate::sim::SceneSim;
+use softtouch_schemas::scene::ObjectProfile;
+use softtouch_schemas::{ContactPose, Effect, RodShape};
+use std::time::Duration;
+
+fn land() -> SceneSpec {
+    softtouch_schemas::defaults::scene()
+}
+
+fn with_effects(effects: Vec<Effect>) -> SceneSpec {
+    let mut s = land();
+    s.effects.extend(effects);
+    s
+}
+
+fn ms(t: u64) -> TimestampNs {
+    TimestampNs(t * 1_000_000)
+}
+
+fn squeeze(obj: &GraspObject, k: usize, opening_m: f64) -> f64 {
+    let grip = Grip {
+        opening_m,
+        ..Grip::default()
+    };
+    finger_contact(
+        &FingerGeometry::default(),
+        &ContactParams::default(),
+        obj,
+        k,
+        &grip,
+        [0.0; 2],
+    )
+    .expect("contact")
+    .squeeze_n()
+}
+
+/// Activates, closes to `count` at full speed and waits 1 s.
+async fn grip_at(
+    scene: &SceneSpec,
+    obj: GraspObject,
+    count: u8,
+) -> (SoftGripper, SoftGraspHandle, TokioClock) {
+    let clock = TokioClock::new();
+    let (mut g, _, h) = soft_grasp(scene, obj, 60.0, 1, clock).expect("builds");
+    g.activate().await.expect("activates");
+    g.command(GripperCommand {
+        position: count,
+        speed: 255,
+        force: 255,
+    })
+    .await
+    .expect("sent");
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    g.status().await.expect("status");
+    (g, h, clock)
+}
+
+/// The count at which the squeeze on one finger first reaches `force_n`.
+fn count_for(h: &SoftGraspHandle, force_n: f64) -> u8 {
+    let counts: Vec<u8> = (0..=255).collect();
+    h.grip_force_curve(&counts)
+        .expect("curve")
+        .into_iter()
+        .find(|(_, f)| *f >= force_n)
+        .map(|(p, _)| p)
+        .expect("reachable")
+}
+
+/// The count at which the squeeze first reaches `force_n`, and the squeeze there.
+fn grip_for(obj: &GraspObject, force_n: f64) -> (u8, f64) {
+    let (_, _, h) = soft_grasp(&land(), obj.clone(), 60.0, 1, TokioClock::new()).expect("builds");
+    let p = count_for(&h, force_n);
+    let f = h.grip_force_curve(&[p]).expect("curve")[0].1;
+    (p, f)
+}
+
+fn cylinder_standing() -> GraspObject {
+    GraspObject::standing(
+        "cylinder",
+        RodShape::Circle,
+        0.03,
+        1.0,
+        ObjectProfile::Prism { height_m: 0.03 },
+    )
+}
+
+#[test]
+fn a_lying_cylinder_presses_like_the_rod_of_the_same_section() {
+    // Same law, same finger: the grasp's strip model and the rod presses agree.
+    let obj = GraspObject::cylinder("rod", 0.02);
+    let sim = SceneSim::new(
+        &SceneSpec {
+            rods: vec![obj.face_rod()],
+            ..land()
+        },
+        0,
+    )
+    .expect("scene");
+    let p = ContactParams::default();
+    for penetration_m in [0.0005, 0.001, 0.002] {
+        let x_m = (penetration_m - p.penetration_at_zero_m) / p.penetration_per_m;
+        let pose = ContactPose {
+            x_m,
+            z_m: 0.0,
+            theta_rad: 0.0,
+        };
+        let rod = -sim.wrench("rod", &pose).expect("wrench").force_n[0];
+        let grasp = squeeze(&obj, 0, 0.02 - 2.0 * penetration_m);
+        assert!(
+            (grasp - rod).abs() < 0.05 * rod,
+            "{penetration_m}: grasp {grasp} N, rod {rod} N"
+        );
+    }
+}
+
+#[test]
+fn profiles_give_the_width_at_each_height() {
+    // A sphere's chord.
+    let ball = GraspObject::standing("ball", RodShape::Circle, 0.04, 1.0, ObjectProfile::Sphere);
+    assert!((ball.grasp_height_m - 0.02).abs() < 1e-12);
+    for q in [0.0, 0.01, -0.015, 0.0199] {
+        let (r, y) = ball.half_width_at(q, 0.0, 0).expect("inside");
+        assert!(
+            (r - (0.02_f64.powi(2) - q * q).sqrt()).abs() < 1e-12,
+            "{q}: {r}"
+        );
+        assert!(y.abs() < 1e-15);
+    }
+    assert!(ball.half_width_at(0.021, 0.0, 0).is_none());
+    // A taper's width at the contact height: 40 mm at the bottom, 20 mm at the top.
+    let bottle = GraspObject::standing(
+        "bottle",
+        RodShape::Circle,
+        0.04,
+        1.0,
+        ObjectProfile::Taper {
+            height_m: 0.1,
+            top_width_m: 0.02,
+        },
+    );
+    let (r, _) = bottle.half_width_at(0.0, 0.0, 1).expect("mid");
+    assert!((r - 0.015).abs() < 1e-12, "{r}");
+    let (r, _) = bottle.half_width_at(-0.05, 0.0, 1).expect("top");
+    assert!((r - 0.01).abs() < 1e-12, "{r}");
+    assert!(bottle.half_width_at(0.051, 0.0, 1).is_none());
+    // An oval tube turned a quarter: its depth is now across the fingers, and the
+    // contact moves off-centre in between.
+    let tube = GraspObject::standing(
+        "tube",
+        RodShape::Oval,
+        0.03,
+        0.5,
+        ObjectProfile::Prism { height_m: 0.05 },
+    );
+    let (r0, y0) = tube.half_width_at(0.0, 0.0, 0).expect("in");
+    let (r90, _) = tube
+        .half_width_at(0.0, std::f64::consts::FRAC_PI_2, 0)
+        .expect("in");
+    let (r45, y45) = tube
+        .half_width_at(0.0, std::f64::consts::FRAC_PI_4, 0)
+        .expect("in");
+    assert!((r0 - 0.015).abs() < 1e-12 && y0.abs() < 1e-12);
+    assert!((r90 - 0.0075).abs() < 1e-12, "{r90}");
+    assert!(r45 < r0 && r45 > r90 && y45.abs() > 1e-3, "{r45} {y45}");
+    // The two fingers meet diametrically opposite points.
+    let (_, y45_other) = tube
+        .half_width_at(0.0, std::f64::consts::FRAC_PI_4, 1)
+        .expect("in");
+    assert!((y45 + y45_other).abs() < 1e-12);
+    // Defaults from geometry.
+    assert!((ball.volume_m3 - 4.0 / 3.0 * std::f64::consts::PI * 0.02_f64.powi(3)).abs() < 1e-12);
+    assert!((tube.grasp_width_m - 0.028).abs() < 1e-12);
+}
+
+#[test]
+fn turning_an_oval_tube_changes_the_squeeze_and_the_contact_side() {
+    let tube = GraspObject::standing(
+        "tube",
+        RodShape::Oval,
+        0.03,
+        0.6,
+        ObjectProfile::Prism { height_m: 0.05 },
+    );
+    let at = |yaw: f64| {
+        finger_contact(
+            &FingerGeometry::default(),
+            &ContactParams::default(),
+            &tube,
+            0,
+            &Grip {
+                opening_m: 0.026,
+                shift_m: 0.0,
+                yaw_rad: yaw,
+            },
+            [0.0; 2],
+        )
+        .expect("contact")
+    };
+    let (straight, turned) = (at(0.0), at(0.5));
+    assert!(turned.squeeze_n() < straight.squeeze_n());
+    assert!(straight.contact.azimuth.abs() < 1e-9);
+    assert!(
+        turned.contact.azimuth.abs() > 0.05,
+        "{}",
+        turned.contact.azimuth
+    );
+}
+
+#[test]
+fn placements_that_miss_are_none_and_near_ones_are_met() {
+    let obj = cylinder_standing();
+    assert!(obj.placed([0.0; 3]).is_some());
+    assert!(obj.placed([0.005, 0.002, 0.003]).is_some());
+    // An open finger lands on it: the stroke leaves (50 − 30) / 2 = 10 mm either side.
+    assert!(obj.placed([0.0099, 0.0, 0.0]).is_some());
+    assert!(obj.placed([0.0101, 0.0, 0.0]).is_none());
+    assert!(obj.placed([-0.0101, 0.0, 0.0]).is_none());
+    // Off the fingers' faces across (their half-width is at most 16 mm).
+    assert!(obj.placed([0.0, 0.03, 0.0]).is_none());
+    // Far above or below the fingers along z.
+    assert!(obj.placed([0.0, 0.0, 0.1]).is_none());
+    assert!(obj.placed([0.0, 0.0, -0.1]).is_none());
+    assert!(obj.placed([f64::NAN, 0.0, 0.0]).is_none());
+    // Offsets add up.
+    let twice = obj
+        .placed([0.006, 0.0, 0.0])
+        .and_then(|o| o.placed([0.006, 0.0, 0.0]));
+    assert!(twice.is_none());
+    // An object exactly as wide as the stroke is refused, one just under is met.
+    let mut wide = GraspObject::cylinder("wide", 0.05);
+    assert!(wide.validate().is_err());
+    wide.width_m = 0.0499;
+    assert!(wide.validate().is_ok());
+    assert!(wide.placed([0.0; 3]).is_some());
+    assert!(wide.placed([0.0002, 0.0, 0.0]).is_none());
+}
+
+#[tokio::test(start_paused = true)]
+async fn it_rests_until_the_lift_and_is_held_with_enough_friction() {
+    let obj = cylinder_standing();
+    let (_, probe, _) = grip_at(&land(), obj.clone(), 0).await;
+    let count = count_for(&probe, 1.5);
+    let (_, h, clock) = grip_at(&land(), obj, count).await;
+    assert_eq!(h.hold_state().expect("state"), HoldState::Resting);
+    let now = clock.now();
+    let t0 = h.true_wrench(now).expect("truth");
+    h.start_lift(TimestampNs(now.0 + 10_000_000), 0.1, 0.1, 1.0)
+        .expect("lift");
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    assert_eq!(h.hold_state().expect("state"), HoldState::Held);
+    // The fingers carry the weight in friction: a shear along z on each.
+    let w = h.true_wrench(clock.now()).expect("truth");
+    let weight_n = 0.05 * G_M_S2;
+    assert!(
+        (w.force_n[2] - t0.force_n[2] - weight_n / 2.0).abs() < 0.02,
+        "{w:?}"
+    );
+    assert!(h.start_lift(now, 0.1, 0.1, 1.0).is_err(), "one lift");
+}
+
+#[tokio::test(start_paused = true)]
+async fn zero_friction_or_a_huge_mass_slips_at_the_lift() {
+    for (friction, mass_kg) in [(0.0, 0.05), (0.5, 9.0)] {
+        let obj = GraspObject {
+            friction,
+            mass_kg,
+            ..cylinder_standing()
+        };
+        let (_, probe, _) = grip_at(&land(), obj.clone(), 0).await;
+        let count = count_for(&probe, 1.5);
+        let (_, h, clock) = grip_at(&land(), obj, count).await;
+        let start = TimestampNs(clock.now().0 + 5_000_000);
+        h.start_lift(start, 0.1, 0.1, 1.0).expect("lift");
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        match h.hold_state().expect("state") {
+            HoldState::Slipped { t } => {
+                assert!(t >= start && t.0 <= start.0 + STEP_NS, "{t:?} vs {start:?}")
+            }
+            other => panic!("μ = {friction}, m = {mass_kg}: {other:?}"),
+        }
+        // It fell: the fingers feel nothing.
+        let w = h.true_wrench(clock.now()).expect("truth");
+        assert_eq!(w, Wrench::ZERO);
+        assert!(!h.has_object().expect("state"));
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_acceleration_decides_a_marginal_hold() {
+    // Friction carries the weight plus a gentle start but not a hard one.
+    let obj = cylinder_standing();
+    let (count, squeeze_n) = grip_for(&obj, 1.0);
+    // 2·μ·F ≈ 1.2 · m·g (the normal force is a little above the squeeze).
+    let obj = GraspObject {
+        mass_kg: 2.0 * 0.5 * squeeze_n / (1.2 * G_M_S2),
+        ..obj
+    };
+    for (accel, slips) in [(0.5, false), (5.0, true)] {
+        let (_, h, clock) = grip_at(&land(), obj.clone(), count).await;
+        h.start_lift(clock.now(), 0.05, 0.2, accel).expect("lift");
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        let state = h.hold_state().expect("state");
+        assert_eq!(
+            matches!(state, HoldState::Slipped { .. }),
+            slips,
+            "a = {accel}: {state:?}"
+        );
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_fragile_object_is_crushed_and_reported() {
+    let obj = GraspObject {
+        crush_force_n: Some(1.0),
+        ..cylinder_standing()
+    };
+    let (_, probe, _) = grip_at(&land(), obj.clone(), 0).await;
+    let count = count_for(&probe, 2.0);
+    let (_, h, _) = grip_at(&land(), obj, count).await;
+    assert!(matches!(
+        h.hold_state().expect("state"),
+        HoldState::Crushed { .. }
+    ));
+    assert!(h.crushed().expect("state"));
+    h.set_object(false).expect("removes");
+    assert_eq!(h.hold_state().expect("state"), HoldState::Absent);
+}
+
+#[tokio::test(start_paused = true)]
+async fn buoyancy_and_drag_change_the_outcome_only_when_declared() {
+    let water_buoyancy = with_effects(vec![Effect::ObjectBuoyancy {
+        fluid_density_kg_m3: 1000.0,
+    }]);
+    let water_drag = with_effects(vec![Effect::ObjectDrag {
+        fluid_density_kg_m3: 1000.0,
+    }]);
+    let lift = |h: &SoftGraspHandle, t: TimestampNs, height: f64, speed: f64, accel: f64| {
+        h.start_lift(t, height, speed, accel).expect("lift")
+    };
+    let outcome = |h: &SoftGraspHandle| {
+        let state = h.hold_state().expect("state");
+        assert!(
+            matches!(state, HoldState::Held | HoldState::Slipped { .. }),
+            "{state:?}"
+        );
+        matches!(state, HoldState::Slipped { .. })
+    };
+    // Too heavy for a light grip on land; the water it displaces (0.21 N for this
+    // 30 × 30 mm cylinder) carries enough of it.
+    let obj = cylinder_standing();
+    let (count, squeeze_n) = grip_for(&obj, 0.3);
+    let capacity_n = 2.0 * obj.friction * squeeze_n;
+    let buoyancy_n = 1000.0 * G_M_S2 * obj.volume_m3;
+    assert!(
+        capacity_n < 0.6 && buoyancy_n > 0.2,
+        "{capacity_n} {buoyancy_n}"
+    );
+    let heavy = GraspObject {
+        mass_kg: 1.3 * capacity_n / (G_M_S2 + 2.0),
+        ..obj.clone()
+    };
+    for (scene, slips) in [(land(), true), (water_buoyancy, false)] {
+        let (_, h, clock) = grip_at(&scene, heavy.clone(), count).await;
+        lift(&h, clock.now(), 0.2, 0.1, 2.0);
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        assert_eq!(outcome(&h), slips);
+    }
+    // Lifted fast: held on land, dragged out of the grip in water (½·ρ·C_d·A·v² at
+    // 1.5 m/s on 7.1 cm² is 0.8 N).
+    let (count, squeeze_n) = grip_for(&obj, 1.0);
+    let capacity_n = 2.0 * obj.friction * squeeze_n;
+    let peak_land_n = obj.mass_kg * (G_M_S2 + 5.0);
+    assert!(
+        capacity_n > peak_land_n * 1.05 && capacity_n < obj.mass_kg * G_M_S2 + 0.7,
+        "{capacity_n}"
+    );
+    for (scene, slips) in [(land(), false), (water_drag, true)] {
+        let (_, h, clock) = grip_at(&scene, obj.clone(), count).await;
+        lift(&h, clock.now(), 1.0, 1.5, 5.0);
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        assert_eq!(outcome(&h), slips);
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_declared_current_squeezes_one_finger_more_than_the_other() {
+    let flow = with_effects(vec![Effect::ObjectFlow {
+        fluid_density_kg_m3: 1000.0,
+        mean_m_s: 0.3,
+        gust_m_s: 0.2,
+        period_s: 0.5,
+    }]);
+    let obj = cylinder_standing();
+    let (_, probe, _) = grip_at(&land(), obj.clone(), 0).await;
+    let count = count_for(&probe, 1.5);
+    let mut spreads = Vec::new();
+    for scene in [land(), flow] {
+        let (_, h, clock) = grip_at(&scene, obj.clone(), count).await;
+        let mut spread = Vec::new();
+        for i in 0..20 {
+            let t = TimestampNs(clock.now().0 + i * 50_000_000);
+            let a = -h.true_wrench_on(0, t).expect("truth").force_n[0];
+            let b = -h.true_wrench_on(1, t).expect("truth").force_n[0];
+            spread.push(a - b);
+        }
+        spreads.push(spread);
+    }
+    assert!(
+        spreads[0].iter().all(|d| d.abs() < 1e-9),
+        "{:?}",
+        spreads[0]
+    );
+    // Pushed towards finger 1 (+x): finger 1 squeezed harder, by a varying amount.
+    assert!(spreads[1].iter().all(|d| *d < -0.01), "{:?}", spreads[1]);
+    let (lo, hi) = spreads[1]
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), d| {
+            (l.min(*d), h.max(*d))
+        });
+    assert!(hi - lo > 0.01, "the gusts vary: {lo} … {hi}");
+}
+
+#[tokio::test(start_paused = true)]
+async fn turning_a_gripped_cylinder_makes_a_torque_about_z_that_the_wrist_removes() {
+    let obj = cylinder_standing();
+    let (_, probe, _) = grip_at(&land(), obj.clone(), 0).await;
+    let count = count_for(&probe, 2.0);
+    let run = |follow: bool| {
+        let obj = obj.clone();
+        async move {
+            let (_, h, clock) = grip_at(&land(), obj, count).await;
+            let now = clock.now();
+            let tz0 = h.true_wrench(now).expect("truth").torque_nm[2];
+            h.schedule_object_yaw(now, 0.05, 0.5).expect("turn");
+            if follow {
+                h.set_wrist_target(0.05).expect("wrist");
+            }
+            tokio::time::sleep(Duration::from_secs(1)).await;
+            let now = clock.now();
+            let w0 = h.true_wrench_on(0, now).expect("truth");
+            let w1 = h.true_wrench_on(1, now).expect("truth");
+            (
+                w0.torque_nm[2] - tz0,
+                w1.torque_nm[2] - tz0,
+                h.wrist_yaw(now).expect("wrist"),
+            )
+        }
+    };
+    let (tz0, tz1, wrist) = run(false).await;
+    assert!(wrist.abs() < 1e-15);
+    // Measured from the shear, not assumed: both fingers, the same sign.
+    assert!(tz0 < -1e-4 && tz1 < -1e-4, "{tz0} {tz1}");
+    let (fz0, fz1, wrist) = run(true).await;
+    assert!((wrist - 0.05).abs() < 1e-9);
+    assert!(
+        fz0.abs() < 0.05 * tz0.abs() && fz1.abs() < 0.05 * tz1.abs(),
+        "{fz0} {fz1}"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_second_finger_has_its_own_camera_and_mirrors_the_first() {
+    let obj = cylinder_standing();
+    let (_, probe, _) = grip_at(&land(), obj.clone(), 0).await;
+    let count = count_for(&probe, 1.5);
+    let (_, h, clock) = grip_at(&land(), obj, count).await;
+    let now = clock.now();
+    let (w0, w1) = (
+        h.true_wrench_on(0, now).expect("truth"),
+        h.true_wrench_on(1, now).expect("truth"),
+    );
+    for i in 0..6 {
+        assert!(
+            (w0.to_array()[i] - w1.to_array()[i]).abs() < 1e-9,
+            "{w0:?} {w1:?}"
+        );
+    }
+    assert!(h.true_wrench_on(2, now).is_err());
+    let mut cam = h.second_camera().expect("camera");
+    let frame = cam.frame_after(now, 100).await.expect("frame");
+    assert_eq!(frame.data.len(), 640 * 480 * 3);
+    assert!(frame.meta.t >= now);
+}
+
+#[test]
+fn bad_lifts_and_turns_are_refused_with_the_field() {
+    let (_, _, h) =
+        soft_grasp(&land(), cylinder_standing(), 30.0, 0, TokioClock::new()).expect("builds");
+    for (height, speed, accel, field) in [
+        (f64::NAN, 0.1, 1.0, "height_m"),
+        (0.1, 0.0, 1.0, "speed_m_s"),
+        (0.1, 0.1, -1.0, "accel_m_s2"),
+    ] {
+        let err = h
+            .start_lift(TimestampNs::ZERO, height, speed, accel)
+            .expect_err("refused");
+        assert!(err.to_string().contains(field), "{err}");
+    }
+    assert!(h.schedule_object_yaw(ms(0), f64::INFINITY, 1.0).is_err());
+    h.schedule_object_yaw(ms(100), 0.5, 1.0).expect("turn");
+    let err = h
+        .schedule_object_yaw(ms(500), 0.0, 1.0)
+        .expect_err("overlap");
+    assert!(err.to_string().contains("overlaps"), "{err}");
+    assert!(h.set_wrist_target(f64::NAN).is_err());
+}
+
+#[test]
+fn the_shipped_scenes_declare_five_graspable_objects() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    for file in [
+        "scenes/grasp.toml",
+        "scenes/water.toml",
+        "scenes/grasp-water.toml",
+    ] {
+        let scene: SceneSpec =
+            softtouch_schemas::config::load_toml(&root.join(file)).expect("loads and validates");
+        let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+        assert_eq!(
+            names,
+            ["cylinder", "oval-tube", "ball", "bottle", "cake"],
+            "{file}"
+        );
+        for spec in &scene.objects {
+            let obj = GraspObject::from_spec(spec);
+            let (_, _, h) = soft_grasp(&scene, obj.clone(), 30.0, 0, TokioClock::new())
+                .unwrap_or_else(|e| panic!("{file} {}: {e}", spec.name));
+            let touch = h.contact_count(0.02).expect("curve");
+            assert!(touch.is_some(), "{file} {}: never touched", spec.name);
+            // The open-loop grasp width squeezes it.
+            let f = squeeze(&obj, 0, obj.grasp_width_m);
+            assert!(f > 0.05, "{file} {}: {f} N at the grasp width", spec.name);
+        }
+    }
+}

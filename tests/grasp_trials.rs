@@ -1,0 +1,319 @@
+//! End-to-end tests of `softtouch grasp trials`: a tiny model trained in-test grasps
+//! simulated objects on land and underwater; the same seed gives the same
+//! perturbations and outcomes, a trial run alone equals itself in a bigger session, a
+//! kill -9 during the trials then a resume loses and doubles nothing, an open-loop
+//! width that misses is recorded as misses, and bad input exits 2 naming what is known.
+
+mod common;
+use common::{fails_with, ok, runtime, simulated_dataset, softtouch, tempdir, text};
+use std::path::Path;
+use std::process::{Command, Stdio};
+
+/// Short trials: 30 Hz camera, quick confirmation, a short lift and hold.
+const FAST: [&str; 12] = [
+    "--fps",
+    "30",
+    "--confirm-s",
+    "0.1",
+    "--close-timeout-s",
+    "1.5",
+    "--lift-mm",
+    "20",
+    "--hold-s",
+    "0.3",
+    "--out-dir",
+    "g",
+];
+
+fn trials(dir: &Path, extra: &[&str]) -> std::process::Output {
+    let mut args = vec!["grasp", "trials"];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&FAST);
+    softtouch(dir, &args)
+}
+
+/// (medium, object, mode, trial, dx, dy, dz, success, reason, final width) of a session.
+type TrialRow = (
+    String,
+    String,
+    String,
+    i64,
+    f64,
+    f64,
+    f64,
+    i64,
+    Option<String>,
+    f64,
+);
+
+async fn session_rows(db: &Path, session: i64) -> Vec<TrialRow> {
+    let options = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(db)
+        .read_only(true);
+    let Ok(mut conn) = sqlx::ConnectOptions::connect(&options).await else {
+        return Vec::new();
+    };
+    sqlx::query_as(
+        "SELECT medium, object, mode, trial, dx_m, dy_m, dz_m, success, reason, final_width_m \
+         FROM grasp_trials WHERE session_id = ? ORDER BY sigma_index, scene_index, object, mode, trial",
+    )
+    .bind(session)
+    .fetch_all(&mut conn)
+    .await
+    .unwrap_or_default()
+}
+
+async fn count(db: &Path, sql: &'static str) -> i64 {
+    let options = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(db)
+        .read_only(true);
+    let Ok(mut conn) = sqlx::ConnectOptions::connect(&options).await else {
+        return 0;
+    };
+    sqlx::query_scalar(sql)
+        .fetch_one(&mut conn)
+        .await
+        .unwrap_or(0)
+}
+
+#[test]
+fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
+    let dir = tempdir();
+    let d = dir.path();
+    let db = d.join("softtouch.db");
+    simulated_dataset(d, "120", "5", "air");
+    ok(&softtouch(
+        d,
+        &[
+            "train",
+            "--dataset",
+            "air",
+            "--size",
+            "16",
+            "--width",
+            "4",
+            "--latent",
+            "8",
+            "--epochs",
+            "2",
+            "--batch",
+            "32",
+            "--patience",
+            "0",
+        ],
+    ));
+    let rt = runtime();
+
+    // Session 1: both built-in media, two objects, both modes, two trials each.
+    let base = [
+        "--model",
+        "air-svae",
+        "--objects",
+        "cylinder,cake",
+        "--trials",
+        "2",
+        "--seed",
+        "3",
+    ];
+    let out = ok(&trials(d, &base));
+    assert!(out.contains("grasp session 1"), "{out}");
+    assert!(out.contains("Wilson 95%"), "{out}");
+    for needle in [
+        "land", "water", "cylinder", "cake", "44%", "100%", "30%", "90%",
+    ] {
+        assert!(out.contains(needle), "no `{needle}` in: {out}");
+    }
+    let csv = std::fs::read_to_string(d.join("g/grasp-trials.csv")).expect("csv");
+    assert!(csv.starts_with(
+        "sigma_index,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,paper_rate"
+    ));
+    // 2 media × (2 objects + all) × 2 modes.
+    assert_eq!(csv.lines().count(), 1 + 12, "{csv}");
+    let rows_csv = std::fs::read_to_string(d.join("g/grasp-trials-rows.csv")).expect("rows csv");
+    assert_eq!(rows_csv.lines().count(), 1 + 16);
+    let png = std::fs::read(d.join("g/grasp-trials.png")).expect("png");
+    assert!(png.starts_with(b"\x89PNG"));
+    let first = rt.block_on(session_rows(&db, 1));
+    assert_eq!(first.len(), 16);
+    assert!(
+        first.iter().all(|r| (r.7 == 1) == r.8.is_none()),
+        "{first:?}"
+    );
+    let traces = rt.block_on(count(
+        &db,
+        "SELECT COUNT(*) FROM grasp_traces c JOIN grasp_trials t USING (trial_id) WHERE t.session_id = 1 AND c.cycles > 0",
+    ));
+    assert_eq!(traces, 16, "every trial has its trace");
+
+    // Session 2, the same seed: the same perturbations and outcomes.
+    let out = ok(&trials(d, &base));
+    assert!(out.contains("grasp session 2"), "{out}");
+    assert_eq!(rt.block_on(session_rows(&db, 2)), first);
+
+    // Session 3: the cake's closed-loop trials alone equal themselves in session 1.
+    ok(&trials(
+        d,
+        &[
+            "--model",
+            "air-svae",
+            "--objects",
+            "cake",
+            "--modes",
+            "closed",
+            "--trials",
+            "2",
+            "--seed",
+            "3",
+        ],
+    ));
+    let alone = rt.block_on(session_rows(&db, 3));
+    let within: Vec<TrialRow> = first
+        .iter()
+        .filter(|r| r.1 == "cake" && r.2 == "closed")
+        .cloned()
+        .collect();
+    assert_eq!(alone, within);
+
+    // Session 4: an open-loop width wider than any object misses every one.
+    let out = ok(&trials(
+        d,
+        &[
+            "--model",
+            "air-svae",
+            "--objects",
+            "cylinder,cake",
+            "--modes",
+            "open",
+            "--trials",
+            "2",
+            "--open-width-mm",
+            "49",
+            "--seed",
+            "3",
+        ],
+    ));
+    let missed = rt.block_on(session_rows(&db, 4));
+    assert_eq!(missed.len(), 8, "{out}");
+    assert!(
+        missed
+            .iter()
+            .all(|r| r.7 == 0 && r.8.as_deref() == Some("miss")),
+        "{missed:?}"
+    );
+
+    // Session 5, killed with SIGKILL once a few trials are stored, then resumed.
+    let planned = 12i64;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_softtouch"))
+        .args([
+            "grasp",
+            "trials",
+            "--model",
+            "air-svae",
+            "--objects",
+            "cylinder",
+            "--trials",
+            "3",
+            "--seed",
+            "9",
+        ])
+        .args(FAST)
+        .current_dir(d)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let stored = "SELECT COUNT(*) FROM grasp_trials WHERE session_id = 5";
+    loop {
+        if child.try_wait().ok().flatten().is_some() {
+            break;
+        }
+        if rt.block_on(count(&db, stored)) >= 3 {
+            break;
+        }
+        std::thread::yield_now();
+    }
+    let _ = child.kill(); // SIGKILL
+    let _ = child.wait();
+    let before = rt.block_on(count(&db, stored));
+    assert!(
+        before < planned,
+        "the kill landed before the end ({before})"
+    );
+    let out = ok(&trials(d, &["--resume", "5"]));
+    assert!(out.contains(&format!("{before} stored")), "{out}");
+    assert_eq!(rt.block_on(count(&db, stored)), planned);
+    let orphans = rt.block_on(count(
+        &db,
+        "SELECT (SELECT COUNT(*) FROM grasp_trials t WHERE NOT EXISTS (SELECT 1 FROM grasp_traces c WHERE c.trial_id = t.trial_id)) \
+              + (SELECT COUNT(*) FROM grasp_traces c WHERE NOT EXISTS (SELECT 1 FROM grasp_trials t WHERE t.trial_id = c.trial_id))",
+    ));
+    assert_eq!(
+        orphans, 0,
+        "no trial without its trace, no trace without its trial"
+    );
+    // An uninterrupted session with the same seed took the same trials.
+    ok(&trials(
+        d,
+        &[
+            "--model",
+            "air-svae",
+            "--objects",
+            "cylinder",
+            "--trials",
+            "3",
+            "--seed",
+            "9",
+        ],
+    ));
+    assert_eq!(
+        rt.block_on(session_rows(&db, 5)),
+        rt.block_on(session_rows(&db, 6))
+    );
+
+    // Bad input: exit 2, saying what is known.
+    fails_with(
+        &trials(d, &["--model", "air-svae", "--objects", "vase"]),
+        2,
+        "no object `vase` (it has: cylinder, oval-tube, ball, bottle, cake)",
+    );
+    let wide = d.join("wide.toml");
+    let land =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/grasp.toml"))
+            .expect("scenes/grasp.toml");
+    std::fs::write(
+        &wide,
+        format!(
+            "{land}\n[[objects]]\nname = \"platter\"\nshape = \"oval\"\naspect = 1.5\nwidth_m = 0.04\nmass_kg = 0.1\nfriction = 0.5\nprofile = {{ kind = \"prism\", height_m = 0.02 }}\n"
+        ),
+    )
+    .expect("write scene");
+    fails_with(
+        &trials(
+            d,
+            &[
+                "--model",
+                "air-svae",
+                "--objects",
+                "platter",
+                "--scene",
+                wide.to_str().unwrap_or_default(),
+            ],
+        ),
+        2,
+        "outside the Hand-E's 50 mm stroke",
+    );
+    fails_with(&trials(d, &["--resume", "99"]), 2, "no grasp session 99");
+    fails_with(
+        &trials(d, &["--model", "air-svae", "--modes", "half"]),
+        2,
+        "--modes: unknown mode `half`",
+    );
+    fails_with(&trials(d, &["--model", "nope"]), 2, "nope");
+    let none = text(&trials(d, &["--model", "air-svae", "--sigma-mm=-1"]).stderr);
+    assert!(none.contains("--sigma-mm"), "{none}");
+    assert_eq!(
+        rt.block_on(count(&db, "SELECT COUNT(*) FROM grasp_sessions")),
+        6,
+        "refused runs create no session"
+    );
+}

@@ -1,0 +1,194 @@
+//! End-to-end tests of `softtouch rig check`, `softtouch live` and `softtouch bench
+//! grasp`: the rig check passes on the simulated rig and fails a Net F/T sensor that
+//! never answers; `live` runs its scripted press on the simulated rig beside the
+//! simulated sensor; `bench grasp` writes its table, CSV and PNG.
+
+mod common;
+use common::{fails_with, ok, simulated_dataset, softtouch, tempdir, text};
+
+/// A database with a tiny model `air-svae` (16×16, width 4, 2 epochs).
+fn tiny_model(d: &std::path::Path) {
+    simulated_dataset(d, "120", "5", "air");
+    ok(&softtouch(
+        d,
+        &[
+            "train",
+            "--dataset",
+            "air",
+            "--size",
+            "16",
+            "--width",
+            "4",
+            "--latent",
+            "8",
+            "--epochs",
+            "2",
+            "--batch",
+            "32",
+            "--patience",
+            "0",
+        ],
+    ));
+}
+
+#[test]
+fn rig_check_passes_every_device_of_the_simulated_rig() {
+    let dir = tempdir();
+    let out = ok(&softtouch(dir.path(), &["rig", "check"]));
+    for device in ["arm", "force_sensor", "camera", "gripper"] {
+        let line = out
+            .lines()
+            .find(|l| l.starts_with(&format!("{device} ")))
+            .unwrap_or_else(|| panic!("no {device} row: {out}"));
+        assert!(line.contains(" pass "), "{line}");
+    }
+    assert!(!out.contains("FAIL"), "{out}");
+    // The stream's measured rate is printed against the configured 1000 Hz.
+    assert!(out.contains("of 1000 Hz configured"), "{out}");
+}
+
+#[test]
+fn rig_check_fails_a_net_ft_sensor_that_never_answers() {
+    let dir = tempdir();
+    // Bound, never answering: the sensor's address with nothing behind it.
+    let silent = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let port = silent.local_addr().expect("addr").port();
+    let rig = softtouch_schemas::defaults::RIG_TOML.replace(
+        "[force_sensor]\ndriver = \"sim\"",
+        &format!(
+            "[force_sensor]\ndriver = \"net-ft\"\naddress = \"127.0.0.1:{port}\"\ncounts_per_force = 1000000.0\ncounts_per_torque = 1000000.0"
+        ),
+    );
+    assert!(rig.contains("net-ft"), "the default rig's layout changed");
+    std::fs::write(dir.path().join("rig.toml"), rig).expect("write");
+    let out = softtouch(
+        dir.path(),
+        &["rig", "check", "--rig", "rig.toml", "--timeout-s", "3"],
+    );
+    fails_with(&out, 1, "1 of 4 devices failed");
+    let stdout = text(&out.stdout);
+    let row = stdout
+        .lines()
+        .find(|l| l.starts_with("force_sensor "))
+        .unwrap_or_else(|| panic!("no sensor row: {stdout}"));
+    assert!(row.contains("FAIL") && row.contains("net-ft"), "{row}");
+    assert!(
+        row.contains("expected"),
+        "the row says what was expected: {row}"
+    );
+    for device in ["arm ", "camera ", "gripper "] {
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with(device))
+            .unwrap_or_else(|| panic!("no {device}row: {stdout}"));
+        assert!(line.contains(" pass "), "{line}");
+    }
+    drop(silent);
+}
+
+#[test]
+fn live_presses_on_the_simulated_rig_and_bench_grasp_writes_its_table() {
+    let dir = tempdir();
+    let d = dir.path();
+    tiny_model(d);
+    let out = ok(&softtouch(
+        d,
+        &["live", "--model", "air-svae", "--out", "live.csv"],
+    ));
+    assert!(out.contains("scripted press"), "{out}");
+    assert!(out.contains("script done"), "{out}");
+    assert!(out.contains("RMS estimate − sensor"), "{out}");
+    let csv = std::fs::read_to_string(d.join("live.csv")).expect("csv");
+    let mut lines = csv.lines();
+    let header = lines.next().expect("header");
+    assert!(header.starts_with("t_s,frame,est_fx_n"), "{header}");
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| {
+            l.split(',')
+                .map(|c| c.parse::<f64>().unwrap_or(f64::NAN))
+                .collect()
+        })
+        .collect();
+    // One row per frame at 120 Hz over a script of a few seconds.
+    assert!(rows.len() > 240, "{} rows", rows.len());
+    assert!(rows.iter().all(|r| r.len() == 14));
+    // Every frame has a finite estimate and a sensor reading.
+    assert!(rows.iter().all(|r| r[2..14].iter().all(|v| v.is_finite())));
+    // The press shows on the sensor: clear of the rod first, then newtons.
+    let force = |r: &Vec<f64>| (r[8] * r[8] + r[9] * r[9] + r[10] * r[10]).sqrt();
+    assert!(force(&rows[0]) < 0.3, "{:?}", rows[0]);
+    let peak = rows.iter().map(force).fold(0.0, f64::max);
+    assert!(peak > 1.0, "peak {peak} N");
+    // Frames in order, on the 120 Hz grid.
+    assert!(rows.windows(2).all(|w| w[1][0] > w[0][0]));
+
+    let out = ok(&softtouch(
+        d,
+        &[
+            "bench",
+            "grasp",
+            "--model",
+            "air-svae",
+            "--gains",
+            "0.3,0.75",
+            "--tolerances",
+            "0.1",
+            "--fps",
+            "30,120",
+            "--hold-s",
+            "1",
+            "--out",
+            "b",
+        ],
+    ));
+    assert!(out.contains("settle s"), "{out}");
+    for varied in ["baseline", "K ", "fps "] {
+        assert!(out.contains(varied), "no {varied} row: {out}");
+    }
+    let csv = std::fs::read_to_string(d.join("b/grasp-bench.csv")).expect("csv");
+    assert_eq!(csv.lines().count(), 1 + 3, "{csv}");
+    assert!(d.join("b/grasp-bench.png").is_file());
+    fails_with(
+        &softtouch(
+            d,
+            &["bench", "grasp", "--model", "air-svae", "--gains", "0"],
+        ),
+        2,
+        "--gains",
+    );
+    fails_with(
+        &softtouch(d, &["live", "--model", "air-svae", "--depth-m", "0.5"]),
+        2,
+        "workspace",
+    );
+
+    // `grasp follow --rig` with a real Hand-E: the gain is required (no simulator to
+    // measure Λ), and a finger camera that cannot be opened is a runtime failure.
+    let rig = softtouch_schemas::defaults::RIG_TOML
+        .replace(
+            "[gripper]\ndriver = \"sim\"",
+            "[gripper]\ndriver = \"hand-e\"\nport = \"/dev/softtouch-no-such-port\"\nslave_id = 9\n",
+        )
+        .replace(
+            "[camera]\ndriver = \"sim\"",
+            "[camera]\ndriver = \"v4l\"\ndevice = \"/dev/softtouch-no-such-camera\"\n",
+        )
+        .replace("fps = 120.0\n", "");
+    assert!(
+        rig.contains("hand-e") && rig.contains("v4l"),
+        "the default rig's layout changed"
+    );
+    std::fs::write(d.join("real.toml"), rig).expect("write");
+    let follow = [
+        "grasp",
+        "follow",
+        "--model",
+        "air-svae",
+        "--rig",
+        "real.toml",
+    ];
+    fails_with(&softtouch(d, &follow), 2, "--gain");
+    let mut with_gain = follow.to_vec();
+    with_gain.extend(["--gain", "4"]);
+    fails_with(&softtouch(d, &with_gain), 1, "camera");
+}
