@@ -1184,8 +1184,15 @@ fn sighup_then_a_second_signal_stops_the_binary_at_once() {
         &["collect", "--samples", "100000", "--seed", "10"],
         2,
     );
-    signal(&child, "HUP");
-    signal(&child, "TERM");
+    // Both from one shell, microseconds apart: a simulated sample takes about 3 ms,
+    // so two `kill` processes in turn could let the child finish and exit between them.
+    let pid = child.id();
+    let ok = Command::new("sh")
+        .args(["-c", &format!("kill -HUP {pid} && kill -TERM {pid}")])
+        .status()
+        .unwrap_or_else(|e| panic!("sh: {e}"))
+        .success();
+    assert!(ok, "kill -HUP, -TERM failed");
     let out = child.wait_with_output().unwrap_or_else(|e| panic!("{e}"));
     assert!(
         out.status.success(),

@@ -50,9 +50,9 @@ async fn session_rows(db: &Path, session: i64) -> Vec<TrialRow> {
     let options = sqlx::sqlite::SqliteConnectOptions::new()
         .filename(db)
         .read_only(true);
-    let Ok(mut conn) = sqlx::ConnectOptions::connect(&options).await else {
-        return Vec::new();
-    };
+    let mut conn = sqlx::ConnectOptions::connect(&options)
+        .await
+        .unwrap_or_else(|e| panic!("open {}: {e}", db.display()));
     sqlx::query_as(
         "SELECT medium, object, mode, trial, dx_m, dy_m, dz_m, success, reason, final_width_m \
          FROM grasp_trials WHERE session_id = ? ORDER BY sigma_index, scene_index, object, mode, trial",
@@ -60,7 +60,7 @@ async fn session_rows(db: &Path, session: i64) -> Vec<TrialRow> {
     .bind(session)
     .fetch_all(&mut conn)
     .await
-    .unwrap_or_default()
+    .unwrap_or_else(|e| panic!("session {session}'s trials: {e}"))
 }
 
 async fn count(db: &Path, sql: &'static str) -> i64 {
@@ -224,20 +224,23 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
         .unwrap_or_else(|e| panic!("{e}"));
     let stored = "SELECT COUNT(*) FROM grasp_trials WHERE session_id = 5";
     loop {
-        if child.try_wait().ok().flatten().is_some() {
-            break;
-        }
+        let exited = child.try_wait().ok().flatten();
+        assert!(
+            exited.is_none(),
+            "the session ended on its own ({exited:?}) before 3 trials were stored: nothing to kill"
+        );
         if rt.block_on(count(&db, stored)) >= 3 {
             break;
         }
         std::thread::yield_now();
     }
-    let _ = child.kill(); // SIGKILL
-    let _ = child.wait();
+    child.kill().expect("SIGKILL"); // the child was still running just above
+    let status = child.wait().expect("reaped");
+    assert!(!status.success(), "killed, not finished: {status:?}");
     let before = rt.block_on(count(&db, stored));
     assert!(
-        before < planned,
-        "the kill landed before the end ({before})"
+        (3..planned).contains(&before),
+        "the kill landed after 3 stored trials and before the end ({before})"
     );
     let out = ok(&trials(d, &["--resume", "5"]));
     assert!(out.contains(&format!("{before} stored")), "{out}");
@@ -309,8 +312,11 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
         "--modes: unknown mode `half`",
     );
     fails_with(&trials(d, &["--model", "nope"]), 2, "nope");
-    let none = text(&trials(d, &["--model", "air-svae", "--sigma-mm=-1"]).stderr);
-    assert!(none.contains("--sigma-mm"), "{none}");
+    fails_with(
+        &trials(d, &["--model", "air-svae", "--sigma-mm=-1"]),
+        2,
+        "--sigma-mm",
+    );
     assert_eq!(
         rt.block_on(count(&db, "SELECT COUNT(*) FROM grasp_sessions")),
         6,

@@ -12,7 +12,7 @@ use std::time::Duration;
 use softtouch_drivers::{Camera, Clock, DeviceError, Gripper, TokioClock};
 use softtouch_grasp::{
     CalibrationConfig, Controller, ControllerConfig, Cycle, EndCalibration, GraspError, NoTruth,
-    Projection, calibrate_ends,
+    Projection, StopRequest, calibrate_ends,
 };
 use softtouch_schemas::RigConfig;
 use softtouch_schemas::rig::{CameraDevice, GripperDevice};
@@ -147,20 +147,24 @@ pub enum RigFollowError {
 /// `grasp follow` on the rig's real Hand-E and finger cameras: open the devices,
 /// calibrate the ends (nothing between the fingers), then hold each target from the
 /// open end with the fingers' estimate closing the loop (the mean of both when the
-/// rig has a `second_camera`, read through `second_projection`), on the wall clock. There is no
+/// caller passes `second_projection` for the rig's `second_camera`), on the wall clock. There is no
 /// simulator to measure Λ, so the gain is the caller's. The gripper opens at the end
-/// (and on every error, [`softtouch_grasp::ExitAction::Open`]).
+/// (and on every error, [`softtouch_grasp::ExitAction::Open`]), and also when `stop`
+/// holds a request (checked every cycle). Settings and targets are checked before any
+/// device is opened.
 ///
 /// # Errors
 /// A device that cannot be opened, a failed calibration, bad settings, an unreachable
-/// target, or a device error during the loop.
+/// target, a device error during the loop, or a stop request.
 pub async fn follow_on_rig(
     rig: &RigConfig,
     predictor: Predictor,
     mut config: ControllerConfig,
-    second_projection: Projection,
+    second_projection: Option<Projection>,
     targets: &[(f64, Duration)],
+    stop: StopRequest,
 ) -> Result<RigFollow, RigFollowError> {
+    config.check(targets)?;
     let clock = TokioClock::new();
     let shared: Arc<dyn Clock> = Arc::new(clock);
     let mut devices = real_grasp_devices(rig, shared.clone()).await?;
@@ -173,9 +177,11 @@ pub async fn follow_on_rig(
         NoTruth,
         shared,
         config,
-    )?;
-    if let Some(second) = devices.second_camera {
-        controller = controller.with_second_finger(second, second_projection);
+    )?
+    .with_stop(stop);
+    // The second finger only when asked for (`--fingers 2`), even if the rig has one.
+    if let (Some(second), Some(projection)) = (devices.second_camera, second_projection) {
+        controller = controller.with_second_finger(second, projection);
     }
     let cycles = controller.follow(targets).await?;
     Ok(RigFollow {

@@ -32,6 +32,10 @@ use crate::estimator::ForceEstimator;
 use crate::projection::Projection;
 use crate::stepper::{StepOutcome, Stepper, StepperConfig};
 use crate::wrist::{Wrist, WristLoop};
+
+/// How far from the request an arrival reported by the gripper (gOBJ = 3) may be,
+/// counts (about 0.4 mm).
+const ARRIVAL_SLACK_COUNTS: u8 = 2;
 use softtouch_schemas::Wrench;
 
 /// How often [`Controller::approach`] reads the gripper (the Hand-E allows 200 Hz).
@@ -89,6 +93,18 @@ impl ControllerConfig {
             keep_alive: Duration::from_millis(200),
             on_exit: ExitAction::Open,
         }
+    }
+
+    /// Checks the settings and every target before anything moves.
+    ///
+    /// # Errors
+    /// A bad setting or an unreachable target, named.
+    pub fn check(&self, targets: &[(f64, Duration)]) -> Result<(), GraspError> {
+        self.validate()?;
+        for (target_n, _) in targets {
+            self.stepper.check_target(*target_n)?;
+        }
+        Ok(())
     }
 
     fn validate(&self) -> Result<(), GraspError> {
@@ -182,7 +198,11 @@ pub struct Controller<G, C, E, T = NoTruth> {
     /// The wrist loop on τz, when the arm's wrist takes part.
     wrist: Option<(Box<dyn Wrist>, WristLoop)>,
     last_frame_t: Option<TimestampNs>,
+    stop: Option<StopRequest>,
 }
+
+/// A stop request published by name (a signal's), checked once per cycle.
+pub type StopRequest = tokio::sync::watch::Receiver<Option<&'static str>>;
 
 /// The second sensorised finger: its camera and projection.
 struct SecondFinger {
@@ -256,7 +276,17 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
             second: None,
             wrist: None,
             last_frame_t: None,
+            stop: None,
         })
+    }
+
+    /// Ends [`Self::follow`] at the next cycle once `stop` holds a request (Ctrl-C or
+    /// SIGTERM on a rig): the gripper is then left as [`ExitAction`] says, and the
+    /// error names the request. Checked between cycles, so no command is cut short.
+    #[must_use]
+    pub fn with_stop(mut self, stop: StopRequest) -> Self {
+        self.stop = Some(stop);
+        self
     }
 
     /// Adds a second sensorised finger: its camera (on the same frame grid as the
@@ -343,7 +373,12 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
                 status.object,
                 ObjectStatus::ContactClosing | ObjectStatus::ContactOpening
             );
-            if echoed && (status.position == position || stopped) {
+            // A real Hand-E may settle a count or two short of the request and report
+            // gOBJ = 3 (at position); take that as arrival too.
+            let arrived = status.position == position
+                || (status.object == ObjectStatus::AtPosition
+                    && status.position.abs_diff(position) <= ARRIVAL_SLACK_COUNTS);
+            if echoed && (arrived || stopped) {
                 return Ok(status);
             }
             let now = self.clock.now();
@@ -387,6 +422,9 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
                     .saturating_add(duration.as_nanos() as u64),
             );
             while self.clock.now() < end {
+                if let Some(name) = self.stop.as_ref().and_then(|s| *s.borrow()) {
+                    return Err(GraspError::Interrupted(name.to_string()));
+                }
                 cycles.push(self.cycle(*target_n).await?);
             }
         }
@@ -421,10 +459,13 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
         } else {
             (finger_estimates_n[0], None)
         };
+        // τz only from fingers whose estimate is usable: a NaN or saturated wrench
+        // never turns the wrist either.
         let torques: Vec<f64> = wrenches
             .iter()
-            .flatten()
-            .map(|w| w.torque_nm[2])
+            .zip(finger_estimates_n)
+            .filter(|(_, f)| f.is_some_and(|f| f.is_finite() && f < saturation_n))
+            .filter_map(|(w, _)| w.as_ref().map(|w| w.torque_nm[2]))
             .filter(|t| t.is_finite())
             .collect();
         let torque_z_nm =
@@ -466,7 +507,13 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
         });
         let changed = self.sent.is_none_or(|(p, _)| p != position_request);
         if changed || stale {
-            self.send(position_request, now).await?;
+            if outcome.is_some_and(StepOutcome::is_flagged) {
+                // The stepper's hold is the measured position itself, even outside the
+                // stroke: clamping it would move the fingers on an unusable estimate.
+                self.send_unclamped(position_request, now).await?;
+            } else {
+                self.send(position_request, now).await?;
+            }
         }
         Ok(Cycle {
             t: frame.meta.t,
@@ -488,6 +535,10 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
 
     async fn send(&mut self, position: u8, now: TimestampNs) -> Result<(), GraspError> {
         let position = self.config.stepper.stroke.clamp(i64::from(position));
+        self.send_unclamped(position, now).await
+    }
+
+    async fn send_unclamped(&mut self, position: u8, now: TimestampNs) -> Result<(), GraspError> {
         self.gripper
             .command(GripperCommand {
                 position,

@@ -36,7 +36,8 @@ pub mod wrist;
 
 pub use calibrate::{CalibrationConfig, EndCalibration, calibrate_ends};
 pub use controller::{
-    Controller, ControllerConfig, Cycle, ExitAction, NoTruth, TrueForce, combine_fingers,
+    Controller, ControllerConfig, Cycle, ExitAction, NoTruth, StopRequest, TrueForce,
+    combine_fingers,
 };
 pub use estimator::ForceEstimator;
 pub use metrics::{HoldMetrics, hold_metrics};
@@ -79,4 +80,8 @@ pub enum GraspError {
     /// The model could not read a frame.
     #[error("force estimate: {0}")]
     Estimate(String),
+    /// A stop request (a signal, named) ended the loop; the gripper was left as the
+    /// controller's exit action says.
+    #[error("stopped by {0}")]
+    Interrupted(String),
 }

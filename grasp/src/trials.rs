@@ -647,21 +647,21 @@ impl Run {
             .await?;
         self.last_status = Some(status);
         let (mut gripper, mut camera, mut estimator, mut truth) = ctl.into_parts();
+        // What `approach` sent: the predefined width, clamped to the stroke.
+        let grasp_position = config.stepper.stroke.clamp(i64::from(trial.grasp_position));
         let command = GripperCommand {
-            position: trial.grasp_position,
+            position: grasp_position,
             speed: config.speed,
             force: config.force,
         };
         let keep_alive_ns = config.keep_alive.as_nanos() as u64;
         let mut sent = self.clock.now();
-        lift.start_lift(&trial.lift).await?;
-        self.lifted = true;
-        let end = self.clock.now().0
-            + (trial.lift.duration_s() * 1e9) as u64
-            + trial.hold.as_nanos() as u64;
         let mut next = self.clock.now();
+        // The first cycle watches the closed fingers before the lift, so a grasp that
+        // slips at lift-off (where the load is largest) is seen to have touched.
+        let mut end: Option<u64> = None;
         let watched: Result<(), GraspError> = async {
-            while self.clock.now().0 < end {
+            while end.is_none_or(|end| self.clock.now().0 < end) {
                 let frame = camera.frame_after(next, config.frame_timeout_ms).await?;
                 next = TimestampNs(frame.meta.t.0 + 1);
                 let sat = config.stepper.saturation_n;
@@ -690,8 +690,17 @@ impl Run {
                     estimate_n,
                     true_n,
                     measured_position: status.position,
-                    position_request: trial.grasp_position,
+                    position_request: grasp_position,
                 });
+                if end.is_none() {
+                    lift.start_lift(&trial.lift).await?;
+                    self.lifted = true;
+                    end = Some(
+                        self.clock.now().0
+                            + (trial.lift.duration_s() * 1e9) as u64
+                            + trial.hold.as_nanos() as u64,
+                    );
+                }
             }
             Ok(())
         }

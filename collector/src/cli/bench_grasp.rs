@@ -54,7 +54,9 @@ pub struct BenchGraspArgs {
 fn grasp_failure(e: GraspError) -> Failure {
     match e {
         GraspError::Config(_) | GraspError::UnreachableTarget { .. } => Failure::BadInput(e.into()),
-        GraspError::Device(_) | GraspError::Estimate(_) => Failure::Runtime(e.into()),
+        GraspError::Device(_) | GraspError::Estimate(_) | GraspError::Interrupted(_) => {
+            Failure::Runtime(e.into())
+        }
     }
 }
 

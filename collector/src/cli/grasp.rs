@@ -242,7 +242,9 @@ impl TrueForce for SimTruth {
 fn grasp_failure(e: GraspError) -> Failure {
     match e {
         GraspError::Config(_) | GraspError::UnreachableTarget { .. } => Failure::BadInput(e.into()),
-        GraspError::Device(_) | GraspError::Estimate(_) => Failure::Runtime(e.into()),
+        GraspError::Device(_) | GraspError::Estimate(_) | GraspError::Interrupted(_) => {
+            Failure::Runtime(e.into())
+        }
     }
 }
 
@@ -348,10 +350,12 @@ async fn prepare(
     model_bytes: &[u8],
     scene: &SceneSpec,
     object: GraspObject,
-    top_n: f64,
+    targets_n: &[f64],
     on_exit: ExitAction,
     out: &mut dyn Write,
 ) -> Result<Prepared, Failure> {
+    // Λ is measured up to half again the largest target.
+    let top_n = 1.5 * targets_n.iter().copied().fold(0.0, f64::max);
     let predictor = Predictor::from_bytes(model_bytes)?;
     let clock = TokioClock::new();
     let (gripper, camera, handle) = soft_grasp(scene, object.clone(), c.fps, c.seed, clock)
@@ -380,6 +384,9 @@ async fn prepare(
     config.stepper.gain_n_per_mm = gain;
     config.stepper.tolerance_n = c.tolerance;
     config.on_exit = on_exit;
+    // Every setting and target is checked before the fingers move.
+    let checked: Vec<(f64, Duration)> = targets_n.iter().map(|t| (*t, Duration::ZERO)).collect();
+    config.check(&checked).map_err(grasp_failure)?;
     let w = |e| io_failure(e);
     writeln!(
         out,
@@ -461,9 +468,17 @@ async fn follow(args: FollowArgs, db: &Path, out: &mut dyn Write) -> Result<(), 
         },
         (None, None, None) => return Err(bad("the scene has neither objects nor rods".into())),
     };
-    let top_n = 1.5 * args.targets.iter().copied().fold(0.0, f64::max);
     let model = load_model_and_pause(c, db).await?;
-    let mut p = prepare(c, &model, &scene, object, top_n, ExitAction::Open, out).await?;
+    let mut p = prepare(
+        c,
+        &model,
+        &scene,
+        object,
+        &args.targets,
+        ExitAction::Open,
+        out,
+    )
+    .await?;
     let hold = Duration::from_secs_f64(args.hold_s);
     let targets: Vec<(f64, Duration)> = args.targets.iter().map(|t| (*t, hold)).collect();
     let cycles = p.controller.follow(&targets).await.map_err(grasp_failure)?;
@@ -511,13 +526,22 @@ async fn follow_on_rig(
         c.tolerance
     )
     .map_err(io_failure)?;
-    let run = crate::grasp_devices::follow_on_rig(rig, predictor, config, projections[1], &targets)
-        .await
-        .map_err(|e| match e {
-            // Its Display already names the device and the cause.
-            crate::grasp_devices::RigFollowError::Open(e) => Failure::Runtime(anyhow!("{e}")),
-            crate::grasp_devices::RigFollowError::Grasp(e) => grasp_failure(e),
-        })?;
+    let second = (c.fingers == 2).then_some(projections[1]);
+    let signals = super::signals::SignalWatch::start();
+    let run = crate::grasp_devices::follow_on_rig(
+        rig,
+        predictor,
+        config,
+        second,
+        &targets,
+        signals.request(),
+    )
+    .await
+    .map_err(|e| match e {
+        // Its Display already names the device and the cause.
+        crate::grasp_devices::RigFollowError::Open(e) => Failure::Runtime(anyhow!("{e}")),
+        crate::grasp_devices::RigFollowError::Grasp(e) => grasp_failure(e),
+    })?;
     let cal = run.calibration;
     writeln!(
         out,
@@ -727,16 +751,7 @@ async fn disturb(args: DisturbArgs, db: &Path, out: &mut dyn Write) -> Result<()
     });
     let object = named_object(&scene, &args.object)?;
     let model = load_model_and_pause(c, db).await?;
-    let mut p = prepare(
-        c,
-        &model,
-        &scene,
-        object,
-        1.5 * target,
-        ExitAction::Open,
-        out,
-    )
-    .await?;
+    let mut p = prepare(c, &model, &scene, object, &[target], ExitAction::Open, out).await?;
     let start = p.clock.now();
     let at = |s: f64| TimestampNs(start.0 + (s * 1e9) as u64);
     let mut yaw_deg = 0.0;
@@ -910,7 +925,7 @@ async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Result<(), Fa
             &model,
             &scene,
             object.clone(),
-            1.5 * args.target,
+            &[args.target],
             ExitAction::Open,
             out,
         )

@@ -333,7 +333,9 @@ fn planned(plan: &Plan, scenes: usize, modes: &[Mode]) -> Vec<Planned> {
 fn grasp_failure(e: GraspError) -> Failure {
     match e {
         GraspError::Config(_) | GraspError::UnreachableTarget { .. } => Failure::BadInput(e.into()),
-        GraspError::Device(_) | GraspError::Estimate(_) => Failure::Runtime(e.into()),
+        GraspError::Device(_) | GraspError::Estimate(_) | GraspError::Interrupted(_) => {
+            Failure::Runtime(e.into())
+        }
     }
 }
 

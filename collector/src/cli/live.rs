@@ -234,6 +234,9 @@ pub async fn run(args: LiveArgs, db: &Path, out: &mut dyn Write) -> Result<(), F
         mut camera,
         ..
     } = devices;
+    // From here on the devices are open: a signal ends the session through the same
+    // exit as an error (the arm is stopped, the CSV flushed).
+    let signals = super::signals::SignalWatch::start();
     let file = std::fs::File::create(&args.out)
         .map_err(|e| Failure::Runtime(anyhow!("cannot create {}: {e}", args.out.display())))?;
     let mut csv = std::io::BufWriter::new(file);
@@ -244,6 +247,7 @@ pub async fn run(args: LiveArgs, db: &Path, out: &mut dyn Write) -> Result<(), F
         every: args.every,
         frame_timeout_ms: (rig.procedure.frame_timeout_s * 1000.0).ceil() as u64,
         clock: &clock,
+        stop: signals.request(),
     };
     writeln!(
         out,
@@ -296,6 +300,8 @@ struct Session<'a> {
     every: u64,
     frame_timeout_ms: u64,
     clock: &'a dyn Clock,
+    /// A signal's stop request: the session ends there and the arm is stopped.
+    stop: super::signals::StopRequest,
 }
 
 #[derive(Debug, Default)]
@@ -501,6 +507,8 @@ impl Session<'_> {
         let mut buf = Vec::new();
         let script = run_script(arm, self.rig, steps);
         tokio::pin!(script);
+        let stop = super::signals::requested(self.stop.clone());
+        tokio::pin!(stop);
         loop {
             let now = self.clock.now();
             let done = match self.until {
@@ -519,6 +527,7 @@ impl Session<'_> {
                 break;
             }
             tokio::select! {
+                name = &mut stop => return Err(format!("stopped by {name}")),
                 finished = &mut script, if !script_done => {
                     finished?;
                     script_done = true;

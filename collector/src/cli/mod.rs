@@ -16,6 +16,7 @@ pub mod live;
 pub mod report;
 pub mod rig;
 pub mod runs;
+pub(crate) mod signals;
 pub mod sim;
 pub mod sweep;
 pub mod train;

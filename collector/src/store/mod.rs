@@ -11,10 +11,10 @@
 
 mod event;
 mod grasp;
+pub use event::EventKind;
 pub use grasp::{
     GraspSessionRow, GraspTrace, GraspTrialKey, GraspTrialRow, TRACE_ENCODING, unpack_f32,
 };
-pub use event::EventKind;
 pub(crate) mod rows;
 mod runs;
 pub(crate) use runs::{run_counts_columns, run_counts_from};

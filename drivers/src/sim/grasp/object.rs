@@ -9,6 +9,7 @@
 
 use super::super::SimError;
 use super::super::contact::RodProfile;
+use super::touch::Grip;
 use crate::gripper::STROKE_MM;
 use softtouch_schemas::scene::{ObjectProfile, ObjectSpec};
 use softtouch_schemas::{RodShape, RodSpec};
@@ -419,17 +420,27 @@ impl GraspObject {
         for i in 0..3 {
             o.offset_m[i] += offset_m[i];
         }
-        let room_m = 0.5 * (STROKE_MM / 1000.0 - o.max_width_m());
-        if o.offset_m[0].abs() > room_m {
+        // The fully open fingers come down around the object moved by x: a finger that
+        // already presses it there lands on it. The finger's own section over its
+        // length decides, with the object as it stands (yaw 0), so only what the
+        // fingers' faces pass counts (a bottle's wide base below the tips does not).
+        let open = Grip {
+            opening_m: STROKE_MM / 1000.0,
+            // Grip's shift is along G's −x, towards finger 0.
+            shift_m: -o.offset_m[0],
+            yaw_rad: 0.0,
+        };
+        if (0..2).any(|k| o.touches_at(k, &open)) {
             return None;
         }
-        o.touches().then_some(o)
+        let closed = Grip::default();
+        (0..2).any(|k| o.touches_at(k, &closed)).then_some(o)
     }
 
-    /// Whether fully closed fingers would touch it (with the default finger).
-    fn touches(&self) -> bool {
+    /// Whether finger `k` (the default finger) presses the object at `grip`.
+    fn touches_at(&self, k: usize, grip: &Grip) -> bool {
         let finger = super::super::FingerGeometry::default();
-        (0..2).any(|k| super::touch::reaches_finger(&finger, self, k, 0.0))
+        super::touch::reaches_finger(&finger, self, k, grip)
     }
 }
 

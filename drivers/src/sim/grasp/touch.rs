@@ -190,17 +190,13 @@ pub(crate) fn finger_contact(
     })
 }
 
-/// Whether finger `k` touches `obj` at `opening_m` (object centred, not turned).
+/// Whether finger `k` presses `obj` at `grip` (no shear).
 pub(crate) fn reaches_finger(
     finger: &FingerGeometry,
     obj: &GraspObject,
     k: usize,
-    opening_m: f64,
+    grip: &Grip,
 ) -> bool {
-    let grip = Grip {
-        opening_m,
-        ..Grip::default()
-    };
-    finger_contact(finger, &ContactParams::default(), obj, k, &grip, [0.0; 2])
+    finger_contact(finger, &ContactParams::default(), obj, k, grip, [0.0; 2])
         .is_ok_and(|c| c.normal_n > 0.0)
 }
