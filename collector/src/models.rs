@@ -44,6 +44,11 @@ pub enum ModelError {
     /// No model of that name.
     #[error("no model named `{0}` in this database (see `softtouch models`)")]
     NotFound(String),
+    /// A model that reads no force (a VAE) where a force estimate is needed.
+    #[error(
+        "model `{0}` is a VAE and reads no force: expected an svae or convnet model (see `softtouch models`)"
+    )]
+    NoForce(String),
     /// The trainer failed.
     #[error(transparent)]
     Train(#[from] softtouch_trainer::TrainError),
@@ -55,7 +60,7 @@ impl ModelError {
     pub fn is_bad_input(&self) -> bool {
         match self {
             Self::Dataset(e) => e.is_bad_input(),
-            Self::Exists(_) | Self::NotFound(_) => true,
+            Self::Exists(_) | Self::NotFound(_) | Self::NoForce(_) => true,
             Self::Train(e) => e.is_bad_input(),
             Self::Query { .. } | Self::Frame { .. } => false,
         }
@@ -348,6 +353,26 @@ pub async fn list(store: &Store) -> Result<Vec<ModelInfo>, ModelError> {
         .fetch_all(store.pool())
         .await
         .map_err(model_query("listing models"))
+}
+
+/// A stored model's artifact for a verb that acts on its force estimate (`live`, the
+/// grasp verbs): a VAE, which reads no force, is refused up front, before any device
+/// opens, rather than holding the loop on a missing estimate forever.
+///
+/// # Errors
+/// No such model, a VAE, or a query failure.
+pub async fn force_artifact(store: &Store, name: &str) -> Result<Vec<u8>, ModelError> {
+    let row: Option<(Vec<u8>, String)> =
+        sqlx::query_as("SELECT artifact, kind FROM models WHERE name = ?")
+            .bind(name)
+            .fetch_optional(store.pool())
+            .await
+            .map_err(model_query("reading a model"))?;
+    match row {
+        None => Err(ModelError::NotFound(name.to_owned())),
+        Some((_, kind)) if kind == "vae" => Err(ModelError::NoForce(name.to_owned())),
+        Some((artifact, _)) => Ok(artifact),
+    }
 }
 
 /// The artifact bytes of model `name`.

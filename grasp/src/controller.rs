@@ -72,7 +72,9 @@ pub struct ControllerConfig {
     pub speed: u8,
     /// rFR for every request: high enough that a few newtons never trip a contact stop.
     pub force: u8,
-    /// How long to wait for a frame before the run fails, ms.
+    /// How long to wait for a frame before the run fails, ms. A cycle may wait this
+    /// long on each of two cameras, so `keep_alive + 2 × frame_timeout_ms` stays under
+    /// the Hand-E's 1 s watchdog.
     pub frame_timeout_ms: u64,
     /// Re-send the current request after this long without a command (< 1 s).
     pub keep_alive: Duration,
@@ -89,7 +91,7 @@ impl ControllerConfig {
             projection,
             speed: 128,
             force: 255,
-            frame_timeout_ms: 500,
+            frame_timeout_ms: 300,
             keep_alive: Duration::from_millis(200),
             on_exit: ExitAction::Open,
         }
@@ -119,6 +121,15 @@ impl ControllerConfig {
             return Err(GraspError::Config(
                 "frame_timeout_ms 0: expected at least 1 ms".into(),
             ));
+        }
+        // The longest a cycle can go without a command: the keep-alive's period, then
+        // a wait on each of two cameras.
+        let worst = self.keep_alive + Duration::from_millis(2 * self.frame_timeout_ms);
+        if worst >= Duration::from_millis(900) {
+            return Err(GraspError::Config(format!(
+                "frame_timeout_ms {} with keep_alive {:?}: expected keep_alive + 2 × frame_timeout_ms under 0.9 s (the Hand-E faults after 1 s without a command)",
+                self.frame_timeout_ms, self.keep_alive
+            )));
         }
         Ok(())
     }

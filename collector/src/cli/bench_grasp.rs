@@ -118,7 +118,7 @@ pub async fn run(args: BenchGraspArgs, db: &Path, out: &mut dyn Write) -> Result
     let store = open_existing(db).await?;
     let mut models = Vec::new();
     for name in &args.model {
-        let bytes = crate::models::artifact(&store, name).await?;
+        let bytes = crate::models::force_artifact(&store, name).await?;
         let predictor = softtouch_trainer::Predictor::from_bytes(&bytes)?;
         models.push((name.clone(), bytes, predictor.header().config));
     }

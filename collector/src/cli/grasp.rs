@@ -339,7 +339,7 @@ fn named_object(scene: &SceneSpec, name: &str) -> Result<GraspObject, Failure> {
 /// and cameras (the database is read first: its pool's timeouts need real time).
 async fn load_model_and_pause(c: &LoopArgs, db: &Path) -> Result<Vec<u8>, Failure> {
     let store = open_existing(db).await?;
-    let bytes = crate::models::artifact(&store, &c.model).await?;
+    let bytes = crate::models::force_artifact(&store, &c.model).await?;
     drop(store);
     tokio::time::pause();
     Ok(bytes)
@@ -511,7 +511,7 @@ async fn follow_on_rig(
         ));
     }
     let store = open_existing(db).await?;
-    let bytes = crate::models::artifact(&store, &c.model).await?;
+    let bytes = crate::models::force_artifact(&store, &c.model).await?;
     drop(store);
     let predictor = Predictor::from_bytes(&bytes)?;
     let projections = projections().map_err(grasp_failure)?;
@@ -1037,7 +1037,14 @@ async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Result<(), Fa
     );
     let o = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
     for (i, (_, run)) in runs.iter().enumerate() {
-        for ((cy, truth), yaw) in run.cycles.iter().zip(&run.truth).zip(&run.object_yaw_rad) {
+        for cy in &run.cycles {
+            // The truth is logged per frame, skipping any it could not read: match by
+            // the frame's time, not by position.
+            let truth = run
+                .truth
+                .binary_search_by_key(&cy.t, |s| s.t)
+                .ok()
+                .map(|k| (&run.truth[k], run.object_yaw_rad[k]));
             text.push_str(&format!(
                 "{},{},{},{},{},{},{},{},{}\n",
                 if i == 0 { "off" } else { "on" },
@@ -1046,9 +1053,9 @@ async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Result<(), Fa
                 o(cy.estimate_n),
                 o(cy.true_n),
                 o(cy.torque_z_nm.map(|t| t * 1000.0)),
-                truth.torque_z_nm * 1000.0,
-                yaw.to_degrees(),
-                truth.wrist_rad.to_degrees(),
+                o(truth.map(|(s, _)| s.torque_z_nm * 1000.0)),
+                o(truth.map(|(_, yaw)| yaw.to_degrees())),
+                o(truth.map(|(s, _)| s.wrist_rad.to_degrees())),
             ));
         }
     }

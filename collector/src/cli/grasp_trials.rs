@@ -472,7 +472,7 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
             let model = args.model.clone().unwrap_or_default();
             objects_of(&plan, &scenes)?; // checked before anything is stored
             // The model must exist before a session names it.
-            crate::models::artifact(&store, &model).await?;
+            crate::models::force_artifact(&store, &model).await?;
             let config_json = serde_json::to_string(&plan)
                 .map_err(|e| Failure::Runtime(anyhow!("cannot encode the settings: {e}")))?;
             let scenes_json = serde_json::to_string(&scenes)
@@ -485,7 +485,7 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
     };
     let objects = objects_of(&plan, &scenes)?;
     let modes = plan.modes()?;
-    let bytes = crate::models::artifact(&store, &model).await?;
+    let bytes = crate::models::force_artifact(&store, &model).await?;
     let mut predictor = Some(Predictor::from_bytes(&bytes)?);
 
     let all = planned(&plan, scenes.len(), &modes);

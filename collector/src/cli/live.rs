@@ -217,7 +217,7 @@ pub async fn run(args: LiveArgs, db: &Path, out: &mut dyn Write) -> Result<(), F
         (None, false) => Until::For(Duration::from_secs(10)),
     };
     let store = open_existing(db).await?;
-    let bytes = crate::models::artifact(&store, &args.model).await?;
+    let bytes = crate::models::force_artifact(&store, &args.model).await?;
     let mut predictor = softtouch_trainer::Predictor::from_bytes(&bytes)?;
     drop(store);
     let camera_rate = match &rig.camera {
