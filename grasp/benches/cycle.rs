@@ -3,10 +3,11 @@
 //! 32×32 input, width 16, latent 32; timing does not depend on the weights) on one
 //! core: burn's flex backend runs its kernels on rayon, so the cycle runs inside a
 //! one-thread rayon pool (`ThreadPool::install`), as the trainer's latency benchmark
-//! does. The frame is a real 640×480 RGB frame of the simulated finger pressed on a rod.
+//! does. The frame is a real 640×480 RGB frame of the simulated finger pressed on a rod,
+//! raw (RGB8) and as a JPEG (a V4L2 camera in MJPEG mode: the decode is in the cycle).
 //! Target: median ≤ 1.5 ms.
 //!
-//! `cargo bench -p softtouch-grasp --bench cycle`
+//! `cargo bench --workspace --bench cycle`
 
 use std::hint::black_box;
 
@@ -68,26 +69,49 @@ fn bench(c: &mut Criterion) {
         .num_threads(1)
         .build()
         .unwrap_or_else(|e| panic!("{e}"));
+    // The same frame as a V4L2 camera in MJPEG mode delivers it: the decode is part of
+    // the cycle then.
+    let mut jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 90)
+        .encode(
+            &frame.data,
+            frame.meta.width,
+            frame.meta.height,
+            image::ExtendedColorType::Rgb8,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    let jpeg_frame = Frame {
+        meta: FrameMeta {
+            format: FrameFormat::Jpeg,
+            ..frame.meta
+        },
+        data: jpeg,
+    };
     let mut g = c.benchmark_group("control_cycle");
-    g.bench_function("frame_to_rpr_1_thread", |b| {
-        pool.install(|| {
-            b.iter(|| {
-                let wrench = predictor
-                    .estimate(black_box(&frame))
-                    .unwrap_or_else(|e| panic!("{e}"));
-                let f_est = wrench.and_then(|w| projection.grip_force_n(&w));
-                let step = stepper.step(black_box(120), 1.6, f_est);
-                regs::encode_output(
-                    regs::R_ACT | regs::R_GTO,
-                    GripperCommand {
-                        position: step.position_request,
-                        speed: 128,
-                        force: 255,
-                    },
-                )
+    for (name, frame) in [
+        ("rgb8_frame_to_rpr_1_thread", &frame),
+        ("jpeg_frame_to_rpr_1_thread", &jpeg_frame),
+    ] {
+        g.bench_function(name, |b| {
+            pool.install(|| {
+                b.iter(|| {
+                    let wrench = predictor
+                        .estimate(black_box(frame))
+                        .unwrap_or_else(|e| panic!("{e}"));
+                    let f_est = wrench.and_then(|w| projection.grip_force_n(&w));
+                    let step = stepper.step(black_box(120), 1.6, f_est);
+                    regs::encode_output(
+                        regs::R_ACT | regs::R_GTO,
+                        GripperCommand {
+                            position: step.position_request,
+                            speed: 128,
+                            force: 255,
+                        },
+                    )
+                });
             });
         });
-    });
+    }
     g.finish();
 }
 

@@ -310,7 +310,26 @@ impl ForceSensorDevice {
             Self::AtiSerial { .. } => 7000.0,
         }
     }
+
+    /// The slowest a working sensor may stream, readings per second: the configured
+    /// rate, or for an ATI serial box what its baud rate carries of ASCII lines of at
+    /// most [`ATI_LINE_CHARS`] characters (10 bits each): about 15 Hz at 9600 baud,
+    /// 180 Hz at 115200. The default skew limit is taken from this rate, so a slow
+    /// serial box does not reject every sample.
+    #[must_use]
+    pub fn least_rate_hz(&self) -> f64 {
+        match self {
+            Self::AtiSerial { baud, .. } => {
+                (f64::from(*baud) / (10.0 * ATI_LINE_CHARS)).min(self.rate_hz())
+            }
+            _ => self.rate_hz(),
+        }
+    }
 }
+
+/// Longest ASCII line an ATI serial box streams, characters (status and six values,
+/// comma-separated, with CR LF), for [`ForceSensorDevice::least_rate_hz`].
+pub const ATI_LINE_CHARS: f64 = 64.0;
 
 /// Default of [`Procedure::ft_stale_s`], s: 100 readings at 1 kHz, five times the
 /// longest packet of the simulated sensor (20 ms) and of a Net F/T's RDT burst.
@@ -596,5 +615,42 @@ fn latency(c: &mut Check, field: &str, v: Option<f64>) {
 fn non_empty(c: &mut Check, field: &str, v: &str) {
     if v.trim().is_empty() {
         c.fail(field, "expected a non-empty string");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ati(baud: u32) -> ForceSensorDevice {
+        ForceSensorDevice::AtiSerial {
+            port: "/dev/ttyUSB0".into(),
+            baud,
+            counts_per_force: 1.0,
+            counts_per_torque: 1.0,
+            latency_s: None,
+        }
+    }
+
+    #[test]
+    fn the_default_skew_limit_follows_the_slowest_the_sensor_streams() {
+        let p = crate::defaults::rig().procedure;
+        assert!(p.max_skew_s.is_none());
+        // A 1 kHz stream: the 5 ms floor.
+        let sim = ForceSensorDevice::Sim { rate_hz: 1000.0 };
+        assert!((p.max_skew_s_for(sim.least_rate_hz()) - DEFAULT_MAX_SKEW_S).abs() < 1e-12);
+        // A serial box at 9600 baud carries 15 lines/s: two periods, 133 ms.
+        let slow = ati(9600);
+        assert!((slow.least_rate_hz() - 15.0).abs() < 1e-9);
+        assert!((p.max_skew_s_for(slow.least_rate_hz()) - 2.0 / 15.0).abs() < 1e-9);
+        // Faster links: never above the 7000 Hz the box can stream at most.
+        assert!((ati(115_200).least_rate_hz() - 180.0).abs() < 1e-9);
+        assert!(ati(u32::MAX).least_rate_hz() <= 7000.0);
+        // A configured limit wins.
+        let set = Procedure {
+            max_skew_s: Some(0.002),
+            ..p
+        };
+        assert!((set.max_skew_s_for(slow.least_rate_hz()) - 0.002).abs() < 1e-12);
     }
 }

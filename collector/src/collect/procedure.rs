@@ -423,7 +423,7 @@ impl Job<'_> {
         // A window that passes every other check must also hold readings close to
         // the frame on both sides: otherwise its mean is not the force in the image.
         let max_skew =
-            DurationNs::from_secs_f64(p.max_skew_s_for(self.plan.rig.force_sensor.rate_hz()));
+            DurationNs::from_secs_f64(p.max_skew_s_for(self.plan.rig.force_sensor.least_rate_hz()));
         if stats.reject.is_none() && !frame_covered(&readings, frame.meta.t, max_skew) {
             stats.reject = Some(RejectReason::ClockSkew);
         }
