@@ -662,3 +662,138 @@ fn a_resume_checks_the_stored_scene_against_the_rig_again() {
         "field `poses.x_m`: range [0, 0.09] lies outside the rig's workspace",
     );
 }
+
+#[test]
+fn a_water_run_with_poses_from_a_land_run_repeats_its_poses_and_rods_pose_by_pose() {
+    let dir = tempdir();
+    let water = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/water.toml");
+    let water = water.to_str().unwrap_or_default();
+    ok(&softtouch(
+        dir.path(),
+        &["collect", "--samples", "12", "--seed", "5", "--block", "4"],
+    ));
+    let out = ok(&softtouch(
+        dir.path(),
+        &["collect", "--scene", water, "--poses-from", "1"],
+    ));
+    assert!(
+        out.contains("run 2 pairs with run 1: 12 samples in both, every rod and pose the same"),
+        "{out}"
+    );
+    let status = ok(&softtouch(dir.path(), &["status", "2"]));
+    assert!(status.contains("poses and rods of run 1"), "{status}");
+    runtime().block_on(async {
+        let store = open(&dir.path().join("softtouch.db")).await;
+        let (land, wet) = (store.run_record(1).await, store.run_record(2).await);
+        let (land, wet) = (
+            land.unwrap_or_else(|e| panic!("{e}")),
+            wet.unwrap_or_else(|e| panic!("{e}")),
+        );
+        assert_eq!(wet.poses_from, Some(1));
+        assert_eq!(land.poses_from, None);
+        assert_eq!(
+            (
+                wet.seed,
+                wet.samples_planned,
+                &wet.rod_schedule,
+                wet.rod_block
+            ),
+            (
+                land.seed,
+                land.samples_planned,
+                &land.rod_schedule,
+                land.rod_block
+            )
+        );
+        assert!(wet.scene_toml.contains("underwater"));
+        // Pose by pose, rod by rod, and the media differ.
+        let (a, b) = (poses(&store, 1).await, poses(&store, 2).await);
+        assert_eq!(a.len(), 12);
+        assert_eq!(a, b);
+        assert_eq!(sample_rods(&store, 1).await, sample_rods(&store, 2).await);
+        assert_eq!(store.check_paired_poses(2, 1).await.ok(), Some(12));
+        // A pose changed behind the pairing's back is found, naming the sample.
+        sqlx::query(
+            "UPDATE samples SET cmd_x_m = cmd_x_m + 1e-12 WHERE run_id = 2 AND sample_index = 7",
+        )
+        .execute(store.pool())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"));
+        let e = store
+            .check_paired_poses(2, 1)
+            .await
+            .expect_err("pose 7 differs")
+            .to_string();
+        assert!(
+            e.contains("run 2 does not pair with run 1: sample 7"),
+            "{e}"
+        );
+        // A run with no common sample does not pair either.
+        let e = store
+            .check_paired_poses(2, 99)
+            .await
+            .expect_err("nothing in common");
+        assert!(
+            e.to_string().contains("no sample index is stored in both"),
+            "{e}"
+        );
+    });
+
+    // Scenes that cannot repeat run 1's poses are refused before a run is created.
+    let narrow = dir.path().join("narrow.toml");
+    let land = defaults::SCENE_TOML;
+    assert!(land.contains("x_m = [0.0, 0.05]") && land.contains("size_m = 0.01\n"));
+    std::fs::write(
+        &narrow,
+        land.replace("x_m = [0.0, 0.05]", "x_m = [0.0, 0.04]"),
+    )
+    .expect("write scene");
+    fails_with(
+        &softtouch(
+            dir.path(),
+            &[
+                "collect",
+                "--scene",
+                narrow.to_str().unwrap_or_default(),
+                "--poses-from",
+                "1",
+            ],
+        ),
+        2,
+        "--poses-from 1: scene",
+    );
+    let fat = dir.path().join("fat.toml");
+    std::fs::write(&fat, land.replace("size_m = 0.01\n", "size_m = 0.011\n")).expect("write scene");
+    fails_with(
+        &softtouch(
+            dir.path(),
+            &[
+                "collect",
+                "--scene",
+                fat.to_str().unwrap_or_default(),
+                "--poses-from",
+                "1",
+            ],
+        ),
+        2,
+        "expected the same rod",
+    );
+    fails_with(
+        &softtouch(dir.path(), &["collect", "--poses-from", "99"]),
+        2,
+        "no run 99",
+    );
+    fails_with(
+        &softtouch(dir.path(), &["collect", "--poses-from", "1", "--seed", "3"]),
+        2,
+        "--seed",
+    );
+    runtime().block_on(async {
+        let store = open(&dir.path().join("softtouch.db")).await;
+        let runs: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM runs")
+            .fetch_one(store.pool())
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(runs, 2, "refused pairings create no run");
+    });
+}

@@ -5,7 +5,7 @@
 //! width that misses is recorded as misses, and bad input exits 2 naming what is known.
 
 mod common;
-use common::{fails_with, ok, runtime, simulated_dataset, softtouch, tempdir, text};
+use common::{fails_with, ok, runtime, simulated_dataset, softtouch, tempdir};
 use std::path::Path;
 use std::process::{Command, Stdio};
 

@@ -119,6 +119,7 @@ impl RunPlan {
                 medium: self.medium,
                 rig_toml: &self.rig_toml,
                 scene_toml: &self.scene_toml,
+                poses_from: None,
             })
             .await
             .unwrap_or_else(|e| panic!("{e}"))

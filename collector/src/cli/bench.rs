@@ -174,6 +174,7 @@ pub async fn run(cmd: BenchCommand, db: &Path, out: &mut dyn Write) -> Result<()
                     medium: Medium::Air,
                     rig_toml: String::new(),
                     scene_toml: String::new(),
+                    poses_from: None,
                 })?;
                 let frames: Vec<Frame> = if encoded {
                     raw.iter()

@@ -18,6 +18,7 @@ use std::time::Instant;
   softtouch collect --samples 200 --seed 1          # simulated rig, on-land scene
   softtouch collect --scene scenes/water.toml --samples 30000
   softtouch collect --rig lab-rig.toml --scene rods.toml --rods circle-10 --samples 5000
+  softtouch collect --scene scenes/water.toml --poses-from 1   # run 1's poses, underwater
   softtouch collect --resume 3                      # continue run 3 where it stopped
   softtouch collect --resume 3 --rig lab-rig.toml   # ... with the F/T box on a new port
 
@@ -35,18 +36,28 @@ pub struct CollectArgs {
     #[arg(long, conflicts_with = "resume")]
     pub scene: Option<PathBuf>,
     /// Samples to take.
-    #[arg(long, required_unless_present = "resume", conflicts_with = "resume")]
+    #[arg(
+        long,
+        required_unless_present_any = ["resume", "poses_from"],
+        conflicts_with_all = ["resume", "poses_from"]
+    )]
     pub samples: Option<u64>,
     /// Seed of the pose sampler and the simulation (default: from the clock; printed
     /// and stored with the run).
-    #[arg(long, conflicts_with = "resume")]
+    #[arg(long, conflicts_with_all = ["resume", "poses_from"])]
     pub seed: Option<u64>,
     /// Rods to use, in order, comma-separated (default: every rod of the scene).
-    #[arg(long, value_delimiter = ',', conflicts_with = "resume")]
+    #[arg(long, value_delimiter = ',', conflicts_with_all = ["resume", "poses_from"])]
     pub rods: Vec<String>,
     /// Samples per rod before changing to the next (default: an equal share each).
-    #[arg(long, conflicts_with = "resume")]
+    #[arg(long, conflicts_with_all = ["resume", "poses_from"])]
     pub block: Option<u64>,
+    /// Repeat run RUN's poses and rods (its seed, sample count and rod schedule) in
+    /// this scene: the finger meets the same deformations, e.g. on land and underwater.
+    /// The scene must have the same pose ranges and rods; the finished run is checked
+    /// against RUN pose by pose.
+    #[arg(long, value_name = "RUN", conflicts_with = "resume")]
+    pub poses_from: Option<i64>,
     /// Continue run RUN at its next sample, with its stored seed, rig and scene (the
     /// database must exist).
     #[arg(long, value_name = "RUN")]
@@ -213,6 +224,7 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
             seed: args.seed,
             rods: args.rods,
             block: args.block,
+            poses_from: args.poses_from,
         };
         CollectPlan::new_run(&store, &request).map_err(plan_failure)?
     };
@@ -245,6 +257,11 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
         collect(&store, &plan, devices, clock, stop_rx, progress.as_mut()).await;
     signals.abort();
     drop(progress);
+    // Through the writer's own runtime: this one's clock may be paused (simulated rig).
+    let paired = match outcome {
+        Outcome::Completed => check_pairing(&store, run_id),
+        _ => Ok(None),
+    };
     store.close();
     let wall = started.elapsed().as_secs_f64();
     let summary = format!(
@@ -258,7 +275,17 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
         softtouch_drivers::Clock::now(&clock).as_secs_f64()
     );
     match outcome {
-        Outcome::Completed => writeln!(out, "{summary}; complete").map_err(io_failure),
+        Outcome::Completed => {
+            writeln!(out, "{summary}; complete").map_err(io_failure)?;
+            if let Some((source, pairs)) = paired? {
+                writeln!(
+                    out,
+                    "run {run_id} pairs with run {source}: {pairs} samples in both, every rod and pose the same"
+                )
+                .map_err(io_failure)?;
+            }
+            Ok(())
+        }
         Outcome::Stopped => {
             writeln!(out, "{summary}; stopped (resume with --resume {run_id})").map_err(io_failure)
         }
@@ -266,6 +293,16 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
             format!("{summary}; safe stop (fix the cause, then --resume {run_id})"),
         ))),
     }
+}
+
+/// A run made with `--poses-from` is checked against its source pose by pose once it
+/// is complete (and after a completed resume): `(source, pairs)`, or `None` for a run
+/// with poses of its own.
+fn check_pairing(store: &SyncStore, run_id: i64) -> Result<Option<(i64, u64)>, Failure> {
+    let Some(source) = store.run_record(run_id)?.poses_from else {
+        return Ok(None);
+    };
+    Ok(Some((source, store.check_paired_poses(run_id, source)?)))
 }
 
 pub async fn run_status(db: &Path, run: Option<i64>, out: &mut dyn Write) -> Result<(), Failure> {
@@ -291,9 +328,12 @@ pub async fn run_status(db: &Path, run: Option<i64>, out: &mut dyn Write) -> Res
             // damaged schedule is shown as such: the rest of the status still helps.
             match store.run_record(r.run_id).await {
                 Ok(record) => text.push_str(&format!(
-                    "    rods {}, {} samples each\n",
+                    "    rods {}, {} samples each{}\n",
                     serde_json::to_string(&record.rod_schedule).unwrap_or_default(),
-                    record.rod_block
+                    record.rod_block,
+                    record
+                        .poses_from
+                        .map_or_else(String::new, |s| format!("; poses and rods of run {s}"))
                 )),
                 Err(e @ crate::store::StoreError::Damaged { .. }) => {
                     text.push_str(&format!("    rods: {e}\n"));

@@ -252,6 +252,7 @@ pub async fn sweep_point(
         medium: scene.medium,
         rig_toml: to_toml(&rig),
         scene_toml: to_toml(scene),
+        poses_from: None,
     })?;
     let clock = TokioClock::new();
     let sim = SimRig::new(&rig, scene, seed, clock).map_err(|e| BenchError::Sim(e.to_string()))?;

@@ -53,6 +53,10 @@ pub struct NewRunRequest {
     pub rods: Vec<String>,
     /// Samples per rod before the next (default: an equal share each).
     pub block: Option<u64>,
+    /// Repeat this stored run's poses and rods (its seed, sample count and rod
+    /// schedule), in this request's scene: paired deformations, e.g. land and water.
+    /// `samples`, `seed`, `rods` and `block` must then be left unset.
+    pub poses_from: Option<RunId>,
 }
 
 /// What resuming a run found.
@@ -93,6 +97,14 @@ pub enum PlanError {
     /// A stored run whose rod schedule is empty: the store is damaged.
     #[error("run {0} has no rod schedule")]
     NoRodSchedule(RunId),
+    /// `--poses-from`: the scene cannot repeat the source run's poses.
+    #[error("--poses-from {from_run}: {why}")]
+    Unpairable {
+        /// The run whose poses were asked for.
+        from_run: RunId,
+        /// What differs.
+        why: String,
+    },
 }
 
 impl PlanError {
@@ -102,7 +114,11 @@ impl PlanError {
     pub const fn is_bad_input(&self) -> bool {
         match self {
             Self::Store(e) => matches!(e, StoreError::NoSuchRun(_)),
-            Self::Config(_) | Self::UnknownRod { .. } | Self::ZeroBlock | Self::NoRods => true,
+            Self::Config(_)
+            | Self::UnknownRod { .. }
+            | Self::ZeroBlock
+            | Self::NoRods
+            | Self::Unpairable { .. } => true,
             Self::NoRodSchedule(_) => false,
         }
     }
@@ -129,6 +145,9 @@ impl CollectPlan {
     /// A bad config or request, checked before the run is created; or the store.
     pub fn new_run(store: &SyncStore, request: &NewRunRequest) -> Result<Self, PlanError> {
         let resolved = configs::resolve(request.rig.as_deref(), request.scene.as_deref())?;
+        if let Some(source) = request.poses_from {
+            return Self::paired_run(store, request, resolved, source);
+        }
         let samples = request.samples;
         let scene_rods = || resolved.scene.rods.iter().map(|r| r.name.as_str());
         let rods: Vec<String> = if request.rods.is_empty() {
@@ -158,6 +177,87 @@ impl CollectPlan {
                 .duration_since(std::time::UNIX_EPOCH)
                 .map_or(0, |d| d.as_nanos() as u64)
         });
+        Self::create(store, resolved, seed, samples, schedule, None)
+    }
+
+    /// A new run repeating run `source`'s poses and rods in the request's scene. Pose
+    /// `i` is a pure function of the seed and the scene's pose ranges, so the same
+    /// seed and ranges give the same poses; the rods must be the same shapes.
+    fn paired_run(
+        store: &SyncStore,
+        request: &NewRunRequest,
+        resolved: configs::Resolved,
+        source: RunId,
+    ) -> Result<Self, PlanError> {
+        let unpairable = |why: String| PlanError::Unpairable {
+            from_run: source,
+            why,
+        };
+        if request.seed.is_some() || !request.rods.is_empty() || request.block.is_some() {
+            return Err(unpairable(
+                "the seed, rods and block come from that run: leave --seed, --rods and --block out"
+                    .into(),
+            ));
+        }
+        let record = store.run_record(source)?;
+        let source_scene: SceneSpec = parse_toml(
+            &record.scene_toml,
+            &ConfigSource::Stored(format!("run {source} scene")),
+        )?;
+        if resolved.scene.poses != source_scene.poses {
+            return Err(unpairable(format!(
+                "scene {} samples poses over {:?}, run {source}'s scene over {:?}: expected the same ranges",
+                resolved.scene_source, resolved.scene.poses, source_scene.poses
+            )));
+        }
+        for name in &record.rod_schedule {
+            let theirs = source_scene.rod(name);
+            match resolved.scene.rod(name) {
+                Some(ours) if Some(ours) == theirs => {}
+                Some(ours) => {
+                    return Err(unpairable(format!(
+                        "rod `{name}` is {ours:?} in scene {}, {theirs:?} in run {source}'s scene: expected the same rod",
+                        resolved.scene_source
+                    )));
+                }
+                None => {
+                    return Err(unpairable(format!(
+                        "scene {} has no rod `{name}`, which run {source} used",
+                        resolved.scene_source
+                    )));
+                }
+            }
+        }
+        let samples = u64::try_from(record.samples_planned).unwrap_or(0);
+        if request.samples != 0 && request.samples != samples {
+            return Err(unpairable(format!(
+                "it planned {samples} samples, not {}: leave --samples out",
+                request.samples
+            )));
+        }
+        let schedule = RodSchedule::new(
+            record.rod_schedule.clone(),
+            u64::try_from(record.rod_block).unwrap_or(1),
+        )
+        .ok_or(PlanError::NoRodSchedule(source))?;
+        Self::create(
+            store,
+            resolved,
+            record.seed_u64(),
+            samples,
+            schedule,
+            Some(source),
+        )
+    }
+
+    fn create(
+        store: &SyncStore,
+        resolved: configs::Resolved,
+        seed: u64,
+        samples: u64,
+        schedule: RodSchedule,
+        poses_from: Option<RunId>,
+    ) -> Result<Self, PlanError> {
         let run_id = store.create_run(OwnedNewRun {
             seed,
             samples_planned: samples,
@@ -167,6 +267,7 @@ impl CollectPlan {
             medium: resolved.scene.medium,
             rig_toml: to_toml(&resolved.rig),
             scene_toml: to_toml(&resolved.scene),
+            poses_from,
         })?;
         // Nobody else knows the run yet: the lease is free.
         let lease = LeaseHolder::this_process();

@@ -116,6 +116,16 @@ pub enum StoreError {
         /// The run.
         run_id: RunId,
     },
+    /// A run meant to repeat another's poses (`collect --poses-from`) does not.
+    #[error("run {run_id} does not pair with run {from_run}: {why}")]
+    Unpaired {
+        /// The paired run.
+        run_id: RunId,
+        /// The run whose poses it should repeat.
+        from_run: RunId,
+        /// The first difference.
+        why: String,
+    },
 }
 
 fn query_err(doing: &'static str) -> impl FnOnce(sqlx::Error) -> StoreError {

@@ -70,6 +70,8 @@ pub(crate) struct RunRow<'a> {
     pub schema_version: i64,
     /// `None`: now (an import keeps the original run's time).
     pub created_at: Option<&'a str>,
+    /// The run whose poses and rods this one repeats (`collect --poses-from`).
+    pub poses_from: Option<RunId>,
 }
 
 /// Insert a run; its new id.
@@ -80,10 +82,10 @@ pub(crate) async fn insert_run(
     let sql = concat!(
         "INSERT INTO runs (status, seed, samples_planned, rod_schedule, rod_block, scene_name,
                            medium, rig_toml, scene_toml, software_version, schema_version,
-                           created_at, updated_at, finished_at)
+                           created_at, poses_from_run_id, updated_at, finished_at)
          VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, COALESCE(?12, ",
         now_sql!(),
-        "), ",
+        "), ?13, ",
         now_sql!(),
         ", CASE WHEN ?1 = 'running' THEN NULL ELSE ",
         now_sql!(),
@@ -102,6 +104,7 @@ pub(crate) async fn insert_run(
         .bind(run.software_version)
         .bind(run.schema_version)
         .bind(run.created_at)
+        .bind(run.poses_from)
         .execute(&mut *conn)
         .await
         .map_err(query_err("creating a run"))?;

@@ -50,6 +50,8 @@ pub struct NewRun<'a> {
     pub rig_toml: &'a str,
     /// Resolved scene spec, as TOML.
     pub scene_toml: &'a str,
+    /// The run whose poses and rods this one repeats (`collect --poses-from`).
+    pub poses_from: Option<RunId>,
 }
 
 /// A run's counts as `runs`, `status` and the report show them: the columns (of `r`, `s`
@@ -136,6 +138,22 @@ pub struct RunRecord {
     pub rig_toml: String,
     /// Resolved scene.
     pub scene_toml: String,
+    /// The run whose poses and rods this one repeats (`collect --poses-from`).
+    pub poses_from: Option<RunId>,
+}
+
+/// One sample index of two runs, for [`Store::check_paired_poses`].
+#[derive(FromRow)]
+struct PairRow {
+    sample_index: i64,
+    rod_a: String,
+    x_a: f64,
+    z_a: f64,
+    theta_a: f64,
+    rod_b: String,
+    x_b: f64,
+    z_b: f64,
+    theta_b: f64,
 }
 
 /// [`RunRecord`] as stored (the rod schedule still JSON text).
@@ -149,6 +167,7 @@ struct RunRecordRow {
     rod_block: i64,
     rig_toml: String,
     scene_toml: String,
+    poses_from_run_id: Option<RunId>,
 }
 
 impl RunRecord {
@@ -180,6 +199,7 @@ impl Store {
             software_version: softtouch_schemas::SOFTWARE_VERSION,
             schema_version: Self::schema_version(),
             created_at: None,
+            poses_from: run.poses_from,
         };
         rows::insert_run(&mut conn, &row).await
     }
@@ -221,7 +241,8 @@ impl Store {
     /// The run's provenance, for resume.
     pub async fn run_record(&self, run_id: RunId) -> Result<RunRecord, StoreError> {
         let row = sqlx::query_as::<_, RunRecordRow>(
-            "SELECT run_id, status, seed, samples_planned, rod_schedule, rod_block, rig_toml, scene_toml
+            "SELECT run_id, status, seed, samples_planned, rod_schedule, rod_block, rig_toml, scene_toml,
+                    poses_from_run_id
              FROM runs WHERE run_id = ?",
         )
         .bind(run_id)
@@ -238,7 +259,52 @@ impl Store {
             rod_block: row.rod_block,
             rig_toml: row.rig_toml,
             scene_toml: row.scene_toml,
+            poses_from: row.poses_from_run_id,
         })
+    }
+
+    /// Checks that run `run_id` repeats run `source` pose by pose: every sample index
+    /// stored in both has the same rod and bit-identical commanded pose. The number of
+    /// such pairs.
+    ///
+    /// # Errors
+    /// The first index whose rod or pose differs, or no common index at all.
+    pub async fn check_paired_poses(
+        &self,
+        run_id: RunId,
+        source: RunId,
+    ) -> Result<u64, StoreError> {
+        let rows: Vec<PairRow> = sqlx::query_as(
+            "SELECT a.sample_index, a.rod AS rod_a, a.cmd_x_m AS x_a, a.cmd_z_m AS z_a,
+                    a.cmd_theta_rad AS theta_a, b.rod AS rod_b, b.cmd_x_m AS x_b,
+                    b.cmd_z_m AS z_b, b.cmd_theta_rad AS theta_b
+             FROM samples a JOIN samples b ON b.run_id = ?2 AND b.sample_index = a.sample_index
+             WHERE a.run_id = ?1 ORDER BY a.sample_index",
+        )
+        .bind(run_id)
+        .bind(source)
+        .fetch_all(&self.pool)
+        .await
+        .map_err(query_err("pairing two runs' poses"))?;
+        let unpaired = |why: String| StoreError::Unpaired {
+            run_id,
+            from_run: source,
+            why,
+        };
+        if rows.is_empty() {
+            return Err(unpaired("no sample index is stored in both".into()));
+        }
+        // Bit for bit: both runs drew the pose from the same pure function.
+        let bits = |x: f64, z: f64, t: f64| [x.to_bits(), z.to_bits(), t.to_bits()];
+        if let Some(r) = rows.iter().find(|r| {
+            r.rod_a != r.rod_b || bits(r.x_a, r.z_a, r.theta_a) != bits(r.x_b, r.z_b, r.theta_b)
+        }) {
+            return Err(unpaired(format!(
+                "sample {}: rod `{}` at x {} m, z {} m, θ {} rad against rod `{}` at x {} m, z {} m, θ {} rad",
+                r.sample_index, r.rod_a, r.x_a, r.z_a, r.theta_a, r.rod_b, r.x_b, r.z_b, r.theta_b
+            )));
+        }
+        Ok(rows.len() as u64)
     }
 }
 

@@ -72,6 +72,11 @@ enum Op {
         run_id: RunId,
         reply: Reply<Option<TimestampNs>>,
     },
+    CheckPaired {
+        run_id: RunId,
+        source: RunId,
+        reply: Reply<u64>,
+    },
     SetRig {
         run_id: RunId,
         rig_toml: String,
@@ -147,6 +152,8 @@ pub struct OwnedNewRun {
     pub rig_toml: String,
     /// Resolved scene.
     pub scene_toml: String,
+    /// The run whose poses and rods this one repeats (`collect --poses-from`).
+    pub poses_from: Option<RunId>,
 }
 
 /// What the writer did.
@@ -406,6 +413,15 @@ impl SyncStore {
         self.call(|reply| Op::RunTimeBase { run_id, reply })
     }
 
+    /// See [`Store::check_paired_poses`] (after every submitted sample is committed).
+    pub fn check_paired_poses(&self, run_id: RunId, source: RunId) -> Result<u64, StoreError> {
+        self.call(|reply| Op::CheckPaired {
+            run_id,
+            source,
+            reply,
+        })
+    }
+
     /// Hand an event to the writer (see [`Store::log_event`]); events and samples are
     /// written in the order they were submitted.
     pub fn log_event(
@@ -498,6 +514,7 @@ async fn serve(store: &Store, op: Op, shared: &Mutex<Shared>) {
                 medium: run.medium,
                 rig_toml: &run.rig_toml,
                 scene_toml: &run.scene_toml,
+                poses_from: run.poses_from,
             };
             let _ = reply.send(store.create_run(&new).await);
         }
@@ -580,6 +597,13 @@ async fn serve(store: &Store, op: Op, shared: &Mutex<Shared>) {
         }
         Op::RunTimeBase { run_id, reply } => {
             let _ = reply.send(store.run_time_base(run_id).await);
+        }
+        Op::CheckPaired {
+            run_id,
+            source,
+            reply,
+        } => {
+            let _ = reply.send(store.check_paired_poses(run_id, source).await);
         }
         Op::SetRig {
             run_id,

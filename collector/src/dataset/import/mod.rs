@@ -270,6 +270,7 @@ async fn write_run(
         medium: run.medium,
         rig_toml: &run.rig_toml,
         scene_toml: &run.scene_toml,
+        poses_from: None,
         software_version: &run.software_version,
         schema_version: run.schema_version,
         created_at: run.created_at.as_deref(),
