@@ -3,33 +3,13 @@
 //! the verbs print their tables and write the CSV and the PNG; bad input exits 2.
 
 mod common;
-use common::{fails_with, ok, simulated_dataset, softtouch, tempdir};
+use common::{fails_with, ok, softtouch, tempdir, tiny_model};
 
 #[test]
 fn grasp_follow_prints_a_row_per_target_and_writes_csv_and_png() {
     let dir = tempdir();
     let d = dir.path();
-    simulated_dataset(d, "120", "5", "air");
-    ok(&softtouch(
-        d,
-        &[
-            "train",
-            "--dataset",
-            "air",
-            "--size",
-            "16",
-            "--width",
-            "4",
-            "--latent",
-            "8",
-            "--epochs",
-            "2",
-            "--batch",
-            "32",
-            "--patience",
-            "0",
-        ],
-    ));
+    tiny_model(d);
     let out = ok(&softtouch(
         d,
         &[

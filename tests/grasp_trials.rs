@@ -5,7 +5,7 @@
 //! width that misses is recorded as misses, and bad input exits 2 naming what is known.
 
 mod common;
-use common::{fails_with, ok, runtime, simulated_dataset, softtouch, tempdir};
+use common::{fails_with, ok, runtime, softtouch, tempdir, tiny_model};
 use std::path::Path;
 use std::process::{Command, Stdio};
 
@@ -81,27 +81,7 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
     let dir = tempdir();
     let d = dir.path();
     let db = d.join("softtouch.db");
-    simulated_dataset(d, "120", "5", "air");
-    ok(&softtouch(
-        d,
-        &[
-            "train",
-            "--dataset",
-            "air",
-            "--size",
-            "16",
-            "--width",
-            "4",
-            "--latent",
-            "8",
-            "--epochs",
-            "2",
-            "--batch",
-            "32",
-            "--patience",
-            "0",
-        ],
-    ));
+    tiny_model(d);
     let rt = runtime();
 
     // Session 1: both built-in media, two objects, both modes, two trials each.

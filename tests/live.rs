@@ -4,32 +4,7 @@
 //! simulated sensor; `bench grasp` writes its table, CSV and PNG.
 
 mod common;
-use common::{fails_with, ok, simulated_dataset, softtouch, tempdir, text};
-
-/// A database with a tiny model `air-svae` (16×16, width 4, 2 epochs).
-fn tiny_model(d: &std::path::Path) {
-    simulated_dataset(d, "120", "5", "air");
-    ok(&softtouch(
-        d,
-        &[
-            "train",
-            "--dataset",
-            "air",
-            "--size",
-            "16",
-            "--width",
-            "4",
-            "--latent",
-            "8",
-            "--epochs",
-            "2",
-            "--batch",
-            "32",
-            "--patience",
-            "0",
-        ],
-    ));
-}
+use common::{fails_with, ok, softtouch, tempdir, text, tiny_model};
 
 #[test]
 fn rig_check_passes_every_device_of_the_simulated_rig() {

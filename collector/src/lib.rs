@@ -16,6 +16,8 @@
 //!   rate and model on the simulated soft grasp.
 //! - [`grasp_devices`]: a real Hand-E and the finger cameras from the rig config, end
 //!   calibration.
+//! - [`transfer`]: land to water: a dataset's test split alone, and the water test
+//!   samples paired with land samples of the same pose (`collect --poses-from`).
 //! - [`configs`]: resolving the rig and scene from files or the embedded defaults.
 //! - [`plot`]: PNG histograms and x–y charts (plotters).
 //! - [`report`]: `softtouch report`, one self-contained HTML page (inline SVG, maud
@@ -43,3 +45,4 @@ pub mod store;
 pub mod synthetic;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
+pub mod transfer;

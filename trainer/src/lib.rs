@@ -15,6 +15,7 @@ pub mod loss;
 pub mod metrics;
 pub mod model;
 pub mod preprocess;
+pub mod similarity;
 pub mod train;
 
 use std::path::Path;
@@ -26,7 +27,8 @@ pub use metrics::Metrics;
 pub use model::{ModelConfig, ModelKind};
 pub use preprocess::{FingerTable, Preprocess};
 pub use train::{
-    EpochReport, Example, Observer, Quiet, Splits, TrainConfig, Trained, evaluate, train,
+    EpochReport, Example, Observer, Quiet, Splits, TrainConfig, Trained, evaluate, latent_means,
+    train,
 };
 
 /// Everything that can go wrong in this crate.

@@ -340,6 +340,32 @@ pub fn evaluate(
     (metrics, predictions)
 }
 
+/// The latent mean μ of every example (evaluation mode, batches of 64), one row per
+/// example, as f64: the touch representation that the land-to-water comparison reads.
+pub fn latent_means(
+    net: &Net,
+    config: &ModelConfig,
+    norm: &LabelNorm,
+    examples: &[Example],
+    device: &Device,
+) -> Vec<Vec<f64>> {
+    let net = net.valid();
+    let indices: Vec<usize> = (0..examples.len()).collect();
+    let mut out = Vec::with_capacity(examples.len());
+    for chunk in indices.chunks(64) {
+        let (images, _) = batch_tensors(examples, chunk, config, norm, device);
+        let (mean, _) = net.forward_wrench(images);
+        let values = to_vec(mean);
+        let per = values.len() / chunk.len().max(1);
+        out.extend(
+            values
+                .chunks_exact(per.max(1))
+                .map(|row| row.iter().map(|v| f64::from(*v)).collect()),
+        );
+    }
+    out
+}
+
 fn score(config: &ModelConfig, m: &Metrics) -> f64 {
     if config.kind.predicts_wrench() {
         m.r2_mean.unwrap_or(f64::MIN)

@@ -20,6 +20,7 @@ pub(crate) mod signals;
 pub mod sim;
 pub mod sweep;
 pub mod train;
+pub mod transfer;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -116,6 +117,20 @@ Interrupted? Run the same command again: it resumes from the last epoch's checkp
   softtouch eval air-svae --dataset water --split all
   softtouch eval model.stm --dataset air")]
     Eval(eval::EvalArgs),
+    /// Land to water: one model's R² and RMSE per axis on a land and a water test
+    /// split, how alike its latents are for paired deformations (cosine per pair,
+    /// linear CKA, MMD with a permutation p-value), and models trained on land, water
+    /// and both, each tested on both; a CSV.
+    #[command(after_help = "Examples:
+  softtouch collect --samples 6000 --seed 1                                  # run 1, land
+  softtouch collect --scene scenes/water.toml --poses-from 1                 # run 2, the same poses underwater
+  softtouch dataset create land --runs 1 && softtouch dataset create water --runs 2
+  softtouch train --dataset land && softtouch train --dataset water
+  softtouch transfer --model land-svae --land land --water water --water-model water-svae
+
+The water runs must be collected with --poses-from a run of the land dataset: pairs are
+the water test samples whose partner (same run index) is in the land dataset.")]
+    Transfer(transfer::TransferArgs),
     /// List stored models with their test metrics.
     #[command(after_help = "Example:\n  softtouch models")]
     Models,
@@ -219,6 +234,7 @@ pub async fn run(cli: Cli, out: &mut dyn std::io::Write) -> Result<(), Failure> 
         Command::Rig(cmd) => rig::run(cmd, out).await,
         Command::Train(args) => train::run_train(args, &cli.db, out).await,
         Command::Eval(args) => eval::run_eval(args, &cli.db, out).await,
+        Command::Transfer(args) => transfer::run_transfer(args, &cli.db, out).await,
         Command::Models => eval::run_models(&cli.db, out).await,
         Command::Sweep(cmd) => sweep::run_sweep(cmd, &cli.db, out).await,
         Command::Report(args) => report::run_report(args, &cli.db, out).await,
