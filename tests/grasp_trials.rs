@@ -28,7 +28,12 @@ const FAST: [&str; 12] = [
 fn trials(dir: &Path, extra: &[&str]) -> std::process::Output {
     let mut args = vec!["grasp", "trials"];
     args.extend_from_slice(extra);
-    args.extend_from_slice(&FAST);
+    if extra.contains(&"--resume") {
+        // A resumed session runs on its stored settings; only the output may move.
+        args.extend_from_slice(&["--out-dir", "g"]);
+    } else {
+        args.extend_from_slice(&FAST);
+    }
     softtouch(dir, &args)
 }
 
@@ -286,6 +291,12 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
         "outside the Hand-E's 50 mm stroke",
     );
     fails_with(&trials(d, &["--resume", "99"]), 2, "no grasp session 99");
+    // A resumed session's settings are the stored ones: a flag beside it is refused.
+    fails_with(
+        &trials(d, &["--resume", "5", "--trials", "4"]),
+        2,
+        "cannot be used with",
+    );
     fails_with(
         &trials(d, &["--model", "air-svae", "--modes", "half"]),
         2,

@@ -85,8 +85,16 @@ pub struct TrialsArgs {
     /// Seed of the perturbations and the simulated scenes.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Continue a stored session (its settings are the stored ones).
-    #[arg(long)]
+    /// Continue a stored session (its settings are the stored ones, so the settings'
+    /// flags are refused beside it; --out-dir may change).
+    #[arg(
+        long,
+        conflicts_with_all = [
+            "model", "scene", "objects", "trials", "sigma_mm", "sweep_sigma", "modes", "seed",
+            "fps", "target_n", "tolerance", "confirm_s", "close_timeout_s", "lift_mm",
+            "hold_s", "open_width_mm",
+        ]
+    )]
     pub resume: Option<i64>,
     /// Camera rate, Hz (one control cycle per frame).
     #[arg(long, default_value_t = 120.0)]
@@ -194,8 +202,16 @@ impl Plan {
         if let Some(w) = args.open_width_mm {
             check_range("--open-width-mm", w, 0.0, STROKE_MM, "mm")?;
         }
+        // Each object once, in the order first given (a repeat would run its trials
+        // twice, the second time as already stored).
+        let mut objects: Vec<String> = Vec::new();
+        for o in &args.objects {
+            if !objects.contains(o) {
+                objects.push(o.clone());
+            }
+        }
         Ok(Self {
-            objects: args.objects.clone(),
+            objects,
             modes,
             trials: args.trials,
             sigmas_mm,
