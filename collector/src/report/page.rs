@@ -853,10 +853,10 @@ fn land_to_water_section() -> Markup {
     html! {
         section #land-to-water {
             h2 { "Land to water" }
-            (todo("This build has no transfer evaluation yet (issue #18: the transfer table, fine-tuning with a little water data and the latent figures). Until it lands, compare a land model on a water dataset by hand:",
-                  &["softtouch collect --scene scenes/water.toml --samples 300 --seed 2",
+            (todo("This report does not show the land-to-water comparison yet (fine-tuning and the latent figures are not built either). Collect the water run with the land run's poses and compare them; softtouch transfer prints the table and writes a CSV:",
+                  &["softtouch collect --scene scenes/water.toml --poses-from 1",
                     "softtouch dataset create water-v1 --runs 2",
-                    "softtouch eval land-v1-svae --dataset water-v1"]))
+                    "softtouch transfer --model land-v1-svae --land land-v1 --water water-v1"]))
         }
     }
 }
@@ -865,8 +865,10 @@ fn grasping_section() -> Markup {
     html! {
         section #grasping {
             h2 { "Grasping" }
-            (todo("This build has no grasping yet (issues #16 and #17: trial success with Wilson intervals beside the paper's Figure 4f, force following, disturbance and twist traces of Figure 5, and the bench grasp trade-offs). When they land, their verbs (softtouch grasp follow|disturb|twist|trials, softtouch bench grasp) store what this section will show.",
-                  &[]))
+            (todo("This report does not show grasping yet. The verbs print their tables and write CSVs and PNGs (success with Wilson intervals beside the paper's Figure 4f; force following, disturbance and twist traces of Figure 5; the bench grasp trade-offs), and the trials are stored as grasp sessions:",
+                  &["softtouch grasp trials --model land-v1-svae --trials 10 --sigma-mm 5",
+                    "softtouch grasp follow --model land-v1-svae --targets 0.4,1.6,3",
+                    "softtouch bench grasp --model land-v1-svae"]))
         }
     }
 }
