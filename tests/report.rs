@@ -313,6 +313,8 @@ fn an_empty_database_gives_a_page_saying_which_verbs_to_run() {
         "softtouch bench collection",
         "softtouch collect --scene scenes/water.toml --poses-from",
         "softtouch transfer",
+        "softtouch sweep finetune --init",
+        "softtouch latent",
         "softtouch grasp trials",
         "softtouch bench grasp",
     ] {

@@ -153,8 +153,17 @@ fn sweeps_and_the_model_benchmark_write_tables_csv_and_png() {
     args.extend(TINY);
     let at = args.len() - 5;
     args[at] = "1";
-    ok(&softtouch(d, &args));
+    let out = ok(&softtouch(d, &args));
     assert!(d.join("sw/sweep-latent.png").is_file());
+    // Method S2 b–g: a decoder traversal per latent size.
+    for n in [4, 8] {
+        let png = d.join(format!("sw/sweep-latent-traversal-{n}.png"));
+        assert!(png.is_file(), "{} missing: {out}", png.display());
+        assert!(
+            out.contains(&format!("sweep-latent-traversal-{n}.png")),
+            "{out}"
+        );
+    }
 
     let out = ok(&softtouch(
         d,

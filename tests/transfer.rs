@@ -7,8 +7,20 @@ use common::{fails_with, ok, softtouch, tempdir};
 use std::path::Path;
 
 const TINY: [&str; 14] = [
-    "--size", "16", "--width", "4", "--latent", "8", "--epochs", "2", "--batch", "32",
-    "--patience", "0", "--seed", "1",
+    "--size",
+    "16",
+    "--width",
+    "4",
+    "--latent",
+    "8",
+    "--epochs",
+    "2",
+    "--batch",
+    "32",
+    "--patience",
+    "0",
+    "--seed",
+    "1",
 ];
 
 fn train(d: &Path, dataset: &str) {
@@ -24,16 +36,36 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
     let water = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/water.toml");
     let water = water.to_str().unwrap_or_default();
     ok(&softtouch(d, &["db", "init"]));
-    ok(&softtouch(d, &["collect", "--samples", "150", "--seed", "4"]));
-    ok(&softtouch(d, &["collect", "--scene", water, "--poses-from", "1"]));
+    ok(&softtouch(
+        d,
+        &["collect", "--samples", "150", "--seed", "4"],
+    ));
+    ok(&softtouch(
+        d,
+        &["collect", "--scene", water, "--poses-from", "1"],
+    ));
     // A water run of its own, with no partner on land.
     ok(&softtouch(
         d,
-        &["collect", "--scene", water, "--samples", "40", "--seed", "9"],
+        &[
+            "collect",
+            "--scene",
+            water,
+            "--samples",
+            "40",
+            "--seed",
+            "9",
+        ],
     ));
     ok(&softtouch(d, &["dataset", "create", "land", "--runs", "1"]));
-    ok(&softtouch(d, &["dataset", "create", "water", "--runs", "2"]));
-    ok(&softtouch(d, &["dataset", "create", "lonely", "--runs", "3"]));
+    ok(&softtouch(
+        d,
+        &["dataset", "create", "water", "--runs", "2"],
+    ));
+    ok(&softtouch(
+        d,
+        &["dataset", "create", "lonely", "--runs", "3"],
+    ));
     train(d, "land");
     train(d, "water");
 
@@ -79,7 +111,11 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
     assert!(csv.contains("latents,land-svae,paired,,cka,"), "{csv}");
     assert!(csv.contains("table,water-svae,water,,r2_mean,"), "{csv}");
     for line in &lines[1..] {
-        let value: f64 = line.rsplit(',').next().and_then(|v| v.parse().ok()).unwrap_or(f64::NAN);
+        let value: f64 = line
+            .rsplit(',')
+            .next()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(f64::NAN);
         assert!(value.is_finite(), "{line}");
     }
 
@@ -92,7 +128,14 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
     let out = ok(&softtouch(
         d,
         &[
-            "transfer", "--model", "land-svae", "--land", "land", "--water", "water-b", "--out",
+            "transfer",
+            "--model",
+            "land-svae",
+            "--land",
+            "land",
+            "--water",
+            "water-b",
+            "--out",
             "b.csv",
         ],
     ));
@@ -102,7 +145,15 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
     fails_with(
         &softtouch(
             d,
-            &["transfer", "--model", "land-svae", "--land", "land", "--water", "lonely"],
+            &[
+                "transfer",
+                "--model",
+                "land-svae",
+                "--land",
+                "land",
+                "--water",
+                "lonely",
+            ],
         ),
         2,
         "no test sample of dataset `lonely` pairs with a sample of dataset `land`",
@@ -110,7 +161,9 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
     fails_with(
         &softtouch(
             d,
-            &["transfer", "--model", "nope", "--land", "land", "--water", "water"],
+            &[
+                "transfer", "--model", "nope", "--land", "land", "--water", "water",
+            ],
         ),
         2,
         "no model named `nope`",
@@ -118,7 +171,15 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
     fails_with(
         &softtouch(
             d,
-            &["transfer", "--model", "land-svae", "--land", "land", "--water", "sea"],
+            &[
+                "transfer",
+                "--model",
+                "land-svae",
+                "--land",
+                "land",
+                "--water",
+                "sea",
+            ],
         ),
         2,
         "sea",
@@ -140,5 +201,204 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
         ),
         2,
         "--permutations 0",
+    );
+}
+
+/// Fine-tuning (`train --init`, `sweep finetune`) and the latent figures (`latent`) on
+/// a land run and its paired water run.
+#[test]
+fn fine_tuning_and_latent_figures_from_a_land_model() {
+    let dir = tempdir();
+    let d = dir.path();
+    let water = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/water.toml");
+    let water = water.to_str().unwrap_or_default();
+    ok(&softtouch(d, &["db", "init"]));
+    ok(&softtouch(
+        d,
+        &["collect", "--samples", "120", "--seed", "4"],
+    ));
+    ok(&softtouch(
+        d,
+        &["collect", "--scene", water, "--poses-from", "1"],
+    ));
+    ok(&softtouch(d, &["dataset", "create", "land", "--runs", "1"]));
+    ok(&softtouch(
+        d,
+        &["dataset", "create", "water", "--runs", "2"],
+    ));
+    train(d, "land");
+
+    // train --init: the settings come from the starting model; the start is recorded.
+    let out = ok(&softtouch(
+        d,
+        &[
+            "train",
+            "--dataset",
+            "water",
+            "--init",
+            "land-svae",
+            "--epochs",
+            "2",
+            "--batch",
+            "32",
+            "--patience",
+            "0",
+        ],
+    ));
+    for needle in [
+        "training water-from-land-svae: svae width 4 latent 8 input 1×16×16",
+        "starting from land-svae (weights ",
+        "fine-tuned from land-svae (weights ",
+        "stored model `water-from-land-svae`",
+    ] {
+        assert!(out.contains(needle), "expected `{needle}` in:\n{out}");
+    }
+    fails_with(
+        &softtouch(
+            d,
+            &[
+                "train",
+                "--dataset",
+                "water",
+                "--init",
+                "land-svae",
+                "--latent",
+                "16",
+                "--name",
+                "x",
+            ],
+        ),
+        2,
+        "--init land-svae: that model is a svae width 4 latent 8",
+    );
+    fails_with(
+        &softtouch(d, &["train", "--dataset", "water", "--init", "nope"]),
+        2,
+        "no model named `nope`",
+    );
+
+    // sweep finetune: n = 0 is the land model untouched; each n fine-tuned and scratch.
+    let out = ok(&softtouch(
+        d,
+        &[
+            "sweep",
+            "finetune",
+            "--init",
+            "land-svae",
+            "--dataset",
+            "water",
+            "--samples",
+            "40,0,20",
+            "--epochs",
+            "2",
+            "--batch",
+            "16",
+            "--out",
+            "ft",
+        ],
+    ));
+    assert!(out.contains("fine-tuning land-svae (weights "), "{out}");
+    assert!(
+        out.contains("— 20 samples (3 validation), fine-tuned"),
+        "{out}"
+    );
+    assert!(
+        out.contains("— 40 samples (6 validation), scratch"),
+        "{out}"
+    );
+    let csv = std::fs::read_to_string(d.join("ft/finetune.csv")).expect("finetune.csv");
+    let lines: Vec<&str> = csv.lines().collect();
+    assert!(lines[0].starts_with("samples,val_samples,start,epochs_run,best_epoch,epochs_to_target,seconds,r2_mean,r2_min,r2_fx"), "{csv}");
+    assert_eq!(lines.len(), 1 + 1 + 2 * 2, "{csv}");
+    assert!(lines[1].starts_with("0,0,fine-tuned,0,0,,"), "{csv}");
+    assert!(lines[2].starts_with("20,3,fine-tuned,2,"), "{csv}");
+    assert!(lines[5].starts_with("40,6,scratch,2,"), "{csv}");
+    assert_png(&d.join("ft/finetune.png"));
+    for (samples, needle) in [
+        ("1", "--samples 1: training needs at least 2"),
+        (
+            "100000",
+            "--samples 100000: the dataset's train split holds 84",
+        ),
+    ] {
+        fails_with(
+            &softtouch(
+                d,
+                &[
+                    "sweep",
+                    "finetune",
+                    "--init",
+                    "land-svae",
+                    "--dataset",
+                    "water",
+                    "--samples",
+                    samples,
+                    "--out",
+                    "ft2",
+                ],
+            ),
+            2,
+            needle,
+        );
+    }
+
+    // latent: the two maps, the traversal, the paired instances and the CSV.
+    let out = ok(&softtouch(
+        d,
+        &[
+            "latent",
+            "land-svae",
+            "--dataset",
+            "land",
+            "--water",
+            "water",
+            "--out",
+            "lat",
+        ],
+    ));
+    assert!(
+        out.contains("model land-svae (8 latent dimensions) on `land` (24 test samples)"),
+        "{out}"
+    );
+    assert!(out.contains("axis  strongest latent  r"), "{out}");
+    assert!(out.contains("mean |r| between latent dimensions:"), "{out}");
+    for file in [
+        "land-svae-latent-correlation.png",
+        "land-svae-latent-wrench.png",
+        "land-svae-traversal.png",
+        "land-svae-paired.png",
+    ] {
+        assert_png(&d.join("lat").join(file));
+    }
+    let csv = std::fs::read_to_string(d.join("lat/land-svae-latent.csv")).expect("csv");
+    // 8 × 8 latent cells and 8 × 6 wrench cells.
+    assert_eq!(csv.lines().count(), 1 + 64 + 48, "{csv}");
+    assert!(csv.contains("latent,z0,z0,1.000000"), "{csv}");
+    assert!(csv.contains("wrench,z7,Tz,"), "{csv}");
+    fails_with(
+        &softtouch(
+            d,
+            &["latent", "land-svae", "--dataset", "land", "--dims", "8"],
+        ),
+        2,
+        "--dims 8: model land-svae has latent dimensions 0 to 7",
+    );
+    fails_with(
+        &softtouch(
+            d,
+            &["latent", "land-svae", "--dataset", "land", "--span", "0"],
+        ),
+        2,
+        "--span 0",
+    );
+}
+
+/// A PNG file that starts with the PNG signature and is not trivially small.
+fn assert_png(path: &Path) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert!(
+        bytes.starts_with(b"\x89PNG\r\n\x1a\n") && bytes.len() > 1000,
+        "{} is no PNG",
+        path.display()
     );
 }

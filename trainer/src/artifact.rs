@@ -37,6 +37,10 @@ pub struct TrainingSummary {
     pub train_images_per_s: f64,
     pub val: Metrics,
     pub test: Metrics,
+    /// The weights the training started from (fine-tuning), as [`crate::InitFrom`]
+    /// labels them; absent for a training from the seed's initialisation.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init_from: Option<String>,
 }
 
 /// The header of a model artifact.
@@ -209,6 +213,7 @@ mod tests {
             train_images_per_s: f64::NAN,
             val: test.clone(),
             test,
+            init_from: None,
         });
         let bytes = artifact.to_bytes().expect("encode");
         let (header, _) = ModelArtifact::header_from_bytes(&bytes).expect("loads");

@@ -27,8 +27,8 @@ pub use metrics::Metrics;
 pub use model::{ModelConfig, ModelKind};
 pub use preprocess::{FingerTable, Preprocess};
 pub use train::{
-    EpochReport, Example, Observer, Quiet, Splits, TrainConfig, Trained, evaluate, latent_means,
-    train,
+    EpochReport, Example, InitFrom, Observer, Quiet, Splits, TrainConfig, Trained, evaluate,
+    latent_means, train, train_from,
 };
 
 /// Everything that can go wrong in this crate.

@@ -449,6 +449,72 @@ impl fmt::Display for Distribution {
     }
 }
 
+/// Pearson correlation between every column of `x` and every column of `y` (rows
+/// paired): `r[i][j]` correlates column `i` of `x` with column `j` of `y`. Pass the
+/// same set twice for its correlation map. A column that is constant (or too small
+/// to centre) has no correlation: `None` in every cell it touches.
+///
+/// Computed from columns centred and scaled to a largest magnitude of 1, so values
+/// near `f64::MAX` or `f64::MIN_POSITIVE` give finite results; each `r` is clamped
+/// to `[-1, 1]` against rounding.
+///
+/// # Errors
+/// Ragged rows, non-finite values, row counts that differ, fewer than [`MIN_SAMPLES`]
+/// rows, or no columns.
+pub fn cross_correlation(
+    x: &[Vec<f64>],
+    y: &[Vec<f64>],
+) -> Result<Vec<Vec<Option<f64>>>, SimilarityError> {
+    let d = check_matrix(x, Side::Land)?;
+    let e = check_matrix(y, Side::Water)?;
+    let n = check_pairs(x, y)?;
+    check_min_samples(n, Side::Land)?;
+    if d == 0 {
+        return Err(SimilarityError::NoColumns { side: Side::Land });
+    }
+    if e == 0 {
+        return Err(SimilarityError::NoColumns { side: Side::Water });
+    }
+    let cx = standardised_columns(x, d);
+    let cy = standardised_columns(y, e);
+    Ok(cx
+        .iter()
+        .map(|a| {
+            cy.iter()
+                .map(|b| match (a, b) {
+                    (Some(a), Some(b)) => {
+                        let r = dot(a, b);
+                        r.is_finite().then(|| r.clamp(-1.0, 1.0))
+                    }
+                    _ => None,
+                })
+                .collect()
+        })
+        .collect())
+}
+
+/// Each column centred and scaled to unit Euclidean norm (so that a dot product is a
+/// correlation), or `None` for a column with no spread.
+fn standardised_columns(rows: &[Vec<f64>], cols: usize) -> Vec<Option<Vec<f64>>> {
+    let n = rows.len() as f64;
+    (0..cols)
+        .map(|c| {
+            let column: Vec<f64> = rows.iter().map(|r| r[c]).collect();
+            // Scale first: squares of values near f64::MAX would overflow.
+            let scale = max_abs(&column);
+            if !(scale > 0.0 && scale.is_finite()) {
+                return None;
+            }
+            let scaled: Vec<f64> = column.iter().map(|v| v / scale).collect();
+            let mean = scaled.iter().sum::<f64>() / n;
+            let centred: Vec<f64> = scaled.iter().map(|v| v - mean).collect();
+            let norm = centred.iter().map(|v| v * v).sum::<f64>().sqrt();
+            // A spread at rounding level is no spread: its "correlation" would be noise.
+            (norm > 1e-12 * n.sqrt()).then(|| centred.iter().map(|v| v / norm).collect())
+        })
+        .collect()
+}
+
 /// Checks that every row has the first row's length and every value is finite;
 /// returns the column count (0 for an empty set).
 fn check_matrix(rows: &[Vec<f64>], side: Side) -> Result<usize, SimilarityError> {
@@ -1067,5 +1133,71 @@ mod tests {
                 t.elapsed()
             );
         }
+    }
+    #[test]
+    fn cross_correlation_of_a_set_with_itself_has_a_unit_diagonal() {
+        let x: Vec<Vec<f64>> = (0..20)
+            .map(|i| {
+                let t = f64::from(i);
+                vec![t, -2.0 * t + 1.0, (t * 0.7).sin(), 5.0]
+            })
+            .collect();
+        let r = cross_correlation(&x, &x).expect("correlation");
+        for (i, row) in r.iter().enumerate().take(3) {
+            let v = row[i].expect("varies");
+            assert!((v - 1.0).abs() < 1e-12, "{v}");
+        }
+        let anti = r[0][1].expect("varies");
+        assert!((anti + 1.0).abs() < 1e-12, "{anti}");
+        assert!(
+            r[3].iter().all(Option::is_none),
+            "a constant column has no r"
+        );
+        assert!(r.iter().all(|row| row[3].is_none()));
+    }
+
+    #[test]
+    fn cross_correlation_holds_at_extreme_magnitudes() {
+        // 9 × MAX/16 is still finite.
+        for scale in [f64::MAX / 16.0, 1e-300, f64::MIN_POSITIVE] {
+            let x: Vec<Vec<f64>> = (0..10).map(|i| vec![f64::from(i) * scale]).collect();
+            let y: Vec<Vec<f64>> = (0..10).map(|i| vec![f64::from(i * i)]).collect();
+            let r = cross_correlation(&x, &y).expect("correlation")[0][0].expect("varies");
+            assert!(r.is_finite() && r > 0.9 && r <= 1.0, "{scale}: {r}");
+        }
+        // A column constant up to rounding is not a spread.
+        let x: Vec<Vec<f64>> = (0..10).map(|_| vec![0.1 + 0.2]).collect();
+        let y: Vec<Vec<f64>> = (0..10).map(|i| vec![f64::from(i)]).collect();
+        assert_eq!(cross_correlation(&x, &y).expect("ok")[0][0], None);
+    }
+
+    #[test]
+    fn cross_correlation_refuses_what_it_cannot_compute() {
+        let two = vec![vec![1.0], vec![2.0]];
+        assert!(matches!(
+            cross_correlation(&two, &two),
+            Err(SimilarityError::TooFewSamples { found: 2, .. })
+        ));
+        let x = vec![vec![1.0], vec![2.0], vec![3.0]];
+        let y = vec![vec![1.0], vec![2.0]];
+        assert!(matches!(
+            cross_correlation(&x, &y),
+            Err(SimilarityError::MismatchedPairs { .. })
+        ));
+        let empty = vec![Vec::new(); 3];
+        assert!(matches!(
+            cross_correlation(&empty, &x),
+            Err(SimilarityError::NoColumns { side: Side::Land })
+        ));
+        let nan = vec![vec![1.0], vec![f64::NAN], vec![3.0]];
+        assert!(matches!(
+            cross_correlation(&x, &nan),
+            Err(SimilarityError::NonFinite {
+                side: Side::Water,
+                row: 1,
+                ..
+            })
+        ));
+        assert!(cross_correlation(&[], &[]).is_err());
     }
 }

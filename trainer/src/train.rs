@@ -154,6 +154,32 @@ pub struct Trained {
     pub resumed_after: Option<usize>,
 }
 
+/// Weights a training starts from instead of the seed's initialisation: fine-tuning a
+/// model (say, trained on land) on other data (water). The model's settings and its
+/// label normalisation come with it, so the prediction head keeps its meaning.
+#[derive(Debug, Clone)]
+pub struct InitFrom {
+    /// What the weights are, e.g. `land-default (weights 3f2a…)`: recorded in the
+    /// checkpoint (a resume from other weights is refused) and in the new artifact.
+    pub label: String,
+    pub config: ModelConfig,
+    pub norm: LabelNorm,
+    weights: Vec<u8>,
+}
+
+impl InitFrom {
+    /// The weights of `artifact`, labelled `name (weights HASH)`.
+    pub fn from_artifact(name: &str, artifact: &ModelArtifact) -> Result<Self, TrainError> {
+        let weights = record_bytes(&artifact.net)?;
+        Ok(Self {
+            label: format!("{name} (weights {})", fnv(&[&weights])),
+            config: artifact.header.config,
+            norm: artifact.header.norm,
+            weights,
+        })
+    }
+}
+
 /// The committed state of a checkpoint folder (`checkpoint.json`).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -170,6 +196,9 @@ struct CheckpointState {
     best_file: String,
     history: Vec<EpochReport>,
     seconds: f64,
+    /// [`InitFrom::label`] of a fine-tuning (absent in older checkpoints: none).
+    #[serde(default)]
+    init_from: Option<String>,
 }
 
 const CHECKPOINT: &str = "checkpoint.json";
@@ -208,15 +237,36 @@ impl burn::module::ModuleVisitor for Materialise {
 
 /// A short fingerprint of the training data (sizes and every label), so a resume on
 /// different data is refused rather than silently mixed.
-fn fingerprint(splits: &Splits) -> String {
-    // FNV-1a over sizes and label bits: stable across runs and platforms.
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut feed = |bytes: &[u8]| {
+/// FNV-1a over byte slices, as 16 hex digits: stable across runs and platforms.
+fn fnv(parts: &[&[u8]]) -> String {
+    let mut h = Fnv::default();
+    for p in parts {
+        h.feed(p);
+    }
+    format!("{:016x}", h.0)
+}
+
+struct Fnv(u64);
+
+impl Default for Fnv {
+    fn default() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fnv {
+    fn feed(&mut self, bytes: &[u8]) {
         for b in bytes {
-            h ^= u64::from(*b);
-            h = h.wrapping_mul(0x0100_0000_01b3);
+            self.0 ^= u64::from(*b);
+            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
         }
-    };
+    }
+}
+
+fn fingerprint(splits: &Splits) -> String {
+    // Over sizes and label bits.
+    let mut h = Fnv::default();
+    let mut feed = |bytes: &[u8]| h.feed(bytes);
     for split in [&splits.train, &splits.val, &splits.test] {
         feed(&(split.len() as u64).to_le_bytes());
         for e in split {
@@ -226,7 +276,7 @@ fn fingerprint(splits: &Splits) -> String {
             feed(&(e.image.len() as u64).to_le_bytes());
         }
     }
-    format!("{h:016x}")
+    format!("{:016x}", h.0)
 }
 
 fn check_inputs(
@@ -391,14 +441,56 @@ pub fn train(
     checkpoint_dir: Option<&Path>,
     observer: &mut dyn Observer,
 ) -> Result<Trained, TrainError> {
+    train_from(config, train_config, splits, checkpoint_dir, None, observer)
+}
+
+/// [`train`], starting from `init`'s weights and label normalisation when given
+/// (fine-tuning; `config` must be `init.config`). The seed still drives the shuffle
+/// and the latent noise.
+pub fn train_from(
+    config: &ModelConfig,
+    train_config: &TrainConfig,
+    splits: &Splits,
+    checkpoint_dir: Option<&Path>,
+    init: Option<&InitFrom>,
+    observer: &mut dyn Observer,
+) -> Result<Trained, TrainError> {
     check_inputs(config, train_config, splits)?;
+    if let Some(init) = init
+        && init.config != *config
+    {
+        return Err(TrainError::Config(format!(
+            "the starting weights ({}) are a {} width {} latent {} input {}×{}×{}; the settings ask for a {} width {} latent {} input {}×{}×{}",
+            init.label,
+            init.config.kind,
+            init.config.width,
+            init.config.latent,
+            init.config.preprocess.channels,
+            init.config.preprocess.size_px,
+            init.config.preprocess.size_px,
+            config.kind,
+            config.width,
+            config.latent,
+            config.preprocess.channels,
+            config.preprocess.size_px,
+            config.preprocess.size_px,
+        )));
+    }
     let plain = crate::backend::device()?;
     let device = plain.clone().autodiff();
     let fingerprint = fingerprint(splits);
-    let labels: Vec<WrenchLabel> = splits.train.iter().map(|e| e.label).collect();
-    let norm = LabelNorm::fit(&labels)?;
-
-    let mut net = init_net(config, train_config.seed, &device);
+    let init_label = init.map(|i| i.label.clone());
+    let (mut net, norm) = match init {
+        // The starting model's normalisation: its prediction head reads labels in it.
+        Some(init) => (load_net(init.weights.clone(), config, &device)?, init.norm),
+        None => {
+            let labels: Vec<WrenchLabel> = splits.train.iter().map(|e| e.label).collect();
+            (
+                init_net(config, train_config.seed, &device),
+                LabelNorm::fit(&labels)?,
+            )
+        }
+    };
     let mut optimizer: ModuleOptimizer = AdamConfig::new().init();
     let mut history = Vec::new();
     let (mut start_epoch, mut best_epoch, mut best_score) = (0usize, 0usize, f64::MIN);
@@ -421,6 +513,18 @@ pub fn train(
                     dir.display(),
                     state.config.kind,
                     state.train
+                )));
+            }
+            if state.init_from != init_label {
+                return Err(TrainError::Checkpoint(format!(
+                    "{} holds a training that started from {}, not from {}; \
+                     pass a new name, or restart to discard it",
+                    dir.display(),
+                    state
+                        .init_from
+                        .as_deref()
+                        .unwrap_or("the seed's initialisation"),
+                    init_label.as_deref().unwrap_or("the seed's initialisation"),
                 )));
             }
             if state.data_fingerprint != fingerprint {
@@ -578,6 +682,7 @@ pub fn train(
                     best_file: format!("best-{best_epoch:04}.model"),
                     history: history.clone(),
                     seconds: seconds_before + started.elapsed().as_secs_f64(),
+                    init_from: init_label.clone(),
                 },
             )?;
         }
@@ -620,6 +725,7 @@ pub fn train(
             train_images_per_s: train_rate,
             val,
             test,
+            init_from: init_label,
         }),
     };
     Ok(Trained {

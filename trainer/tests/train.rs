@@ -9,8 +9,8 @@ use softtouch_drivers::sim::SceneSim;
 use softtouch_schemas::ContactPose;
 use softtouch_trainer::labels::label_from_si;
 use softtouch_trainer::{
-    Example, ModelArtifact, ModelConfig, ModelKind, Predictor, Preprocess, Quiet, Splits,
-    TrainConfig, TrainError, train,
+    Example, InitFrom, ModelArtifact, ModelConfig, ModelKind, Predictor, Preprocess, Quiet, Splits,
+    TrainConfig, TrainError, train, train_from,
 };
 
 const SIZE: usize = 16;
@@ -124,6 +124,99 @@ fn the_same_seed_gives_the_same_metrics_and_another_seed_does_not() {
             "seed 6 gave seed 5's loss: {a:?} vs {c:?}"
         );
     }
+}
+
+/// Fine-tuning starts from the given weights and normalisation: with a learning rate
+/// too small to move them, the result is the starting model (a scratch run with the
+/// same rate is an untrained one); the start is recorded, and a checkpoint of a
+/// fine-tuning is not resumed as a training from scratch (or the reverse).
+#[test]
+fn fine_tuning_starts_from_the_given_weights() {
+    let config = tiny(ModelKind::Svae);
+    let base = train(&config, &quick(8), splits(), None, &mut Quiet).expect("trains");
+    let base_r2 = base
+        .artifact
+        .header
+        .training
+        .as_ref()
+        .and_then(|s| s.test.r2_mean)
+        .expect("R²");
+    assert!(base_r2 > 0.5, "the starting model learnt: {base_r2}");
+    let init = InitFrom::from_artifact("base", &base.artifact).expect("init");
+    assert!(init.label.starts_with("base (weights "), "{}", init.label);
+    let frozen = TrainConfig {
+        learning_rate: 1e-12,
+        ..quick(1)
+    };
+    let tuned =
+        train_from(&config, &frozen, splits(), None, Some(&init), &mut Quiet).expect("tunes");
+    let s = tuned.artifact.header.training.as_ref().expect("summary");
+    let tuned_r2 = s.test.r2_mean.expect("R²");
+    assert!(
+        (tuned_r2 - base_r2).abs() < 0.05,
+        "a frozen fine-tuning is the starting model: {tuned_r2} vs {base_r2}"
+    );
+    assert_eq!(s.init_from.as_deref(), Some(init.label.as_str()));
+    assert_eq!(tuned.artifact.header.norm, base.artifact.header.norm);
+    let scratch = train(&config, &frozen, splits(), None, &mut Quiet).expect("trains");
+    let scratch_r2 = scratch
+        .artifact
+        .header
+        .training
+        .as_ref()
+        .and_then(|s| s.test.r2_mean)
+        .expect("R²");
+    assert!(
+        scratch_r2 < base_r2 - 0.3,
+        "frozen from scratch is untrained: {scratch_r2} vs {base_r2}"
+    );
+    assert_eq!(
+        scratch.artifact.header.training.and_then(|s| s.init_from),
+        None
+    );
+
+    // Other settings than the starting model's are refused before training.
+    let other = ModelConfig {
+        latent: 16,
+        ..config
+    };
+    let e =
+        train_from(&other, &frozen, splits(), None, Some(&init), &mut Quiet).expect_err("refused");
+    assert!(
+        matches!(e, TrainError::Config(ref m) if m.contains("latent 8")),
+        "{e}"
+    );
+
+    // A checkpoint remembers where its training started.
+    let dir = tempfile::tempdir().expect("tempdir");
+    train_from(
+        &config,
+        &frozen,
+        splits(),
+        Some(dir.path()),
+        Some(&init),
+        &mut Quiet,
+    )
+    .expect("tunes");
+    let more = TrainConfig {
+        epochs: 2,
+        ..frozen
+    };
+    let e = train(&config, &more, splits(), Some(dir.path()), &mut Quiet).expect_err("refused");
+    assert!(
+        matches!(e, TrainError::Checkpoint(ref m) if m.contains("started from base (weights")),
+        "{e}"
+    );
+    let resumed = train_from(
+        &config,
+        &more,
+        splits(),
+        Some(dir.path()),
+        Some(&init),
+        &mut Quiet,
+    )
+    .expect("resumes");
+    assert_eq!(resumed.resumed_after, Some(1));
 }
 
 /// Equal up to the last bits: multithreaded kernels may sum in another order when

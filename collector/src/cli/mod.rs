@@ -12,6 +12,7 @@ pub mod db;
 pub mod eval;
 pub mod grasp;
 pub mod grasp_trials;
+pub mod latent;
 pub mod live;
 pub mod report;
 pub mod rig;
@@ -108,6 +109,7 @@ pub enum Command {
   softtouch train --dataset air
   softtouch train --dataset air --model convnet --epochs 20 --name air-cnn
   softtouch train --dataset air --alpha 10 --beta 0.1 --latent 64 --out air-a10.stm
+  softtouch train --dataset water --init land-svae     # fine-tune a land model on water data
 
 Interrupted? Run the same command again: it resumes from the last epoch's checkpoint.")]
     Train(train::TrainArgs),
@@ -131,10 +133,23 @@ Interrupted? Run the same command again: it resumes from the last epoch's checkp
 The water runs must be collected with --poses-from a run of the land dataset: pairs are
 the water test samples whose partner (same run index) is in the land dataset.")]
     Transfer(transfer::TransferArgs),
+    /// Latent figures (Figure 3): the correlation map of the latent dimensions, the
+    /// latent-to-wrench correlation map, decoder traversals with one latent varied over
+    /// [−5, 5], and with --water the latent values of paired land and water instances.
+    #[command(after_help = "Examples:
+  softtouch latent land-svae --dataset land
+  softtouch latent land-svae --dataset land --water water        # + paired instances
+  softtouch latent land-l6 land-l16 land-l32 --dataset land       # one set per latent size
+  softtouch latent land-svae --dataset land --dims 0,5,9 --span 3
+
+Writes MODEL-latent-correlation.png, MODEL-latent-wrench.png, MODEL-traversal.png,
+MODEL-paired.png (with --water) and MODEL-latent.csv under --out (latent-out).")]
+    Latent(latent::LatentArgs),
     /// List stored models with their test metrics.
     #[command(after_help = "Example:\n  softtouch models")]
     Models,
-    /// Sweep a setting and train once per value: α (the paper's Table 1) or latent size.
+    /// Sweep a setting and train once per value: α (the paper's Table 1), latent size,
+    /// or the training samples of a fine-tuning.
     #[command(subcommand)]
     Sweep(sweep::SweepCommand),
     /// Write one self-contained HTML page of the database: runs, datasets, models,
@@ -235,6 +250,7 @@ pub async fn run(cli: Cli, out: &mut dyn std::io::Write) -> Result<(), Failure> 
         Command::Train(args) => train::run_train(args, &cli.db, out).await,
         Command::Eval(args) => eval::run_eval(args, &cli.db, out).await,
         Command::Transfer(args) => transfer::run_transfer(args, &cli.db, out).await,
+        Command::Latent(args) => latent::run_latent(args, &cli.db, out).await,
         Command::Models => eval::run_models(&cli.db, out).await,
         Command::Sweep(cmd) => sweep::run_sweep(cmd, &cli.db, out).await,
         Command::Report(args) => report::run_report(args, &cli.db, out).await,

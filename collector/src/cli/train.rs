@@ -7,7 +7,9 @@ use crate::progress::{TrainProgress, progress_bar};
 use crate::store::Store;
 use anyhow::anyhow;
 use clap::Args;
-use softtouch_trainer::{ModelConfig, ModelKind, Preprocess, Splits, TrainConfig, Trained};
+use softtouch_trainer::{
+    InitFrom, ModelConfig, ModelKind, Preprocess, Splits, TrainConfig, Trained,
+};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -56,7 +58,45 @@ pub struct ModelArgs {
     pub seed: u64,
 }
 
+/// One line naming a model's settings.
+pub(crate) fn describe(m: &ModelConfig) -> String {
+    format!(
+        "{} width {} latent {} input {}×{}×{} α {} β {}",
+        m.kind,
+        m.width,
+        m.latent,
+        m.preprocess.channels,
+        m.preprocess.size_px,
+        m.preprocess.size_px,
+        m.alpha,
+        m.beta
+    )
+}
+
 impl ModelArgs {
+    /// [`Self::configs`] for a training that starts from a model of settings `init`:
+    /// the model's settings are `init`'s, and flags that would set others are refused
+    /// (flags left at their defaults, or matching `init`, are fine).
+    pub(crate) fn configs_from(
+        &self,
+        init: Option<(&str, &ModelConfig)>,
+    ) -> Result<(ModelConfig, TrainConfig), Failure> {
+        let (model, train) = self.configs()?;
+        let Some((name, init)) = init else {
+            return Ok((model, train));
+        };
+        if model == ModelConfig::default() || model == *init {
+            return Ok((*init, train));
+        }
+        Err(Failure::BadInput(anyhow!(
+            "--init {name}: that model is a {}, the flags ask for a {}; \
+             leave out --model, --alpha, --beta, --latent, --width, --size and --channels \
+             (the settings come from the starting model)",
+            describe(init),
+            describe(&model)
+        )))
+    }
+
     pub(crate) fn configs(&self) -> Result<(ModelConfig, TrainConfig), Failure> {
         let model = ModelConfig {
             kind: self.model,
@@ -111,6 +151,11 @@ pub struct TrainArgs {
     /// Discard an existing checkpoint of this name instead of resuming it.
     #[arg(long)]
     pub restart: bool,
+    /// Start from this stored model's weights and label normalisation instead of a
+    /// fresh initialisation: fine-tuning, e.g. a land model on a little water data.
+    /// The model's settings come from it (default name: DATASET-from-MODEL).
+    #[arg(long, value_name = "MODEL")]
+    pub init: Option<String>,
     #[command(flatten)]
     pub model: ModelArgs,
 }
@@ -154,13 +199,24 @@ fn default_checkpoints(db: &Path) -> PathBuf {
 
 /// `softtouch train`.
 pub async fn run_train(args: TrainArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
-    let (model, train) = args.model.configs()?;
-    let name = args
-        .name
-        .clone()
-        .unwrap_or_else(|| format!("{}-{}", args.dataset, model.kind));
-    crate::dataset::validate_name(&name).map_err(|e| Failure::BadInput(e.into()))?;
     let store = open_existing(db).await?;
+    let init = match &args.init {
+        Some(init_name) => {
+            let device = softtouch_trainer::backend::device()?;
+            let bytes = models::artifact(&store, init_name).await?;
+            let artifact = softtouch_trainer::ModelArtifact::from_bytes(&bytes, &device)?;
+            Some(InitFrom::from_artifact(init_name, &artifact)?)
+        }
+        None => None,
+    };
+    let (model, train) = args
+        .model
+        .configs_from(args.init.as_deref().zip(init.as_ref().map(|i| &i.config)))?;
+    let name = args.name.clone().unwrap_or_else(|| match &args.init {
+        Some(init) => format!("{}-from-{init}", args.dataset),
+        None => format!("{}-{}", args.dataset, model.kind),
+    });
+    crate::dataset::validate_name(&name).map_err(|e| Failure::BadInput(e.into()))?;
     if models::find(&store, &name).await?.is_some() {
         return Err(Failure::BadInput(anyhow!(
             "a model named `{name}` already exists: pass --name to choose another"
@@ -177,23 +233,26 @@ pub async fn run_train(args: TrainArgs, db: &Path, out: &mut dyn Write) -> Resul
     }
     writeln!(
         out,
-        "training {name}: {} width {} latent {} input {}×{}×{} α {} β {}, batch {}, up to {} epochs (checkpoints in {})",
-        model.kind,
-        model.width,
-        model.latent,
-        model.preprocess.channels,
-        model.preprocess.size_px,
-        model.preprocess.size_px,
-        model.alpha,
-        model.beta,
+        "training {name}: {}, batch {}, up to {} epochs{} (checkpoints in {})",
+        describe(&model),
         train.batch_size,
         train.epochs,
+        init.as_ref()
+            .map(|i| format!(", starting from {}", i.label))
+            .unwrap_or_default(),
         dir.display()
     )
     .map_err(io_failure)?;
     let trained = {
         let mut progress = TrainProgress::new(out, train.epochs, true);
-        softtouch_trainer::train(&model, &train, &splits, Some(&dir), &mut progress)?
+        softtouch_trainer::train_from(
+            &model,
+            &train,
+            &splits,
+            Some(&dir),
+            init.as_ref(),
+            &mut progress,
+        )?
     };
     report_trained(&trained, out)?;
     models::record(&store, &name, &args.dataset, &trained).await?;
@@ -224,6 +283,9 @@ fn report_trained(trained: &Trained, out: &mut dyn Write) -> Result<(), Failure>
             s.train_images_per_s
         )
         .map_err(io_failure)?;
+        if let Some(init) = &s.init_from {
+            writeln!(out, "fine-tuned from {init}").map_err(io_failure)?;
+        }
         write!(out, "test split:\n{}", s.test.render()).map_err(io_failure)?;
     }
     Ok(())

@@ -853,10 +853,12 @@ fn land_to_water_section() -> Markup {
     html! {
         section #land-to-water {
             h2 { "Land to water" }
-            (todo("This report does not show the land-to-water comparison yet (fine-tuning and the latent figures are not built either). Collect the water run with the land run's poses and compare them; softtouch transfer prints the table and writes a CSV:",
+            (todo("This report does not show the land-to-water comparison yet. Collect the water run with the land run's poses; softtouch transfer prints the comparison and writes a CSV, sweep finetune the fine-tuning curve (CSV, PNG), latent the latent figures (PNGs):",
                   &["softtouch collect --scene scenes/water.toml --poses-from 1",
                     "softtouch dataset create water-v1 --runs 2",
-                    "softtouch transfer --model land-v1-svae --land land-v1 --water water-v1"]))
+                    "softtouch transfer --model land-v1-svae --land land-v1 --water water-v1",
+                    "softtouch sweep finetune --init land-v1-svae --dataset water-v1",
+                    "softtouch latent land-v1-svae --dataset land-v1 --water water-v1"]))
         }
     }
 }
