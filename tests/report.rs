@@ -4,27 +4,12 @@
 //! database gives a page of verbs to run; bad options exit 2.
 
 mod common;
-use common::{fails_with, ok, runtime, simulated_dataset, softtouch, tempdir};
+use common::{TINY, fails_with, ok, runtime, simulated_dataset, softtouch, tempdir};
 
 use scraper::{Html, Selector};
 use sqlx::Row as _;
 use sqlx::sqlite::{SqliteConnectOptions, SqlitePoolOptions};
 use std::path::Path;
-
-const TINY: [&str; 12] = [
-    "--size",
-    "16",
-    "--width",
-    "4",
-    "--latent",
-    "8",
-    "--epochs",
-    "2",
-    "--batch",
-    "32",
-    "--patience",
-    "0",
-];
 
 /// `samples` simulated samples, dataset `air` over them, and `models` tiny models.
 fn lab(dir: &Path, samples: &str, models: &[&str]) {

@@ -3,25 +3,31 @@
 //! and written as a CSV; unpaired datasets and bad options exit 2.
 
 mod common;
-use common::{fails_with, ok, softtouch, tempdir};
+use common::{TINY, fails_with, ok, softtouch, tempdir};
 use std::path::Path;
 
-const TINY: [&str; 14] = [
-    "--size",
-    "16",
-    "--width",
-    "4",
-    "--latent",
-    "8",
-    "--epochs",
-    "2",
-    "--batch",
-    "32",
-    "--patience",
-    "0",
-    "--seed",
-    "1",
-];
+/// A database with a land run (run 1, `samples` samples, seed 4) and a water run
+/// with its poses (run 2, `collect --poses-from 1`), and datasets `land` and `water`
+/// of them; returns the water scene's path.
+fn paired_land_and_water(d: &Path, samples: &str) -> String {
+    let water = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/water.toml");
+    let water = water.to_str().unwrap_or_default().to_owned();
+    ok(&softtouch(d, &["db", "init"]));
+    ok(&softtouch(
+        d,
+        &["collect", "--samples", samples, "--seed", "4"],
+    ));
+    ok(&softtouch(
+        d,
+        &["collect", "--scene", &water, "--poses-from", "1"],
+    ));
+    ok(&softtouch(d, &["dataset", "create", "land", "--runs", "1"]));
+    ok(&softtouch(
+        d,
+        &["dataset", "create", "water", "--runs", "2"],
+    ));
+    water
+}
 
 fn train(d: &Path, dataset: &str) {
     let mut args = vec!["train", "--dataset", dataset];
@@ -33,17 +39,8 @@ fn train(d: &Path, dataset: &str) {
 fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
     let dir = tempdir();
     let d = dir.path();
-    let water = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/water.toml");
-    let water = water.to_str().unwrap_or_default();
-    ok(&softtouch(d, &["db", "init"]));
-    ok(&softtouch(
-        d,
-        &["collect", "--samples", "150", "--seed", "4"],
-    ));
-    ok(&softtouch(
-        d,
-        &["collect", "--scene", water, "--poses-from", "1"],
-    ));
+    let water = paired_land_and_water(d, "150");
+    let water = water.as_str();
     // A water run of its own, with no partner on land.
     ok(&softtouch(
         d,
@@ -56,11 +53,6 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
             "--seed",
             "9",
         ],
-    ));
-    ok(&softtouch(d, &["dataset", "create", "land", "--runs", "1"]));
-    ok(&softtouch(
-        d,
-        &["dataset", "create", "water", "--runs", "2"],
     ));
     ok(&softtouch(
         d,
@@ -210,22 +202,7 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
 fn fine_tuning_and_latent_figures_from_a_land_model() {
     let dir = tempdir();
     let d = dir.path();
-    let water = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/water.toml");
-    let water = water.to_str().unwrap_or_default();
-    ok(&softtouch(d, &["db", "init"]));
-    ok(&softtouch(
-        d,
-        &["collect", "--samples", "120", "--seed", "4"],
-    ));
-    ok(&softtouch(
-        d,
-        &["collect", "--scene", water, "--poses-from", "1"],
-    ));
-    ok(&softtouch(d, &["dataset", "create", "land", "--runs", "1"]));
-    ok(&softtouch(
-        d,
-        &["dataset", "create", "water", "--runs", "2"],
-    ));
+    paired_land_and_water(d, "120");
     train(d, "land");
 
     // train --init: the settings come from the starting model; the start is recorded.

@@ -238,15 +238,28 @@ pub(crate) fn fmt_opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {
     v.map_or_else(|| "–".to_owned(), f)
 }
 
+/// CSV columns `,r2_fx … ,r2_tz` (header) for [`push_axis_r2`].
+pub(crate) fn push_axis_r2_header(s: &mut String) {
+    for a in AXES {
+        s.push_str(&format!(",r2_{}", a.to_lowercase()));
+    }
+}
+
+/// The six per-axis R² of `m` as CSV cells, each after a comma (empty when absent).
+pub(crate) fn push_axis_r2(s: &mut String, m: &Metrics) {
+    for i in 0..6 {
+        s.push(',');
+        s.push_str(&fmt_opt(m.r2.map(|x| x[i].r2), |v| format!("{v:.6}")));
+    }
+}
+
 /// The rows as CSV: settings, timings, image MSE, mean and per-axis test R².
 #[must_use]
 pub fn rows_csv(rows: &[Row]) -> String {
     let mut s = String::from(
         "label,model,alpha,beta,latent,width,size_px,epochs,seconds_per_epoch,train_images_per_s,latency_ms,frame_latency_ms,image_mse,r2_mean",
     );
-    for a in AXES {
-        s.push_str(&format!(",r2_{}", a.to_lowercase()));
-    }
+    push_axis_r2_header(&mut s);
     s.push('\n');
     for r in rows {
         let c = &r.config;
@@ -267,10 +280,7 @@ pub fn rows_csv(rows: &[Row]) -> String {
             fmt_opt(r.test.image_mse, |v| format!("{v:.6e}")),
             fmt_opt(r.test.r2_mean, |v| format!("{v:.6}")),
         ));
-        for i in 0..6 {
-            s.push(',');
-            s.push_str(&fmt_opt(r.test.r2.map(|x| x[i].r2), |v| format!("{v:.6}")));
-        }
+        push_axis_r2(&mut s, &r.test);
         s.push('\n');
     }
     s

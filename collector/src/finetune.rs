@@ -7,14 +7,14 @@
 //! samples as the dataset's split ratio gives n training samples: a lab with 100 water
 //! samples does not have the full validation split either.
 
-use crate::experiments::{ExperimentError, fmt_opt};
+use crate::experiments::{ExperimentError, fmt_opt, push_axis_r2, push_axis_r2_header};
 use crate::plot::{Series, SeriesStyle, XyChart, xy_chart};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use softtouch_trainer::train::Observer;
 use softtouch_trainer::{
-    AXES, EpochReport, InitFrom, Metrics, ModelArtifact, Splits, TrainConfig, evaluate,
+    EpochReport, InitFrom, Metrics, ModelArtifact, Splits, TrainConfig, evaluate,
 };
 use std::path::Path;
 
@@ -77,26 +77,34 @@ pub fn val_size(n: usize, splits: &Splits) -> usize {
         .min(splits.val.len())
 }
 
-/// Checks a list of subset sizes against the dataset.
+/// Checks a list of subset sizes on its own, before any data is loaded.
 ///
 /// # Errors
-/// An empty list, a size of 1 (batch norm needs two), or one beyond the train split.
-pub fn check_sizes(sizes: &[usize], splits: &Splits) -> Result<(), ExperimentError> {
+/// An empty list, or a size of 1 (batch norm needs two).
+pub fn check_requested(sizes: &[usize]) -> Result<(), ExperimentError> {
     if sizes.is_empty() {
         return Err(ExperimentError::Invalid(
             "--samples: expected at least one size".into(),
         ));
     }
+    if sizes.contains(&1) {
+        return Err(ExperimentError::Invalid(
+            "--samples 1: training needs at least 2 samples (batch norm); 0 tests the starting model as it is".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Checks a list of subset sizes against the dataset (after [`check_requested`]).
+///
+/// # Errors
+/// A size beyond the train split, or a validation split of fewer than 2 samples.
+pub fn check_sizes(sizes: &[usize], splits: &Splits) -> Result<(), ExperimentError> {
     if let Some(n) = sizes.iter().find(|n| **n > splits.train.len()) {
         return Err(ExperimentError::Invalid(format!(
             "--samples {n}: the dataset's train split holds {}",
             splits.train.len()
         )));
-    }
-    if sizes.contains(&1) {
-        return Err(ExperimentError::Invalid(
-            "--samples 1: training needs at least 2 samples (batch norm); 0 tests the starting model as it is".into(),
-        ));
     }
     if splits.val.len() < 2 {
         return Err(ExperimentError::Invalid(format!(
@@ -186,9 +194,7 @@ pub fn rows_csv(rows: &[FinetuneRow]) -> String {
     let mut s = String::from(
         "samples,val_samples,start,epochs_run,best_epoch,epochs_to_target,seconds,r2_mean,r2_min",
     );
-    for a in AXES {
-        s.push_str(&format!(",r2_{}", a.to_lowercase()));
-    }
+    push_axis_r2_header(&mut s);
     s.push('\n');
     for r in rows {
         s.push_str(&format!(
@@ -203,10 +209,7 @@ pub fn rows_csv(rows: &[FinetuneRow]) -> String {
             fmt_opt(r.test.r2_mean, |v| format!("{v:.6}")),
             fmt_opt(r.test.r2_min(), |v| format!("{v:.6}")),
         ));
-        for i in 0..6 {
-            s.push(',');
-            s.push_str(&fmt_opt(r.test.r2.map(|x| x[i].r2), |v| format!("{v:.6}")));
-        }
+        push_axis_r2(&mut s, &r.test);
         s.push('\n');
     }
     s
@@ -306,12 +309,15 @@ mod tests {
     #[test]
     fn sizes_beyond_the_split_or_of_one_are_refused() {
         let s = splits(10, 4);
-        assert!(check_sizes(&[0, 2, 10], &s).is_ok());
+        let check = |sizes: &[usize], s: &Splits| {
+            check_requested(sizes).and_then(|()| check_sizes(sizes, s))
+        };
+        assert!(check(&[0, 2, 10], &s).is_ok());
         for bad in [&[][..], &[11][..], &[1][..]] {
-            let e = check_sizes(bad, &s).expect_err("refused");
+            let e = check(bad, &s).expect_err("refused");
             assert!(e.to_string().contains("--samples"), "{e}");
         }
-        assert!(check_sizes(&[2], &splits(10, 1)).is_err());
+        assert!(check(&[2], &splits(10, 1)).is_err());
     }
 
     #[test]

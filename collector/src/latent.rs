@@ -9,8 +9,17 @@
 use crate::plot::{FONT_FAMILY, PALETTE, PlotError, register_font};
 use burn::prelude::*;
 use plotters::prelude::*;
-use softtouch_trainer::{ModelArtifact, TrainError};
+use softtouch_trainer::{Example, ModelArtifact, TrainError};
 use std::path::Path;
+
+/// Each example's label as a row of f64 (Fx … Tz), to correlate latents with.
+#[must_use]
+pub fn wrench_rows(examples: &[Example]) -> Vec<Vec<f64>> {
+    examples
+        .iter()
+        .map(|e| e.label.iter().map(|v| f64::from(*v)).collect())
+        .collect()
+}
 
 /// The latent values a traversal shows: `steps` values evenly over `[-span, span]`.
 #[must_use]

@@ -66,29 +66,28 @@ pub(crate) fn simulated_dataset(dir: &Path, samples: &str, seed: &str, name: &st
     ok(&softtouch(dir, &["dataset", "create", name, "--runs", "1"]));
 }
 
+/// The settings of a tiny model (16×16, width 4, latent 8, 2 epochs, batch 32, no
+/// early stopping): quick to train, enough to close loops and fill reports with.
+pub(crate) const TINY: [&str; 12] = [
+    "--size",
+    "16",
+    "--width",
+    "4",
+    "--latent",
+    "8",
+    "--epochs",
+    "2",
+    "--batch",
+    "32",
+    "--patience",
+    "0",
+];
+
 /// [`simulated_dataset`] (120 samples, dataset `air`) with a tiny model `air-svae`
-/// trained on it (16×16, width 4, latent 8, 2 epochs): what the grasp and live tests
-/// close their loops with.
+/// ([`TINY`]) trained on it: what the grasp and live tests close their loops with.
 pub(crate) fn tiny_model(d: &Path) {
     simulated_dataset(d, "120", "5", "air");
-    ok(&softtouch(
-        d,
-        &[
-            "train",
-            "--dataset",
-            "air",
-            "--size",
-            "16",
-            "--width",
-            "4",
-            "--latent",
-            "8",
-            "--epochs",
-            "2",
-            "--batch",
-            "32",
-            "--patience",
-            "0",
-        ],
-    ));
+    let mut args = vec!["train", "--dataset", "air"];
+    args.extend(TINY);
+    ok(&softtouch(d, &args));
 }

@@ -116,6 +116,21 @@ impl ModelConfig {
         out
     }
 
+    /// One line naming the settings, e.g. `svae width 16 latent 32 input 1×32×32 α 1 β 0.1`.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} width {} latent {} input {}×{}×{} α {} β {}",
+            self.kind,
+            self.width,
+            self.latent,
+            self.preprocess.channels,
+            self.preprocess.size_px,
+            self.preprocess.size_px,
+            self.alpha,
+            self.beta
+        )
+    }
+
     /// Channels after the stem and after each residual stage.
     fn stage_channels(&self) -> Vec<usize> {
         let stages = (self.preprocess.size_px / 8).max(1).ilog2() as usize;

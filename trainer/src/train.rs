@@ -460,20 +460,10 @@ pub fn train_from(
         && init.config != *config
     {
         return Err(TrainError::Config(format!(
-            "the starting weights ({}) are a {} width {} latent {} input {}×{}×{}; the settings ask for a {} width {} latent {} input {}×{}×{}",
+            "the starting weights ({}) are a {}; the settings ask for a {}",
             init.label,
-            init.config.kind,
-            init.config.width,
-            init.config.latent,
-            init.config.preprocess.channels,
-            init.config.preprocess.size_px,
-            init.config.preprocess.size_px,
-            config.kind,
-            config.width,
-            config.latent,
-            config.preprocess.channels,
-            config.preprocess.size_px,
-            config.preprocess.size_px,
+            init.config.describe(),
+            config.describe()
         )));
     }
     let plain = crate::backend::device()?;

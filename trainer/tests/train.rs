@@ -126,6 +126,17 @@ fn the_same_seed_gives_the_same_metrics_and_another_seed_does_not() {
     }
 }
 
+/// The mean test R² a training reports.
+fn test_r2_mean(trained: &softtouch_trainer::Trained) -> f64 {
+    trained
+        .artifact
+        .header
+        .training
+        .as_ref()
+        .and_then(|s| s.test.r2_mean)
+        .expect("R²")
+}
+
 /// Fine-tuning starts from the given weights and normalisation: with a learning rate
 /// too small to move them, the result is the starting model (a scratch run with the
 /// same rate is an untrained one); the start is recorded, and a checkpoint of a
@@ -134,13 +145,7 @@ fn the_same_seed_gives_the_same_metrics_and_another_seed_does_not() {
 fn fine_tuning_starts_from_the_given_weights() {
     let config = tiny(ModelKind::Svae);
     let base = train(&config, &quick(8), splits(), None, &mut Quiet).expect("trains");
-    let base_r2 = base
-        .artifact
-        .header
-        .training
-        .as_ref()
-        .and_then(|s| s.test.r2_mean)
-        .expect("R²");
+    let base_r2 = test_r2_mean(&base);
     assert!(base_r2 > 0.5, "the starting model learnt: {base_r2}");
     let init = InitFrom::from_artifact("base", &base.artifact).expect("init");
     assert!(init.label.starts_with("base (weights "), "{}", init.label);
@@ -159,13 +164,7 @@ fn fine_tuning_starts_from_the_given_weights() {
     assert_eq!(s.init_from.as_deref(), Some(init.label.as_str()));
     assert_eq!(tuned.artifact.header.norm, base.artifact.header.norm);
     let scratch = train(&config, &frozen, splits(), None, &mut Quiet).expect("trains");
-    let scratch_r2 = scratch
-        .artifact
-        .header
-        .training
-        .as_ref()
-        .and_then(|s| s.test.r2_mean)
-        .expect("R²");
+    let scratch_r2 = test_r2_mean(&scratch);
     assert!(
         scratch_r2 < base_r2 - 0.3,
         "frozen from scratch is untrained: {scratch_r2} vs {base_r2}"

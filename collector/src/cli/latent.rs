@@ -3,16 +3,17 @@
 
 use super::{Failure, io_failure, open_existing};
 use crate::latent::{
-    column_means, draw_pairs, mean_off_diagonal, strongest_dims, traversal_values, write_traversal,
+    column_means, draw_pairs, mean_off_diagonal, strongest_dims, traversal_values, wrench_rows,
+    write_traversal,
 };
 use crate::models;
 use crate::plot::{Heatmap, heatmap};
-use crate::transfer::{TestSplit, paired_test, test_split};
+use crate::transfer::{Pairs, TestSplit, paired_test, test_split};
 use anyhow::anyhow;
 use clap::Args;
 use softtouch_schemas::wrench::AXES;
 use softtouch_trainer::similarity::{cosine_similarities, cross_correlation};
-use softtouch_trainer::{Example, FingerTable, ModelArtifact, Preprocess, latent_means};
+use softtouch_trainer::{FingerTable, ModelArtifact, Preprocess, latent_means};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -48,13 +49,6 @@ pub struct LatentArgs {
     pub out: PathBuf,
 }
 
-fn to_rows(labels: &[Example]) -> Vec<Vec<f64>> {
-    labels
-        .iter()
-        .map(|e| e.label.iter().map(|v| f64::from(*v)).collect())
-        .collect()
-}
-
 fn check(args: &LatentArgs) -> Result<(), Failure> {
     let mut problems = Vec::new();
     if !(args.span.is_finite() && args.span > 0.0) {
@@ -82,9 +76,9 @@ pub async fn run_latent(args: LatentArgs, db: &Path, out: &mut dyn Write) -> Res
     let device = softtouch_trainer::backend::device()?;
     std::fs::create_dir_all(&args.out)
         .map_err(|e| Failure::Runtime(anyhow!("cannot create {}: {e}", args.out.display())))?;
-    // Test splits preprocessed for the last model's input; reloaded only when the
-    // next model reads another input.
-    let mut loaded: Option<(Preprocess, TestSplit, Option<TestSplit>)> = None;
+    // The test split (and the land/water pairs) preprocessed for the last model's
+    // input; made again only when the next model reads another input.
+    let mut loaded: Option<(Preprocess, TestSplit, Option<Pairs>)> = None;
     for name in &args.models {
         let bytes = models::artifact(&store, name).await?;
         let artifact = ModelArtifact::from_bytes(&bytes, &device)?;
@@ -93,13 +87,16 @@ pub async fn run_latent(args: LatentArgs, db: &Path, out: &mut dyn Write) -> Res
         if loaded.as_ref().is_none_or(|(p, _, _)| *p != preprocess) {
             let table = FingerTable::new(&preprocess);
             let land = test_split(&store, &args.dataset, &table).await?;
-            let water = match &args.water {
-                Some(w) => Some(test_split(&store, w, &table).await?),
+            let pairs = match &args.water {
+                Some(w) => {
+                    let water = test_split(&store, w, &table).await?;
+                    Some(paired_test(&store, &land, &water, &table).await?)
+                }
                 None => None,
             };
-            loaded = Some((preprocess, land, water));
+            loaded = Some((preprocess, land, pairs));
         }
-        let Some((_, land, water)) = loaded.as_ref() else {
+        let Some((_, land, pairs)) = loaded.as_ref() else {
             continue;
         };
         if land.examples.len() < 3 {
@@ -124,7 +121,7 @@ pub async fn run_latent(args: LatentArgs, db: &Path, out: &mut dyn Write) -> Res
         )
         .map_err(io_failure)?;
         let latents = latent_means(&artifact.net, &h.config, &h.norm, &land.examples, &device);
-        let wrench = to_rows(&land.examples);
+        let wrench = wrench_rows(&land.examples);
         let bad = |e| Failure::BadInput(anyhow!("model {name} on `{}`: {e}", args.dataset));
         let map = cross_correlation(&latents, &latents).map_err(bad)?;
         let to_wrench = cross_correlation(&latents, &wrench).map_err(bad)?;
@@ -209,9 +206,7 @@ pub async fn run_latent(args: LatentArgs, db: &Path, out: &mut dyn Write) -> Res
         }
 
         // Figure 3a: paired instances, land against water.
-        if let Some(water) = water {
-            let table = FingerTable::new(&preprocess);
-            let pairs = paired_test(&store, land, water, &table).await?;
+        if let Some(pairs) = pairs {
             let k = args.pairs.min(pairs.land.len());
             let l = latent_means(&artifact.net, &h.config, &h.norm, &pairs.land[..k], &device);
             let w = latent_means(

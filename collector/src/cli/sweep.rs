@@ -2,11 +2,11 @@
 //! sweep, and fine-tuning a model on growing subsets of another dataset (issue 18).
 //! The grids and rows are [`crate::experiments`]'; this verb parses, calls and prints.
 
-use super::train::{ModelArgs, describe, load};
+use super::train::{ModelArgs, load};
 use super::{Failure, io_failure, open_existing};
 use crate::experiments::{self, Row, Sweep, fmt_opt};
 use crate::finetune::{self, Start};
-use crate::latent::{column_means, strongest_dims, traversal_values, write_traversal};
+use crate::latent::{column_means, strongest_dims, traversal_values, wrench_rows, write_traversal};
 use crate::models;
 use crate::progress::TrainProgress;
 use anyhow::anyhow;
@@ -180,11 +180,7 @@ fn latent_traversal(
     }
     let device = softtouch_trainer::backend::device()?;
     let latents = latent_means(&artifact.net, &h.config, &h.norm, &splits.test, &device);
-    let wrench: Vec<Vec<f64>> = splits
-        .test
-        .iter()
-        .map(|e| e.label.iter().map(|v| f64::from(*v)).collect())
-        .collect();
+    let wrench = wrench_rows(&splits.test);
     // Too few test samples or constant latents: traverse the first dimensions instead.
     let strongest = cross_correlation(&latents, &wrench)
         .map(|m| strongest_dims(&m))
@@ -237,6 +233,7 @@ async fn run_finetune(args: FinetuneArgs, db: &Path, out: &mut dyn Write) -> Res
     let mut sizes = args.samples.clone();
     sizes.sort_unstable();
     sizes.dedup();
+    finetune::check_requested(&sizes)?;
     let store = open_existing(db).await?;
     let device = softtouch_trainer::backend::device()?;
     let bytes = models::artifact(&store, &args.init).await?;
@@ -251,7 +248,7 @@ async fn run_finetune(args: FinetuneArgs, db: &Path, out: &mut dyn Write) -> Res
         "fine-tuning {} on `{}`: {} (epochs ≤ {}, lr {} × {} per epoch, patience {})",
         init.label,
         args.dataset,
-        describe(&init.config),
+        init.config.describe(),
         train.epochs,
         train.learning_rate,
         train.lr_decay,

@@ -58,21 +58,6 @@ pub struct ModelArgs {
     pub seed: u64,
 }
 
-/// One line naming a model's settings.
-pub(crate) fn describe(m: &ModelConfig) -> String {
-    format!(
-        "{} width {} latent {} input {}×{}×{} α {} β {}",
-        m.kind,
-        m.width,
-        m.latent,
-        m.preprocess.channels,
-        m.preprocess.size_px,
-        m.preprocess.size_px,
-        m.alpha,
-        m.beta
-    )
-}
-
 impl ModelArgs {
     /// [`Self::configs`] for a training that starts from a model of settings `init`:
     /// the model's settings are `init`'s, and flags that would set others are refused
@@ -92,8 +77,8 @@ impl ModelArgs {
             "--init {name}: that model is a {}, the flags ask for a {}; \
              leave out --model, --alpha, --beta, --latent, --width, --size and --channels \
              (the settings come from the starting model)",
-            describe(init),
-            describe(&model)
+            init.describe(),
+            model.describe()
         )))
     }
 
@@ -234,7 +219,7 @@ pub async fn run_train(args: TrainArgs, db: &Path, out: &mut dyn Write) -> Resul
     writeln!(
         out,
         "training {name}: {}, batch {}, up to {} epochs{} (checkpoints in {})",
-        describe(&model),
+        model.describe(),
         train.batch_size,
         train.epochs,
         init.as_ref()
