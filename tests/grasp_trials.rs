@@ -68,6 +68,17 @@ async fn session_rows(db: &Path, session: i64) -> Vec<TrialRow> {
     .unwrap_or_else(|e| panic!("session {session}'s trials: {e}"))
 }
 
+async fn execute(db: &Path, sql: &'static str) {
+    let options = sqlx::sqlite::SqliteConnectOptions::new().filename(db);
+    let mut conn = sqlx::ConnectOptions::connect(&options)
+        .await
+        .unwrap_or_else(|e| panic!("open {}: {e}", db.display()));
+    sqlx::query(sql)
+        .execute(&mut conn)
+        .await
+        .unwrap_or_else(|e| panic!("{sql}: {e}"));
+}
+
 async fn count(db: &Path, sql: &'static str) -> i64 {
     let options = sqlx::sqlite::SqliteConnectOptions::new()
         .filename(db)
@@ -291,6 +302,25 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
         "outside the Hand-E's 50 mm stroke",
     );
     fails_with(&trials(d, &["--resume", "99"]), 2, "no grasp session 99");
+    // The session recorded the model's sha256; a model changed under its name since
+    // is refused on resume.
+    assert_eq!(
+        rt.block_on(count(
+            &db,
+            "SELECT COUNT(*) FROM grasp_sessions WHERE length(model_sha256) = 64 AND model_sha256 NOT GLOB '*[^0-9a-f]*'"
+        )),
+        rt.block_on(count(&db, "SELECT COUNT(*) FROM grasp_sessions")),
+        "every session records a sha256"
+    );
+    rt.block_on(execute(
+        &db,
+        "UPDATE grasp_sessions SET model_sha256 = 'feedfacefeedface' WHERE session_id = 5",
+    ));
+    fails_with(
+        &trials(d, &["--resume", "5"]),
+        2,
+        "model `air-svae` has changed since the session started (sha256 feedfacefeed then,",
+    );
     // A resumed session's settings are the stored ones: a flag beside it is refused.
     fails_with(
         &trials(d, &["--resume", "5", "--trials", "4"]),

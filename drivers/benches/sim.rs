@@ -1,8 +1,11 @@
 //! One simulated sample, stage by stage: contact, lattice solve, drawing, image
 //! effects, PNG encoding, and the whole. `absent_effects` shows that a scene with no
-//! effects spends nothing on them.
+//! effects spends nothing on them. The whole-sample rows alternate two poses, so the
+//! renderer's copy of the last drawn lattice never serves them (as in a collection,
+//! where every sample is a new pose); `8_same_pose_again` is that copy's case (a
+//! steady grasp).
 //!
-//! `cargo bench -p softtouch-drivers --bench sim`
+//! `cargo bench --workspace --bench sim`
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use softtouch_drivers::sim::{SceneSim, encode_png};
@@ -53,21 +56,29 @@ fn bench(c: &mut Criterion) {
     g.bench_function("5_png_encode", |b| {
         b.iter(|| encode_png(black_box(&frame.image)))
     });
+    let other = ContactPose { x_m: 0.03, ..pose };
+    let poses = [pose, other];
+    let mut k = 0;
     g.bench_function("6_full_sample_air", |b| {
         b.iter(|| {
+            k += 1;
             let r = sim
-                .render(rod, black_box(&pose), 0, 0.0)
+                .render(rod, black_box(&poses[k % 2]), 0, 0.0)
                 .unwrap_or_else(|e| panic!("{e}"));
             encode_png(&r.image)
         })
     });
     g.bench_function("7_full_sample_water", |b| {
         b.iter(|| {
+            k += 1;
             let r = wsim
-                .render(rod, black_box(&pose), 3, 0.1)
+                .render(rod, black_box(&poses[k % 2]), 3, 0.1)
                 .unwrap_or_else(|e| panic!("{e}"));
             encode_png(&r.image)
         })
+    });
+    g.bench_function("8_same_pose_again_water_no_png", |b| {
+        b.iter(|| wsim.render(rod, black_box(&pose), 3, 0.1))
     });
     g.finish();
 }

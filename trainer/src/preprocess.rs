@@ -127,18 +127,23 @@ impl Preprocess {
         rgb: &[u8],
         out: &mut [f32],
     ) -> Result<(), TrainError> {
-        self.squash(width, height, rgb, out, |r, g, b| self.is_finger(r, g, b))
+        self.squash(width, height, rgb, out, false, |r, g, b| {
+            self.is_finger(r, g, b)
+        })
     }
 
     /// The threshold and box filter, with `is_finger` deciding each pixel (the
-    /// direct test, or a [`FingerTable`] of it: the same decisions).
+    /// direct test, or a [`FingerTable`] of it: the same decisions). `split`: the
+    /// top and bottom halves of the output on two threads when there are two cores
+    /// (the same sums, so the same output).
     fn squash(
         &self,
         width: usize,
         height: usize,
         rgb: &[u8],
         out: &mut [f32],
-        is_finger: impl Fn(u8, u8, u8) -> bool,
+        split: bool,
+        is_finger: impl Fn(u8, u8, u8) -> bool + Sync,
     ) -> Result<(), TrainError> {
         if width == 0 || height == 0 {
             return Err(TrainError::Input(format!(
@@ -172,24 +177,44 @@ impl Preprocess {
         let columns: Vec<(usize, usize)> = (0..n).map(|ox| bounds(ox, width)).collect();
         // Integer sums (at most 255 × the box's pixels) are exact, as f32 sums of
         // integers below 2²⁴ were.
-        let mut acc = vec![[0u32; 3]; n];
-        for oy in 0..n {
-            let (y0, y1) = bounds(oy, height);
-            acc.iter_mut().for_each(|a| *a = [0; 3]);
-            for y in y0..y1 {
-                let row = &rgb[y * width * 3..(y + 1) * width * 3];
-                for (a, &(x0, x1)) in acc.iter_mut().zip(&columns) {
-                    for px in row[x0 * 3..x1 * 3].chunks_exact(3) {
-                        let (r, g, b) = (px[0], px[1], px[2]);
-                        if is_finger(r, g, b) {
-                            a[0] += u32::from(r);
-                            a[1] += u32::from(g);
-                            a[2] += u32::from(b);
+        // Output rows from `oy0` on, one row of `n` box sums per chunk of `rows`.
+        let fill = |rows: &mut [[u32; 3]], oy0: usize| {
+            for (i, acc) in rows.chunks_exact_mut(n).enumerate() {
+                let (y0, y1) = bounds(oy0 + i, height);
+                for y in y0..y1 {
+                    let row = &rgb[y * width * 3..(y + 1) * width * 3];
+                    for (a, &(x0, x1)) in acc.iter_mut().zip(&columns) {
+                        // Masked sums in locals rather than a branch per pixel and a
+                        // store per pixel into `acc`.
+                        let (mut sr, mut sg, mut sb) = (0u32, 0u32, 0u32);
+                        for px in row[x0 * 3..x1 * 3].chunks_exact(3) {
+                            let (r, g, b) = (px[0], px[1], px[2]);
+                            let keep = u32::from(is_finger(r, g, b));
+                            sr += u32::from(r) * keep;
+                            sg += u32::from(g) * keep;
+                            sb += u32::from(b) * keep;
                         }
+                        a[0] += sr;
+                        a[1] += sg;
+                        a[2] += sb;
                     }
                 }
             }
-            for (ox, (a, &(x0, x1))) in acc.iter().zip(&columns).enumerate() {
+        };
+        let mut sums = vec![[0u32; 3]; plane];
+        let two_cores = std::thread::available_parallelism().is_ok_and(|c| c.get() > 1);
+        if split && two_cores && n > 1 {
+            let (top, bottom) = sums.split_at_mut(n / 2 * n);
+            std::thread::scope(|s| {
+                s.spawn(|| fill(bottom, n / 2));
+                fill(top, 0);
+            });
+        } else {
+            fill(&mut sums, 0);
+        }
+        for (oy, row) in sums.chunks_exact(n).enumerate() {
+            let (y0, y1) = bounds(oy, height);
+            for (ox, (a, &(x0, x1))) in row.iter().zip(&columns).enumerate() {
                 let count = ((x1 - x0) * (y1 - y0)) as f32 * 255.0;
                 let at = oy * n + ox;
                 if self.channels == 1 {
@@ -216,6 +241,14 @@ impl Preprocess {
 pub struct FingerTable {
     params: Preprocess,
     bits: Vec<u64>,
+    /// The least red channel of any colour kept: a darker red is never the finger,
+    /// which answers most background pixels without touching a table.
+    min_red: u8,
+    /// For each (red, green), the blues kept as one interval `[lo, hi]` (`lo > hi`:
+    /// none), when every (red, green) keeps an interval (true for the HSV window
+    /// the finger uses): 128 KiB that stay in a core's cache, where the 2 MiB of bits
+    /// do not. `None`: some (red, green) keeps blues in pieces; the bits decide.
+    blue_runs: Option<Box<[[u8; 2]; 1 << 16]>>,
 }
 
 impl std::fmt::Debug for FingerTable {
@@ -233,19 +266,46 @@ impl std::fmt::Debug for FingerTable {
 impl FingerTable {
     pub fn new(params: &Preprocess) -> Self {
         let mut bits = vec![0u64; (1 << 24) / 64];
+        let mut min_red = u8::MAX;
         for (word_index, word) in bits.iter_mut().enumerate() {
             for bit in 0..64 {
                 let colour = word_index * 64 + bit;
                 let [_, r, g, b] = (colour as u32).to_be_bytes();
                 if params.is_finger(r, g, b) {
                     *word |= 1 << bit;
+                    min_red = min_red.min(r);
                 }
             }
         }
+        let blue_runs = Self::blue_runs(&bits);
         Self {
             params: *params,
             bits,
+            min_red,
+            blue_runs,
         }
+    }
+
+    /// The blues kept for each (red, green) as one interval, if each is one.
+    fn blue_runs(bits: &[u64]) -> Option<Box<[[u8; 2]; 1 << 16]>> {
+        // Fixed length, so that indexing by (red, green) needs no bounds check.
+        let mut runs: Box<[[u8; 2]; 1 << 16]> = vec![[1u8, 0u8]; 1 << 16].try_into().ok()?;
+        for (rg, run) in runs.iter_mut().enumerate() {
+            // The 256 blues of one (red, green) are four words.
+            let words = &bits[rg * 4..rg * 4 + 4];
+            let kept = words.iter().map(|w| w.count_ones()).sum::<u32>();
+            if kept == 0 {
+                continue;
+            }
+            let first = (0..256).find(|&b| (words[b / 64] >> (b % 64)) & 1 == 1)?;
+            let last = first + kept as usize - 1;
+            // One interval: every blue from the first kept to first + count − 1.
+            if (first..=last).any(|b| b > 255 || (words[b / 64] >> (b % 64)) & 1 == 0) {
+                return None;
+            }
+            *run = [first as u8, last as u8];
+        }
+        Some(runs)
     }
 
     /// The parameters the table was built from.
@@ -256,6 +316,14 @@ impl FingerTable {
     /// The same answer as [`Preprocess::is_finger`], by lookup.
     #[inline]
     pub fn contains(&self, r: u8, g: u8, b: u8) -> bool {
+        if let Some(runs) = &self.blue_runs {
+            // No branch: on a noisy frame the answer is a coin toss for the predictor.
+            let [lo, hi] = runs[(usize::from(r) << 8) | usize::from(g)];
+            return (lo <= b) & (b <= hi);
+        }
+        if r < self.min_red {
+            return false;
+        }
         let colour = (usize::from(r) << 16) | (usize::from(g) << 8) | usize::from(b);
         (self.bits[colour >> 6] >> (colour & 63)) & 1 == 1
     }
@@ -269,7 +337,25 @@ impl FingerTable {
         out: &mut [f32],
     ) -> Result<(), TrainError> {
         self.params
-            .squash(width, height, rgb, out, |r, g, b| self.contains(r, g, b))
+            .squash(width, height, rgb, out, false, |r, g, b| {
+                self.contains(r, g, b)
+            })
+    }
+
+    /// [`Self::apply_into`] with the output's halves on two threads when there are
+    /// two cores (tens of µs to start; for one frame's latency, not for a loader that
+    /// already keeps every core busy). The same output.
+    pub fn apply_into_split(
+        &self,
+        width: usize,
+        height: usize,
+        rgb: &[u8],
+        out: &mut [f32],
+    ) -> Result<(), TrainError> {
+        self.params
+            .squash(width, height, rgb, out, true, |r, g, b| {
+                self.contains(r, g, b)
+            })
     }
 
     /// [`Preprocess::apply`] with the lookup.
@@ -394,6 +480,11 @@ mod tests {
             let table = FingerTable::new(&p);
             let direct = p.apply(w, h, &rgb).expect("valid");
             let looked_up = table.apply(w, h, &rgb).expect("valid");
+            let mut split = vec![0.0; p.input_len()];
+            table
+                .apply_into_split(w, h, &rgb, &mut split)
+                .expect("valid");
+            assert_eq!(looked_up, split, "two threads give the same output");
             assert!(direct.iter().any(|v| *v > 0.0));
             assert!(
                 direct
@@ -441,9 +532,19 @@ mod tests {
                 value_min: 0.0,
                 ..Preprocess::default()
             },
+            // Every hue, saturation ≥ 0.55: (200, 100, b) keeps low and high blues but
+            // not the middle ones, so the table falls back on its bits.
+            Preprocess {
+                hue_min_deg: 0.0,
+                hue_max_deg: 359.9,
+                saturation_min: 0.55,
+                value_min: 0.0,
+                ..Preprocess::default()
+            },
         ];
-        for p in &params {
+        for (i, p) in params.iter().enumerate() {
             let table = FingerTable::new(p);
+            assert_eq!(table.blue_runs.is_some(), i < 2, "{p:?}");
             let mut kept = 0u32;
             for r in 0..=255u8 {
                 for g in 0..=255u8 {

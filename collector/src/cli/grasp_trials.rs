@@ -30,6 +30,7 @@ use softtouch_schemas::{Medium, SceneSpec};
 use softtouch_trainer::Predictor;
 
 use super::{Failure, io_failure, open_existing};
+use crate::dataset::export::sha256_hex;
 use crate::grasp_bench::{SimTruth, projection, stiffness};
 use crate::plot::{BarChart, BarSeries, Series, SeriesStyle, XyChart, bar_chart, xy_chart};
 use crate::store::{GraspTrace, GraspTrialKey, GraspTrialRow};
@@ -448,7 +449,7 @@ fn fmt_duration(s: f64) -> String {
 /// Run `grasp trials`.
 pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
     let store = open_existing(db).await?;
-    let (session_id, model, seed, plan, scenes) = match args.resume {
+    let (session_id, model, seed, plan, scenes, bytes) = match args.resume {
         Some(id) => {
             let s = store.grasp_session(id).await?.ok_or_else(|| {
                 bad(format!(
@@ -474,7 +475,19 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
                     "grasp session {id}: stored scenes do not read back: {e}"
                 ))
             })?;
-            (id, s.model, s.seed, plan, scenes)
+            let bytes = crate::models::force_artifact(&store, &s.model).await?;
+            let now = sha256_hex(&bytes);
+            if let Some(then) = &s.model_sha256
+                && *then != now
+            {
+                return Err(bad(format!(
+                    "--resume {id}: model `{}` has changed since the session started (sha256 {} then, {} now); start a new session",
+                    s.model,
+                    &then[..then.len().min(12)],
+                    &now[..12]
+                )));
+            }
+            (id, s.model, s.seed, plan, scenes, bytes)
         }
         None => {
             let mut plan = Plan::from_args(&args)?;
@@ -488,21 +501,37 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
             let model = args.model.clone().unwrap_or_default();
             objects_of(&plan, &scenes)?; // checked before anything is stored
             // The model must exist before a session names it.
-            crate::models::force_artifact(&store, &model).await?;
+            let bytes = crate::models::force_artifact(&store, &model).await?;
             let config_json = serde_json::to_string(&plan)
                 .map_err(|e| Failure::Runtime(anyhow!("cannot encode the settings: {e}")))?;
             let scenes_json = serde_json::to_string(&scenes)
                 .map_err(|e| Failure::Runtime(anyhow!("cannot encode the scenes: {e}")))?;
             let id = store
-                .create_grasp_session(&model, args.seed, &scenes_json, &config_json)
+                .create_grasp_session(
+                    &model,
+                    &sha256_hex(&bytes),
+                    args.seed,
+                    &scenes_json,
+                    &config_json,
+                )
                 .await?;
-            (id, model, args.seed, plan, scenes)
+            (id, model, args.seed, plan, scenes, bytes)
         }
     };
     let objects = objects_of(&plan, &scenes)?;
     let modes = plan.modes()?;
-    let bytes = crate::models::force_artifact(&store, &model).await?;
-    let mut predictor = Some(Predictor::from_bytes(&bytes)?);
+    let mut predictor = Predictor::from_bytes(&bytes)?;
+    // A trial is one frame at a time: its drawing and preprocessing take the second
+    // core for half of each frame, and the model runs on one (burn's rayon workers
+    // spinning on both cores would only get in their way).
+    predictor.split_preprocessing(true);
+    let inference_pool = Arc::new(
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .map_err(|e| Failure::Runtime(anyhow!("cannot build a thread pool: {e}")))?,
+    );
+    let mut predictor = Some(predictor);
 
     let all = planned(&plan, scenes.len(), &modes);
     let done = store.grasp_trial_keys(session_id).await?;
@@ -510,7 +539,8 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
     let w = io_failure;
     writeln!(
         out,
-        "grasp session {session_id}: model `{model}`, seed {seed}, {} trials planned, {} stored, {} to run",
+        "grasp session {session_id}: model `{model}` (sha256 {}), seed {seed}, {} trials planned, {} stored, {} to run",
+        &sha256_hex(&bytes)[..12],
         all.len(),
         all.len() - todo.len(),
         todo.len()
@@ -577,9 +607,11 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
                 "the model was lost by a failed trial"
             )));
         };
-        let (pred, result) = tokio::task::spawn_blocking(move || run_job(job, pred))
-            .await
-            .map_err(|e| Failure::Runtime(anyhow!("a trial's thread failed: {e}")))?;
+        let pool = Arc::clone(&inference_pool);
+        let (pred, result) =
+            tokio::task::spawn_blocking(move || pool.install(|| run_job(job, pred)))
+                .await
+                .map_err(|e| Failure::Runtime(anyhow!("a trial's thread failed: {e}")))?;
         predictor = Some(pred);
         let result = result.map_err(grasp_failure)?;
         let wall_s = t0.elapsed().as_secs_f64();

@@ -35,6 +35,9 @@ pub struct GraspSessionRow {
     pub created_at: String,
     /// The model's name.
     pub model: String,
+    /// sha256 of the model's artifact as run (`None`: a session from before it was
+    /// recorded).
+    pub model_sha256: Option<String>,
     /// The seed.
     pub seed: u64,
     /// JSON array of the scenes.
@@ -125,16 +128,18 @@ impl Store {
     pub async fn create_grasp_session(
         &self,
         model: &str,
+        model_sha256: &str,
         seed: u64,
         scenes_json: &str,
         config_json: &str,
     ) -> Result<i64, StoreError> {
         let row = sqlx::query(concat!(
-            "INSERT INTO grasp_sessions (created_at, model, seed, scenes_json, config_json, software_version) VALUES (",
+            "INSERT INTO grasp_sessions (created_at, model, model_sha256, seed, scenes_json, config_json, software_version) VALUES (",
             now_sql!(),
-            ", ?, ?, ?, ?, ?) RETURNING session_id"
+            ", ?, ?, ?, ?, ?, ?) RETURNING session_id"
         ))
         .bind(model)
+        .bind(model_sha256)
         .bind(seed_to_sql(seed))
         .bind(scenes_json)
         .bind(config_json)
@@ -154,7 +159,7 @@ impl Store {
         session_id: i64,
     ) -> Result<Option<GraspSessionRow>, StoreError> {
         let row = sqlx::query(
-            "SELECT session_id, created_at, model, seed, scenes_json, config_json FROM grasp_sessions WHERE session_id = ?",
+            "SELECT session_id, created_at, model, seed, scenes_json, config_json, model_sha256 FROM grasp_sessions WHERE session_id = ?",
         )
         .bind(session_id)
         .fetch_optional(self.pool())
@@ -164,6 +169,7 @@ impl Store {
             session_id: r.get(0),
             created_at: r.get(1),
             model: r.get(2),
+            model_sha256: r.get(6),
             seed: seed_from_sql(r.get(3)),
             scenes_json: r.get(4),
             config_json: r.get(5),
@@ -402,13 +408,13 @@ mod tests {
             .await
             .unwrap_or_else(|e| panic!("{e}"));
         let id = store
-            .create_grasp_session("m", u64::MAX, "[]", "{}")
+            .create_grasp_session("m", "ab12", u64::MAX, "[]", "{}")
             .await
             .unwrap_or_else(|e| panic!("{e}"));
         let s = store.grasp_session(id).await.ok().flatten();
         assert_eq!(
-            s.map(|s| (s.model, s.seed)),
-            Some(("m".to_owned(), u64::MAX))
+            s.map(|s| (s.model, s.model_sha256, s.seed)),
+            Some(("m".to_owned(), Some("ab12".to_owned()), u64::MAX))
         );
         let trace = GraspTrace {
             t_s: vec![0.0, 0.0083],

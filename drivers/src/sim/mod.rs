@@ -61,8 +61,8 @@
 //! medium alone switches nothing on. Image effects: refraction (focal length × index),
 //! colour attenuation and turbidity (along the light path, per beam and once for the
 //! background), caustics (a precomputed tile, shifted per frame), bubbles, exposure
-//! (a lookup table), camera noise (a precomputed Gaussian table walked with a random
-//! offset and stride per frame), background clutter (drawn once into the background).
+//! (a lookup table), camera noise (a frame's worth of a precomputed Gaussian table, read
+//! from a random offset per frame), background clutter (drawn once into the background).
 //! Force/torque: white noise, drift, buoyancy offset, packet loss, latency. Camera:
 //! frame drops, latency. Arm: reflex faults. Gripper: fluid drag on the held object.
 //!

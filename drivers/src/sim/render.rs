@@ -5,8 +5,11 @@
 //!
 //! Cost model: everything that does not change between frames (background, clutter,
 //! skin tint, per-effect tables) is computed once in [`Renderer::new`]; a frame is a
-//! copy of the background, ~1000 short line rasterisations, and one pass per declared
+//! copy of the background, ~450 line rasterisations, and one pass per declared
 //! per-pixel effect. Effects the scene does not declare are skipped by one branch.
+//! The drawn lattice of the last frame is kept: a finger whose nodes have not moved
+//! (at rest, or a steady hold) is a copy, not a redraw. The per-pixel effects are
+//! written as straight runs over precomputed rows so that they vectorise.
 
 use super::contact::FingerGeometry;
 use super::effects::ImageEffects;
@@ -14,6 +17,7 @@ use super::lattice::{BeamKind, Deformed, Lattice};
 use super::rng;
 use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
+use std::sync::Mutex;
 
 /// Frame width, px.
 pub const WIDTH: u32 = 640;
@@ -32,8 +36,10 @@ const BACKGROUND_M: f64 = 0.25;
 const LED_REF_M: f64 = 0.035;
 /// Scale of the veiling light's growth with distance (turbidity), m.
 const TURBIDITY_M: f64 = 0.08;
-/// Size of the camera-noise table (a power of two).
-const NOISE_TABLE: usize = 1 << 18;
+/// Offsets a frame's camera noise can start at: the table holds this many values
+/// beyond one frame's worth, and each frame reads one frame's worth from a random
+/// offset (a straight run, so the add vectorises; no frame sees a value twice).
+const NOISE_OFFSETS: usize = 1 << 18;
 
 /// The finger's material colour (orange silicone), far from any background colour:
 /// a colour threshold keeps pixels with R > 150 and R − B > 90.
@@ -47,9 +53,78 @@ pub(crate) struct Renderer {
     focal: f64,
     z_cam: f64,
     background: Vec<u8>,
-    caustic: Option<(Vec<u8>, usize, f32)>,
+    caustic: Option<Caustic>,
     noise: Option<Vec<i16>>,
     exposure: Option<[u8; 256]>,
+    drawn: DrawnCache,
+}
+
+/// The caustic pattern: a `period`-pixel square tile, stored as RGB rows of
+/// `W + period` pixels (the tile repeated), so that any horizontal shift of a row is
+/// one contiguous slice of `3·W` bytes.
+#[derive(Debug, Clone)]
+struct Caustic {
+    rows: Vec<u8>,
+    period: usize,
+    period_px: f32,
+}
+
+impl Caustic {
+    const ROW: usize = W * 3;
+
+    fn new(strength: f64, period_px: f64) -> Self {
+        let p = (period_px.round() as usize).clamp(2, 1024);
+        let k = std::f64::consts::TAU / p as f64;
+        let stride = (W + p) * 3;
+        let mut rows = vec![0u8; p * stride];
+        for y in 0..p {
+            for x in 0..W + p {
+                let (fx, fy) = ((x % p) as f64 * k, y as f64 * k);
+                let a = 0.5 + 0.5 * (fx + 0.9 * (fy + 0.5).sin()).cos();
+                let b = 0.5 + 0.5 * (fy + 0.9 * (fx * 1.0 + 1.3).sin()).cos();
+                let v = ((a * b).powi(3) * strength * 255.0)
+                    .round()
+                    .clamp(0.0, 255.0) as u8;
+                rows[y * stride + x * 3..y * stride + x * 3 + 3].fill(v);
+            }
+        }
+        Self {
+            rows,
+            period: p,
+            period_px: period_px as f32,
+        }
+    }
+
+    /// Row `y` of the pattern shifted by `ox` pixels: `3·W` bytes.
+    fn row(&self, y: usize, ox: usize) -> &[u8] {
+        let start = y * (W + self.period) * 3 + ox * 3;
+        &self.rows[start..start + Self::ROW]
+    }
+}
+
+/// The last drawn lattice (before the per-frame effects) and the nodes it was drawn
+/// from. Shared by the threads that render with one renderer; a thread that finds it
+/// busy draws without it.
+#[derive(Debug, Default)]
+struct DrawnCache(Mutex<Option<Drawn>>);
+
+/// A drawn lattice and the nodes it was drawn from.
+#[derive(Debug)]
+struct Drawn {
+    nodes: Vec<[f64; 3]>,
+    image: Vec<u8>,
+}
+
+impl Clone for DrawnCache {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+/// The cores this process may use (asked once).
+fn cores() -> usize {
+    static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, usize::from))
 }
 
 /// Per-channel colour in 0–255, as floats.
@@ -68,27 +143,15 @@ impl Renderer {
             caustic: None,
             noise: None,
             exposure: None,
+            drawn: DrawnCache::default(),
         };
         r.background = r.make_background(finger);
         if let Some((strength, period)) = effects.caustics {
-            let p = (period.round() as usize).clamp(2, 1024);
-            let mut tile = vec![0u8; p * p];
-            let k = std::f64::consts::TAU / p as f64;
-            for y in 0..p {
-                for x in 0..p {
-                    let (fx, fy) = (x as f64 * k, y as f64 * k);
-                    let a = 0.5 + 0.5 * (fx + 0.9 * (fy + 0.5).sin()).cos();
-                    let b = 0.5 + 0.5 * (fy + 0.9 * (fx * 1.0 + 1.3).sin()).cos();
-                    tile[y * p + x] = ((a * b).powi(3) * strength * 255.0)
-                        .round()
-                        .clamp(0.0, 255.0) as u8;
-                }
-            }
-            r.caustic = Some((tile, p, period as f32));
+            r.caustic = Some(Caustic::new(strength, period));
         }
         if let Some(sigma) = effects.noise_sigma {
             let mut g = rng::stream(seed, "camera-noise-table");
-            let table = (0..NOISE_TABLE)
+            let table = (0..NOISE_OFFSETS + W * H * 3)
                 .map(|_| {
                     let z: f64 = StandardNormal.sample(&mut g);
                     (z * sigma).round().clamp(-255.0, 255.0) as i16
@@ -225,14 +288,36 @@ impl Renderer {
         frame_index: u64,
         t_s: f64,
     ) -> Vec<u8> {
+        let mut img = self.drawn_lattice(lattice, deformed);
+        self.apply_effects(&mut img, frame_index, t_s);
+        img
+    }
+
+    /// The background with the lattice drawn on it: a copy of the last frame's when
+    /// the nodes are the same (bit for bit, so the bytes are too).
+    fn drawn_lattice(&self, lattice: &Lattice, deformed: &Deformed) -> Vec<u8> {
+        let Ok(mut cache) = self.drawn.0.try_lock() else {
+            let mut img = self.background.clone();
+            self.draw_lattice(&mut img, lattice, deformed);
+            return img;
+        };
+        if let Some(drawn) = cache.as_ref()
+            && drawn.nodes == deformed.nodes
+        {
+            return drawn.image.clone();
+        }
         let mut img = self.background.clone();
         self.draw_lattice(&mut img, lattice, deformed);
-        self.apply_effects(&mut img, frame_index, t_s);
+        *cache = Some(Drawn {
+            nodes: deformed.nodes.clone(),
+            image: img.clone(),
+        });
         img
     }
 
     pub(crate) fn draw_lattice(&self, img: &mut [u8], lattice: &Lattice, deformed: &Deformed) {
         let base = FINGER_RGB.map(f32::from);
+        let mut lines = Vec::with_capacity(lattice.beams.len());
         for &(i, j, kind) in &lattice.beams {
             let (Some(a), Some(b)) = (
                 self.project(deformed.nodes[i]),
@@ -253,26 +338,38 @@ impl Renderer {
             let half_w = ((self.focal * radius_m / d) as f32).clamp(0.5, 3.0);
             let light = ((LED_REF_M / d).powf(0.7).clamp(0.45, 1.2) * shade) as f32;
             let c = self.medium(base.map(|v| (v * light).min(255.0)), d);
-            draw_line(img, (a.0, a.1), (b.0, b.1), half_w, c);
+            lines.push(((a.0, a.1), (b.0, b.1), half_w, c));
+        }
+        // The top and bottom halves on two threads when the machine has two cores:
+        // each pixel still gets its beams in the same order, so the bytes are those of
+        // one pass. A scoped thread per frame (tens of µs) rather than a pool, whose
+        // sleeping workers wake too late for a millisecond of work.
+        let (top, bottom) = img.split_at_mut(H / 2 * W * 3);
+        let draw = |band: &mut [u8], rows: (i32, i32)| {
+            for &(p0, p1, half_w, c) in &lines {
+                draw_line(band, rows, p0, p1, half_w, c);
+            }
+        };
+        let half = H as i32 / 2;
+        if cores() > 1 {
+            std::thread::scope(|s| {
+                s.spawn(|| draw(bottom, (half, H as i32)));
+                draw(top, (0, half));
+            });
+        } else {
+            draw(top, (0, half));
+            draw(bottom, (half, H as i32));
         }
     }
 
     pub(crate) fn apply_effects(&self, img: &mut [u8], frame_index: u64, t_s: f64) {
-        if let Some((tile, p, period)) = &self.caustic {
-            let shift = (t_s * 0.5 * f64::from(*period)) as usize;
+        if let Some(caustic) = &self.caustic {
+            let p = caustic.period;
+            let shift = (t_s * 0.5 * f64::from(caustic.period_px)) as usize;
             let (ox, oy) = (shift % p, (shift * 7 / 10) % p);
-            for y in 0..H {
-                let row = &tile[((y + oy) % p) * p..((y + oy) % p + 1) * p];
-                let mut tx = ox;
-                for px in img[y * W * 3..(y + 1) * W * 3].chunks_exact_mut(3) {
-                    let add = row[tx];
-                    for c in px.iter_mut() {
-                        *c = c.saturating_add(add);
-                    }
-                    tx += 1;
-                    if tx == *p {
-                        tx = 0;
-                    }
+            for (y, row) in img.chunks_exact_mut(Caustic::ROW).enumerate() {
+                for (c, &add) in row.iter_mut().zip(caustic.row((y + oy) % p, ox)) {
+                    *c = c.saturating_add(add);
                 }
             }
         }
@@ -302,12 +399,9 @@ impl Renderer {
         }
         if let Some(table) = &self.noise {
             let mut g = rng::indexed(self.seed, "camera-noise", frame_index);
-            let mut idx: usize = g.random_range(0..NOISE_TABLE);
-            let stride: usize = g.random_range(0..NOISE_TABLE / 2) * 2 + 1;
-            for v in img.iter_mut() {
-                let n = table[idx & (NOISE_TABLE - 1)];
+            let start: usize = g.random_range(0..NOISE_OFFSETS);
+            for (v, &n) in img.iter_mut().zip(&table[start..start + W * H * 3]) {
                 *v = (i16::from(*v) + n).clamp(0, 255) as u8;
-                idx = idx.wrapping_add(stride);
             }
         }
     }
@@ -327,10 +421,44 @@ fn blend(img: &mut [u8], x: i32, y: i32, c: Rgb, a: f32) {
     }
 }
 
+/// `x.floor()` as an integer, without the libm call that `floor` is on baseline
+/// x86-64 (no SSE4.1). Saturates far outside `i32`, as `as` does.
+#[inline]
+fn floor_i32(x: f32) -> i32 {
+    let t = x as i32;
+    t.saturating_sub(i32::from((t as f32) > x))
+}
+
+/// `x.ceil()` as an integer (see [`floor_i32`]).
+#[inline]
+fn ceil_i32(x: f32) -> i32 {
+    let t = x as i32;
+    t.saturating_add(i32::from((t as f32) < x))
+}
+
+/// Blend `solid` into the pixel at byte offset `o` with coverage `a` in (0, 1), in
+/// integers (coverage in 1/256ths): within one level of [`blend`], at a fraction of
+/// its cost. The line rasteriser clips to its band, so `o` is always inside it.
+#[inline]
+fn blend_at(img: &mut [u8], o: usize, solid: [u8; 3], a: f32) {
+    let a = (a * 256.0) as i32;
+    for (p, &c) in img[o..o + 3].iter_mut().zip(&solid) {
+        let v = i32::from(*p);
+        *p = (v + (((i32::from(c) - v) * a + 128) >> 8)) as u8;
+    }
+}
+
 /// A thick anti-aliased segment: walks the major axis and, for each column, covers
 /// the pixels of the band around the line by their perpendicular distance to it
 /// (exact distance to the segment only past its ends). No trigonometry per pixel.
-fn draw_line(img: &mut [u8], p0: (f32, f32), p1: (f32, f32), half_w: f32, c: Rgb) {
+fn draw_line(
+    band: &mut [u8],
+    (y0, y1): (i32, i32),
+    p0: (f32, f32),
+    p1: (f32, f32),
+    half_w: f32,
+    c: Rgb,
+) {
     let (dx, dy) = (p1.0 - p0.0, p1.1 - p0.1);
     let x_major = dx.abs() >= dy.abs();
     // Swap axes so the walk is always along the major axis ("a").
@@ -341,40 +469,80 @@ fn draw_line(img: &mut [u8], p0: (f32, f32), p1: (f32, f32), half_w: f32, c: Rgb
     };
     let (da, db) = (a1 - a0, b1 - b0);
     let len2 = da * da + db * db;
+    let inv_len2 = 1.0 / len2;
     let slope = if da.abs() > 1e-6 { db / da } else { 0.0 };
     let norm = (1.0 + slope * slope).sqrt();
     let inv_norm = 1.0 / norm;
     let reach = half_w + 1.0;
     let across = reach * norm + 0.5;
     let (amin, amax) = (a0.min(a1), a0.max(a1));
-    let limit_a = if x_major { W as i32 } else { H as i32 };
-    let limit_b = if x_major { H as i32 } else { W as i32 };
-    let lo = ((amin - reach).floor() as i32).max(0);
-    let hi = ((amax + reach).ceil() as i32).min(limit_a - 1);
+    // The band holds rows y0..y1: y is b when x is major, a otherwise.
+    let (a_range, b_range) = if x_major {
+        ((0, W as i32), (y0, y1))
+    } else {
+        ((y0, y1), (0, W as i32))
+    };
+    // Byte offset in the band of (a, b).
+    let at = |ia: i32, ib: i32| {
+        let (x, y) = if x_major { (ia, ib) } else { (ib, ia) };
+        ((y - y0) as usize * W + x as usize) * 3
+    };
+    let step = if x_major { W * 3 } else { 3 };
+    let lo = floor_i32(amin - reach).max(a_range.0);
+    let hi = ceil_i32(amax + reach).min(a_range.1 - 1);
     let edge = half_w + 0.5;
+    // A pixel the band covers fully takes the colour itself, without arithmetic.
+    let solid = c.map(|v| (v + 0.5) as u8);
     for ia in lo..=hi {
         let ac = ia as f32 + 0.5;
         let inside = ac >= amin && ac <= amax;
         let bc = b0 + (ac.clamp(amin, amax) - a0) * slope;
-        let blo = ((bc - across).floor() as i32).max(0);
-        let bhi = ((bc + across).ceil() as i32).min(limit_b - 1);
+        if inside {
+            // Across the line: pixels nearer than `edge − 1` (perpendicular) are
+            // covered fully, those nearer than `edge` partly, the rest not at all.
+            let span = edge * norm;
+            let blo = floor_i32(bc - span - 0.5).max(b_range.0);
+            let bhi = ceil_i32(bc + span - 0.5).min(b_range.1 - 1);
+            if blo > bhi {
+                continue;
+            }
+            let first = at(ia, blo);
+            let partial = |band: &mut [u8], ib: i32| {
+                let d = (ib as f32 + 0.5 - bc).abs() * inv_norm;
+                let cov = (edge - d).clamp(0.0, 1.0);
+                if cov > 0.0 {
+                    blend_at(band, first + (ib - blo) as usize * step, solid, cov);
+                }
+            };
+            let full = (edge - 1.0) * norm;
+            let flo = ceil_i32(bc - full - 0.5).max(blo);
+            let fhi = floor_i32(bc + full - 0.5).min(bhi);
+            if flo <= fhi {
+                (blo..flo).for_each(|ib| partial(band, ib));
+                for ib in flo..=fhi {
+                    let o = first + (ib - blo) as usize * step;
+                    band[o..o + 3].copy_from_slice(&solid);
+                }
+                (fhi + 1..=bhi).for_each(|ib| partial(band, ib));
+            } else {
+                (blo..=bhi).for_each(|ib| partial(band, ib));
+            }
+            continue;
+        }
+        let blo = floor_i32(bc - across).max(b_range.0);
+        let bhi = ceil_i32(bc + across).min(b_range.1 - 1);
         for ib in blo..=bhi {
             let pb = ib as f32 + 0.5;
-            let d = if inside {
-                (pb - bc).abs() * inv_norm
+            let t = if len2 > 1e-12 {
+                (((ac - a0) * da + (pb - b0) * db) * inv_len2).clamp(0.0, 1.0)
             } else {
-                let t = if len2 > 1e-12 {
-                    (((ac - a0) * da + (pb - b0) * db) / len2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                let (ea, eb) = (a0 + t * da - ac, b0 + t * db - pb);
-                (ea * ea + eb * eb).sqrt()
+                0.0
             };
+            let (ea, eb) = (a0 + t * da - ac, b0 + t * db - pb);
+            let d = (ea * ea + eb * eb).sqrt();
             let cov = (edge - d).clamp(0.0, 1.0);
             if cov > 0.0 {
-                let (x, y) = if x_major { (ia, ib) } else { (ib, ia) };
-                blend(img, x, y, c, cov);
+                blend_at(band, at(ia, ib), solid, cov);
             }
         }
     }

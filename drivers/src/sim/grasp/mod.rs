@@ -49,9 +49,10 @@ mod touch;
 pub use object::GraspObject;
 
 use super::SimError;
-use super::contact::{ContactParams, FingerGeometry};
+use super::contact::{Contact, ContactParams, FingerGeometry};
 use super::effects::{Effects, Flow};
 use super::gripper::{G_M_S2, SPEED_MM_S, grip_force_n};
+use super::lattice::Deformed;
 use super::world::{Look, Model, Scene};
 use crate::camera::{Camera, Frame};
 use crate::clock::{Clock, TokioClock};
@@ -63,6 +64,7 @@ use crate::gripper::{
 use async_trait::async_trait;
 use rand::RngExt;
 use softtouch_schemas::{FrameFormat, FrameMeta, SceneSpec, TimestampNs, Wrench};
+use std::cell::RefCell;
 use std::sync::{Arc, Mutex, MutexGuard};
 use touch::{FingerContact, Grip, finger_contact};
 
@@ -175,11 +177,24 @@ impl FlowSeries {
     }
 }
 
+/// A finger's contact and the grip and shear it was worked out for.
+#[derive(Debug, Clone)]
+struct ContactMemo {
+    grip: Grip,
+    shear_n: [f64; 2],
+    contact: FingerContact,
+}
+
 /// The shared state of the soft grasp.
 #[derive(Debug)]
 struct State {
-    /// One scene per finger: the same model, each its own seeded renderer.
-    scenes: [Scene; 2],
+    /// One scene per finger: the same model, each its own seeded renderer. Finger
+    /// 1's is made when its camera is first asked for (its renderer's tables cost
+    /// tens of milliseconds, and most grasps watch one finger).
+    scenes: [Option<Scene>; 2],
+    /// The scene finger 1's is made from, and its seed.
+    second_spec: (SceneSpec, u64),
+    model: Arc<Model>,
     effects: Effects,
     finger: FingerGeometry,
     contact: ContactParams,
@@ -209,9 +224,22 @@ struct State {
     stick_m: [f64; 2],
     /// Each finger's shear (y, z in its frame), N.
     shear_n: [[f64; 2]; 2],
+    /// Each finger's last contact and the grip and shear it was worked out for: the
+    /// physics steps, the status and the camera ask for the same one many times while
+    /// nothing moves (a steady hold).
+    last_contact: RefCell<[Option<ContactMemo>; 2]>,
+    /// Each camera's last solved lattice and the contact it was solved for.
+    last_deformed: [Option<(Contact, Deformed)>; 2],
 }
 
 impl State {
+    /// Finger `k`'s scene (0 or 1), made on first use.
+    fn scene(&mut self, k: usize) -> &Scene {
+        let (spec, seed) = &self.second_spec;
+        let model = &self.model;
+        self.scenes[k.min(1)].get_or_insert_with(|| Scene::new(spec, *seed, Arc::clone(model)))
+    }
+
     fn object_yaw_at(&self, t: TimestampNs) -> f64 {
         let mut yaw = 0.0;
         for m in &self.yaw_moves {
@@ -245,15 +273,22 @@ impl State {
         let Some(obj) = &self.object else {
             return Ok(None);
         };
-        finger_contact(
-            &self.finger,
-            &self.contact,
-            obj,
-            k,
-            &self.grip(opening_mm),
-            self.shear_n[k],
-        )
-        .map(Some)
+        let grip = self.grip(opening_mm);
+        let shear = self.shear_n[k];
+        // The same inputs bit for bit: the same contact.
+        if let Some(m) = &self.last_contact.borrow()[k]
+            && m.grip == grip
+            && m.shear_n.map(f64::to_bits) == shear.map(f64::to_bits)
+        {
+            return Ok(Some(m.contact.clone()));
+        }
+        let contact = finger_contact(&self.finger, &self.contact, obj, k, &grip, shear)?;
+        self.last_contact.borrow_mut()[k] = Some(ContactMemo {
+            grip,
+            shear_n: shear,
+            contact: contact.clone(),
+        });
+        Ok(Some(contact))
     }
 
     /// The larger squeeze of the two fingers at an opening, N.
@@ -349,15 +384,42 @@ impl State {
         };
         let reach = 0.25 * self.object.as_ref().map_or(0.0, GraspObject::max_width_m);
         let (mut lo, mut hi) = (-reach, reach);
-        for _ in 0..30 {
-            let mid = 0.5 * (lo + hi);
-            if imbalance(self, mid)? > 0.0 {
-                hi = mid;
+        let (mut f_lo, mut f_hi) = (imbalance(self, lo)?, imbalance(self, hi)?);
+        // The push beats the squeeze anywhere within reach: the object sits at the end.
+        if f_lo >= 0.0 {
+            return Ok(lo);
+        }
+        if f_hi <= 0.0 {
+            return Ok(hi);
+        }
+        // Illinois false position: the imbalance grows smoothly with the shift, so a
+        // few steps reach 0.1 µN (30 bisections cost 60 contacts a step).
+        let mut last_side = 0;
+        let mut x = 0.0;
+        for _ in 0..60 {
+            x = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
+            if !x.is_finite() {
+                x = 0.5 * (lo + hi);
+            }
+            let f = imbalance(self, x)?;
+            if f.abs() <= 1e-7 || hi - lo <= 1e-12 {
+                break;
+            }
+            if f > 0.0 {
+                (hi, f_hi) = (x, f);
+                if last_side == 1 {
+                    f_lo *= 0.5;
+                }
+                last_side = 1;
             } else {
-                lo = mid;
+                (lo, f_lo) = (x, f);
+                if last_side == -1 {
+                    f_hi *= 0.5;
+                }
+                last_side = -1;
             }
         }
-        Ok(0.5 * (lo + hi))
+        Ok(x)
     }
 
     /// One step of the hold's physics at `t`.
@@ -445,6 +507,7 @@ impl State {
     /// The object is gone (slipped or crushed): it pushes back no more.
     fn lose(&mut self, how: HoldState) -> Result<(), SimError> {
         self.object = None;
+        self.last_contact = RefCell::default();
         self.hold = how;
         self.shear_n = [[0.0; 2]; 2];
         self.stick_m = [0.0; 2];
@@ -517,17 +580,17 @@ pub fn soft_grasp(
     let mut spec = scene.clone();
     spec.rods = vec![object.face_rod()];
     // Finger 1's camera draws its own seeded streams.
-    let scenes = [
-        Scene::new(&spec, seed, Arc::clone(&model)),
-        Scene::new(&spec, seed ^ 0x5eed_f1a6_e201_0001, Arc::clone(&model)),
-    ];
-    let effects = scenes[0].effects.clone();
+    let first = Scene::new(&spec, seed, Arc::clone(&model));
+    let effects = first.effects.clone();
+    let second_spec = (spec, seed ^ 0x5eed_f1a6_e201_0001);
     let flow = effects.object_flow.map(|f| FlowSeries::new(f, seed));
     let period_ns = 1e9 / fps;
     let state = Arc::new(Mutex::new(State {
         finger: model.params.finger,
         contact: model.params.contact,
-        scenes,
+        scenes: [Some(first), None],
+        second_spec,
+        model: Arc::clone(&model),
         effects,
         clock,
         period_ns,
@@ -552,6 +615,8 @@ pub fn soft_grasp(
         rel_yaw_rad: 0.0,
         stick_m: [0.0; 2],
         shear_n: [[0.0; 2]; 2],
+        last_contact: RefCell::default(),
+        last_deformed: [None, None],
     }));
     Ok((
         SoftGripper {
@@ -608,6 +673,7 @@ impl SoftGraspHandle {
     pub fn set_object(&self, present: bool) -> Result<(), SimError> {
         let mut s = self.lock()?;
         s.object = present.then(|| s.template.clone());
+        s.last_contact = RefCell::default();
         s.hold = if present {
             HoldState::Resting
         } else {
@@ -891,17 +957,29 @@ impl Camera for SoftFingerCamera {
         tokio::time::sleep_until(self.clock.instant_at(exposed)).await;
         let mut s = lock_state(&self.state)?;
         s.advance(exposed).map_err(|e| device_fault(CAMERA, &e))?;
-        let scene = &s.scenes[self.finger];
         let contact = s
             .finger_at(self.finger, s.opening_mm)
             .map_err(|e| device_fault(CAMERA, &e))?;
         let look = match contact {
             Some(c) => {
-                let deformed = scene
-                    .model
-                    .lattice
-                    .deform(&s.finger, &c.contact)
-                    .map_err(|e| device_fault(CAMERA, &e))?;
+                let cached = s.last_deformed[self.finger]
+                    .as_ref()
+                    .filter(|(solved_for, _)| *solved_for == c.contact)
+                    .map(|(_, d)| d.clone());
+                let deformed = match cached {
+                    Some(d) => d,
+                    None => {
+                        let finger = s.finger;
+                        let d = s
+                            .scene(self.finger)
+                            .model
+                            .lattice
+                            .deform(&finger, &c.contact)
+                            .map_err(|e| device_fault(CAMERA, &e))?;
+                        s.last_deformed[self.finger] = Some((c.contact.clone(), d.clone()));
+                        d
+                    }
+                };
                 Look {
                     wrench: c.contact.wrench,
                     deformed,
@@ -909,11 +987,12 @@ impl Camera for SoftFingerCamera {
             }
             None => Look {
                 wrench: Wrench::ZERO,
-                deformed: super::lattice::Deformed {
-                    nodes: scene.model.lattice.rest.clone(),
+                deformed: Deformed {
+                    nodes: s.scene(self.finger).model.lattice.rest.clone(),
                 },
             },
         };
+        let scene = s.scene(self.finger);
         let data = scene.render(&look, k, exposed.0 as f64 * 1e-9);
         Ok(Frame {
             meta: FrameMeta {

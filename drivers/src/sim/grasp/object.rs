@@ -354,16 +354,17 @@ impl GraspObject {
     /// A lying object's face is the rod presses' gap profile (its flanks slope away
     /// steeply beyond its extent, so the half-width there is small or negative).
     pub(crate) fn half_width_at(&self, q: f64, yaw_rad: f64, finger: usize) -> Option<(f64, f64)> {
-        let Some(_) = self.profile else {
-            let rod = RodProfile::new(&self.face_rod()).ok()?;
-            return Some((0.5 * self.width_m - rod.gap(q), 0.0));
-        };
-        let width = self.width_at_height(self.grasp_height_m - q)?;
-        if width <= 0.0 {
-            return None;
+        self.facing(yaw_rad, finger).half_width_at(self, q)
+    }
+
+    /// What of the object faces finger `finger` when it is turned by `yaw_rad`: the
+    /// part of [`Self::half_width_at`] that does not change along the finger, worked
+    /// out once per contact instead of once per strip.
+    pub(crate) fn facing(&self, yaw_rad: f64, finger: usize) -> Facing {
+        match self.profile {
+            None => Facing::Lying(RodProfile::new(&self.face_rod()).ok()),
+            Some(_) => Facing::Standing(self.section_support(yaw_rad, finger)),
         }
-        let (h, y) = self.section_support(yaw_rad, finger);
-        Some((h * width, y * width))
     }
 
     /// Support of the unit-width section turned by `yaw_rad`, towards finger `finger`:
@@ -441,6 +442,31 @@ impl GraspObject {
     fn touches_at(&self, k: usize, grip: &Grip) -> bool {
         let finger = super::super::FingerGeometry::default();
         super::touch::reaches_finger(&finger, self, k, grip)
+    }
+}
+
+/// The side of an object facing one finger ([`GraspObject::facing`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Facing {
+    /// A lying object's face: the rod presses' gap profile (`None`: not a valid rod).
+    Lying(Option<RodProfile>),
+    /// A standing object's section: (half-width, y of the contact) per unit width.
+    Standing((f64, f64)),
+}
+
+impl Facing {
+    /// [`GraspObject::half_width_at`] at offset `q` along the finger, m.
+    pub(crate) fn half_width_at(&self, obj: &GraspObject, q: f64) -> Option<(f64, f64)> {
+        match self {
+            Self::Lying(rod) => Some((0.5 * obj.width_m - rod.as_ref()?.gap(q), 0.0)),
+            Self::Standing((h, y)) => {
+                let width = obj.width_at_height(obj.grasp_height_m - q)?;
+                if width <= 0.0 {
+                    return None;
+                }
+                Some((h * width, y * width))
+            }
+        }
     }
 }
 

@@ -98,6 +98,7 @@ pub(crate) fn finger_contact(
     // Finger 1 is turned half a turn about z: its y is G's −y.
     let y_sign = if k == 0 { 1.0 } else { -1.0 };
     let dq = finger.length_m / STRIPS as f64;
+    let facing = obj.facing(grip.yaw_rad, k);
     let mut strips = Vec::with_capacity(STRIPS);
     let mut normals = Vec::with_capacity(STRIPS);
     let mut normal_n = 0.0;
@@ -108,7 +109,7 @@ pub(crate) fn finger_contact(
         let mut fn_mag = 0.0;
         let mut point = [finger.semi_axes(h).0, 0.0, h];
         let mut n = [1.0, 0.0, 0.0];
-        if let Some((r, y_g)) = obj.half_width_at(q, grip.yaw_rad, k) {
+        if let Some((r, y_g)) = facing.half_width_at(obj, q) {
             let y = y_sign * (y_g + obj.offset_m[1]);
             if let Some((x, normal)) = surface(finger, h, y) {
                 point = [x, y, h];
