@@ -202,8 +202,7 @@ impl Preprocess {
             }
         };
         let mut sums = vec![[0u32; 3]; plane];
-        let two_cores = std::thread::available_parallelism().is_ok_and(|c| c.get() > 1);
-        if split && two_cores && n > 1 {
+        if split && two_cores() && n > 1 {
             let (top, bottom) = sums.split_at_mut(n / 2 * n);
             std::thread::scope(|s| {
                 s.spawn(|| fill(bottom, n / 2));
@@ -230,6 +229,13 @@ impl Preprocess {
         }
         Ok(())
     }
+}
+
+/// Whether this process may use two cores or more, asked once: the answer reads
+/// cgroup files, far too slow to ask for every frame.
+fn two_cores() -> bool {
+    static TWO: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *TWO.get_or_init(|| std::thread::available_parallelism().is_ok_and(|c| c.get() > 1))
 }
 
 /// [`Preprocess::is_finger`] decided once for each of the 2²⁴ RGB colours, one bit
