@@ -96,12 +96,10 @@ impl Predictor {
         rgb: &[u8],
     ) -> Result<Prediction, TrainError> {
         let mut input = std::mem::take(&mut self.input);
-        let result = if self.split {
-            self.table.apply_into_split(width, height, rgb, &mut input)
-        } else {
-            self.table.apply_into(width, height, rgb, &mut input)
-        }
-        .and_then(|()| self.predict_preprocessed(&input));
+        let result = self
+            .table
+            .apply_into_on(width, height, rgb, &mut input, self.split)
+            .and_then(|()| self.predict_preprocessed(&input));
         self.input = input;
         result
     }

@@ -342,24 +342,22 @@ impl FingerTable {
         rgb: &[u8],
         out: &mut [f32],
     ) -> Result<(), TrainError> {
-        self.params
-            .squash(width, height, rgb, out, false, |r, g, b| {
-                self.contains(r, g, b)
-            })
+        self.apply_into_on(width, height, rgb, out, false)
     }
 
-    /// [`Self::apply_into`] with the output's halves on two threads when there are
-    /// two cores (tens of µs to start; for one frame's latency, not for a loader that
-    /// already keeps every core busy). The same output.
-    pub fn apply_into_split(
+    /// [`Self::apply_into`], with `split`: the output's halves on two threads when
+    /// there are two cores (tens of µs to start; for one frame's latency, not for a
+    /// loader that already keeps every core busy). The same output either way.
+    pub fn apply_into_on(
         &self,
         width: usize,
         height: usize,
         rgb: &[u8],
         out: &mut [f32],
+        split: bool,
     ) -> Result<(), TrainError> {
         self.params
-            .squash(width, height, rgb, out, true, |r, g, b| {
+            .squash(width, height, rgb, out, split, |r, g, b| {
                 self.contains(r, g, b)
             })
     }
@@ -488,7 +486,7 @@ mod tests {
             let looked_up = table.apply(w, h, &rgb).expect("valid");
             let mut split = vec![0.0; p.input_len()];
             table
-                .apply_into_split(w, h, &rgb, &mut split)
+                .apply_into_on(w, h, &rgb, &mut split, true)
                 .expect("valid");
             assert_eq!(looked_up, split, "two threads give the same output");
             assert!(direct.iter().any(|v| *v > 0.0));

@@ -449,7 +449,7 @@ fn fmt_duration(s: f64) -> String {
 /// Run `grasp trials`.
 pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
     let store = open_existing(db).await?;
-    let (session_id, model, seed, plan, scenes, bytes) = match args.resume {
+    let (session_id, model, seed, plan, scenes, bytes, model_sha256) = match args.resume {
         Some(id) => {
             let s = store.grasp_session(id).await?.ok_or_else(|| {
                 bad(format!(
@@ -487,7 +487,7 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
                     &now[..12]
                 )));
             }
-            (id, s.model, s.seed, plan, scenes, bytes)
+            (id, s.model, s.seed, plan, scenes, bytes, now)
         }
         None => {
             let mut plan = Plan::from_args(&args)?;
@@ -502,20 +502,15 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
             objects_of(&plan, &scenes)?; // checked before anything is stored
             // The model must exist before a session names it.
             let bytes = crate::models::force_artifact(&store, &model).await?;
+            let model_sha256 = sha256_hex(&bytes);
             let config_json = serde_json::to_string(&plan)
                 .map_err(|e| Failure::Runtime(anyhow!("cannot encode the settings: {e}")))?;
             let scenes_json = serde_json::to_string(&scenes)
                 .map_err(|e| Failure::Runtime(anyhow!("cannot encode the scenes: {e}")))?;
             let id = store
-                .create_grasp_session(
-                    &model,
-                    &sha256_hex(&bytes),
-                    args.seed,
-                    &scenes_json,
-                    &config_json,
-                )
+                .create_grasp_session(&model, &model_sha256, args.seed, &scenes_json, &config_json)
                 .await?;
-            (id, model, args.seed, plan, scenes, bytes)
+            (id, model, args.seed, plan, scenes, bytes, model_sha256)
         }
     };
     let objects = objects_of(&plan, &scenes)?;
@@ -540,7 +535,7 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
     writeln!(
         out,
         "grasp session {session_id}: model `{model}` (sha256 {}), seed {seed}, {} trials planned, {} stored, {} to run",
-        &sha256_hex(&bytes)[..12],
+        &model_sha256[..12],
         all.len(),
         all.len() - todo.len(),
         todo.len()
