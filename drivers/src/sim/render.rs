@@ -281,6 +281,11 @@ impl Renderer {
 
     /// The finger at rest or deformed, with the per-frame effects of frame
     /// `frame_index` exposed at `t_s` seconds. Raw RGB8, 640×480.
+    ///
+    /// The frame is made in two row bands on two threads (when there are two
+    /// cores), each band start to end: background, beams, then the effects, written
+    /// as the copy into the output. Every pixel gets the same operations in the same
+    /// order as in one pass, so the bytes do not depend on the split.
     pub(crate) fn render(
         &self,
         lattice: &Lattice,
@@ -288,34 +293,80 @@ impl Renderer {
         frame_index: u64,
         t_s: f64,
     ) -> Vec<u8> {
-        let mut img = self.drawn_lattice(lattice, deformed);
-        self.apply_effects(&mut img, frame_index, t_s);
-        img
-    }
-
-    /// The background with the lattice drawn on it: a copy of the last frame's when
-    /// the nodes are the same (bit for bit, so the bytes are too).
-    fn drawn_lattice(&self, lattice: &Lattice, deformed: &Deformed) -> Vec<u8> {
+        let mut out = vec![0u8; W * H * 3];
+        let effects = self.frame_effects(frame_index, t_s);
         let Ok(mut cache) = self.drawn.0.try_lock() else {
-            let mut img = self.background.clone();
-            self.draw_lattice(&mut img, lattice, deformed);
-            return img;
+            // Another thread renders with this renderer: draw without the cache.
+            let lines = self.lines(lattice, deformed);
+            let mut drawn = vec![0u8; W * H * 3];
+            self.paint(&mut drawn, Some(&lines), &mut out, &effects);
+            return out;
         };
-        if let Some(drawn) = cache.as_ref()
-            && drawn.nodes == deformed.nodes
-        {
-            return drawn.image.clone();
+        match cache.as_mut() {
+            // The same nodes, bit for bit: the same drawn lattice.
+            Some(d) if d.nodes == deformed.nodes => {
+                self.paint(&mut d.image, None, &mut out, &effects);
+            }
+            Some(d) => {
+                let lines = self.lines(lattice, deformed);
+                d.nodes.clone_from(&deformed.nodes);
+                self.paint(&mut d.image, Some(&lines), &mut out, &effects);
+            }
+            None => {
+                let lines = self.lines(lattice, deformed);
+                let mut image = vec![0u8; W * H * 3];
+                self.paint(&mut image, Some(&lines), &mut out, &effects);
+                *cache = Some(Drawn {
+                    nodes: deformed.nodes.clone(),
+                    image,
+                });
+            }
         }
-        let mut img = self.background.clone();
-        self.draw_lattice(&mut img, lattice, deformed);
-        *cache = Some(Drawn {
-            nodes: deformed.nodes.clone(),
-            image: img.clone(),
-        });
-        img
+        out
     }
 
-    pub(crate) fn draw_lattice(&self, img: &mut [u8], lattice: &Lattice, deformed: &Deformed) {
+    /// Make a frame in two row bands. `lines`: draw them on the background into
+    /// `drawn` first; `None`: `drawn` already holds this frame's lattice. Then `out`
+    /// gets `drawn` with the frame's effects.
+    fn paint(
+        &self,
+        drawn: &mut [u8],
+        lines: Option<&[Line]>,
+        out: &mut [u8],
+        effects: &FrameEffects,
+    ) {
+        // Split where the beams' pixels are halved (the effects cost the same per
+        // row): the finger's near end, with the longest, widest beams, is rarely in
+        // the middle of the frame.
+        let split = lines.map_or(H / 2, split_row);
+        let band = |drawn: &mut [u8], out: &mut [u8], rows: (usize, usize)| {
+            if let Some(lines) = lines {
+                drawn.copy_from_slice(&self.background[rows.0 * W * 3..rows.1 * W * 3]);
+                let rows_i32 = (rows.0 as i32, rows.1 as i32);
+                for &(p0, p1, half_w, c) in lines {
+                    draw_line(drawn, rows_i32, p0, p1, half_w, c);
+                }
+            }
+            self.effects_into(drawn, out, rows.0, effects);
+        };
+        let (d_top, d_bottom) = drawn.split_at_mut(split * W * 3);
+        let (o_top, o_bottom) = out.split_at_mut(split * W * 3);
+        // A scoped thread per frame (tens of µs) rather than a pool, whose sleeping
+        // workers wake too late for a millisecond of work.
+        if cores() > 1 {
+            std::thread::scope(|s| {
+                s.spawn(|| band(d_bottom, o_bottom, (split, H)));
+                band(d_top, o_top, (0, split));
+            });
+        } else {
+            band(d_top, o_top, (0, split));
+            band(d_bottom, o_bottom, (split, H));
+        }
+    }
+
+    /// The beams to draw, far to near as the lattice lists them: end points (px),
+    /// half width (px) and colour.
+    fn lines(&self, lattice: &Lattice, deformed: &Deformed) -> Vec<Line> {
         let base = FINGER_RGB.map(f32::from);
         let mut lines = Vec::with_capacity(lattice.beams.len());
         for &(i, j, kind) in &lattice.beams {
@@ -340,39 +391,31 @@ impl Renderer {
             let c = self.medium(base.map(|v| (v * light).min(255.0)), d);
             lines.push(((a.0, a.1), (b.0, b.1), half_w, c));
         }
-        // The top and bottom halves on two threads when the machine has two cores:
-        // each pixel still gets its beams in the same order, so the bytes are those of
-        // one pass. A scoped thread per frame (tens of µs) rather than a pool, whose
-        // sleeping workers wake too late for a millisecond of work.
-        let (top, bottom) = img.split_at_mut(H / 2 * W * 3);
-        let draw = |band: &mut [u8], rows: (i32, i32)| {
-            for &(p0, p1, half_w, c) in &lines {
-                draw_line(band, rows, p0, p1, half_w, c);
-            }
-        };
-        let half = H as i32 / 2;
-        if cores() > 1 {
-            std::thread::scope(|s| {
-                s.spawn(|| draw(bottom, (half, H as i32)));
-                draw(top, (0, half));
-            });
-        } else {
-            draw(top, (0, half));
-            draw(bottom, (half, H as i32));
+        lines
+    }
+
+    /// Draw the lattice on `img`, a copy of the background (benchmarks and tests; a
+    /// frame is [`Self::render`]).
+    pub(crate) fn draw_lattice(&self, img: &mut [u8], lattice: &Lattice, deformed: &Deformed) {
+        for &(p0, p1, half_w, c) in &self.lines(lattice, deformed) {
+            draw_line(img, (0, H as i32), p0, p1, half_w, c);
         }
     }
 
+    /// Apply frame `frame_index`'s effects to a whole frame in place (benchmarks).
     pub(crate) fn apply_effects(&self, img: &mut [u8], frame_index: u64, t_s: f64) {
-        if let Some(caustic) = &self.caustic {
+        let drawn = img.to_vec();
+        self.effects_into(&drawn, img, 0, &self.frame_effects(frame_index, t_s));
+    }
+
+    /// What the declared per-frame effects do in frame `frame_index` at `t_s`.
+    fn frame_effects(&self, frame_index: u64, t_s: f64) -> FrameEffects {
+        let caustic_offset = self.caustic.as_ref().map(|caustic| {
             let p = caustic.period;
             let shift = (t_s * 0.5 * f64::from(caustic.period_px)) as usize;
-            let (ox, oy) = (shift % p, (shift * 7 / 10) % p);
-            for (y, row) in img.chunks_exact_mut(Caustic::ROW).enumerate() {
-                for (c, &add) in row.iter_mut().zip(caustic.row((y + oy) % p, ox)) {
-                    *c = c.saturating_add(add);
-                }
-            }
-        }
+            (shift % p, (shift * 7 / 10) % p)
+        });
+        let mut bubbles = Vec::new();
         if let Some((per_frame, max_r)) = self.effects.bubbles {
             let slots = per_frame.ceil() as u64;
             let frac = per_frame - per_frame.floor();
@@ -389,22 +432,119 @@ impl Renderer {
                 let span = H as f64 + 4.0 * max_r;
                 let v = (v0 - speed * t_s).rem_euclid(span) - 2.0 * max_r;
                 let u = u0 + 6.0 * (t_s * 2.0 + slot as f64).sin();
-                draw_bubble(img, u as f32, v as f32, r as f32);
+                bubbles.push((u as f32, v as f32, r as f32));
             }
         }
-        if let Some(lut) = &self.exposure {
-            for v in img.iter_mut() {
-                *v = lut[usize::from(*v)];
-            }
-        }
-        if let Some(table) = &self.noise {
+        let noise_start = self.noise.as_ref().map(|_| {
             let mut g = rng::indexed(self.seed, "camera-noise", frame_index);
-            let start: usize = g.random_range(0..NOISE_OFFSETS);
-            for (v, &n) in img.iter_mut().zip(&table[start..start + W * H * 3]) {
-                *v = (i16::from(*v) + n).clamp(0, 255) as u8;
+            g.random_range(0..NOISE_OFFSETS)
+        });
+        FrameEffects {
+            caustic_offset,
+            bubbles,
+            noise_start,
+        }
+    }
+
+    /// `out` = rows `y0..` of `drawn` with the frame's effects, in their order:
+    /// caustics (as the copy), bubbles, exposure, noise. A few rows at a time, so
+    /// the passes after the first find their bytes in cache.
+    fn effects_into(&self, drawn: &[u8], out: &mut [u8], y0: usize, fx: &FrameEffects) {
+        const ROWS: usize = 16;
+        const ROW: usize = W * 3;
+        for (i, (src, dst)) in drawn
+            .chunks(ROWS * ROW)
+            .zip(out.chunks_mut(ROWS * ROW))
+            .enumerate()
+        {
+            let first = y0 + i * ROWS;
+            let rows = (first, first + dst.len() / ROW);
+            match (&self.caustic, fx.caustic_offset) {
+                (Some(caustic), Some((ox, oy))) => {
+                    let p = caustic.period;
+                    for (y, (s, d)) in src
+                        .chunks_exact(ROW)
+                        .zip(dst.chunks_exact_mut(ROW))
+                        .enumerate()
+                    {
+                        let add = caustic.row((rows.0 + y + oy) % p, ox);
+                        for ((d, &s), &a) in d.iter_mut().zip(s).zip(add) {
+                            *d = s.saturating_add(a);
+                        }
+                    }
+                }
+                _ => dst.copy_from_slice(src),
+            }
+            for &(u, v, r) in &fx.bubbles {
+                draw_bubble(dst, rows, u, v, r);
+            }
+            if let Some(lut) = &self.exposure {
+                for v in dst.iter_mut() {
+                    *v = lut[usize::from(*v)];
+                }
+            }
+            if let (Some(table), Some(start)) = (&self.noise, fx.noise_start) {
+                let (at, len) = (start + rows.0 * ROW, dst.len());
+                for (v, &n) in dst.iter_mut().zip(&table[at..at + len]) {
+                    *v = (i16::from(*v) + n).clamp(0, 255) as u8;
+                }
             }
         }
     }
+}
+
+/// One beam as drawn: end points (px), half width (px), colour.
+type Line = ((f32, f32), (f32, f32), f32, Rgb);
+
+/// What the declared effects do in one frame: the caustics' shift (px), the bubbles
+/// (centre and radius, px) and where the frame's camera noise starts in the table.
+#[derive(Debug)]
+struct FrameEffects {
+    caustic_offset: Option<(usize, usize)>,
+    bubbles: Vec<(f32, f32, f32)>,
+    noise_start: Option<usize>,
+}
+
+/// The row that splits the beams' drawing work in halves: each beam's pixels
+/// (length × width) spread evenly over the rows it spans. In `1..H`.
+fn split_row(lines: &[Line]) -> usize {
+    let mut per_row = vec![0f32; H + 1];
+    for &(p0, p1, half_w, _) in lines {
+        let reach = half_w + 1.0;
+        let lo = (p0.1.min(p1.1) - reach).clamp(0.0, H as f32) as usize;
+        let hi = ((p0.1.max(p1.1) + reach).clamp(0.0, H as f32) as usize).max(lo);
+        if hi == lo {
+            continue;
+        }
+        let len = ((p1.0 - p0.0).powi(2) + (p1.1 - p0.1).powi(2)).sqrt();
+        let cost = (len + 2.0 * reach) * 2.0 * reach;
+        if !cost.is_finite() {
+            continue;
+        }
+        let per = cost / (hi - lo) as f32;
+        per_row[lo] += per;
+        per_row[hi] -= per;
+    }
+    let mut running = 0.0;
+    let cumulative: Vec<f32> = per_row[..H]
+        .iter()
+        .map(|d| {
+            running += d;
+            running.max(0.0)
+        })
+        .collect();
+    let total: f32 = cumulative.iter().sum();
+    if !(total > 0.0) {
+        return H / 2;
+    }
+    let mut sum = 0.0;
+    for (y, c) in cumulative.iter().enumerate() {
+        sum += c;
+        if sum >= total / 2.0 {
+            return y.clamp(1, H - 1);
+        }
+    }
+    H / 2
 }
 
 /// Blend `c` into pixel `(x, y)` with coverage `a`.
@@ -488,8 +628,29 @@ fn draw_line(
         ((y - y0) as usize * W + x as usize) * 3
     };
     let step = if x_major { W * 3 } else { 3 };
-    let lo = floor_i32(amin - reach).max(a_range.0);
-    let hi = ceil_i32(amax + reach).min(a_range.1 - 1);
+    let mut lo = floor_i32(amin - reach).max(a_range.0);
+    let mut hi = ceil_i32(amax + reach).min(a_range.1 - 1);
+    if x_major {
+        // A column reaches the rows within `across` of its centre `bc` (less inside
+        // the segment): skip a band the line does not reach, and walk only the
+        // columns whose centre is within `m` of the band (the band's rows are b).
+        let m = across + 2.0;
+        let (y0f, y1f) = (y0 as f32, y1 as f32);
+        if b0.max(b1) + m < y0f || b0.min(b1) - m > y1f {
+            return;
+        }
+        if slope.abs() > 1e-3 {
+            let (e0, e1) = (a0 + (y0f - m - b0) / slope, a0 + (y1f + m - b0) / slope);
+            let (c0, c1) = (e0.min(e1), e0.max(e1));
+            // Past its ends a column's centre stays at the end's: keep the caps then.
+            if c0 > amin {
+                lo = lo.max(floor_i32(c0 - 1.0));
+            }
+            if c1 < amax {
+                hi = hi.min(ceil_i32(c1 + 1.0));
+            }
+        }
+    }
     let edge = half_w + 0.5;
     // A pixel the band covers fully takes the colour itself, without arithmetic.
     let solid = c.map(|v| (v + 0.5) as u8);
@@ -548,20 +709,21 @@ fn draw_line(
     }
 }
 
-/// A bubble: a bright anti-aliased rim with a faint fill.
-fn draw_bubble(img: &mut [u8], cx: f32, cy: f32, r: f32) {
+/// A bubble: a bright anti-aliased rim with a faint fill, on the rows `y0..y1` of
+/// the frame that `band` holds.
+fn draw_bubble(band: &mut [u8], (y0, y1): (usize, usize), cx: f32, cy: f32, r: f32) {
     let rim = [235.0, 245.0, 255.0];
     let lo_x = (cx - r - 2.0).floor() as i32;
     let hi_x = (cx + r + 2.0).ceil() as i32;
-    let lo_y = (cy - r - 2.0).floor() as i32;
-    let hi_y = (cy + r + 2.0).ceil() as i32;
+    let lo_y = ((cy - r - 2.0).floor() as i32).max(y0 as i32);
+    let hi_y = ((cy + r + 2.0).ceil() as i32).min(y1 as i32 - 1);
     for y in lo_y..=hi_y {
         for x in lo_x..=hi_x {
             let (ddx, ddy) = (x as f32 + 0.5 - cx, y as f32 + 0.5 - cy);
             let d = (ddx * ddx + ddy * ddy).sqrt();
             let ring = (1.2 - (d - r).abs()).clamp(0.0, 1.0) * 0.8;
             let fill = if d < r { 0.12 } else { 0.0 };
-            blend(img, x, y, rim, ring.max(fill));
+            blend(band, x, y - y0 as i32, rim, ring.max(fill));
         }
     }
 }
