@@ -8,8 +8,11 @@
 //! copy of the background, ~450 line rasterisations, and one pass per declared
 //! per-pixel effect. Effects the scene does not declare are skipped by one branch.
 //! The drawn lattice of the last frame is kept: a finger whose nodes have not moved
-//! (at rest, or a steady hold) is a copy, not a redraw. The per-pixel effects are
-//! written as straight runs over precomputed rows so that they vectorise.
+//! (at rest, or a steady hold) is not redrawn. A frame is made in two row bands on
+//! two threads, each band start to end (background, beams, then the effects written
+//! as its copy into the output, a few rows at a time so that they run in cache); the
+//! bands split where the beams' pixels halve. The per-pixel effects are written as
+//! straight runs over precomputed rows so that they vectorise.
 
 use super::contact::FingerGeometry;
 use super::effects::ImageEffects;
@@ -534,7 +537,7 @@ fn split_row(lines: &[Line]) -> usize {
         })
         .collect();
     let total: f32 = cumulative.iter().sum();
-    if !(total > 0.0) {
+    if total.is_nan() || total <= 0.0 {
         return H / 2;
     }
     let mut sum = 0.0;
@@ -724,6 +727,76 @@ fn draw_bubble(band: &mut [u8], (y0, y1): (usize, usize), cx: f32, cy: f32, r: f
             let ring = (1.2 - (d - r).abs()).clamp(0.0, 1.0) * 0.8;
             let fill = if d < r { 0.12 } else { 0.0 };
             blend(band, x, y - y0 as i32, rim, ring.max(fill));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(y_a: f32, y_b: f32) -> Line {
+        ((100.0, y_a), (400.0, y_b), 3.0, [255.0, 140.0, 36.0])
+    }
+
+    #[test]
+    fn the_split_halves_the_beams_pixels() {
+        // Nothing to draw: the middle.
+        assert_eq!(split_row(&[]), H / 2);
+        // Two equal beams: between them.
+        let s = split_row(&[line(100.0, 100.0), line(380.0, 380.0)]);
+        assert!((100..=380).contains(&s), "split at {s}");
+        // All the work near the top: the split follows it.
+        let top = [line(10.0, 10.0), line(20.0, 20.0), line(30.0, 30.0)];
+        let s = split_row(&top);
+        assert!((10..=30).contains(&s), "split at {s}");
+        // One long beam down the whole frame: about the middle.
+        let s = split_row(&[((320.0, -50.0), (320.0, 530.0), 3.0, [0.0; 3])]);
+        assert!(s.abs_diff(H / 2) <= 2, "split at {s}");
+    }
+
+    #[test]
+    fn the_split_stays_inside_the_frame_on_extreme_beams() {
+        let far = 1e30_f32;
+        for lines in [
+            vec![((0.0, f32::NAN), (10.0, f32::NAN), 3.0, [0.0; 3])],
+            vec![((0.0, -far), (10.0, -far), 3.0, [0.0; 3])],
+            vec![((0.0, far), (10.0, far), 3.0, [0.0; 3])],
+            vec![((-far, -far), (far, far), 3.0, [0.0; 3])],
+            vec![((f32::INFINITY, 0.0), (0.0, 479.0), 3.0, [0.0; 3])],
+            vec![((5.0, 0.0), (5.0, 0.0), 0.5, [0.0; 3])],
+            vec![((5.0, 479.9), (600.0, 479.9), 3.0, [0.0; 3])],
+        ] {
+            let s = split_row(&lines);
+            assert!((1..H).contains(&s), "split at {s} for {lines:?}");
+        }
+    }
+
+    #[test]
+    fn a_line_drawn_in_bands_is_the_line_drawn_whole() {
+        // Steep, shallow, flat, reversed, past the frame's edges, a dot: every split
+        // row gives the bytes of one pass.
+        let lines: [Line; 7] = [
+            ((10.0, 5.0), (600.0, 470.0), 3.0, [250.0, 140.0, 30.0]),
+            ((620.0, 30.0), (15.0, 90.0), 2.2, [200.0, 120.0, 20.0]),
+            ((100.0, 240.5), (500.0, 240.5), 3.0, [255.0, 255.0, 255.0]),
+            ((300.0, -40.0), (310.0, 520.0), 1.5, [90.0, 200.0, 10.0]),
+            ((-80.0, 200.0), (700.0, 260.0), 0.5, [255.0, 0.0, 0.0]),
+            ((320.0, 239.0), (320.2, 239.1), 3.0, [0.0, 255.0, 0.0]),
+            ((50.0, 470.0), (630.0, 478.0), 3.0, [10.0, 20.0, 255.0]),
+        ];
+        let mut whole = vec![40u8; W * H * 3];
+        for &(p0, p1, hw, c) in &lines {
+            draw_line(&mut whole, (0, H as i32), p0, p1, hw, c);
+        }
+        for split in [1, 7, 100, 239, 240, 241, 400, 479] {
+            let mut banded = vec![40u8; W * H * 3];
+            let (top, bottom) = banded.split_at_mut(split * W * 3);
+            for &(p0, p1, hw, c) in &lines {
+                draw_line(top, (0, split as i32), p0, p1, hw, c);
+                draw_line(bottom, (split as i32, H as i32), p0, p1, hw, c);
+            }
+            assert!(banded == whole, "split at row {split}");
         }
     }
 }

@@ -79,6 +79,43 @@ fn render_contact_is_a_pure_function_and_contacts_differ() {
 }
 
 #[test]
+fn a_frame_in_two_bands_is_the_frame_in_one_pass_with_every_water_effect() {
+    // `render` draws and applies the effects in two row bands (split where the beams'
+    // pixels halve, a few rows at a time); the stages draw the whole frame at once and
+    // apply the effects to it whole. Caustics, bubbles that cross band and chunk
+    // edges, exposure and noise: the same bytes. Again for the renderer's copy of the
+    // last drawn lattice (the same pose twice) and after a different pose.
+    let mut scene = water_scene();
+    scene.effects.push(Effect::Exposure { gain: 1.3 });
+    scene.effects.push(Effect::Bubbles {
+        per_frame: 40.0,
+        max_radius_px: 20.0,
+    });
+    let sim = SceneSim::new(&scene, 5).expect("scene");
+    for (i, (p, frame, t_s)) in [
+        (pose(0.03, 0.01, 1.2), 3, 0.25),
+        (pose(0.03, 0.01, 1.2), 4, 0.5),
+        (pose(0.045, -0.03, -2.0), 9, 7.75),
+        (pose(0.0, 0.0, 0.0), 10, 8.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let mut one_pass = sim.stage_draw("circle-10", &p).expect("draw");
+        sim.stage_effects(&mut one_pass, frame, t_s);
+        let banded = sim.render("circle-10", &p, frame, t_s).expect("render");
+        let differing = banded
+            .image
+            .as_raw()
+            .iter()
+            .zip(&one_pass)
+            .filter(|(a, b)| a != b)
+            .count();
+        assert_eq!(differing, 0, "frame {i}: {differing} bytes differ");
+    }
+}
+
+#[test]
 fn a_scene_without_effects_renders_exactly_the_base_pipeline() {
     // Background + lattice, no effect stage: however many effect kinds the code knows,
     // an effect-free scene is bit-identical to this.
