@@ -338,10 +338,10 @@ impl Renderer {
         out: &mut [u8],
         effects: &FrameEffects,
     ) {
-        // Split where the beams' pixels are halved (the effects cost the same per
-        // row): the finger's near end, with the longest, widest beams, is rarely in
-        // the middle of the frame.
-        let split = lines.map_or(H / 2, split_row);
+        // Split where the work is halved: the beams' pixels, and the copies and
+        // effects that cost the same in every row. The finger's near end, with the
+        // longest, widest beams, is rarely in the middle of the frame.
+        let split = lines.map_or(H / 2, |lines| split_row(lines, self.row_cost()));
         let band = |drawn: &mut [u8], out: &mut [u8], rows: (usize, usize)| {
             if let Some(lines) = lines {
                 drawn.copy_from_slice(&self.background[rows.0 * W * 3..rows.1 * W * 3]);
@@ -365,6 +365,18 @@ impl Renderer {
             band(d_top, o_top, (0, split));
             band(d_bottom, o_bottom, (split, H));
         }
+    }
+
+    /// What a row's copies and declared per-pixel effects cost, in beam pixels
+    /// drawn (measured with `perf` on water grasp trials: a drawn beam pixel about
+    /// 8 ns, a row's two copies about 100 ns, caustics or noise about 150 ns each).
+    fn row_cost(&self) -> f32 {
+        let per_pixel_effects = [
+            self.caustic.is_some(),
+            self.noise.is_some(),
+            self.exposure.is_some(),
+        ];
+        13.0 + 20.0 * per_pixel_effects.iter().filter(|on| **on).count() as f32
     }
 
     /// The beams to draw, far to near as the lattice lists them: end points (px),
@@ -508,10 +520,15 @@ struct FrameEffects {
     noise_start: Option<usize>,
 }
 
-/// The row that splits the beams' drawing work in halves: each beam's pixels
-/// (length × width) spread evenly over the rows it spans. In `1..H`.
-fn split_row(lines: &[Line]) -> usize {
+/// The row that splits a frame's work in halves: each beam's pixels (length ×
+/// width) spread evenly over the rows it spans, plus `row_cost` (in beam pixels) in
+/// every row for the copies and effects. The first row of the lower half, in `1..H`.
+fn split_row(lines: &[Line], row_cost: f32) -> usize {
     let mut per_row = vec![0f32; H + 1];
+    if row_cost.is_finite() && row_cost > 0.0 {
+        per_row[0] += row_cost;
+        per_row[H] -= row_cost;
+    }
     for &(p0, p1, half_w, _) in lines {
         let reach = half_w + 1.0;
         let lo = (p0.1.min(p1.1) - reach).clamp(0.0, H as f32) as usize;
@@ -544,7 +561,7 @@ fn split_row(lines: &[Line]) -> usize {
     for (y, c) in cumulative.iter().enumerate() {
         sum += c;
         if sum >= total / 2.0 {
-            return y.clamp(1, H - 1);
+            return (y + 1).clamp(1, H - 1);
         }
     }
     H / 2
@@ -742,17 +759,39 @@ mod tests {
     #[test]
     fn the_split_halves_the_beams_pixels() {
         // Nothing to draw: the middle.
-        assert_eq!(split_row(&[]), H / 2);
+        assert_eq!(split_row(&[], 0.0), H / 2);
         // Two equal beams: between them.
-        let s = split_row(&[line(100.0, 100.0), line(380.0, 380.0)]);
+        let s = split_row(&[line(100.0, 100.0), line(380.0, 380.0)], 0.0);
         assert!((100..=380).contains(&s), "split at {s}");
         // All the work near the top: the split follows it.
         let top = [line(10.0, 10.0), line(20.0, 20.0), line(30.0, 30.0)];
-        let s = split_row(&top);
+        let s = split_row(&top, 0.0);
         assert!((10..=30).contains(&s), "split at {s}");
         // One long beam down the whole frame: about the middle.
-        let s = split_row(&[((320.0, -50.0), (320.0, 530.0), 3.0, [0.0; 3])]);
+        let s = split_row(&[((320.0, -50.0), (320.0, 530.0), 3.0, [0.0; 3])], 0.0);
         assert!(s.abs_diff(H / 2) <= 2, "split at {s}");
+    }
+
+    #[test]
+    fn the_split_counts_the_rows_copies_and_effects() {
+        // Rows alone: the middle.
+        assert_eq!(split_row(&[], 53.0), H / 2);
+        // Beams near the top pull the split up, less the more a row costs: three
+        // beams of about 2 460 px near the top and 480 rows of 53 put half the work
+        // in the first ~170 rows.
+        let top = [line(10.0, 10.0), line(20.0, 20.0), line(30.0, 30.0)];
+        let beams_only = split_row(&top, 0.0);
+        let cheap_rows = split_row(&top, 1.0);
+        let dear_rows = split_row(&top, 53.0);
+        assert!(
+            beams_only < cheap_rows && cheap_rows < dear_rows && dear_rows < H / 2,
+            "splits {beams_only}, {cheap_rows}, {dear_rows}"
+        );
+        assert!((150..=190).contains(&dear_rows), "split at {dear_rows}");
+        // A cost that is not a number or not positive counts as none.
+        for bad in [f32::NAN, f32::INFINITY, -5.0, 0.0] {
+            assert_eq!(split_row(&top, bad), beams_only, "row cost {bad}");
+        }
     }
 
     #[test]
@@ -767,8 +806,10 @@ mod tests {
             vec![((5.0, 0.0), (5.0, 0.0), 0.5, [0.0; 3])],
             vec![((5.0, 479.9), (600.0, 479.9), 3.0, [0.0; 3])],
         ] {
-            let s = split_row(&lines);
-            assert!((1..H).contains(&s), "split at {s} for {lines:?}");
+            for row_cost in [0.0, 53.0] {
+                let s = split_row(&lines, row_cost);
+                assert!((1..H).contains(&s), "split at {s} for {lines:?}");
+            }
         }
     }
 

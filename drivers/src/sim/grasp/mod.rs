@@ -74,6 +74,9 @@ const CAMERA: &str = "sim-soft-camera";
 const STEP_NS: u64 = 2_000_000;
 /// Tangential stiffness of a finger's contact at 1 N of normal force, N/m.
 const SHEAR_STIFFNESS_N_PER_M: f64 = 600.0;
+/// Half width of the first bracket of the object's balance around the last step's
+/// shift, m (widened eightfold until it holds the balance).
+const WARM_BRACKET_M: f64 = 1e-5;
 /// Fastest the simulated wrist turns, rad/s (a Panda's last joint: 2.61 rad/s).
 pub const WRIST_MAX_RAD_S: f64 = 2.5;
 
@@ -182,7 +185,8 @@ impl FlowSeries {
 struct ContactMemo {
     grip: Grip,
     shear_n: [f64; 2],
-    contact: FingerContact,
+    /// Shared, not copied: the balance asks for it tens of times a frame.
+    contact: Arc<FingerContact>,
 }
 
 /// The shared state of the soft grasp.
@@ -269,7 +273,7 @@ impl State {
 
     /// Finger `k`'s contact at `opening_mm` with the present shift, turn and shear
     /// (`None`: no object).
-    fn finger_at(&self, k: usize, opening_mm: f64) -> Result<Option<FingerContact>, SimError> {
+    fn finger_at(&self, k: usize, opening_mm: f64) -> Result<Option<Arc<FingerContact>>, SimError> {
         let Some(obj) = &self.object else {
             return Ok(None);
         };
@@ -280,13 +284,20 @@ impl State {
             && m.grip == grip
             && m.shear_n.map(f64::to_bits) == shear.map(f64::to_bits)
         {
-            return Ok(Some(m.contact.clone()));
+            return Ok(Some(Arc::clone(&m.contact)));
         }
-        let contact = finger_contact(&self.finger, &self.contact, obj, k, &grip, shear)?;
+        let contact = Arc::new(finger_contact(
+            &self.finger,
+            &self.contact,
+            obj,
+            k,
+            &grip,
+            shear,
+        )?);
         self.last_contact.borrow_mut()[k] = Some(ContactMemo {
             grip,
             shear_n: shear,
-            contact: contact.clone(),
+            contact: Arc::clone(&contact),
         });
         Ok(Some(contact))
     }
@@ -365,6 +376,7 @@ impl State {
     /// The object's shift that balances a push along G's +x, m: the squeeze on finger
     /// 0 less that on finger 1 equals −push.
     fn balance_shift(&mut self, push_n: f64) -> Result<f64, SimError> {
+        let last_m = self.shift_m;
         // Not gripped by both fingers: the support keeps it where it is.
         self.shift_m = 0.0;
         for k in 0..2 {
@@ -383,14 +395,38 @@ impl State {
             Ok(a - b + push_n)
         };
         let reach = 0.25 * self.object.as_ref().map_or(0.0, GraspObject::max_width_m);
-        let (mut lo, mut hi) = (-reach, reach);
-        let (mut f_lo, mut f_hi) = (imbalance(self, lo)?, imbalance(self, hi)?);
-        // The push beats the squeeze anywhere within reach: the object sits at the end.
-        if f_lo >= 0.0 {
-            return Ok(lo);
-        }
-        if f_hi <= 0.0 {
-            return Ok(hi);
+        // Bracket the balance around the last step's shift first (a step changes the
+        // push and the grip a little), widening to the whole reach: about half the
+        // contacts of bracketing the whole reach every step.
+        let mut half_m = if last_m.is_finite() && last_m.abs() < reach {
+            WARM_BRACKET_M
+        } else {
+            2.0 * reach
+        };
+        let (mut lo, mut hi, mut f_lo, mut f_hi);
+        let mut tries = 0;
+        loop {
+            tries += 1;
+            lo = (last_m - half_m).max(-reach);
+            hi = (last_m + half_m).min(reach);
+            if !lo.is_finite() || !hi.is_finite() || lo >= hi {
+                (lo, hi) = (-reach, reach);
+            }
+            (f_lo, f_hi) = (imbalance(self, lo)?, imbalance(self, hi)?);
+            let whole = lo <= -reach && hi >= reach;
+            // The push beats the squeeze anywhere within reach: the object sits at
+            // the end.
+            if lo <= -reach && f_lo >= 0.0 {
+                return Ok(lo);
+            }
+            if hi >= reach && f_hi <= 0.0 {
+                return Ok(hi);
+            }
+            // (A reach that is not a number never becomes whole: the tries end it.)
+            if (f_lo < 0.0 && f_hi > 0.0) || whole || tries >= 16 {
+                break;
+            }
+            half_m *= 8.0;
         }
         // Illinois false position: the imbalance grows smoothly with the shift, so a
         // few steps reach 0.1 µN (30 bisections cost 60 contacts a step).
@@ -453,7 +489,7 @@ impl State {
             contacts.push(self.finger_at(k, self.opening_mm)?);
         }
         let normal = |k: usize| contacts[k].as_ref().map_or(0.0, |c| c.normal_n);
-        let squeeze = |k: usize| contacts[k].as_ref().map_or(0.0, FingerContact::squeeze_n);
+        let squeeze = |k: usize| contacts[k].as_ref().map_or(0.0, |c| c.squeeze_n());
         if let Some(limit) = obj.crush_force_n
             && squeeze(0).max(squeeze(1)) > limit
         {
