@@ -15,6 +15,8 @@
 //!   [`franka`] (Panda through franka-rs on its own thread), `v4l_camera` (V4L2,
 //!   behind feature `v4l`, which needs libclang to build).
 //! - [`select`]: a rig of boxed devices from the rig config, real or simulated.
+//! - [`second_core`]: the other core for the halves of one frame's work (drawing,
+//!   preprocessing), kept awake between frames.
 //! - [`sim`]: the simulated scene (finger, contact, lattice, renderer, effects) and the
 //!   simulated twin of every device.
 //!
@@ -31,6 +33,7 @@ pub mod franka;
 pub mod gripper;
 pub mod hande;
 pub mod netft;
+pub mod second_core;
 pub mod select;
 pub mod sim;
 #[cfg(feature = "v4l")]

@@ -2,6 +2,7 @@
 //! grasp controller calls at the camera's 120 Hz.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use burn::prelude::*;
 use softtouch_schemas::Wrench;
@@ -10,7 +11,7 @@ use crate::TrainError;
 use crate::artifact::{ArtifactHeader, ModelArtifact};
 use crate::labels::{WrenchLabel, wrench_from_label};
 use crate::model::InferenceNet;
-use crate::preprocess::FingerTable;
+use crate::preprocess::{FingerTable, Fork};
 
 /// One inference.
 #[derive(Debug, Clone, PartialEq)]
@@ -40,8 +41,8 @@ pub struct Predictor {
     input: Vec<f32>,
     /// The model's colour threshold as a lookup table (built once, about 0.1 s).
     table: FingerTable,
-    /// Preprocess a frame on two threads ([`Self::split_preprocessing`]).
-    split: bool,
+    /// Preprocess a frame's halves through this ([`Self::split_preprocessing`]).
+    split: Option<Arc<dyn Fork>>,
 }
 
 impl Predictor {
@@ -60,14 +61,15 @@ impl Predictor {
             header: artifact.header,
             device,
             input,
-            split: false,
+            split: None,
         }
     }
 
-    /// Preprocess each frame's halves on two threads when there are two cores (off by
-    /// default: the control-cycle benchmark measures one core). The same estimates.
-    pub fn split_preprocessing(&mut self, on: bool) {
-        self.split = on;
+    /// Preprocess each frame's halves through `fork`, e.g. on two cores (`None`, the
+    /// default: on the caller; the control-cycle benchmark measures one core). The
+    /// same estimates.
+    pub fn split_preprocessing(&mut self, fork: Option<Arc<dyn Fork>>) {
+        self.split = fork;
     }
 
     pub fn load(path: &Path) -> Result<Self, TrainError> {
@@ -98,7 +100,7 @@ impl Predictor {
         let mut input = std::mem::take(&mut self.input);
         let result = self
             .table
-            .apply_into_on(width, height, rgb, &mut input, self.split)
+            .apply_into_on(width, height, rgb, &mut input, self.split.as_deref())
             .and_then(|()| self.predict_preprocessed(&input));
         self.input = input;
         result

@@ -25,7 +25,7 @@ pub use infer::{Latency, Prediction, Predictor, measure_frame_latency, measure_l
 pub use labels::{AXES, LabelNorm, UNITS, WrenchLabel};
 pub use metrics::Metrics;
 pub use model::{ModelConfig, ModelKind};
-pub use preprocess::{FingerTable, Preprocess};
+pub use preprocess::{FingerTable, Fork, Preprocess, ScopedThread};
 pub use train::{
     EpochReport, Example, InitFrom, Observer, Quiet, Splits, TrainConfig, Trained, evaluate,
     latent_means, train, train_from,

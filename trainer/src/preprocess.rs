@@ -127,7 +127,7 @@ impl Preprocess {
         rgb: &[u8],
         out: &mut [f32],
     ) -> Result<(), TrainError> {
-        self.squash(width, height, rgb, out, false, |r, g, b| {
+        self.squash(width, height, rgb, out, None, |r, g, b| {
             self.is_finger(r, g, b)
         })
     }
@@ -142,7 +142,7 @@ impl Preprocess {
         height: usize,
         rgb: &[u8],
         out: &mut [f32],
-        split: bool,
+        split: Option<&dyn Fork>,
         is_finger: impl Fn(u8, u8, u8) -> bool + Sync,
     ) -> Result<(), TrainError> {
         if width == 0 || height == 0 {
@@ -202,11 +202,10 @@ impl Preprocess {
             }
         };
         let mut sums = vec![[0u32; 3]; plane];
-        if split && two_cores() && n > 1 {
+        if let Some(fork) = split.filter(|_| n > 1) {
             let (top, bottom) = sums.split_at_mut(n / 2 * n);
-            std::thread::scope(|s| {
-                s.spawn(|| fill(bottom, n / 2));
-                fill(top, 0);
+            fork.fork(&mut || fill(&mut *top, 0), &mut || {
+                fill(&mut *bottom, n / 2)
             });
         } else {
             fill(&mut sums, 0);
@@ -236,6 +235,32 @@ impl Preprocess {
 fn two_cores() -> bool {
     static TWO: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     *TWO.get_or_init(|| std::thread::available_parallelism().is_ok_and(|c| c.get() > 1))
+}
+
+/// Runs the two halves of one frame's preprocessing, possibly at once, and returns
+/// when both are done. The grasp trials pass the drivers' second core, kept awake
+/// between frames; [`ScopedThread`] starts a thread per frame.
+pub trait Fork: Send + Sync + std::fmt::Debug {
+    fn fork(&self, here: &mut (dyn FnMut() + Send), there: &mut (dyn FnMut() + Send));
+}
+
+/// A scoped thread per call for the other half, when there are two cores (else
+/// both halves on the caller).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ScopedThread;
+
+impl Fork for ScopedThread {
+    fn fork(&self, here: &mut (dyn FnMut() + Send), there: &mut (dyn FnMut() + Send)) {
+        if two_cores() {
+            std::thread::scope(|s| {
+                s.spawn(there);
+                here();
+            });
+        } else {
+            here();
+            there();
+        }
+    }
 }
 
 /// [`Preprocess::is_finger`] decided once for each of the 2²⁴ RGB colours, one bit
@@ -342,19 +367,19 @@ impl FingerTable {
         rgb: &[u8],
         out: &mut [f32],
     ) -> Result<(), TrainError> {
-        self.apply_into_on(width, height, rgb, out, false)
+        self.apply_into_on(width, height, rgb, out, None)
     }
 
-    /// [`Self::apply_into`], with `split`: the output's halves on two threads when
-    /// there are two cores (tens of µs to start; for one frame's latency, not for a
-    /// loader that already keeps every core busy). The same output either way.
+    /// [`Self::apply_into`], with `split`: the output's halves through that
+    /// [`Fork`] (for one frame's latency, not for a loader that already keeps every
+    /// core busy). The same output either way.
     pub fn apply_into_on(
         &self,
         width: usize,
         height: usize,
         rgb: &[u8],
         out: &mut [f32],
-        split: bool,
+        split: Option<&dyn Fork>,
     ) -> Result<(), TrainError> {
         self.params
             .squash(width, height, rgb, out, split, |r, g, b| {
@@ -486,7 +511,7 @@ mod tests {
             let looked_up = table.apply(w, h, &rgb).expect("valid");
             let mut split = vec![0.0; p.input_len()];
             table
-                .apply_into_on(w, h, &rgb, &mut split, true)
+                .apply_into_on(w, h, &rgb, &mut split, Some(&ScopedThread))
                 .expect("valid");
             assert_eq!(looked_up, split, "two threads give the same output");
             assert!(direct.iter().any(|v| *v > 0.0));

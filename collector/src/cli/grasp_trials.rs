@@ -519,7 +519,7 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
     // A trial is one frame at a time: its drawing and preprocessing take the second
     // core for half of each frame, and the model runs on one (burn's rayon workers
     // spinning on both cores would only get in their way).
-    predictor.split_preprocessing(true);
+    predictor.split_preprocessing(Some(Arc::new(SecondCore)));
     let inference_pool = Arc::new(
         rayon::ThreadPoolBuilder::new()
             .num_threads(1)
@@ -1041,5 +1041,16 @@ mod tests {
         assert_eq!(paper_rate(Medium::Water, Mode::Closed), 0.90);
         assert_eq!(fmt_duration(125.4), "2m05s");
         assert_eq!(csv_field("a,b"), "\"a,b\"");
+    }
+}
+
+/// The drivers' second core (kept awake between frames) for the preprocessing's
+/// other half: the one helper the simulated camera's drawing uses too.
+#[derive(Debug)]
+struct SecondCore;
+
+impl softtouch_trainer::Fork for SecondCore {
+    fn fork(&self, here: &mut (dyn FnMut() + Send), there: &mut (dyn FnMut() + Send)) {
+        softtouch_drivers::second_core::join(here, there);
     }
 }

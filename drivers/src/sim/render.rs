@@ -8,8 +8,8 @@
 //! copy of the background, ~450 line rasterisations, and one pass per declared
 //! per-pixel effect. Effects the scene does not declare are skipped by one branch.
 //! The drawn lattice of the last frame is kept: a finger whose nodes have not moved
-//! (at rest, or a steady hold) is not redrawn. A frame is made in two row bands on
-//! two threads, each band start to end (background, beams, then the effects written
+//! (at rest, or a steady hold) is not redrawn. A frame is made in two row bands, one
+//! on the caller and one on [`crate::second_core`], each band start to end (background, beams, then the effects written
 //! as its copy into the output, a few rows at a time so that they run in cache); the
 //! bands split where the beams' pixels halve. The per-pixel effects are written as
 //! straight runs over precomputed rows so that they vectorise.
@@ -122,12 +122,6 @@ impl Clone for DrawnCache {
     fn clone(&self) -> Self {
         Self::default()
     }
-}
-
-/// The cores this process may use (asked once).
-fn cores() -> usize {
-    static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
-    *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, usize::from))
 }
 
 /// Per-channel colour in 0–255, as floats.
@@ -354,17 +348,12 @@ impl Renderer {
         };
         let (d_top, d_bottom) = drawn.split_at_mut(split * W * 3);
         let (o_top, o_bottom) = out.split_at_mut(split * W * 3);
-        // A scoped thread per frame (tens of µs) rather than a pool, whose sleeping
-        // workers wake too late for a millisecond of work.
-        if cores() > 1 {
-            std::thread::scope(|s| {
-                s.spawn(|| band(d_bottom, o_bottom, (split, H)));
-                band(d_top, o_top, (0, split));
-            });
-        } else {
-            band(d_top, o_top, (0, split));
-            band(d_bottom, o_bottom, (split, H));
-        }
+        // On the second core, kept awake between frames (a thread started per frame
+        // began its band 140 µs late).
+        crate::second_core::join(
+            || band(d_top, o_top, (0, split)),
+            || band(d_bottom, o_bottom, (split, H)),
+        );
     }
 
     /// What a row's copies and declared per-pixel effects cost, in beam pixels
