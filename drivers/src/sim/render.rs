@@ -661,6 +661,9 @@ fn draw_line(
         }
     }
     let edge = half_w + 0.5;
+    // Distance (and its square) from which coverage rounds to no change (edge ≥ 1).
+    let no_change = edge - 0.5 / 256.0;
+    let no_change_2 = no_change * no_change;
     // A pixel the band covers fully takes the colour itself, without arithmetic.
     let solid = c.map(|v| (v + 0.5) as u8);
     for ia in lo..=hi {
@@ -699,6 +702,13 @@ fn draw_line(
             }
             continue;
         }
+        // Past an end. A pixel `edge − ½⁄256` or farther from the segment gets a
+        // coverage under 1⁄256, which `blend_at` rounds to no change: skip it without
+        // the square root, and skip a column that far beyond the end (every point of
+        // the segment is at least that far along the walk).
+        if (amin - ac).max(ac - amax) >= no_change {
+            continue;
+        }
         let blo = floor_i32(bc - across).max(b_range.0);
         let bhi = ceil_i32(bc + across).min(b_range.1 - 1);
         for ib in blo..=bhi {
@@ -709,7 +719,11 @@ fn draw_line(
                 0.0
             };
             let (ea, eb) = (a0 + t * da - ac, b0 + t * db - pb);
-            let d = (ea * ea + eb * eb).sqrt();
+            let d2 = ea * ea + eb * eb;
+            if d2 >= no_change_2 {
+                continue;
+            }
+            let d = d2.sqrt();
             let cov = (edge - d).clamp(0.0, 1.0);
             if cov > 0.0 {
                 blend_at(band, at(ia, ib), solid, cov);
