@@ -115,7 +115,7 @@ fn poll_for_work(warm: Arc<AtomicBool>, keep_warm: Duration) -> impl FnOnce() + 
             std::hint::spin_loop();
             spins = spins.wrapping_add(1);
             // Reading the clock costs tens of nanoseconds: not on every spin.
-            if spins % 64 == 0 && last_job.elapsed() >= keep_warm {
+            if spins.is_multiple_of(64) && last_job.elapsed() >= keep_warm {
                 warm.store(false, Ordering::Release);
                 return;
             }
