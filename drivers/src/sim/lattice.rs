@@ -370,7 +370,13 @@ mod tests {
         };
         for first in [0, 1, 5, 8, 9, 20, 36, 37] {
             let b: Vec<f64> = (0..n)
-                .map(|i| if i < first { 0.0 } else { g.random_range(-1e3..1e3) })
+                .map(|i| {
+                    if i < first {
+                        0.0
+                    } else {
+                        g.random_range(-1e3..1e3)
+                    }
+                })
                 .collect();
             let (mut fast, mut want) = (b.clone(), b.clone());
             solve(&l, &mut fast);
@@ -384,7 +390,10 @@ mod tests {
             // K x = b.
             for i in 0..n {
                 let r: f64 = (0..n).map(|j| k[i * n + j] * fast[j]).sum::<f64>() - b[i];
-                assert!(r.abs() < 1e-8, "first load {first}: residual {r} in row {i}");
+                assert!(
+                    r.abs() < 1e-8,
+                    "first load {first}: residual {r} in row {i}"
+                );
             }
         }
     }
@@ -394,7 +403,10 @@ mod tests {
         for len in [0, 1, 7, 8, 9, 16, 17] {
             let a: Vec<f64> = (0..len).map(|i| i as f64 + 1.0).collect();
             let want: f64 = a.iter().map(|v| v * v).sum();
-            assert!((dot(&a, &a) - want).abs() <= 1e-12 * want.max(1.0), "length {len}");
+            assert!(
+                (dot(&a, &a) - want).abs() <= 1e-12 * want.max(1.0),
+                "length {len}"
+            );
         }
         assert!(dot(&[f64::MAX, 1.0], &[2.0, 1.0]).is_infinite());
         assert!(dot(&[f64::NAN], &[1.0]).is_nan());

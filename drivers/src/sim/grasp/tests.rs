@@ -433,6 +433,45 @@ async fn a_declared_current_squeezes_one_finger_more_than_the_other() {
 }
 
 #[tokio::test(start_paused = true)]
+async fn the_balance_bracketed_near_the_last_shift_is_the_balance_bracketed_over_the_reach() {
+    // The balance starts its bracket at the last step's shift: from any last shift
+    // (none, near, far, at and past the reach's end, not a number) it finds the shift
+    // the whole-reach bracket finds, for pushes small, large and beyond what the grip
+    // holds (the object then sits at the reach's end).
+    let obj = cylinder_standing();
+    let (_, probe, _) = grip_at(&land(), obj.clone(), 0).await;
+    let count = count_for(&probe, 1.5);
+    let (_, h, _) = grip_at(&land(), obj.clone(), count).await;
+    let mut s = h.state.lock().expect("state");
+    let reach = 0.25 * obj.max_width_m();
+    for push_n in [0.0, 0.01, -0.2, 0.7, -1.4, 50.0, -50.0] {
+        s.shift_m = f64::NAN;
+        let whole = s.balance_shift(push_n).expect("balance");
+        assert!(whole.abs() <= reach, "push {push_n}: {whole}");
+        // Gripped by both fingers: a push moves the object.
+        assert!(
+            push_n.abs() < 1e-3 || whole.abs() > 1e-7,
+            "push {push_n}: {whole}"
+        );
+        for last_m in [
+            0.0,
+            whole + 3e-6,
+            whole - 2e-4,
+            0.9 * reach,
+            reach,
+            -2.0 * reach,
+        ] {
+            s.shift_m = last_m;
+            let warm = s.balance_shift(push_n).expect("balance");
+            assert!(
+                (warm - whole).abs() <= 1e-9,
+                "push {push_n} N from {last_m} m: {warm} against {whole}"
+            );
+        }
+    }
+}
+
+#[tokio::test(start_paused = true)]
 async fn turning_a_gripped_cylinder_makes_a_torque_about_z_that_the_wrist_removes() {
     let obj = cylinder_standing();
     let (_, probe, _) = grip_at(&land(), obj.clone(), 0).await;
