@@ -9,9 +9,10 @@
 //! per-pixel effect. Effects the scene does not declare are skipped by one branch.
 //! The drawn lattice of the last frame is kept: a finger whose nodes have not moved
 //! (at rest, or a steady hold) is not redrawn. A frame is made in two row bands, one
-//! on the caller and one on [`crate::second_core`], each band start to end (background, beams, then the effects written
-//! as its copy into the output, a few rows at a time so that they run in cache); the
-//! bands split where the beams' pixels halve. The per-pixel effects are written as
+//! on the caller and one on [`crate::second_core`], each band start to end
+//! (background, beams, then the effects written as its copy into the output, a few
+//! rows at a time so that they run in cache); the bands split where the work (the
+//! beams' pixels and each row's copies and effects) halves. The per-pixel effects are written as
 //! straight runs over precomputed rows so that they vectorise.
 
 use super::contact::FingerGeometry;
@@ -279,8 +280,8 @@ impl Renderer {
     /// The finger at rest or deformed, with the per-frame effects of frame
     /// `frame_index` exposed at `t_s` seconds. Raw RGB8, 640×480.
     ///
-    /// The frame is made in two row bands on two threads (when there are two
-    /// cores), each band start to end: background, beams, then the effects, written
+    /// The frame is made in two row bands, one on [`crate::second_core`] (when there
+    /// are two cores), each band start to end: background, beams, then the effects, written
     /// as the copy into the output. Every pixel gets the same operations in the same
     /// order as in one pass, so the bytes do not depend on the split.
     pub(crate) fn render(
