@@ -1184,15 +1184,20 @@ fn sighup_then_a_second_signal_stops_the_binary_at_once() {
         &["collect", "--samples", "100000", "--seed", "10"],
         2,
     );
-    // Both from one shell, microseconds apart: a simulated sample takes about 3 ms,
-    // so two `kill` processes in turn could let the child finish and exit between them.
+    // Both signals are queued while the child is stopped, and arrive together when it
+    // continues. Sent to a running child, even microseconds apart from one shell, a
+    // descheduled shell let the child finish its sample and exit between them (a
+    // simulated sample takes about a millisecond).
     let pid = child.id();
     let ok = Command::new("sh")
-        .args(["-c", &format!("kill -HUP {pid} && kill -TERM {pid}")])
+        .args([
+            "-c",
+            &format!("kill -STOP {pid} && kill -HUP {pid} && kill -TERM {pid} && kill -CONT {pid}"),
+        ])
         .status()
         .unwrap_or_else(|e| panic!("sh: {e}"))
         .success();
-    assert!(ok, "kill -HUP, -TERM failed");
+    assert!(ok, "kill -STOP, -HUP, -TERM, -CONT failed");
     let out = child.wait_with_output().unwrap_or_else(|e| panic!("{e}"));
     assert!(
         out.status.success(),

@@ -152,15 +152,42 @@ async fn count_stop_signals(stop: tokio::sync::watch::Sender<u32>) {
             Ok(()) => "Ctrl-C",
             Err(_) => break,
         };
-        requests += 1;
-        if requests == 1 {
-            eprintln!("\n{name}: stopping after this sample (again to stop the arm at once)");
-        } else {
-            eprintln!("\n{name}: stopping the arm now");
+        let mut names = vec![name];
+        // Signals that came together count together, so the loop never acts on the
+        // first while the second is already here (a stopped shell's HUP and TERM).
+        #[cfg(unix)]
+        names.extend(
+            [
+                already_here(&mut term, "SIGTERM"),
+                already_here(&mut hup, "SIGHUP"),
+            ]
+            .into_iter()
+            .flatten(),
+        );
+        for name in names {
+            requests += 1;
+            if requests == 1 {
+                eprintln!("\n{name}: stopping after this sample (again to stop the arm at once)");
+            } else {
+                eprintln!("\n{name}: stopping the arm now");
+            }
         }
         if stop.send(requests).is_err() {
             break;
         }
+    }
+}
+
+/// `name` if a notification of `signal` is already waiting (taken), without waiting.
+#[cfg(unix)]
+fn already_here(
+    signal: &mut tokio::signal::unix::Signal,
+    name: &'static str,
+) -> Option<&'static str> {
+    let mut cx = std::task::Context::from_waker(std::task::Waker::noop());
+    match signal.poll_recv(&mut cx) {
+        std::task::Poll::Ready(Some(())) => Some(name),
+        _ => None,
     }
 }
 
