@@ -1,6 +1,6 @@
 //! Unit tests of the soft grasp's objects and physics (virtual time).
 
-use super::touch::{Grip, finger_contact};
+use super::touch::{Grip, SqueezeAlongShift, finger_contact};
 use super::*;
 use crate::sim::SceneSim;
 use softtouch_schemas::scene::ObjectProfile;
@@ -469,6 +469,77 @@ async fn the_balance_bracketed_near_the_last_shift_is_the_balance_bracketed_over
             );
         }
     }
+}
+
+#[test]
+fn the_squeeze_along_the_shift_is_the_whole_contacts_bit_for_bit() {
+    // The balance's iterations ask only for the squeeze as the shift changes: the
+    // shortcut must give the whole contact's bits, for every shipped object (standing,
+    // lying, tapered), both fingers, turned, sheared, pressed in and not touching.
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let scene: SceneSpec =
+        softtouch_schemas::config::load_toml(&root.join("scenes/grasp.toml")).expect("loads");
+    let mut objects: Vec<GraspObject> = scene.objects.iter().map(GraspObject::from_spec).collect();
+    objects.push(GraspObject::cylinder("lying", 0.01));
+    let finger = FingerGeometry::default();
+    let params = ContactParams::default();
+    let mut compared = 0;
+    let mut pressed = 0;
+    for obj in &objects {
+        let reach = 0.25 * obj.max_width_m();
+        for k in 0..2 {
+            for (opening_m, yaw_rad, shear_n) in [
+                (obj.grasp_width_m, 0.0, [0.0, 0.0]),
+                (obj.grasp_width_m - 0.002, 0.3, [0.2, -1.5]),
+                (obj.max_width_m() + 0.01, -0.7, [0.0, 0.4]),
+                (0.5 * obj.grasp_width_m, 1.2, [-3.0, 2.0]),
+            ] {
+                let grip = Grip {
+                    opening_m,
+                    shift_m: 0.0,
+                    yaw_rad,
+                };
+                let along = SqueezeAlongShift::new(&finger, &params, obj, k, &grip, shear_n)
+                    .expect("finite");
+                for shift_m in [0.0, -0.0, 1e-9, -3e-6, 2e-4, -reach, reach, 0.37 * reach] {
+                    let whole = finger_contact(
+                        &finger,
+                        &params,
+                        obj,
+                        k,
+                        &Grip { shift_m, ..grip },
+                        shear_n,
+                    )
+                    .expect("contact");
+                    let (normal_n, squeeze_n) = along.at(shift_m).expect("finite");
+                    let what = format!("{} finger {k} at {grip:?} shifted {shift_m}", obj.name);
+                    assert_eq!(squeeze_n.to_bits(), whole.squeeze_n().to_bits(), "{what}");
+                    assert_eq!(normal_n.to_bits(), whole.normal_n.to_bits(), "{what}");
+                    compared += 1;
+                    pressed += usize::from(normal_n > 0.0);
+                }
+            }
+        }
+    }
+    assert!(
+        pressed > compared / 3 && pressed < compared,
+        "{pressed} of {compared}"
+    );
+    // Not finite: no answer from the shortcut, an error from the whole contact.
+    let obj = &objects[0];
+    let grip = Grip {
+        opening_m: obj.grasp_width_m,
+        ..Grip::default()
+    };
+    let along = SqueezeAlongShift::new(&finger, &params, obj, 0, &grip, [0.0; 2]).expect("finite");
+    assert!(along.at(f64::NAN).is_none());
+    assert!(along.at(f64::INFINITY).is_none());
+    let nan_grip = Grip {
+        yaw_rad: f64::NAN,
+        ..grip
+    };
+    assert!(SqueezeAlongShift::new(&finger, &params, obj, 0, &nan_grip, [0.0; 2]).is_err());
+    assert!(SqueezeAlongShift::new(&finger, &params, obj, 1, &grip, [f64::NAN, 0.0]).is_err());
 }
 
 #[tokio::test(start_paused = true)]

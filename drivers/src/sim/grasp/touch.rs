@@ -70,16 +70,89 @@ fn surface(finger: &FingerGeometry, h: f64, y: f64) -> Option<(f64, [f64; 3])> {
     Some((x, [n[0] / len, n[1] / len, n[2] / len]))
 }
 
-/// The contact of `obj` on finger `k` (0 or 1) at `grip`, with `shear_n` = (along y,
-/// along z) in the finger's frame, N, spread over the loaded strips.
-pub(crate) fn finger_contact(
-    finger: &FingerGeometry,
-    params: &ContactParams,
-    obj: &GraspObject,
-    k: usize,
-    grip: &Grip,
-    shear_n: [f64; 2],
-) -> Result<FingerContact, SimError> {
+/// What the strips of finger `k` press with against `obj` turned by `yaw_rad`, apart
+/// from the opening and the object's shift: the part of [`finger_contact`] that a
+/// balance, which moves only the shift, need not redo.
+struct Strips {
+    /// The finger's front at the grasp height, m.
+    front: f64,
+    /// +1 for finger 0, −1 for finger 1: the sign of a shift towards this finger.
+    towards: f64,
+    /// Each strip's height, m, and what faces it (`None`: nothing).
+    strips: Vec<(f64, Option<Facing>)>,
+}
+
+/// An object's face against one strip.
+#[derive(Debug, Clone, Copy)]
+struct Facing {
+    /// The object's half-width across the fingers there, m.
+    r: f64,
+    /// The finger's surface point that touches (x, y), m, and its normal.
+    x: f64,
+    y: f64,
+    normal: [f64; 3],
+    /// The strip's stiffness × length: the press is this × penetration^1.5.
+    k_dq: f64,
+}
+
+impl Strips {
+    fn new(
+        finger: &FingerGeometry,
+        params: &ContactParams,
+        obj: &GraspObject,
+        k: usize,
+        yaw_rad: f64,
+    ) -> Self {
+        let centre = finger.contact_height(obj.contact_z_m);
+        let (front, _, _, _) = finger.semi_axes(centre);
+        // Finger 1 is turned half a turn about z: its y is G's −y.
+        let y_sign = if k == 0 { 1.0 } else { -1.0 };
+        let dq = finger.length_m / STRIPS as f64;
+        let facing = obj.facing(yaw_rad, k);
+        let strips = (0..STRIPS)
+            .map(|j| {
+                let h = finger.base_height_m + (j as f64 + 0.5) * dq;
+                let q = h - centre - obj.offset_m[2];
+                let face = facing.half_width_at(obj, q).and_then(|(r, y_g)| {
+                    let y = y_sign * (y_g + obj.offset_m[1]);
+                    let (x, normal) = surface(finger, h, y)?;
+                    let s = finger.frac(h);
+                    let stiffness = params.stiffness * (1.0 + (params.tip_softening - 1.0) * s);
+                    Some(Facing {
+                        r,
+                        x,
+                        y,
+                        normal,
+                        k_dq: stiffness * dq,
+                    })
+                });
+                (h, face)
+            })
+            .collect();
+        Self {
+            front,
+            towards: if k == 0 { 1.0 } else { -1.0 },
+            strips,
+        }
+    }
+
+    /// How far a facing strip is pressed in at an opening and shift, m (pressing
+    /// where positive).
+    fn penetration_m(&self, f: &Facing, opening_m: f64, shift_m: f64) -> f64 {
+        f.r - 0.5 * opening_m + self.towards * shift_m - self.front + f.x
+    }
+}
+
+/// The slip of pressing along the normal `n` (the finger moves along +x; friction
+/// opposes the tangential slip) and its magnitude.
+fn slip_of(n: [f64; 3]) -> ([f64; 3], f64) {
+    let an = n[0];
+    let slip = [1.0 - an * n[0], -an * n[1], -an * n[2]];
+    let slip_mag = (slip[0] * slip[0] + slip[1] * slip[1] + slip[2] * slip[2]).sqrt();
+    (slip, slip_mag)
+}
+
+fn check_finite(grip: &Grip, shear_n: [f64; 2]) -> Result<(), SimError> {
     let values = [
         grip.opening_m,
         grip.shift_m,
@@ -92,35 +165,36 @@ pub(crate) fn finger_contact(
             "grasp state is not finite: {grip:?}, shear {shear_n:?} N"
         )));
     }
-    let centre = finger.contact_height(obj.contact_z_m);
-    let (front, _, _, _) = finger.semi_axes(centre);
-    let towards = if k == 0 { 1.0 } else { -1.0 };
-    // Finger 1 is turned half a turn about z: its y is G's −y.
-    let y_sign = if k == 0 { 1.0 } else { -1.0 };
-    let dq = finger.length_m / STRIPS as f64;
-    let facing = obj.facing(grip.yaw_rad, k);
+    Ok(())
+}
+
+/// The contact of `obj` on finger `k` (0 or 1) at `grip`, with `shear_n` = (along y,
+/// along z) in the finger's frame, N, spread over the loaded strips.
+pub(crate) fn finger_contact(
+    finger: &FingerGeometry,
+    params: &ContactParams,
+    obj: &GraspObject,
+    k: usize,
+    grip: &Grip,
+    shear_n: [f64; 2],
+) -> Result<FingerContact, SimError> {
+    check_finite(grip, shear_n)?;
+    let along = Strips::new(finger, params, obj, k, grip.yaw_rad);
     let mut strips = Vec::with_capacity(STRIPS);
     let mut normals = Vec::with_capacity(STRIPS);
     let mut normal_n = 0.0;
     let (mut wy, mut wx, mut wr) = (0.0, 0.0, 0.0);
-    for j in 0..STRIPS {
-        let h = finger.base_height_m + (j as f64 + 0.5) * dq;
-        let q = h - centre - obj.offset_m[2];
+    for &(h, face) in &along.strips {
         let mut fn_mag = 0.0;
         let mut point = [finger.semi_axes(h).0, 0.0, h];
         let mut n = [1.0, 0.0, 0.0];
-        if let Some((r, y_g)) = facing.half_width_at(obj, q) {
-            let y = y_sign * (y_g + obj.offset_m[1]);
-            if let Some((x, normal)) = surface(finger, h, y) {
-                point = [x, y, h];
-                n = normal;
-                let pen = r - 0.5 * grip.opening_m + towards * grip.shift_m - front + x;
-                if pen > 0.0 {
-                    let s = finger.frac(h);
-                    let stiffness = params.stiffness * (1.0 + (params.tip_softening - 1.0) * s);
-                    fn_mag = stiffness * dq * pen.powf(1.5);
-                    wr += fn_mag * r;
-                }
+        if let Some(f) = face {
+            point = [f.x, f.y, h];
+            n = f.normal;
+            let pen = along.penetration_m(&f, grip.opening_m, grip.shift_m);
+            if pen > 0.0 {
+                fn_mag = f.k_dq * pen.powf(1.5);
+                wr += fn_mag * f.r;
             }
         }
         normal_n += fn_mag;
@@ -139,10 +213,7 @@ pub(crate) fn finger_contact(
         if fn_mag <= 0.0 {
             continue;
         }
-        // Pressing: the finger moves along +x; friction opposes the tangential slip.
-        let an = n[0];
-        let slip = [1.0 - an * n[0], -an * n[1], -an * n[2]];
-        let slip_mag = (slip[0] * slip[0] + slip[1] * slip[1] + slip[2] * slip[2]).sqrt();
+        let (slip, slip_mag) = slip_of(n);
         let fric = if slip_mag > 1e-12 {
             obj.friction * fn_mag * (slip_mag / params.friction_slip).tanh() / slip_mag
         } else {
@@ -191,6 +262,92 @@ pub(crate) fn finger_contact(
     })
 }
 
+/// Finger `k`'s squeeze against the object's shift, at a fixed opening, turn and
+/// shear: what a balance asks for at each of its iterations. The same arithmetic as
+/// [`finger_contact`], term for term and in the same order, so the same bits, for
+/// the x component only (the shear and the moments do not enter it).
+#[derive(Debug)]
+pub(crate) struct SqueezeAlongShift {
+    opening_m: f64,
+    along: Strips,
+    /// The object's friction coefficient.
+    friction: f64,
+    /// Per facing strip: tanh(slip/slip₀), the slip's magnitude and its x (1 − n_x²).
+    slips: Vec<(f64, f64, f64)>,
+}
+
+impl std::fmt::Debug for Strips {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Strips")
+            .field("front", &self.front)
+            .field("towards", &self.towards)
+            .field(
+                "facing",
+                &self.strips.iter().filter(|s| s.1.is_some()).count(),
+            )
+            .finish()
+    }
+}
+
+impl SqueezeAlongShift {
+    /// At `grip`'s opening and turn (its shift is not used); errors as
+    /// [`finger_contact`] would on a state that is not finite.
+    pub(crate) fn new(
+        finger: &FingerGeometry,
+        params: &ContactParams,
+        obj: &GraspObject,
+        k: usize,
+        grip: &Grip,
+        shear_n: [f64; 2],
+    ) -> Result<Self, SimError> {
+        check_finite(grip, shear_n)?;
+        let along = Strips::new(finger, params, obj, k, grip.yaw_rad);
+        let slips = along
+            .strips
+            .iter()
+            .filter_map(|s| s.1)
+            .map(|f| {
+                let (slip, slip_mag) = slip_of(f.normal);
+                let tanh = (slip_mag / params.friction_slip).tanh();
+                (tanh, slip_mag, slip[0])
+            })
+            .collect();
+        Ok(Self {
+            opening_m: grip.opening_m,
+            along,
+            friction: obj.friction,
+            slips,
+        })
+    }
+
+    /// The normal force and the squeeze (−F_x) at `shift_m`, N; `None` where they
+    /// are not finite ([`finger_contact`] says why).
+    pub(crate) fn at(&self, shift_m: f64) -> Option<(f64, f64)> {
+        let mut normal_n = 0.0;
+        let mut force_x = 0.0;
+        let faces = self.along.strips.iter().filter_map(|s| s.1.as_ref());
+        for (f, &(tanh, slip_mag, slip_x)) in faces.zip(&self.slips) {
+            let pen = self.along.penetration_m(f, self.opening_m, shift_m);
+            let fn_mag = if pen > 0.0 {
+                f.k_dq * pen.powf(1.5)
+            } else {
+                0.0
+            };
+            normal_n += fn_mag;
+            if fn_mag <= 0.0 {
+                continue;
+            }
+            let fric = if slip_mag > 1e-12 {
+                self.friction * fn_mag * tanh / slip_mag
+            } else {
+                0.0
+            };
+            force_x += -fn_mag * f.normal[0] - fric * slip_x;
+        }
+        (normal_n.is_finite() && force_x.is_finite() && shift_m.is_finite())
+            .then_some((normal_n, -force_x))
+    }
+}
 /// Whether finger `k` presses `obj` at `grip` (no shear).
 pub(crate) fn reaches_finger(
     finger: &FingerGeometry,
