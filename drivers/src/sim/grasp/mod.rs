@@ -66,7 +66,7 @@ use rand::RngExt;
 use softtouch_schemas::{FrameFormat, FrameMeta, SceneSpec, TimestampNs, Wrench};
 use std::cell::RefCell;
 use std::sync::{Arc, Mutex, MutexGuard};
-use touch::{FingerContact, Grip, SqueezeAlongShift, finger_contact};
+use touch::{FingerContact, Grip, SqueezeAlongShift, Strips, contact_on, finger_contact};
 
 const GRIPPER: &str = "sim-soft-gripper";
 const CAMERA: &str = "sim-soft-camera";
@@ -232,6 +232,9 @@ struct State {
     /// physics steps, the status and the camera ask for the same one many times while
     /// nothing moves (a steady hold).
     last_contact: RefCell<[Option<ContactMemo>; 2]>,
+    /// Each finger's strips against the object at its last turn: the same for every
+    /// contact until the object turns.
+    strips: RefCell<[Option<Arc<Strips>>; 2]>,
     /// Each camera's last solved lattice and the contact it was solved for.
     last_deformed: [Option<(Contact, Deformed)>; 2],
 }
@@ -286,11 +289,11 @@ impl State {
         {
             return Ok(Some(Arc::clone(&m.contact)));
         }
-        let contact = Arc::new(finger_contact(
+        let contact = Arc::new(contact_on(
+            &self.strips_of(k, obj),
             &self.finger,
             &self.contact,
             obj,
-            k,
             &grip,
             shear,
         )?);
@@ -300,6 +303,24 @@ impl State {
             contact: Arc::clone(&contact),
         });
         Ok(Some(contact))
+    }
+
+    /// Finger `k`'s strips against `obj` (the object) at its present turn.
+    fn strips_of(&self, k: usize, obj: &GraspObject) -> Arc<Strips> {
+        if let Some(s) = &self.strips.borrow()[k]
+            && s.are_for(k, self.rel_yaw_rad)
+        {
+            return Arc::clone(s);
+        }
+        let s = Arc::new(Strips::new(
+            &self.finger,
+            &self.contact,
+            obj,
+            k,
+            self.rel_yaw_rad,
+        ));
+        self.strips.borrow_mut()[k] = Some(Arc::clone(&s));
+        s
     }
 
     /// The larger squeeze of the two fingers at an opening, N.
@@ -385,10 +406,9 @@ impl State {
         // (the same bits as its whole contact, at a fraction of the cost).
         let squeezes = [0, 1].map(|k| {
             SqueezeAlongShift::new(
-                &self.finger,
+                self.strips_of(k, obj),
                 &self.contact,
                 obj,
-                k,
                 &self.grip(self.opening_mm),
                 self.shear_n[k],
             )
@@ -575,6 +595,7 @@ impl State {
     fn lose(&mut self, how: HoldState) -> Result<(), SimError> {
         self.object = None;
         self.last_contact = RefCell::default();
+        self.strips = RefCell::default();
         self.hold = how;
         self.shear_n = [[0.0; 2]; 2];
         self.stick_m = [0.0; 2];
@@ -683,6 +704,7 @@ pub fn soft_grasp(
         stick_m: [0.0; 2],
         shear_n: [[0.0; 2]; 2],
         last_contact: RefCell::default(),
+        strips: RefCell::default(),
         last_deformed: [None, None],
     }));
     Ok((
@@ -741,6 +763,7 @@ impl SoftGraspHandle {
         let mut s = self.lock()?;
         s.object = present.then(|| s.template.clone());
         s.last_contact = RefCell::default();
+        s.strips = RefCell::default();
         s.hold = if present {
             HoldState::Resting
         } else {

@@ -1,6 +1,6 @@
 //! Unit tests of the soft grasp's objects and physics (virtual time).
 
-use super::touch::{Grip, SqueezeAlongShift, finger_contact};
+use super::touch::{Grip, SqueezeAlongShift, Strips, finger_contact};
 use super::*;
 use crate::sim::SceneSim;
 use softtouch_schemas::scene::ObjectProfile;
@@ -499,8 +499,9 @@ fn the_squeeze_along_the_shift_is_the_whole_contacts_bit_for_bit() {
                     shift_m: 0.0,
                     yaw_rad,
                 };
-                let along = SqueezeAlongShift::new(&finger, &params, obj, k, &grip, shear_n)
-                    .expect("finite");
+                let strips = Arc::new(Strips::new(&finger, &params, obj, k, yaw_rad));
+                let along =
+                    SqueezeAlongShift::new(strips, &params, obj, &grip, shear_n).expect("finite");
                 for shift_m in [0.0, -0.0, 1e-9, -3e-6, 2e-4, -reach, reach, 0.37 * reach] {
                     let whole = finger_contact(
                         &finger,
@@ -531,15 +532,16 @@ fn the_squeeze_along_the_shift_is_the_whole_contacts_bit_for_bit() {
         opening_m: obj.grasp_width_m,
         ..Grip::default()
     };
-    let along = SqueezeAlongShift::new(&finger, &params, obj, 0, &grip, [0.0; 2]).expect("finite");
+    let strips = |k| Arc::new(Strips::new(&finger, &params, obj, k, 0.0));
+    let along = SqueezeAlongShift::new(strips(0), &params, obj, &grip, [0.0; 2]).expect("finite");
     assert!(along.at(f64::NAN).is_none());
     assert!(along.at(f64::INFINITY).is_none());
     let nan_grip = Grip {
-        yaw_rad: f64::NAN,
+        opening_m: f64::NAN,
         ..grip
     };
-    assert!(SqueezeAlongShift::new(&finger, &params, obj, 0, &nan_grip, [0.0; 2]).is_err());
-    assert!(SqueezeAlongShift::new(&finger, &params, obj, 1, &grip, [f64::NAN, 0.0]).is_err());
+    assert!(SqueezeAlongShift::new(strips(0), &params, obj, &nan_grip, [0.0; 2]).is_err());
+    assert!(SqueezeAlongShift::new(strips(1), &params, obj, &grip, [f64::NAN, 0.0]).is_err());
 }
 
 #[tokio::test(start_paused = true)]

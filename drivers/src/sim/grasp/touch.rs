@@ -20,6 +20,7 @@ use super::super::contact::{ContactParams, FingerGeometry};
 use super::object::GraspObject;
 use crate::sim::contact::{Contact, Strip};
 use softtouch_schemas::Wrench;
+use std::sync::Arc;
 
 /// Strips along the whole finger.
 pub(crate) const STRIPS: usize = 96;
@@ -71,9 +72,13 @@ fn surface(finger: &FingerGeometry, h: f64, y: f64) -> Option<(f64, [f64; 3])> {
 }
 
 /// What the strips of finger `k` press with against `obj` turned by `yaw_rad`, apart
-/// from the opening and the object's shift: the part of [`finger_contact`] that a
-/// balance, which moves only the shift, need not redo.
-struct Strips {
+/// from the opening, the object's shift and the shear: the part of [`finger_contact`]
+/// that changes only when the object turns (a balance moves only the shift, a
+/// closing only the opening).
+pub(crate) struct Strips {
+    /// The finger and the turn they were worked out for.
+    k: usize,
+    yaw_rad: f64,
     /// The finger's front at the grasp height, m.
     front: f64,
     /// +1 for finger 0, −1 for finger 1: the sign of a shift towards this finger.
@@ -96,7 +101,7 @@ struct Facing {
 }
 
 impl Strips {
-    fn new(
+    pub(crate) fn new(
         finger: &FingerGeometry,
         params: &ContactParams,
         obj: &GraspObject,
@@ -130,10 +135,18 @@ impl Strips {
             })
             .collect();
         Self {
+            k,
+            yaw_rad,
             front,
             towards: if k == 0 { 1.0 } else { -1.0 },
             strips,
         }
+    }
+
+    /// Whether these are finger `k`'s strips against the object turned by `yaw_rad`
+    /// (the same bits).
+    pub(crate) fn are_for(&self, k: usize, yaw_rad: f64) -> bool {
+        self.k == k && self.yaw_rad.to_bits() == yaw_rad.to_bits()
     }
 
     /// How far a facing strip is pressed in at an opening and shift, m (pressing
@@ -180,6 +193,23 @@ pub(crate) fn finger_contact(
 ) -> Result<FingerContact, SimError> {
     check_finite(grip, shear_n)?;
     let along = Strips::new(finger, params, obj, k, grip.yaw_rad);
+    contact_on(&along, finger, params, obj, grip, shear_n)
+}
+
+/// [`finger_contact`] on strips already worked out for the finger and `grip`'s turn.
+pub(crate) fn contact_on(
+    along: &Strips,
+    finger: &FingerGeometry,
+    params: &ContactParams,
+    obj: &GraspObject,
+    grip: &Grip,
+    shear_n: [f64; 2],
+) -> Result<FingerContact, SimError> {
+    check_finite(grip, shear_n)?;
+    debug_assert!(
+        along.are_for(along.k, grip.yaw_rad),
+        "strips for another turn"
+    );
     let mut strips = Vec::with_capacity(STRIPS);
     let mut normals = Vec::with_capacity(STRIPS);
     let mut normal_n = 0.0;
@@ -269,7 +299,7 @@ pub(crate) fn finger_contact(
 #[derive(Debug)]
 pub(crate) struct SqueezeAlongShift {
     opening_m: f64,
-    along: Strips,
+    along: Arc<Strips>,
     /// The object's friction coefficient.
     friction: f64,
     /// Per facing strip: tanh(slip/slip₀), the slip's magnitude and its x (1 − n_x²).
@@ -290,18 +320,21 @@ impl std::fmt::Debug for Strips {
 }
 
 impl SqueezeAlongShift {
-    /// At `grip`'s opening and turn (its shift is not used); errors as
-    /// [`finger_contact`] would on a state that is not finite.
+    /// On `along`, the finger's strips at `grip`'s turn, at `grip`'s opening (its
+    /// shift is not used); errors as [`finger_contact`] would on a state that is not
+    /// finite.
     pub(crate) fn new(
-        finger: &FingerGeometry,
+        along: Arc<Strips>,
         params: &ContactParams,
         obj: &GraspObject,
-        k: usize,
         grip: &Grip,
         shear_n: [f64; 2],
     ) -> Result<Self, SimError> {
         check_finite(grip, shear_n)?;
-        let along = Strips::new(finger, params, obj, k, grip.yaw_rad);
+        debug_assert!(
+            along.are_for(along.k, grip.yaw_rad),
+            "strips for another turn"
+        );
         let slips = along
             .strips
             .iter()
