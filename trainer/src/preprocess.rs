@@ -178,6 +178,8 @@ impl Preprocess {
         // Integer sums (at most 255 × the box's pixels) are exact, as f32 sums of
         // integers below 2²⁴ were.
         // Output rows from `oy0` on, one row of `n` box sums per chunk of `rows`.
+        // One channel needs only the sum of the three (in the first of the sums).
+        let grey = self.channels == 1;
         let fill = |rows: &mut [[u32; 3]], oy0: usize| {
             for (i, acc) in rows.chunks_exact_mut(n).enumerate() {
                 let (y0, y1) = bounds(oy0 + i, height);
@@ -186,8 +188,19 @@ impl Preprocess {
                     for (a, &(x0, x1)) in acc.iter_mut().zip(&columns) {
                         // Masked sums in locals rather than a branch per pixel and a
                         // store per pixel into `acc`.
+                        let pixels = row[x0 * 3..x1 * 3].chunks_exact(3);
+                        if grey {
+                            let mut s = 0u32;
+                            for px in pixels {
+                                let (r, g, b) = (px[0], px[1], px[2]);
+                                let keep = u32::from(is_finger(r, g, b));
+                                s += (u32::from(r) + u32::from(g) + u32::from(b)) * keep;
+                            }
+                            a[0] += s;
+                            continue;
+                        }
                         let (mut sr, mut sg, mut sb) = (0u32, 0u32, 0u32);
-                        for px in row[x0 * 3..x1 * 3].chunks_exact(3) {
+                        for px in pixels {
                             let (r, g, b) = (px[0], px[1], px[2]);
                             let keep = u32::from(is_finger(r, g, b));
                             sr += u32::from(r) * keep;
@@ -215,10 +228,10 @@ impl Preprocess {
             for (ox, (a, &(x0, x1))) in row.iter().zip(&columns).enumerate() {
                 let count = ((x1 - x0) * (y1 - y0)) as f32 * 255.0;
                 let at = oy * n + ox;
-                if self.channels == 1 {
+                if grey {
                     // Brightness as HSV value would need a max per pixel; the mean of
                     // the channels is as informative here and cheaper.
-                    out[at] = (a[0] + a[1] + a[2]) as f32 / (3.0 * count);
+                    out[at] = a[0] as f32 / (3.0 * count);
                 } else {
                     for c in 0..3 {
                         out[c * plane + at] = a[c] as f32 / count;
@@ -484,6 +497,12 @@ mod tests {
         let out = p.apply(w, h, &rgb).expect("valid image");
         assert!((out[0] - 250.0 / 255.0).abs() < 1e-5);
         assert!(out[7].abs() < 1e-6);
+        // One channel: the mean of the kept pixels' three channels.
+        let grey = Preprocess { channels: 1, ..p }
+            .apply(w, h, &rgb)
+            .expect("valid image");
+        assert!((grey[0] - 410.0 / 3.0 / 255.0).abs() < 1e-6, "{}", grey[0]);
+        assert!(grey[7].abs() < 1e-6);
         // Images smaller than the output and of odd sizes still fill every value.
         for (w, h) in [(1, 1), (3, 5), (7, 2)] {
             let out = p.apply(w, h, &solid(w, h, [250, 140, 20])).expect("valid");
