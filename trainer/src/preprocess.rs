@@ -193,8 +193,10 @@ impl Preprocess {
                             let mut s = 0u32;
                             for px in pixels {
                                 let (r, g, b) = (px[0], px[1], px[2]);
-                                let keep = u32::from(is_finger(r, g, b));
-                                s += (u32::from(r) + u32::from(g) + u32::from(b)) * keep;
+                                let sum = u32::from(r) + u32::from(g) + u32::from(b);
+                                // On a noisy frame the finger's edge makes the decision
+                                // a coin toss: a conditional move, never a branch.
+                                s += std::hint::select_unpredictable(is_finger(r, g, b), sum, 0);
                             }
                             a[0] += s;
                             continue;
@@ -362,8 +364,11 @@ impl FingerTable {
     pub fn contains(&self, r: u8, g: u8, b: u8) -> bool {
         if let Some(runs) = &self.blue_runs {
             // No branch: on a noisy frame the answer is a coin toss for the predictor.
+            // One sign test (b − lo and hi − b both ≥ 0) rather than two comparisons,
+            // which the compiler turned into a branch and a conditional move.
             let [lo, hi] = runs[(usize::from(r) << 8) | usize::from(g)];
-            return (lo <= b) & (b <= hi);
+            let (b, lo, hi) = (i32::from(b), i32::from(lo), i32::from(hi));
+            return ((b - lo) | (hi - b)) >= 0;
         }
         if r < self.min_red {
             return false;
