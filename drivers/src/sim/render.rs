@@ -143,19 +143,26 @@ impl Renderer {
             exposure: None,
             drawn: DrawnCache::default(),
         };
-        r.background = r.make_background(finger);
+        // The background and the noise table (a new renderer per grasp trial: each
+        // about 10 ms) at once, from their own random streams.
+        let (mut background, mut noise) = (Vec::new(), None);
+        crate::second_core::join(
+            || background = r.make_background(finger),
+            || {
+                noise = effects.noise_sigma.map(|sigma| {
+                    let mut g = rng::stream(seed, "camera-noise-table");
+                    (0..NOISE_OFFSETS + W * H * 3)
+                        .map(|_| {
+                            let z: f64 = StandardNormal.sample(&mut g);
+                            (z * sigma).round().clamp(-255.0, 255.0) as i16
+                        })
+                        .collect()
+                });
+            },
+        );
+        (r.background, r.noise) = (background, noise);
         if let Some((strength, period)) = effects.caustics {
             r.caustic = Some(Caustic::new(strength, period));
-        }
-        if let Some(sigma) = effects.noise_sigma {
-            let mut g = rng::stream(seed, "camera-noise-table");
-            let table = (0..NOISE_OFFSETS + W * H * 3)
-                .map(|_| {
-                    let z: f64 = StandardNormal.sample(&mut g);
-                    (z * sigma).round().clamp(-255.0, 255.0) as i16
-                })
-                .collect();
-            r.noise = Some(table);
         }
         if let Some(gain) = effects.exposure_gain {
             let mut lut = [0u8; 256];
@@ -168,20 +175,24 @@ impl Renderer {
     }
 
     /// Colour after the light path `d` (m) through the medium, for declared effects.
-    fn medium(&self, mut c: Rgb, d: f64) -> Rgb {
-        if let Some(k) = self.effects.attenuation_per_m {
+    fn medium(&self, c: Rgb, d: f64) -> Rgb {
+        self.medium_at(d).apply(c)
+    }
+
+    /// What the light path `d` (m) through the medium does to a colour: worked out
+    /// once for a distance that many pixels share (the background's).
+    fn medium_at(&self, d: f64) -> Medium {
+        Medium {
             // LED → object → camera: twice the distance.
-            for i in 0..3 {
-                c[i] *= (-k[i] * 2.0 * d).exp() as f32;
-            }
+            attenuation: self
+                .effects
+                .attenuation_per_m
+                .map(|k| k.map(|k| (-k * 2.0 * d).exp() as f32)),
+            veil: self.effects.turbidity.map(|(b, veil)| {
+                let v = (b * (1.0 - (-d / TURBIDITY_M).exp())) as f32;
+                (v, veil.map(f32::from))
+            }),
         }
-        if let Some((b, veil)) = self.effects.turbidity {
-            let v = (b * (1.0 - (-d / TURBIDITY_M).exp())) as f32;
-            for i in 0..3 {
-                c[i] = c[i] * (1.0 - v) + f32::from(veil[i]) * v;
-            }
-        }
-        c
     }
 
     fn make_background(&self, finger: &FingerGeometry) -> Vec<u8> {
@@ -229,6 +240,7 @@ impl Renderer {
         let (ea, eb) = ((self.focal * a0 / d0) as f32, (self.focal * b0 / d0) as f32);
         let (cx, cy) = (W as f32 / 2.0, H as f32 / 2.0);
         let skin = self.medium(FINGER_RGB.map(f32::from), 0.02);
+        let through_water = self.medium_at(BACKGROUND_M);
         for y in 0..H {
             for x in 0..W {
                 let mut c = row_col[y].map(|v| v * col_mod[x]);
@@ -247,7 +259,7 @@ impl Renderer {
                         c = sc;
                     }
                 }
-                c = self.medium(c, BACKGROUND_M);
+                c = through_water.apply(c);
                 // Seen through the translucent skin inside the base ring.
                 let (ex, ey) = ((x as f32 + 0.5 - cx) / eb, (y as f32 + 0.5 - cy) / ea);
                 let e = ex * ex + ey * ey;
@@ -495,6 +507,30 @@ impl Renderer {
                 }
             }
         }
+    }
+}
+
+/// The medium's effect along one light path: per-channel attenuation, then the veil
+/// of scattered light (its weight and colour), each when declared.
+#[derive(Debug, Clone, Copy)]
+struct Medium {
+    attenuation: Option<[f32; 3]>,
+    veil: Option<(f32, Rgb)>,
+}
+
+impl Medium {
+    fn apply(&self, mut c: Rgb) -> Rgb {
+        if let Some(a) = self.attenuation {
+            for i in 0..3 {
+                c[i] *= a[i];
+            }
+        }
+        if let Some((v, veil)) = self.veil {
+            for i in 0..3 {
+                c[i] = c[i] * (1.0 - v) + veil[i] * v;
+            }
+        }
+        c
     }
 }
 
