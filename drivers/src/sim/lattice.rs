@@ -357,6 +357,21 @@ fn dot(a: &[f64], x: &[f64]) -> f64 {
 mod tests {
     use super::*;
 
+    /// `n` loads in ±1000, zero before `first` (a contact loads the nodes from some
+    /// index on).
+    fn loads_from(first: usize, n: usize, g: &mut impl rand::Rng) -> Vec<f64> {
+        use rand::RngExt;
+        (0..n)
+            .map(|i| {
+                if i < first {
+                    0.0
+                } else {
+                    g.random_range(-1e3..1e3)
+                }
+            })
+            .collect()
+    }
+
     /// The solve against the plain one (one running sum, every row), on a random
     /// well-conditioned system with loads that start at every position, none, and
     /// all: the same solution to rounding.
@@ -390,15 +405,7 @@ mod tests {
             }
         };
         for first in [0, 1, 5, 8, 9, 20, 36, 37] {
-            let b: Vec<f64> = (0..n)
-                .map(|i| {
-                    if i < first {
-                        0.0
-                    } else {
-                        g.random_range(-1e3..1e3)
-                    }
-                })
-                .collect();
+            let b = loads_from(first, n, &mut g);
             let (mut fast, mut want) = (b.clone(), b.clone());
             solve(&f, &mut fast);
             plain(&mut want);
@@ -460,15 +467,7 @@ mod tests {
             }
         };
         for first in [0, 1, 7, 8, 13, 14, 21, 40, 89, 90] {
-            let b: Vec<f64> = (0..n)
-                .map(|i| {
-                    if i < first {
-                        0.0
-                    } else {
-                        g.random_range(-1e3..1e3)
-                    }
-                })
-                .collect();
+            let b = loads_from(first, n, &mut g);
             let (mut fast, mut want) = (b.clone(), b.clone());
             solve(&f, &mut fast);
             whole_rows(&mut want);

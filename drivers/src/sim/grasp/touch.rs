@@ -146,13 +146,23 @@ impl Strips {
     /// Whether these are finger `k`'s strips against the object turned by `yaw_rad`
     /// (the same bits).
     pub(crate) fn are_for(&self, k: usize, yaw_rad: f64) -> bool {
-        self.k == k && self.yaw_rad.to_bits() == yaw_rad.to_bits()
+        self.k == k && self.turned_as(yaw_rad)
     }
 
-    /// How far a facing strip is pressed in at an opening and shift, m (pressing
-    /// where positive).
-    fn penetration_m(&self, f: &Facing, opening_m: f64, shift_m: f64) -> f64 {
-        f.r - 0.5 * opening_m + self.towards * shift_m - self.front + f.x
+    /// A facing strip's normal force at an opening and shift, N: `k·δ^1.5` for a
+    /// penetration `δ` > 0, else 0.
+    fn press_n(&self, f: &Facing, opening_m: f64, shift_m: f64) -> f64 {
+        let pen = f.r - 0.5 * opening_m + self.towards * shift_m - self.front + f.x;
+        if pen > 0.0 {
+            f.k_dq * pen.powf(1.5)
+        } else {
+            0.0
+        }
+    }
+
+    /// Whether these were worked out for the turn `yaw_rad` (the same bits).
+    fn turned_as(&self, yaw_rad: f64) -> bool {
+        self.yaw_rad.to_bits() == yaw_rad.to_bits()
     }
 }
 
@@ -191,7 +201,6 @@ pub(crate) fn finger_contact(
     grip: &Grip,
     shear_n: [f64; 2],
 ) -> Result<FingerContact, SimError> {
-    check_finite(grip, shear_n)?;
     let along = Strips::new(finger, params, obj, k, grip.yaw_rad);
     contact_on(&along, finger, params, obj, grip, shear_n)
 }
@@ -206,10 +215,7 @@ pub(crate) fn contact_on(
     shear_n: [f64; 2],
 ) -> Result<FingerContact, SimError> {
     check_finite(grip, shear_n)?;
-    debug_assert!(
-        along.are_for(along.k, grip.yaw_rad),
-        "strips for another turn"
-    );
+    debug_assert!(along.turned_as(grip.yaw_rad), "strips for another turn");
     let mut strips = Vec::with_capacity(STRIPS);
     let mut normals = Vec::with_capacity(STRIPS);
     let mut normal_n = 0.0;
@@ -221,9 +227,8 @@ pub(crate) fn contact_on(
         if let Some(f) = face {
             point = [f.x, f.y, h];
             n = f.normal;
-            let pen = along.penetration_m(&f, grip.opening_m, grip.shift_m);
-            if pen > 0.0 {
-                fn_mag = f.k_dq * pen.powf(1.5);
+            fn_mag = along.press_n(&f, grip.opening_m, grip.shift_m);
+            if fn_mag > 0.0 {
                 wr += fn_mag * f.r;
             }
         }
@@ -331,10 +336,7 @@ impl SqueezeAlongShift {
         shear_n: [f64; 2],
     ) -> Result<Self, SimError> {
         check_finite(grip, shear_n)?;
-        debug_assert!(
-            along.are_for(along.k, grip.yaw_rad),
-            "strips for another turn"
-        );
+        debug_assert!(along.turned_as(grip.yaw_rad), "strips for another turn");
         let slips = along
             .strips
             .iter()
@@ -360,12 +362,7 @@ impl SqueezeAlongShift {
         let mut force_x = 0.0;
         let faces = self.along.strips.iter().filter_map(|s| s.1.as_ref());
         for (f, &(tanh, slip_mag, slip_x)) in faces.zip(&self.slips) {
-            let pen = self.along.penetration_m(f, self.opening_m, shift_m);
-            let fn_mag = if pen > 0.0 {
-                f.k_dq * pen.powf(1.5)
-            } else {
-                0.0
-            };
+            let fn_mag = self.along.press_n(f, self.opening_m, shift_m);
             normal_n += fn_mag;
             if fn_mag <= 0.0 {
                 continue;
@@ -381,6 +378,7 @@ impl SqueezeAlongShift {
             .then_some((normal_n, -force_x))
     }
 }
+
 /// Whether finger `k` presses `obj` at `grip` (no shear).
 pub(crate) fn reaches_finger(
     finger: &FingerGeometry,
