@@ -1,5 +1,6 @@
 //! The second core, for the two halves of one frame's work (the simulated camera's
-//! drawing, the model's preprocessing).
+//! drawing, the model's preprocessing and convolutions), and for the frame's buffers
+//! while the caller works out the finger's lattice.
 //!
 //! A frame's half is a few hundred microseconds of work. Starting a thread for it
 //! cost 85–140 µs on the 2-core VMs this runs on, and waking a sleeping pool worker
@@ -43,10 +44,10 @@ pub fn second_core() -> Option<&'static SecondCore> {
         .as_ref()
 }
 
-/// Runs `here` on the calling thread and `there` on the second core when there is
-/// one and it is free, else both here; returns when both are done. A panic in
-/// either is resumed here.
-pub fn join(here: impl FnOnce() + Send, there: impl FnOnce() + Send) {
+/// Runs `here` on the calling thread (so it need not be `Send`) and `there` on the
+/// second core when there is one and it is free, else both here; returns when both
+/// are done. A panic in either is resumed here.
+pub fn join(here: impl FnOnce(), there: impl FnOnce() + Send) {
     match second_core() {
         Some(core) => core.join(here, there),
         None => {
@@ -72,7 +73,7 @@ impl SecondCore {
     }
 
     /// See [`join`].
-    pub fn join(&self, here: impl FnOnce() + Send, there: impl FnOnce() + Send) {
+    pub fn join(&self, here: impl FnOnce(), there: impl FnOnce() + Send) {
         if self.busy.swap(true, Ordering::Acquire) {
             here();
             there();

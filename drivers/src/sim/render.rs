@@ -21,7 +21,7 @@ use super::lattice::{BeamKind, Deformed, Lattice};
 use super::rng;
 use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 /// Frame width, px.
 pub const WIDTH: u32 = 640;
@@ -56,7 +56,7 @@ pub(crate) struct Renderer {
     seed: u64,
     focal: f64,
     z_cam: f64,
-    background: Vec<u8>,
+    background: Arc<[u8]>,
     caustic: Option<Caustic>,
     noise: Option<Vec<i16>>,
     exposure: Option<[u8; 256]>,
@@ -137,7 +137,7 @@ impl Renderer {
             seed,
             focal,
             z_cam,
-            background: Vec::new(),
+            background: Arc::from([]),
             caustic: None,
             noise: None,
             exposure: None,
@@ -160,7 +160,7 @@ impl Renderer {
                 });
             },
         );
-        (r.background, r.noise) = (background, noise);
+        (r.background, r.noise) = (background.into(), noise);
         if let Some((strength, period)) = effects.caustics {
             r.caustic = Some(Caustic::new(strength, period));
         }
@@ -276,7 +276,12 @@ impl Renderer {
     }
 
     pub(crate) fn background_copy(&self) -> Vec<u8> {
-        self.background.clone()
+        self.background.to_vec()
+    }
+
+    /// The background, shared: what [`FrameBuffers::new`] copies.
+    pub(crate) fn background(&self) -> Arc<[u8]> {
+        Arc::clone(&self.background)
     }
 
     fn project(&self, p: [f64; 3]) -> Option<(f32, f32, f64)> {
@@ -296,20 +301,38 @@ impl Renderer {
     /// are two cores), each band start to end: background, beams, then the effects, written
     /// as the copy into the output. Every pixel gets the same operations in the same
     /// order as in one pass, so the bytes do not depend on the split.
+    ///
+    /// `buffers`, when given, are this frame's output and canvas, made beforehand
+    /// (see [`FrameBuffers`]); the bytes are the same either way.
     pub(crate) fn render(
         &self,
         lattice: &Lattice,
         deformed: &Deformed,
         frame_index: u64,
         t_s: f64,
+        buffers: Option<FrameBuffers>,
     ) -> Vec<u8> {
-        let mut out = vec![0u8; W * H * 3];
+        let (mut out, canvas) = match buffers {
+            Some(b) if b.out.len() == W * H * 3 && b.canvas.len() == W * H * 3 => {
+                (b.out, Some(b.canvas))
+            }
+            _ => (vec![0u8; W * H * 3], None),
+        };
         let effects = self.frame_effects(frame_index, t_s);
+        // Where the lattice is to be drawn: on the made canvas, which holds the
+        // background already, or on a buffer that each band first copies it into.
+        let on_background = canvas.is_some();
+        let take_canvas = move || canvas.unwrap_or_else(|| vec![0u8; W * H * 3]);
         let Ok(mut cache) = self.drawn.0.try_lock() else {
             // Another thread renders with this renderer: draw without the cache.
             let lines = self.lines(lattice, deformed);
-            let mut drawn = vec![0u8; W * H * 3];
-            self.paint(&mut drawn, Some(&lines), &mut out, &effects);
+            let mut drawn = take_canvas();
+            self.paint(
+                &mut drawn,
+                Some((&lines, on_background)),
+                &mut out,
+                &effects,
+            );
             return out;
         };
         match cache.as_mut() {
@@ -320,12 +343,25 @@ impl Renderer {
             Some(d) => {
                 let lines = self.lines(lattice, deformed);
                 d.nodes.clone_from(&deformed.nodes);
-                self.paint(&mut d.image, Some(&lines), &mut out, &effects);
+                if on_background {
+                    d.image = take_canvas();
+                }
+                self.paint(
+                    &mut d.image,
+                    Some((&lines, on_background)),
+                    &mut out,
+                    &effects,
+                );
             }
             None => {
                 let lines = self.lines(lattice, deformed);
-                let mut image = vec![0u8; W * H * 3];
-                self.paint(&mut image, Some(&lines), &mut out, &effects);
+                let mut image = take_canvas();
+                self.paint(
+                    &mut image,
+                    Some((&lines, on_background)),
+                    &mut out,
+                    &effects,
+                );
                 *cache = Some(Drawn {
                     nodes: deformed.nodes.clone(),
                     image,
@@ -336,22 +372,25 @@ impl Renderer {
     }
 
     /// Make a frame in two row bands. `lines`: draw them on the background into
-    /// `drawn` first; `None`: `drawn` already holds this frame's lattice. Then `out`
-    /// gets `drawn` with the frame's effects.
+    /// `drawn` first (copied into it, unless the flag says it holds it already);
+    /// `None`: `drawn` already holds this frame's lattice. Then `out` gets `drawn`
+    /// with the frame's effects.
     fn paint(
         &self,
         drawn: &mut [u8],
-        lines: Option<&[Line]>,
+        lines: Option<(&[Line], bool)>,
         out: &mut [u8],
         effects: &FrameEffects,
     ) {
         // Split where the work is halved: the beams' pixels, and the copies and
         // effects that cost the same in every row. The finger's near end, with the
         // longest, widest beams, is rarely in the middle of the frame.
-        let split = lines.map_or(H / 2, |lines| split_row(lines, self.row_cost()));
+        let split = lines.map_or(H / 2, |(lines, _)| split_row(lines, self.row_cost()));
         let band = |drawn: &mut [u8], out: &mut [u8], rows: (usize, usize)| {
-            if let Some(lines) = lines {
-                drawn.copy_from_slice(&self.background[rows.0 * W * 3..rows.1 * W * 3]);
+            if let Some((lines, on_background)) = lines {
+                if !on_background {
+                    drawn.copy_from_slice(&self.background[rows.0 * W * 3..rows.1 * W * 3]);
+                }
                 let rows_i32 = (rows.0 as i32, rows.1 as i32);
                 for &(p0, p1, half_w, c) in lines {
                     draw_line(drawn, rows_i32, p0, p1, half_w, c);
@@ -531,6 +570,26 @@ impl Medium {
             }
         }
         c
+    }
+}
+
+/// A frame's output buffer and a copy of the background to draw its lattice on,
+/// made before the frame's nodes are known: a grasp trial makes them on the second
+/// core while the caller works out the finger's contact and lattice, so neither the
+/// output's zeroing nor the background's copy is on the caller's path.
+#[derive(Debug)]
+pub(crate) struct FrameBuffers {
+    out: Vec<u8>,
+    canvas: Vec<u8>,
+}
+
+impl FrameBuffers {
+    /// Buffers for a renderer whose [`Renderer::background`] is `background`.
+    pub(crate) fn new(background: &[u8]) -> Self {
+        Self {
+            out: vec![0u8; W * H * 3],
+            canvas: background.to_vec(),
+        }
     }
 }
 

@@ -116,6 +116,49 @@ fn a_frame_in_two_bands_is_the_frame_in_one_pass_with_every_water_effect() {
 }
 
 #[test]
+fn a_frame_in_buffers_made_beforehand_is_the_same_frame() {
+    // A grasp camera makes the frame's output and canvas on the second core before
+    // the nodes are known. The same bytes as a frame rendered without them: on a
+    // first frame, on the renderer's copy of the last drawn lattice (the same pose
+    // twice), after a different pose, and with buffers of the wrong size (ignored).
+    let scene = water_scene();
+    let (plain, made) = (
+        SceneSim::new(&scene, 5).expect("scene"),
+        SceneSim::new(&scene, 5).expect("scene"),
+    );
+    let wrong = render::FrameBuffers::new(&[7; 12]);
+    let mut wrong = Some(wrong);
+    for (i, (p, frame, t_s)) in [
+        (pose(0.03, 0.01, 1.2), 3, 0.25),
+        (pose(0.03, 0.01, 1.2), 4, 0.5),
+        (pose(0.045, -0.03, -2.0), 9, 7.75),
+        (pose(0.0, 0.0, 0.0), 10, 8.0),
+        (pose(0.0, 0.0, 0.0), 11, 8.25),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let expected = plain.render("circle-10", &p, frame, t_s).expect("render");
+        let look = made
+            .scene
+            .look(&made.scene.rod("circle-10").expect("rod"), &p)
+            .expect("look");
+        let buffers = match i {
+            3 => wrong.take(),
+            _ => Some(render::FrameBuffers::new(&made.scene.background())),
+        };
+        let got = made.scene.render_into(&look, frame, t_s, buffers);
+        assert_eq!(got.len(), expected.image.as_raw().len());
+        let differing = got
+            .iter()
+            .zip(expected.image.as_raw())
+            .filter(|(a, b)| a != b)
+            .count();
+        assert_eq!(differing, 0, "frame {i}: {differing} bytes differ");
+    }
+}
+
+#[test]
 fn a_scene_without_effects_renders_exactly_the_base_pipeline() {
     // Background + lattice, no effect stage: however many effect kinds the code knows,
     // an effect-free scene is bit-identical to this.

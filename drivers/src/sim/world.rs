@@ -7,7 +7,7 @@ use super::contact::{self, ContactParams, FingerGeometry, RodProfile};
 use super::effects::Effects;
 use super::gripper::SimObject;
 use super::lattice::{Deformed, Lattice, LatticeParams};
-use super::render::Renderer;
+use super::render::{FrameBuffers, Renderer};
 use softtouch_schemas::{ArmPose, ContactPose, SceneSpec, TimestampNs, Wrench};
 use std::sync::Arc;
 
@@ -104,8 +104,29 @@ impl Scene {
     }
 
     pub(crate) fn render(&self, look: &Look, frame_index: u64, t_s: f64) -> Vec<u8> {
-        self.renderer
-            .render(&self.model.lattice, &look.deformed, frame_index, t_s)
+        self.render_into(look, frame_index, t_s, None)
+    }
+
+    /// [`Self::render`] into buffers made beforehand (the same bytes).
+    pub(crate) fn render_into(
+        &self,
+        look: &Look,
+        frame_index: u64,
+        t_s: f64,
+        buffers: Option<FrameBuffers>,
+    ) -> Vec<u8> {
+        self.renderer.render(
+            &self.model.lattice,
+            &look.deformed,
+            frame_index,
+            t_s,
+            buffers,
+        )
+    }
+
+    /// The renderer's background, to make [`FrameBuffers`] from.
+    pub(crate) fn background(&self) -> std::sync::Arc<[u8]> {
+        self.renderer.background()
     }
 }
 

@@ -53,6 +53,7 @@ use super::contact::{Contact, ContactParams, FingerGeometry};
 use super::effects::{Effects, Flow};
 use super::gripper::{G_M_S2, SPEED_MM_S, grip_force_n};
 use super::lattice::Deformed;
+use super::render::FrameBuffers;
 use super::world::{Look, Model, Scene};
 use crate::camera::{Camera, Frame};
 use crate::clock::{Clock, TokioClock};
@@ -638,6 +639,49 @@ pub struct SoftFingerCamera {
     finger: usize,
 }
 
+impl SoftFingerCamera {
+    /// What the finger looks like at `exposed`: the sim advanced to it, the finger's
+    /// contact and its lattice (solved once per contact).
+    fn look_at(&self, s: &mut State, exposed: TimestampNs) -> Result<Look, DeviceError> {
+        s.advance(exposed).map_err(|e| device_fault(CAMERA, &e))?;
+        let contact = s
+            .finger_at(self.finger, s.opening_mm)
+            .map_err(|e| device_fault(CAMERA, &e))?;
+        Ok(match contact {
+            Some(c) => {
+                let cached = s.last_deformed[self.finger]
+                    .as_ref()
+                    .filter(|(solved_for, _)| *solved_for == c.contact)
+                    .map(|(_, d)| d.clone());
+                let deformed = match cached {
+                    Some(d) => d,
+                    None => {
+                        let finger = s.finger;
+                        let d = s
+                            .scene(self.finger)
+                            .model
+                            .lattice
+                            .deform(&finger, &c.contact)
+                            .map_err(|e| device_fault(CAMERA, &e))?;
+                        s.last_deformed[self.finger] = Some((c.contact.clone(), d.clone()));
+                        d
+                    }
+                };
+                Look {
+                    wrench: c.contact.wrench,
+                    deformed,
+                }
+            }
+            None => Look {
+                wrench: Wrench::ZERO,
+                deformed: Deformed {
+                    nodes: s.scene(self.finger).model.lattice.rest.clone(),
+                },
+            },
+        })
+    }
+}
+
 /// Truth and scene changes for a soft grasp (never used by the loop itself).
 #[derive(Debug, Clone)]
 pub struct SoftGraspHandle {
@@ -1046,44 +1090,21 @@ impl Camera for SoftFingerCamera {
         }
         tokio::time::sleep_until(self.clock.instant_at(exposed)).await;
         let mut s = lock_state(&self.state)?;
-        s.advance(exposed).map_err(|e| device_fault(CAMERA, &e))?;
-        let contact = s
-            .finger_at(self.finger, s.opening_mm)
-            .map_err(|e| device_fault(CAMERA, &e))?;
-        let look = match contact {
-            Some(c) => {
-                let cached = s.last_deformed[self.finger]
-                    .as_ref()
-                    .filter(|(solved_for, _)| *solved_for == c.contact)
-                    .map(|(_, d)| d.clone());
-                let deformed = match cached {
-                    Some(d) => d,
-                    None => {
-                        let finger = s.finger;
-                        let d = s
-                            .scene(self.finger)
-                            .model
-                            .lattice
-                            .deform(&finger, &c.contact)
-                            .map_err(|e| device_fault(CAMERA, &e))?;
-                        s.last_deformed[self.finger] = Some((c.contact.clone(), d.clone()));
-                        d
-                    }
-                };
-                Look {
-                    wrench: c.contact.wrench,
-                    deformed,
-                }
-            }
-            None => Look {
-                wrench: Wrench::ZERO,
-                deformed: Deformed {
-                    nodes: s.scene(self.finger).model.lattice.rest.clone(),
-                },
-            },
+        // The frame's buffers on the second core while this one works out the
+        // finger's contact and lattice.
+        let background = s.scene(self.finger).background();
+        let mut buffers = None;
+        let mut look = None;
+        crate::second_core::join(
+            || look = Some(self.look_at(&mut s, exposed)),
+            || buffers = Some(FrameBuffers::new(&background)),
+        );
+        let look = match look {
+            Some(look) => look?,
+            None => self.look_at(&mut s, exposed)?,
         };
         let scene = s.scene(self.finger);
-        let data = scene.render(&look, k, exposed.0 as f64 * 1e-9);
+        let data = scene.render_into(&look, k, exposed.0 as f64 * 1e-9, buffers);
         Ok(Frame {
             meta: FrameMeta {
                 t: exposed,
