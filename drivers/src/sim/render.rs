@@ -302,8 +302,8 @@ impl Renderer {
     /// as the copy into the output. Every pixel gets the same operations in the same
     /// order as in one pass, so the bytes do not depend on the split.
     ///
-    /// `buffers`, when given, are this frame's output and canvas, made beforehand
-    /// (see [`FrameBuffers`]); the bytes are the same either way.
+    /// `buffers`, when given, hold this frame's canvas, made beforehand (see
+    /// [`FrameBuffers`]); the bytes are the same either way.
     pub(crate) fn render(
         &self,
         lattice: &Lattice,
@@ -312,21 +312,21 @@ impl Renderer {
         t_s: f64,
         buffers: Option<FrameBuffers>,
     ) -> Vec<u8> {
-        let (mut out, canvas) = match buffers {
-            Some(b) if b.out.len() == W * H * 3 && b.canvas.len() == W * H * 3 => {
-                (b.out, Some(b.canvas))
-            }
-            _ => (vec![0u8; W * H * 3], None),
-        };
+        // The effects write every byte of the output, so any buffer of the frame's
+        // size serves, zeroed or not.
+        let fresh = || vec![0u8; W * H * 3];
+        let canvas = buffers
+            .map(|b| b.canvas)
+            .filter(|c| c.len() == W * H * 3);
         let effects = self.frame_effects(frame_index, t_s);
         // Where the lattice is to be drawn: on the made canvas, which holds the
         // background already, or on a buffer that each band first copies it into.
         let on_background = canvas.is_some();
-        let take_canvas = move || canvas.unwrap_or_else(|| vec![0u8; W * H * 3]);
         let Ok(mut cache) = self.drawn.0.try_lock() else {
             // Another thread renders with this renderer: draw without the cache.
             let lines = self.lines(lattice, deformed);
-            let mut drawn = take_canvas();
+            let mut drawn = canvas.unwrap_or_else(fresh);
+            let mut out = fresh();
             self.paint(
                 &mut drawn,
                 Some((&lines, on_background)),
@@ -338,24 +338,30 @@ impl Renderer {
         match cache.as_mut() {
             // The same nodes, bit for bit: the same drawn lattice.
             Some(d) if d.nodes == deformed.nodes => {
+                let mut out = canvas.unwrap_or_else(fresh);
                 self.paint(&mut d.image, None, &mut out, &effects);
+                out
             }
             Some(d) => {
                 let lines = self.lines(lattice, deformed);
                 d.nodes.clone_from(&deformed.nodes);
-                if on_background {
-                    d.image = take_canvas();
-                }
+                // The last drawn lattice, no longer needed, becomes the output.
+                let mut out = match canvas {
+                    Some(canvas) => std::mem::replace(&mut d.image, canvas),
+                    None => fresh(),
+                };
                 self.paint(
                     &mut d.image,
                     Some((&lines, on_background)),
                     &mut out,
                     &effects,
                 );
+                out
             }
             None => {
                 let lines = self.lines(lattice, deformed);
-                let mut image = take_canvas();
+                let mut image = canvas.unwrap_or_else(fresh);
+                let mut out = fresh();
                 self.paint(
                     &mut image,
                     Some((&lines, on_background)),
@@ -366,9 +372,9 @@ impl Renderer {
                     nodes: deformed.nodes.clone(),
                     image,
                 });
+                out
             }
         }
-        out
     }
 
     /// Make a frame in two row bands. `lines`: draw them on the background into
@@ -573,21 +579,19 @@ impl Medium {
     }
 }
 
-/// A frame's output buffer and a copy of the background to draw its lattice on,
-/// made before the frame's nodes are known: a grasp trial makes them on the second
-/// core while the caller works out the finger's contact and lattice, so neither the
-/// output's zeroing nor the background's copy is on the caller's path.
+/// A copy of the background to draw a frame's lattice on, made before the frame's
+/// nodes are known: a grasp camera makes it on the second core while the caller
+/// works out the finger's contact and lattice, so the copy is off the caller's path.
+/// The lattice it replaces becomes the frame's output, so no output is zeroed either.
 #[derive(Debug)]
 pub(crate) struct FrameBuffers {
-    out: Vec<u8>,
     canvas: Vec<u8>,
 }
 
 impl FrameBuffers {
-    /// Buffers for a renderer whose [`Renderer::background`] is `background`.
+    /// The canvas for a renderer whose [`Renderer::background`] is `background`.
     pub(crate) fn new(background: &[u8]) -> Self {
         Self {
-            out: vec![0u8; W * H * 3],
             canvas: background.to_vec(),
         }
     }

@@ -117,10 +117,12 @@ fn a_frame_in_two_bands_is_the_frame_in_one_pass_with_every_water_effect() {
 
 #[test]
 fn a_frame_in_buffers_made_beforehand_is_the_same_frame() {
-    // A grasp camera makes the frame's output and canvas on the second core before
-    // the nodes are known. The same bytes as a frame rendered without them: on a
-    // first frame, on the renderer's copy of the last drawn lattice (the same pose
-    // twice), after a different pose, and with buffers of the wrong size (ignored).
+    // A grasp camera makes the frame's canvas (a copy of the background) on the
+    // second core before the nodes are known, and the lattice it replaces, not
+    // zeroed, becomes the output. The same bytes as a frame rendered without them: on
+    // a first frame, on the renderer's copy of the last drawn lattice (the same pose
+    // twice), after a different pose (the output is the last lattice), and with a
+    // canvas of the wrong size (ignored).
     let scene = water_scene();
     let (plain, made) = (
         SceneSim::new(&scene, 5).expect("scene"),
