@@ -10,7 +10,7 @@ use softtouch_schemas::Wrench;
 use crate::TrainError;
 use crate::artifact::{ArtifactHeader, ModelArtifact};
 use crate::labels::{WrenchLabel, wrench_from_label};
-use crate::model::{ForkedConvs, InferenceNet};
+use crate::model::InferenceNet;
 use crate::preprocess::{FingerTable, Fork};
 
 /// One inference.
@@ -41,11 +41,8 @@ pub struct Predictor {
     input: Vec<f32>,
     /// The model's colour threshold as a lookup table (built once, about 0.1 s).
     table: FingerTable,
-    /// Preprocess a frame's halves, and run the model's halves, through this
-    /// ([`Self::split_preprocessing`]).
+    /// Preprocess a frame's halves through this ([`Self::split_preprocessing`]).
     split: Option<Arc<dyn Fork>>,
-    /// The model's convolutions cut in halves for `split`.
-    halves: ForkedConvs,
 }
 
 impl Predictor {
@@ -58,11 +55,9 @@ impl Predictor {
             .map_or_else(Device::flex, |d| d.clone().inner());
         let input = vec![0.0; artifact.header.config.preprocess.input_len()];
         let table = FingerTable::new(&artifact.header.config.preprocess);
-        let net = InferenceNet::new(&artifact.net);
         Self {
             table,
-            halves: net.fork_convs(),
-            net,
+            net: InferenceNet::new(&artifact.net),
             header: artifact.header,
             device,
             input,
@@ -70,10 +65,9 @@ impl Predictor {
         }
     }
 
-    /// Preprocess each frame's halves, and run the residual stages' convolutions as
-    /// two halves of their output channels, through `fork`, e.g. on two cores
-    /// (`None`, the default: on the caller; the control-cycle benchmark measures one
-    /// core). The same estimates, bit for bit.
+    /// Preprocess each frame's halves through `fork`, e.g. on two cores (`None`, the
+    /// default: on the caller; the control-cycle benchmark measures one core). The
+    /// same estimates.
     pub fn split_preprocessing(&mut self, fork: Option<Arc<dyn Fork>>) {
         self.split = fork;
     }
@@ -126,10 +120,7 @@ impl Predictor {
             TensorData::new(image.to_vec(), [1, p.channels, p.size_px, p.size_px]),
             &self.device,
         );
-        let (mean, wrench) = match &self.split {
-            Some(fork) => self.net.forward_forked(x, &self.halves, fork.as_ref()),
-            None => self.net.forward(x),
-        };
+        let (mean, wrench) = self.net.forward(x);
         let read = |t: Tensor<2>| {
             t.into_data()
                 .as_slice::<f32>()

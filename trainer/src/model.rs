@@ -18,7 +18,7 @@ use burn::prelude::*;
 use burn::tensor::activation::{relu, sigmoid};
 use serde::{Deserialize, Serialize};
 
-use crate::preprocess::{Fork, Preprocess};
+use crate::preprocess::Preprocess;
 
 /// Which of the paper's models.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -446,87 +446,6 @@ impl InferenceNet {
         let wrench = self.head.as_ref().map(|h| h.forward(relu(mean.clone())));
         (mean, wrench)
     }
-
-    /// [`Self::forward`] with each residual stage's two 3×3 convolutions (nine
-    /// tenths of the multiply-adds) cut by output channels over two cores through
-    /// `fork`. Each half is the whole convolution's rows, so the result is the same.
-    pub fn forward_forked(
-        &self,
-        images: Tensor<4>,
-        halves: &ForkedConvs,
-        fork: &dyn Fork,
-    ) -> (Tensor<2>, Option<Tensor<2>>) {
-        let mut x = relu(self.stem.forward(images));
-        for (stage, [h1, h2]) in self.stages.iter().zip(&halves.0) {
-            let h = relu(h1.forward(&stage.conv1, x.clone(), fork));
-            let h = h2.forward(&stage.conv2, h, fork);
-            let s = match &stage.skip {
-                Some(conv) => conv.forward(x),
-                None => x,
-            };
-            x = relu(h + s);
-        }
-        let mean = self.fc_mean.forward(x.flatten(1, 3));
-        let wrench = self.head.as_ref().map(|h| h.forward(relu(mean.clone())));
-        (mean, wrench)
-    }
-
-    /// The residual stages' convolutions, cut in halves for [`Self::forward_forked`].
-    pub fn fork_convs(&self) -> ForkedConvs {
-        ForkedConvs(
-            self.stages
-                .iter()
-                .map(|b| [ConvHalves::new(&b.conv1), ConvHalves::new(&b.conv2)])
-                .collect(),
-        )
-    }
-}
-
-/// Each residual stage's two convolutions, cut by output channels.
-#[derive(Debug, Clone)]
-pub struct ForkedConvs(Vec<[ConvHalves; 2]>);
-
-/// A convolution as two: the first and second half of its output channels (`None`
-/// below two channels: it runs whole).
-#[derive(Debug, Clone)]
-pub struct ConvHalves(Option<[Conv2d; 2]>);
-
-impl ConvHalves {
-    fn new(conv: &Conv2d) -> Self {
-        let [c_out, c_in, kh, kw] = conv.weight.dims();
-        if c_out < 2 {
-            return Self(None);
-        }
-        let half = |rows: std::ops::Range<usize>| Conv2d {
-            weight: Param::from_tensor(conv.weight.val().slice([
-                rows.clone(),
-                0..c_in,
-                0..kh,
-                0..kw,
-            ])),
-            bias: conv
-                .bias
-                .as_ref()
-                .map(|b| Param::from_tensor(b.val().slice([rows]))),
-            ..conv.clone()
-        };
-        Self(Some([half(0..c_out / 2), half(c_out / 2..c_out)]))
-    }
-
-    /// `whole(x)`, one half here and one through `fork`.
-    fn forward(&self, whole: &Conv2d, x: Tensor<4>, fork: &dyn Fork) -> Tensor<4> {
-        let Some([a, b]) = &self.0 else {
-            return whole.forward(x);
-        };
-        let (mut top, mut bottom) = (None, None);
-        fork.fork(&mut || top = Some(a.forward(x.clone())), &mut || {
-            bottom = Some(b.forward(x.clone()))
-        });
-        // A fork runs both; should one not have, it is made here.
-        let top = top.unwrap_or_else(|| a.forward(x.clone()));
-        let bottom = bottom.unwrap_or_else(|| b.forward(x));
-        Tensor::cat(vec![top, bottom], 1)
-    }
 }
 
 #[cfg(test)]
@@ -623,56 +542,6 @@ mod tests {
             assert_eq!(wrench.is_some(), f_wrench.is_some());
             if let (Some(w), Some(f)) = (wrench, f_wrench) {
                 assert!(close(values(w), values(f)), "{kind}: wrench");
-            }
-        }
-    }
-
-    #[test]
-    fn the_forked_inference_net_gives_the_same_bits() {
-        // A fork that runs its halves in the opposite order, on two threads, so the
-        // halves cannot lean on each other.
-        #[derive(Debug)]
-        struct Swapped;
-        impl Fork for Swapped {
-            fn fork(&self, here: &mut (dyn FnMut() + Send), there: &mut (dyn FnMut() + Send)) {
-                std::thread::scope(|s| {
-                    s.spawn(here);
-                    there();
-                });
-            }
-        }
-        let device = Device::flex();
-        for (width, size_px) in [(16, 32), (3, 16), (1, 32)] {
-            let config = ModelConfig {
-                width,
-                preprocess: Preprocess {
-                    size_px,
-                    ..Preprocess::default()
-                },
-                ..ModelConfig::default()
-            };
-            let _guard = crate::train::init_lock();
-            let net = InferenceNet::new(&config.init(&device));
-            let halves = net.fork_convs();
-            let bits = |t: Tensor<2>| {
-                t.into_data()
-                    .as_slice::<f32>()
-                    .expect("f32")
-                    .iter()
-                    .map(|v| v.to_bits())
-                    .collect::<Vec<_>>()
-            };
-            for fork in [&Swapped as &dyn Fork, &crate::preprocess::ScopedThread] {
-                let x = Tensor::<4>::random(
-                    [1, 1, size_px, size_px],
-                    burn::tensor::Distribution::Uniform(0.0, 1.0),
-                    &device,
-                );
-                let (mean, wrench) = net.forward(x.clone());
-                let (f_mean, f_wrench) = net.forward_forked(x, &halves, fork);
-                assert_eq!(bits(mean), bits(f_mean), "width {width}: latent mean");
-                let (w, f) = (wrench.expect("svae"), f_wrench.expect("svae"));
-                assert_eq!(bits(w), bits(f), "width {width}: wrench");
             }
         }
     }

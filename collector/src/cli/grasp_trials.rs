@@ -516,10 +516,9 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
     let objects = objects_of(&plan, &scenes)?;
     let modes = plan.modes()?;
     let mut predictor = Predictor::from_bytes(&bytes)?;
-    // A trial is one frame at a time: its drawing, preprocessing and the model's
-    // larger convolutions take the second core for half of each, through one helper
-    // kept awake between frames (burn's rayon workers spinning on both cores would
-    // only get in their way).
+    // A trial is one frame at a time: its drawing and preprocessing take the second
+    // core for half of each frame, and the model runs on one (burn's rayon workers
+    // spinning on both cores would only get in their way).
     predictor.split_preprocessing(Some(Arc::new(SecondCore)));
     let inference_pool = Arc::new(
         rayon::ThreadPoolBuilder::new()

@@ -315,9 +315,7 @@ impl Renderer {
         // The effects write every byte of the output, so any buffer of the frame's
         // size serves, zeroed or not.
         let fresh = || vec![0u8; W * H * 3];
-        let canvas = buffers
-            .map(|b| b.canvas)
-            .filter(|c| c.len() == W * H * 3);
+        let canvas = buffers.map(|b| b.canvas).filter(|c| c.len() == W * H * 3);
         let effects = self.frame_effects(frame_index, t_s);
         // Where the lattice is to be drawn: on the made canvas, which holds the
         // background already, or on a buffer that each band first copies it into.
