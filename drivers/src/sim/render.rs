@@ -317,21 +317,9 @@ impl Renderer {
         let fresh = || vec![0u8; W * H * 3];
         let canvas = buffers.map(|b| b.canvas).filter(|c| c.len() == W * H * 3);
         let effects = self.frame_effects(frame_index, t_s);
-        // Where the lattice is to be drawn: on the made canvas, which holds the
-        // background already, or on a buffer that each band first copies it into.
-        let on_background = canvas.is_some();
         let Ok(mut cache) = self.drawn.0.try_lock() else {
             // Another thread renders with this renderer: draw without the cache.
-            let lines = self.lines(lattice, deformed);
-            let mut drawn = canvas.unwrap_or_else(fresh);
-            let mut out = fresh();
-            self.paint(
-                &mut drawn,
-                Some((&lines, on_background)),
-                &mut out,
-                &effects,
-            );
-            return out;
+            return self.draw_anew(lattice, deformed, canvas, &effects).1;
         };
         match cache.as_mut() {
             // The same nodes, bit for bit: the same drawn lattice.
@@ -343,6 +331,9 @@ impl Renderer {
             Some(d) => {
                 let lines = self.lines(lattice, deformed);
                 d.nodes.clone_from(&deformed.nodes);
+                // Drawn on the made canvas, which holds the background already, or on
+                // the last drawn lattice, which each band first copies it over.
+                let on_background = canvas.is_some();
                 // The last drawn lattice, no longer needed, becomes the output.
                 let mut out = match canvas {
                     Some(canvas) => std::mem::replace(&mut d.image, canvas),
@@ -357,15 +348,7 @@ impl Renderer {
                 out
             }
             None => {
-                let lines = self.lines(lattice, deformed);
-                let mut image = canvas.unwrap_or_else(fresh);
-                let mut out = fresh();
-                self.paint(
-                    &mut image,
-                    Some((&lines, on_background)),
-                    &mut out,
-                    &effects,
-                );
+                let (image, out) = self.draw_anew(lattice, deformed, canvas, &effects);
                 *cache = Some(Drawn {
                     nodes: deformed.nodes.clone(),
                     image,
@@ -373,6 +356,23 @@ impl Renderer {
                 out
             }
         }
+    }
+
+    /// The lattice drawn on a new buffer (the made canvas when there is one) and the
+    /// frame made from it: (drawn lattice, frame).
+    fn draw_anew(
+        &self,
+        lattice: &Lattice,
+        deformed: &Deformed,
+        canvas: Option<Vec<u8>>,
+        effects: &FrameEffects,
+    ) -> (Vec<u8>, Vec<u8>) {
+        let lines = self.lines(lattice, deformed);
+        let on_background = canvas.is_some();
+        let mut drawn = canvas.unwrap_or_else(|| vec![0u8; W * H * 3]);
+        let mut out = vec![0u8; W * H * 3];
+        self.paint(&mut drawn, Some((&lines, on_background)), &mut out, effects);
+        (drawn, out)
     }
 
     /// Make a frame in two row bands. `lines`: draw them on the background into
