@@ -10,7 +10,7 @@ use softtouch_schemas::Wrench;
 use crate::TrainError;
 use crate::artifact::{ArtifactHeader, ModelArtifact};
 use crate::labels::{WrenchLabel, wrench_from_label};
-use crate::model::InferenceNet;
+use crate::model::{FlatBlock, InferenceNet};
 use crate::preprocess::{FingerTable, Fork};
 
 /// One inference.
@@ -37,6 +37,8 @@ pub struct Predictor {
     header: ArtifactHeader,
     /// The encoder and heads with batch norm folded in (what one image needs).
     net: InferenceNet,
+    /// The net's residual stages with their weights reordered once.
+    blocks: Vec<FlatBlock>,
     device: Device,
     input: Vec<f32>,
     /// The model's colour threshold as a lookup table (built once, about 0.1 s).
@@ -55,9 +57,12 @@ impl Predictor {
             .map_or_else(Device::flex, |d| d.clone().inner());
         let input = vec![0.0; artifact.header.config.preprocess.input_len()];
         let table = FingerTable::new(&artifact.header.config.preprocess);
+        let net = InferenceNet::new(&artifact.net);
+        let blocks = net.flat_blocks();
         Self {
             table,
-            net: InferenceNet::new(&artifact.net),
+            net,
+            blocks,
             header: artifact.header,
             device,
             input,
@@ -120,7 +125,7 @@ impl Predictor {
             TensorData::new(image.to_vec(), [1, p.channels, p.size_px, p.size_px]),
             &self.device,
         );
-        let (mean, wrench) = self.net.forward(x);
+        let (mean, wrench) = self.net.forward_one(&self.blocks, x)?;
         let read = |t: Tensor<2>| {
             t.into_data()
                 .as_slice::<f32>()

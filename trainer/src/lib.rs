@@ -9,6 +9,7 @@
 
 pub mod artifact;
 pub mod backend;
+mod im2col;
 pub mod infer;
 pub mod labels;
 pub mod loss;

@@ -18,6 +18,8 @@ use burn::prelude::*;
 use burn::tensor::activation::{relu, sigmoid};
 use serde::{Deserialize, Serialize};
 
+use crate::TrainError;
+use crate::im2col::{Feature, FlatConv};
 use crate::preprocess::Preprocess;
 
 /// Which of the paper's models.
@@ -405,6 +407,34 @@ impl FoldedBlock {
     }
 }
 
+/// A [`FoldedBlock`]'s convolutions with their weights reordered once
+/// ([`crate::im2col`]), for one image at a time.
+#[derive(Debug, Clone)]
+pub(crate) struct FlatBlock {
+    conv1: FlatConv,
+    conv2: FlatConv,
+    skip: Option<FlatConv>,
+}
+
+impl FlatBlock {
+    /// [`FoldedBlock::forward`], the same values.
+    fn forward(&self, x: Feature) -> Result<Feature, TrainError> {
+        let h = self.conv1.forward(x.clone())?.relu();
+        let h = self.conv2.forward(h)?;
+        let s = match &self.skip {
+            Some(conv) => conv.forward(x)?,
+            None => x,
+        };
+        if (h.c, h.h, h.w) != (s.c, s.h, s.w) {
+            return Err(TrainError::Input(format!(
+                "a residual stage's branches have the shapes {}×{}×{} and {}×{}×{}",
+                h.c, h.h, h.w, s.c, s.h, s.w
+            )));
+        }
+        Ok(h.add(&s).relu())
+    }
+}
+
 /// What single-image inference runs: the encoder with every batch norm folded into
 /// the convolution before it, the latent-mean head and the regression head. It gives
 /// the evaluation-mode [`Net::forward_wrench`] (to float rounding) in fewer passes.
@@ -434,6 +464,36 @@ impl InferenceNet {
             fc_mean: net.fc_mean.clone(),
             head: net.head.clone(),
         }
+    }
+
+    /// The residual stages for [`Self::forward_one`].
+    pub(crate) fn flat_blocks(&self) -> Vec<FlatBlock> {
+        self.stages
+            .iter()
+            .map(|b| FlatBlock {
+                conv1: FlatConv::new(&b.conv1),
+                conv2: FlatConv::new(&b.conv2),
+                skip: b.skip.as_ref().map(FlatConv::new),
+            })
+            .collect()
+    }
+
+    /// [`Self::forward`] of one image (`[1, c, h, w]`), the residual stages through
+    /// `blocks` (from [`Self::flat_blocks`]): the same values, without reordering
+    /// the stages' weights on every call.
+    pub(crate) fn forward_one(
+        &self,
+        blocks: &[FlatBlock],
+        image: Tensor<4>,
+    ) -> Result<(Tensor<2>, Option<Tensor<2>>), TrainError> {
+        let device = image.device();
+        let mut x = Feature::from_tensor(relu(self.stem.forward(image)))?;
+        for block in blocks {
+            x = block.forward(x)?;
+        }
+        let mean = self.fc_mean.forward(x.into_tensor(&device).flatten(1, 3));
+        let wrench = self.head.as_ref().map(|h| h.forward(relu(mean.clone())));
+        Ok((mean, wrench))
     }
 
     /// Images → (latent mean, standardised wrench if the model predicts one).
@@ -543,6 +603,62 @@ mod tests {
             if let (Some(w), Some(f)) = (wrench, f_wrench) {
                 assert!(close(values(w), values(f)), "{kind}: wrench");
             }
+        }
+    }
+
+    #[test]
+    fn one_image_through_the_reordered_weights_is_bit_for_bit_the_burn_forward() {
+        // The stages' convolutions with their weights reordered once must give flex's
+        // values exactly, not nearly: estimates, and so grasp trials, stay the same.
+        // Widths and sizes cover stages through im2col (3×3, strided 1×1 skips) and
+        // a stem through flex's few-channel path; 64 px has 2×2 and 4×4 maps.
+        let device = Device::flex();
+        for (kind, width, size_px, channels) in [
+            (ModelKind::Svae, 16, 32, 1),
+            (ModelKind::Convnet, 4, 16, 1),
+            (ModelKind::Vae, 8, 64, 3),
+            (ModelKind::Svae, 32, 32, 3),
+        ] {
+            let config = ModelConfig {
+                kind,
+                width,
+                latent: 6,
+                preprocess: Preprocess {
+                    size_px,
+                    channels,
+                    ..Preprocess::default()
+                },
+                ..ModelConfig::default()
+            };
+            let _guard = crate::train::init_lock();
+            let mut net = config.init(&device);
+            let mut seed = 40;
+            randomise(&mut net.stem_bn, seed, &device);
+            for stage in &mut net.stages {
+                for bn in [&mut stage.bn1, &mut stage.bn2] {
+                    seed += 1;
+                    randomise(bn, seed, &device);
+                }
+            }
+            let folded = InferenceNet::new(&net);
+            let blocks = folded.flat_blocks();
+            let values = |t: Tensor<2>| t.into_data().as_slice::<f32>().expect("f32").to_vec();
+            for round in 0..3 {
+                let x = Tensor::<4>::random(
+                    [1, channels, size_px, size_px],
+                    burn::tensor::Distribution::Uniform(0.0, 1.0),
+                    &device,
+                );
+                let x = if round == 2 { x.zeros_like() } else { x };
+                let (mean, wrench) = folded.forward(x.clone());
+                let (f_mean, f_wrench) = folded.forward_one(&blocks, x).expect("one image");
+                let what = format!("{kind} width {width} size {size_px} round {round}");
+                assert_eq!(values(mean), values(f_mean), "{what}: latent mean");
+                assert_eq!(wrench.map(values), f_wrench.map(values), "{what}: wrench");
+            }
+            // A batch is not one image: a clear error, no panic.
+            let two = Tensor::<4>::zeros([2, channels, size_px, size_px], &device);
+            assert!(folded.forward_one(&blocks, two).is_err());
         }
     }
 

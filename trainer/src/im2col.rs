@@ -1,0 +1,346 @@
+//! Single-image inference's convolutions on the flex backend without the per-call
+//! weight reordering.
+//!
+//! burn's flex backend runs most convolutions as im2col and one matrix product, and
+//! on every call it first reorders the whole weight tensor from `[c_out, c_in, kh,
+//! kw]` to `[c_out, kh, kw, c_in]`. For one 32×32 image that reordering is most of
+//! the encoder's convolution time (the weights outnumber the activations). Here the
+//! weights are reordered once, when a model is loaded, and each call repeats the
+//! rest of flex's computation step for step (the input in channels-last order, the
+//! same im2col tiles, the bias after the product), so that the output is bit for bit
+//! flex's. The product is flex's matrix product of the weights and the transposed
+//! tile, which calls `gemm` with the very arguments flex's convolution passes it.
+//! [`FlatConv::runs`] says when all that holds; anything else (another backend, or a
+//! convolution flex sends down another of its paths) stays with burn.
+
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::Conv2d;
+use burn::prelude::{Device, Tensor, TensorData};
+
+use crate::TrainError;
+
+/// A feature map of one image: `c × h × w`, channel-major.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Feature {
+    pub(crate) data: Vec<f32>,
+    pub(crate) c: usize,
+    pub(crate) h: usize,
+    pub(crate) w: usize,
+}
+
+impl Feature {
+    /// The map of a `[1, c, h, w]` tensor.
+    pub(crate) fn from_tensor(t: Tensor<4>) -> Result<Self, TrainError> {
+        let [b, c, h, w] = t.dims();
+        if b != 1 {
+            return Err(TrainError::Input(format!(
+                "a batch of {b} images: expected one"
+            )));
+        }
+        let data = t
+            .into_data()
+            .try_into_vec::<f32>()
+            .map_err(|e| TrainError::Artifact(format!("reading a feature map: {e:?}")))?;
+        Ok(Self { data, c, h, w })
+    }
+
+    pub(crate) fn into_tensor(self, device: &Device) -> Tensor<4> {
+        Tensor::from_data(
+            TensorData::new(self.data, [1, self.c, self.h, self.w]),
+            device,
+        )
+    }
+
+    /// flex's ReLU: NaN stays NaN.
+    pub(crate) fn relu(mut self) -> Self {
+        for v in &mut self.data {
+            if !(v.is_nan() || *v > 0.0) {
+                *v = 0.0;
+            }
+        }
+        self
+    }
+
+    /// Element-wise sum with a map of the same shape.
+    pub(crate) fn add(mut self, other: &Self) -> Self {
+        for (a, b) in self.data.iter_mut().zip(&other.data) {
+            *a += b;
+        }
+        self
+    }
+}
+
+/// Output pixels per im2col tile (flex's `TILE_SIZE`).
+const TILE: usize = 512;
+
+/// A convolution with its weights in flex's matrix-product order, and the burn
+/// module for the calls flex would not run through im2col.
+#[derive(Debug, Clone)]
+pub(crate) struct FlatConv {
+    conv: Conv2d,
+    /// `[c_out, kh · kw · c_in]`, each row in `(kh, kw, c_in)` order.
+    weight: Option<Tensor<2>>,
+    bias: Option<Vec<f32>>,
+    c_in: usize,
+    c_out: usize,
+    /// `[top, left]`, when the padding is symmetric and known without the input.
+    padding: Option<[usize; 2]>,
+    /// The device is flex's (other backends compute otherwise).
+    on_flex: bool,
+}
+
+impl FlatConv {
+    pub(crate) fn new(conv: &Conv2d) -> Self {
+        let device = conv.weight.val().device();
+        let [c_out, c_in_per_group, kh, kw] = conv.weight.dims();
+        let raw = conv.weight.val().into_data().try_into_vec::<f32>().ok();
+        let bias = conv
+            .bias
+            .as_ref()
+            .and_then(|b| b.val().into_data().try_into_vec::<f32>().ok());
+        let k = kh * kw;
+        // As flex reorders it: for each output channel, (c_in, k) → (k, c_in).
+        let weight = raw
+            .filter(|raw| raw.len() == c_out * c_in_per_group * k)
+            .map(|raw| {
+                let mut w = vec![0.0; raw.len()];
+                for o in 0..c_out {
+                    let base = o * c_in_per_group * k;
+                    for c in 0..c_in_per_group {
+                        for s in 0..k {
+                            w[base + s * c_in_per_group + c] = raw[base + c * k + s];
+                        }
+                    }
+                }
+                Tensor::from_data(TensorData::new(w, [c_out, c_in_per_group * k]), &device)
+            });
+        let padding = match conv.padding {
+            PaddingConfig2d::Valid => Some([0, 0]),
+            PaddingConfig2d::Explicit(top, left, bottom, right)
+                if top == bottom && left == right =>
+            {
+                Some([top, left])
+            }
+            _ => None,
+        };
+        Self {
+            on_flex: device == Device::flex()
+                && weight.is_some()
+                && (conv.bias.is_none() || bias.as_ref().is_some_and(|b| b.len() == c_out)),
+            conv: conv.clone(),
+            weight,
+            bias,
+            c_in: c_in_per_group * conv.groups,
+            c_out,
+            padding,
+        }
+    }
+
+    /// Whether flex would run this convolution on `x` through its im2col path (the
+    /// one repeated here): its 1×1, depthwise, few-channel and direct paths, grouped
+    /// or dilated convolutions, and padding that flex applies to the input first are
+    /// left to burn.
+    fn runs(&self, x: &Feature) -> bool {
+        let Some([ph, pw]) = self.padding else {
+            return false;
+        };
+        let [kh, kw] = self.conv.kernel_size;
+        let [sh, sw] = self.conv.stride;
+        let one_by_one = kh == 1 && kw == 1 && sh == 1 && sw == 1 && ph == 0 && pw == 0;
+        let depthwise = self.c_in == 1 && self.c_out == 1;
+        let few_channels = self.c_in <= 4 && self.c_out <= 16;
+        let direct = ph == 0
+            && pw == 0
+            && kh == 1
+            && x.h == 1
+            && self.c_in >= 32
+            && kw <= 8
+            && self.out_size(x.w, kw, sw, pw).is_some_and(|ow| ow <= 800);
+        self.on_flex
+            && self.conv.groups == 1
+            && self.conv.dilation == [1, 1]
+            && x.c == self.c_in
+            && x.data.len() == x.c * x.h * x.w
+            && !(one_by_one || depthwise || few_channels || direct)
+            && self.out_size(x.h, kh, sh, ph).is_some()
+            && self.out_size(x.w, kw, sw, pw).is_some()
+    }
+
+    fn out_size(&self, size: usize, k: usize, stride: usize, pad: usize) -> Option<usize> {
+        let span = size + 2 * pad;
+        (stride > 0 && span >= k).then(|| (span - k) / stride + 1)
+    }
+
+    /// The convolution of `x`: flex's im2col computation, or burn's call.
+    pub(crate) fn forward(&self, x: Feature) -> Result<Feature, TrainError> {
+        let device = self.conv.weight.val().device();
+        let weight = match &self.weight {
+            Some(w) if self.runs(&x) => w,
+            _ => return Feature::from_tensor(self.conv.forward(x.into_tensor(&device))),
+        };
+        let (c_in, c_out) = (self.c_in, self.c_out);
+        let [kh, kw] = self.conv.kernel_size;
+        let [sh, sw] = self.conv.stride;
+        let [ph, pw] = self.padding.unwrap_or_default();
+        let (oh, ow) = (
+            self.out_size(x.h, kh, sh, ph).unwrap_or(0),
+            self.out_size(x.w, kw, sw, pw).unwrap_or(0),
+        );
+        // Channels last.
+        let (h, w) = (x.h, x.w);
+        let mut nhwc = vec![0.0f32; c_in * h * w];
+        for y in 0..h {
+            for xx in 0..w {
+                for c in 0..c_in {
+                    nhwc[(y * w + xx) * c_in + c] = x.data[c * h * w + y * w + xx];
+                }
+            }
+        }
+        let col_len = c_in * kh * kw;
+        let spatial = oh * ow;
+        let mut out = vec![0.0f32; c_out * spatial];
+        for tile_start in (0..spatial).step_by(TILE) {
+            let tile_end = (tile_start + TILE).min(spatial);
+            let tile = tile_end - tile_start;
+            let mut col = vec![0.0f32; col_len * tile];
+            for (local, at) in (tile_start..tile_end).enumerate() {
+                let (oy, ox) = (at / ow, at % ow);
+                let row = &mut col[local * col_len..(local + 1) * col_len];
+                let mut offset = 0;
+                for ky in 0..kh {
+                    let iy = (oy * sh + ky) as isize - ph as isize;
+                    for kx in 0..kw {
+                        let ix = (ox * sw + kx) as isize - pw as isize;
+                        if iy >= 0 && iy < h as isize && ix >= 0 && ix < w as isize {
+                            let from = (iy as usize * w + ix as usize) * c_in;
+                            row[offset..offset + c_in].copy_from_slice(&nhwc[from..from + c_in]);
+                        }
+                        offset += c_in;
+                    }
+                }
+            }
+            let col = Tensor::<2>::from_data(TensorData::new(col, [tile, col_len]), &device);
+            let product = weight
+                .clone()
+                .matmul(col.transpose())
+                .into_data()
+                .try_into_vec::<f32>();
+            let product = product
+                .map_err(|e| TrainError::Artifact(format!("reading a convolution: {e:?}")))?;
+            for o in 0..c_out {
+                out[o * spatial + tile_start..o * spatial + tile_end]
+                    .copy_from_slice(&product[o * tile..(o + 1) * tile]);
+            }
+        }
+        if let Some(bias) = &self.bias {
+            for (o, b) in bias.iter().enumerate() {
+                for v in &mut out[o * spatial..(o + 1) * spatial] {
+                    *v += b;
+                }
+            }
+        }
+        Ok(Feature {
+            data: out,
+            c: c_out,
+            h: oh,
+            w: ow,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::nn::conv::Conv2dConfig;
+    use burn::tensor::Distribution;
+
+    fn feature(c: usize, h: usize, w: usize, device: &Device) -> Feature {
+        let t = Tensor::<4>::random([1, c, h, w], Distribution::Uniform(-1.0, 1.0), device);
+        Feature::from_tensor(t).expect("one image")
+    }
+
+    #[test]
+    fn each_path_gives_burns_values_bit_for_bit() {
+        let device = Device::flex();
+        let pad1 = PaddingConfig2d::Explicit(1, 1, 1, 1);
+        // (c_in, c_out, kernel, stride, padding, bias, input size, through im2col here)
+        let cases = [
+            (16, 32, 3, 2, pad1.clone(), false, 16, true),
+            (32, 32, 3, 1, pad1.clone(), false, 8, true),
+            (64, 64, 3, 1, pad1.clone(), true, 2, true),
+            // A strided 1×1 skip with its bias.
+            (16, 32, 1, 2, PaddingConfig2d::Valid, true, 16, true),
+            // More output pixels than one tile (512).
+            (8, 8, 3, 1, pad1.clone(), true, 24, true),
+            // flex's own paths: 1×1 stride 1, few channels, and padding it applies
+            // to the input first (asymmetric): burn runs them.
+            (16, 32, 1, 1, PaddingConfig2d::Valid, true, 8, false),
+            (1, 16, 3, 2, pad1, false, 32, false),
+            (
+                16,
+                16,
+                3,
+                1,
+                PaddingConfig2d::Explicit(1, 0, 0, 1),
+                false,
+                8,
+                false,
+            ),
+            (16, 16, 3, 1, PaddingConfig2d::Same, false, 8, false),
+        ];
+        for (i, (c_in, c_out, k, stride, padding, bias, size, im2col)) in
+            cases.into_iter().enumerate()
+        {
+            let _guard = crate::train::init_lock();
+            let conv = Conv2dConfig::new([c_in, c_out], [k, k])
+                .with_stride([stride, stride])
+                .with_padding(padding)
+                .with_bias(bias)
+                .init(&device);
+            let flat = FlatConv::new(&conv);
+            let x = feature(c_in, size, size, &device);
+            assert_eq!(flat.runs(&x), im2col, "case {i}: path");
+            let expected =
+                Feature::from_tensor(conv.forward(x.clone().into_tensor(&device))).expect("burn");
+            let got = flat.forward(x).expect("flat");
+            assert_eq!(got, expected, "case {i}: values");
+        }
+    }
+
+    #[test]
+    fn a_map_of_the_wrong_channels_is_left_to_burn() {
+        // burn then reports it; the reordered weights never read out of range.
+        let device = Device::flex();
+        let conv = Conv2dConfig::new([16, 32], [3, 3])
+            .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+            .init(&device);
+        let flat = FlatConv::new(&conv);
+        let mut x = feature(16, 8, 8, &device);
+        x.data.truncate(10);
+        assert!(!flat.runs(&x));
+        let x = feature(8, 8, 8, &device);
+        assert!(!flat.runs(&x));
+    }
+
+    #[test]
+    fn relu_keeps_nan_and_zeroes_the_rest_below_zero() {
+        let f = Feature {
+            data: vec![
+                f32::NAN,
+                -1.0,
+                -0.0,
+                0.0,
+                2.5,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+            ],
+            c: 1,
+            h: 1,
+            w: 7,
+        }
+        .relu();
+        assert!(f.data[0].is_nan());
+        assert_eq!(&f.data[1..], &[0.0, 0.0, 0.0, 2.5, f32::INFINITY, 0.0]);
+        assert!(f.data[2].is_sign_positive());
+    }
+}
