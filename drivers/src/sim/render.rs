@@ -801,6 +801,12 @@ fn draw_line_along<const X_MAJOR: bool>(
     let no_change_2 = no_change * no_change;
     // A pixel the band covers fully takes the colour itself, without arithmetic.
     let solid = c.map(|v| (v + 0.5) as u8);
+    // A row of solid pixels, copied whole into a y-major line's full run.
+    const RUN_PX: usize = 16;
+    let mut run = [0u8; 3 * RUN_PX];
+    for px in run.chunks_exact_mut(3) {
+        px.copy_from_slice(&solid);
+    }
     for ia in lo..=hi {
         let ac = ia as f32 + 0.5;
         let inside = ac >= amin && ac <= amax;
@@ -827,9 +833,20 @@ fn draw_line_along<const X_MAJOR: bool>(
             let fhi = floor_i32(bc + full - 0.5).min(bhi);
             if flo <= fhi {
                 (blo..flo).for_each(|ib| partial(band, ib));
-                for ib in flo..=fhi {
-                    let o = first + (ib - blo) as usize * step;
-                    band[o..o + 3].copy_from_slice(&solid);
+                // The fully covered run, one bounds check for all of it: down a
+                // column a row apart (x-major), or along a row in one copy.
+                let o = first + (flo - blo) as usize * step;
+                let n = (fhi - flo) as usize + 1;
+                if X_MAJOR {
+                    for px in band[o..o + (n - 1) * step + 3].chunks_mut(step) {
+                        px[..3].copy_from_slice(&solid);
+                    }
+                } else if n <= RUN_PX {
+                    band[o..o + 3 * n].copy_from_slice(&run[..3 * n]);
+                } else {
+                    for px in band[o..o + 3 * n].chunks_exact_mut(3) {
+                        px.copy_from_slice(&solid);
+                    }
                 }
                 (fhi + 1..=bhi).for_each(|ib| partial(band, ib));
             } else {
