@@ -427,8 +427,9 @@ impl Renderer {
     /// The beams to draw, far to near as the lattice lists them: end points (px),
     /// half width (px) and colour.
     fn lines(&self, lattice: &Lattice, deformed: &Deformed) -> Vec<Line> {
-        // A beam's colour takes a power and a few exponentials (about 80 µs for a
-        // frame's beams): half of the beams on each core, in order.
+        // A beam's colour takes a power and a few exponentials (2 % of a water grasp
+        // trial's samples in `perf`, all on the caller): half the beams on each
+        // core, in order.
         let (first, second) = lattice.beams.split_at(lattice.beams.len() / 2);
         let mut lines = Vec::with_capacity(lattice.beams.len());
         let mut rest = Vec::new();
