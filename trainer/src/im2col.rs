@@ -87,6 +87,8 @@ pub(crate) struct FlatConv {
     padding: Option<[usize; 2]>,
     /// The device is flex's (other backends compute otherwise).
     on_flex: bool,
+    /// The weights' device, where each call's tensors are made.
+    device: Device,
 }
 
 impl FlatConv {
@@ -133,6 +135,7 @@ impl FlatConv {
             c_in: c_in_per_group * conv.groups,
             c_out,
             padding,
+            device,
         }
     }
 
@@ -173,10 +176,10 @@ impl FlatConv {
 
     /// The convolution of `x`: flex's im2col computation, or burn's call.
     pub(crate) fn forward(&self, x: Feature) -> Result<Feature, TrainError> {
-        let device = self.conv.weight.val().device();
+        let device = &self.device;
         let weight = match &self.weight {
             Some(w) if self.runs(&x) => w,
-            _ => return Feature::from_tensor(self.conv.forward(x.into_tensor(&device))),
+            _ => return Feature::from_tensor(self.conv.forward(x.into_tensor(device))),
         };
         let (c_in, c_out) = (self.c_in, self.c_out);
         let [kh, kw] = self.conv.kernel_size;
@@ -219,7 +222,7 @@ impl FlatConv {
                     }
                 }
             }
-            let col = Tensor::<2>::from_data(TensorData::new(col, [tile, col_len]), &device);
+            let col = Tensor::<2>::from_data(TensorData::new(col, [tile, col_len]), device);
             let product = weight
                 .clone()
                 .matmul(col.transpose())
