@@ -561,6 +561,20 @@ mod tests {
         bn.running_var = RunningState::new(uniform(1e-5, 4.0));
     }
 
+    /// A net of `config` whose batch norms all have statistics from [`randomise`],
+    /// drawn from `seed` on (the caller holds `init_lock`).
+    fn with_random_statistics(config: &ModelConfig, mut seed: u64, device: &Device) -> Net {
+        let mut net = config.init(device);
+        randomise(&mut net.stem_bn, seed, device);
+        for stage in &mut net.stages {
+            for bn in [&mut stage.bn1, &mut stage.bn2] {
+                seed += 1;
+                randomise(bn, seed, device);
+            }
+        }
+        net
+    }
+
     #[test]
     fn the_folded_inference_net_gives_the_evaluation_mode_output() {
         let device = Device::flex();
@@ -576,15 +590,7 @@ mod tests {
                 ..ModelConfig::default()
             };
             let _guard = crate::train::init_lock();
-            let mut net = config.init(&device);
-            let mut seed = 10;
-            randomise(&mut net.stem_bn, seed, &device);
-            for stage in &mut net.stages {
-                for bn in [&mut stage.bn1, &mut stage.bn2] {
-                    seed += 1;
-                    randomise(bn, seed, &device);
-                }
-            }
+            let net = with_random_statistics(&config, 10, &device);
             let folded = InferenceNet::new(&net);
             let x = Tensor::<4>::random(
                 [3, 1, 32, 32],
@@ -631,15 +637,7 @@ mod tests {
                 ..ModelConfig::default()
             };
             let _guard = crate::train::init_lock();
-            let mut net = config.init(&device);
-            let mut seed = 40;
-            randomise(&mut net.stem_bn, seed, &device);
-            for stage in &mut net.stages {
-                for bn in [&mut stage.bn1, &mut stage.bn2] {
-                    seed += 1;
-                    randomise(bn, seed, &device);
-                }
-            }
+            let net = with_random_statistics(&config, 40, &device);
             let folded = InferenceNet::new(&net);
             let blocks = folded.flat_blocks();
             let values = |t: Tensor<2>| t.into_data().as_slice::<f32>().expect("f32").to_vec();
