@@ -58,7 +58,7 @@ pub(crate) struct Renderer {
     z_cam: f64,
     background: Arc<[u8]>,
     caustic: Option<Caustic>,
-    noise: Option<Vec<i16>>,
+    noise: Option<NoiseTable>,
     exposure: Option<[u8; 256]>,
     drawn: DrawnCache,
 }
@@ -151,12 +151,14 @@ impl Renderer {
             || {
                 noise = effects.noise_sigma.map(|sigma| {
                     let mut g = rng::stream(seed, "camera-noise-table");
-                    (0..NOISE_OFFSETS + W * H * 3)
-                        .map(|_| {
-                            let z: f64 = StandardNormal.sample(&mut g);
-                            (z * sigma).round().clamp(-255.0, 255.0) as i16
-                        })
-                        .collect()
+                    NoiseTable::new(
+                        (0..NOISE_OFFSETS + W * H * 3)
+                            .map(|_| {
+                                let z: f64 = StandardNormal.sample(&mut g);
+                                (z * sigma).round().clamp(-255.0, 255.0) as i16
+                            })
+                            .collect(),
+                    )
                 });
             },
         );
@@ -564,7 +566,40 @@ impl Renderer {
                 }
             }
             if let (Some(table), Some(start)) = (&self.noise, fx.noise_start) {
-                let (at, len) = (start + rows.0 * ROW, dst.len());
+                table.add_to(dst, start + rows.0 * ROW);
+            }
+        }
+    }
+}
+
+/// The camera noise, in whole levels, from which each frame reads one frame's worth
+/// at its offset. A frame reads a megabyte or two of it, mostly from memory rather
+/// than cache: one byte a value where every value fits (a σ of a few levels), else two.
+#[derive(Debug, Clone)]
+enum NoiseTable {
+    Narrow(Vec<i8>),
+    Wide(Vec<i16>),
+}
+
+impl NoiseTable {
+    fn new(levels: Vec<i16>) -> Self {
+        let narrow: Option<Vec<i8>> = levels.iter().map(|&v| i8::try_from(v).ok()).collect();
+        match narrow {
+            Some(narrow) => Self::Narrow(narrow),
+            None => Self::Wide(levels),
+        }
+    }
+
+    /// Add the table from `at` on to `dst`, saturating at 0 and 255.
+    fn add_to(&self, dst: &mut [u8], at: usize) {
+        let len = dst.len();
+        match self {
+            Self::Narrow(table) => {
+                for (v, &n) in dst.iter_mut().zip(&table[at..at + len]) {
+                    *v = (i16::from(*v) + i16::from(n)).clamp(0, 255) as u8;
+                }
+            }
+            Self::Wide(table) => {
                 for (v, &n) in dst.iter_mut().zip(&table[at..at + len]) {
                     *v = (i16::from(*v) + n).clamp(0, 255) as u8;
                 }
@@ -708,8 +743,20 @@ fn ceil_i32(x: f32) -> i32 {
 /// its cost. The line rasteriser clips to its band, so `o` is always inside it.
 #[inline]
 fn blend_at(img: &mut [u8], o: usize, solid: [u8; 3], a: f32) {
-    let a = (a * 256.0) as i32;
-    for (p, &c) in img[o..o + 3].iter_mut().zip(&solid) {
+    blend_256(&mut img[o..o + 3], solid, coverage_256(a));
+}
+
+/// A coverage in [0, 1] in 1/256ths, as [`blend_at`] works it out (256: the
+/// colour itself, 0: no change).
+#[inline(always)]
+fn coverage_256(cov: f32) -> i32 {
+    (cov * 256.0) as i32
+}
+
+/// Blend `solid` into the pixel `px` (3 bytes) with coverage `a` in 1/256ths.
+#[inline(always)]
+fn blend_256(px: &mut [u8], solid: [u8; 3], a: i32) {
+    for (p, &c) in px.iter_mut().zip(&solid) {
         let v = i32::from(*p);
         *p = (v + (((i32::from(c) - v) * a + 128) >> 8)) as u8;
     }
@@ -856,33 +903,70 @@ fn draw_line_along<const X_MAJOR: bool>(
             continue;
         }
         // Past an end. A pixel `edge − ½⁄256` or farther from the segment gets a
-        // coverage under 1⁄256, which `blend_at` rounds to no change: skip it without
-        // the square root, and skip a column that far beyond the end (every point of
-        // the segment is at least that far along the walk).
+        // coverage under 1⁄256, which rounds to no change; a column that far beyond
+        // the end is skipped whole (every point of the segment is at least that far
+        // along the walk).
         if (amin - ac).max(ac - amax) >= no_change {
             continue;
         }
         let bc = b0 + (ac.clamp(amin, amax) - a0) * slope;
         let blo = floor_i32(bc - across).max(b_range.0);
         let bhi = ceil_i32(bc + across).min(b_range.1 - 1);
-        for ib in blo..=bhi {
+        if blo > bhi {
+            continue;
+        }
+        let degenerate = len2 <= 1e-12;
+        blend_lanes(band, at(ia, blo), step, (blo, bhi), solid, |ib| {
             let pb = ib as f32 + 0.5;
-            let t = if len2 > 1e-12 {
-                (((ac - a0) * da + (pb - b0) * db) * inv_len2).clamp(0.0, 1.0)
-            } else {
+            let t = if degenerate {
                 0.0
+            } else {
+                (((ac - a0) * da + (pb - b0) * db) * inv_len2).clamp(0.0, 1.0)
             };
             let (ea, eb) = (a0 + t * da - ac, b0 + t * db - pb);
             let d2 = ea * ea + eb * eb;
             if d2 >= no_change_2 {
-                continue;
+                0
+            } else {
+                coverage_256((edge - d2.sqrt()).clamp(0.0, 1.0))
             }
-            let d = d2.sqrt();
-            let cov = (edge - d).clamp(0.0, 1.0);
-            if cov > 0.0 {
-                blend_at(band, at(ia, ib), solid, cov);
+        });
+    }
+}
+
+/// Coverages [`blend_lanes`] works out together.
+const LANES: usize = 16;
+
+/// Blend `solid` into the pixels `blo..=bhi` of one column, `step` bytes apart from
+/// byte `first`, pixel `ib` with coverage `coverage(ib)` in 1/256ths (256: the
+/// colour itself). The coverages come [`LANES`] at a time, with no branch between
+/// pixels, so the compiler works them out side by side (a cap's pixel takes a
+/// projection, a square root and several compares); only the pixels they touch are
+/// then blended. The same bytes as [`blend_at`] pixel by pixel.
+#[inline(always)]
+fn blend_lanes(
+    band: &mut [u8],
+    first: usize,
+    step: usize,
+    (blo, bhi): (i32, i32),
+    solid: [u8; 3],
+    coverage: impl Fn(i32) -> i32,
+) {
+    let mut from = blo;
+    while from <= bhi {
+        let n = ((bhi - from) as usize + 1).min(LANES);
+        let mut lanes = [0i32; LANES];
+        for (k, a) in lanes.iter_mut().enumerate() {
+            *a = coverage(from + k as i32);
+        }
+        let o = first + (from - blo) as usize * step;
+        let pixels = band[o..o + (n - 1) * step + 3].chunks_mut(step);
+        for (px, &a) in pixels.zip(&lanes[..n]) {
+            if a != 0 {
+                blend_256(&mut px[..3], solid, a);
             }
         }
+        from += LANES as i32;
     }
 }
 
@@ -996,5 +1080,92 @@ mod tests {
             }
             assert!(banded == whole, "split at row {split}");
         }
+    }
+
+    /// FNV-1a over a frame's bytes: pins a drawing to the bytes it had.
+    fn fnv1a(bytes: &[u8]) -> u64 {
+        bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        })
+    }
+
+    #[test]
+    fn lines_draw_the_bytes_they_always_drew() {
+        // Beams of every width and direction, ends inside and past the frame, and a
+        // dot, over each other.
+        let mut frame = vec![40u8; W * H * 3];
+        for k in 0..60 {
+            let t = k as f32;
+            let p0 = ((t * 37.0) % 700.0 - 30.0, (t * 53.0) % 540.0 - 30.0);
+            let p1 = (p0.0 + (t * 0.7).sin() * 90.0, p0.1 + (t * 1.3).cos() * 70.0);
+            let half_w = 0.5 + (k % 6) as f32 * 0.5;
+            let c = [255.0 - t * 3.0, 140.0, 36.0 + t * 2.0];
+            draw_line(&mut frame, (0, H as i32), p0, p1, half_w, c);
+        }
+        draw_line(
+            &mut frame,
+            (0, H as i32),
+            (320.0, 239.0),
+            (320.2, 239.1),
+            3.0,
+            [0.0, 255.0, 0.0],
+        );
+        // The digest of these bytes as drawn before the caps' pixels were worked out
+        // in lanes (and since): any change to how a beam is drawn shows here.
+        assert_eq!(fnv1a(&frame), 0x0816_607d_1fbb_35e6);
+    }
+
+    #[test]
+    fn pixels_in_lanes_blend_as_one_at_a_time() {
+        // Columns shorter and longer than a block of lanes, along a row and down a
+        // column, with coverages from none to full.
+        let coverage = |ib: i32| [0, 1, 128, 255, 256, 7, 0, 200][(ib.rem_euclid(8)) as usize];
+        for (step, len) in [(3, 40 * 3), (W * 3, 40 * W * 3)] {
+            for (blo, bhi) in [(0, 0), (3, 17), (0, 15), (0, 16), (5, 39), (2, 33)] {
+                let mut lanes: Vec<u8> = (0..len).map(|i| (i * 7 % 251) as u8).collect();
+                let mut one_by_one = lanes.clone();
+                let first = blo as usize * step;
+                let solid = [250, 3, 128];
+                blend_lanes(&mut lanes, first, step, (blo, bhi), solid, coverage);
+                for ib in blo..=bhi {
+                    let o = ib as usize * step;
+                    blend_256(&mut one_by_one[o..o + 3], solid, coverage(ib));
+                }
+                assert!(lanes == one_by_one, "step {step}, pixels {blo}..={bhi}");
+            }
+        }
+        // A full coverage gives the colour, none leaves the pixel.
+        let mut px = [10u8, 200, 99];
+        blend_256(&mut px, [250, 3, 128], 256);
+        assert_eq!(px, [250, 3, 128]);
+        blend_256(&mut px, [0, 0, 0], 0);
+        assert_eq!(px, [250, 3, 128]);
+    }
+
+    #[test]
+    fn camera_noise_is_the_same_in_one_byte_or_two() {
+        assert!(matches!(
+            NoiseTable::new(vec![-128, 0, 127]),
+            NoiseTable::Narrow(_)
+        ));
+        assert!(matches!(
+            NoiseTable::new(vec![-129, 0]),
+            NoiseTable::Wide(_)
+        ));
+        assert!(matches!(NoiseTable::new(vec![0, 128]), NoiseTable::Wide(_)));
+        let levels: Vec<i16> = vec![-128, -5, 0, 3, 127, -1, 100, -100];
+        let narrow = NoiseTable::new(levels.clone());
+        let wide = NoiseTable::Wide(levels);
+        // Saturation at both ends, from two offsets.
+        let frame = [0u8, 2, 255, 254, 130, 0, 200, 50];
+        for at in [0, 2] {
+            let (mut a, mut b) = (frame[..6].to_vec(), frame[..6].to_vec());
+            narrow.add_to(&mut a, at);
+            wide.add_to(&mut b, at);
+            assert_eq!(a, b, "offset {at}");
+        }
+        let mut a = frame.to_vec();
+        narrow.add_to(&mut a, 0);
+        assert_eq!(a, [0, 0, 255, 255, 255, 0, 255, 0]);
     }
 }
