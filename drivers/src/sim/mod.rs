@@ -62,7 +62,7 @@
 //! colour attenuation and turbidity (along the light path, per beam and once for the
 //! background), caustics (a precomputed tile, shifted per frame), bubbles, exposure
 //! (a lookup table), camera noise (a frame's worth of a precomputed Gaussian table, read
-//! from a random offset per frame), background clutter (drawn once into the background).
+//! from a random offset per frame; one byte a level where σ allows), background clutter (drawn once into the background).
 //! Force/torque: white noise, drift, buoyancy offset, packet loss, latency. Camera:
 //! frame drops, latency. Arm: reflex faults. Gripper: fluid drag on the held object.
 //!
