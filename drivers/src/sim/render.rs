@@ -592,19 +592,17 @@ impl NoiseTable {
 
     /// Add the table from `at` on to `dst`, saturating at 0 and 255.
     fn add_to(&self, dst: &mut [u8], at: usize) {
-        let len = dst.len();
         match self {
-            Self::Narrow(table) => {
-                for (v, &n) in dst.iter_mut().zip(&table[at..at + len]) {
-                    *v = (i16::from(*v) + i16::from(n)).clamp(0, 255) as u8;
-                }
-            }
-            Self::Wide(table) => {
-                for (v, &n) in dst.iter_mut().zip(&table[at..at + len]) {
-                    *v = (i16::from(*v) + n).clamp(0, 255) as u8;
-                }
-            }
+            Self::Narrow(table) => add_levels(dst, &table[at..at + dst.len()]),
+            Self::Wide(table) => add_levels(dst, &table[at..at + dst.len()]),
         }
+    }
+}
+
+/// `dst` + `levels`, saturating at 0 and 255: one loop, compiled for each width.
+fn add_levels<T: Copy + Into<i16>>(dst: &mut [u8], levels: &[T]) {
+    for (v, &n) in dst.iter_mut().zip(levels) {
+        *v = (i16::from(*v) + n.into()).clamp(0, 255) as u8;
     }
 }
 
@@ -802,6 +800,8 @@ fn draw_line_along<const X_MAJOR: bool>(
     let (da, db) = (a1 - a0, b1 - b0);
     let len2 = da * da + db * db;
     let inv_len2 = 1.0 / len2;
+    // A segment this short is a dot: its caps measure from its first end.
+    let degenerate = len2 <= 1e-12;
     let slope = if da.abs() > 1e-6 { db / da } else { 0.0 };
     let norm = (1.0 + slope * slope).sqrt();
     let inv_norm = 1.0 / norm;
@@ -915,7 +915,6 @@ fn draw_line_along<const X_MAJOR: bool>(
         if blo > bhi {
             continue;
         }
-        let degenerate = len2 <= 1e-12;
         blend_lanes(band, at(ia, blo), step, (blo, bhi), solid, |ib| {
             let pb = ib as f32 + 0.5;
             let t = if degenerate {
