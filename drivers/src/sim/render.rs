@@ -61,6 +61,7 @@ pub(crate) struct Renderer {
     noise: Option<NoiseTable>,
     exposure: Option<[u8; 256]>,
     drawn: DrawnCache,
+    balance: BandBalance,
 }
 
 /// The caustic pattern: a `period`-pixel square tile, stored as RGB rows of
@@ -142,12 +143,18 @@ impl Renderer {
             noise: None,
             exposure: None,
             drawn: DrawnCache::default(),
+            balance: BandBalance::default(),
         };
-        // The background and the noise table (a new renderer per grasp trial: each
-        // about 10 ms) at once, from their own random streams.
-        let (mut background, mut noise) = (Vec::new(), None);
+        // The background and caustics beside the noise table (a new renderer per
+        // grasp trial: about 10, 5 and 15–20 ms), from their own random streams.
+        let (mut background, mut noise, mut caustic) = (Vec::new(), None, None);
         crate::second_core::join(
-            || background = r.make_background(finger),
+            || {
+                background = r.make_background(finger);
+                caustic = effects
+                    .caustics
+                    .map(|(strength, period)| Caustic::new(strength, period));
+            },
             || {
                 noise = effects.noise_sigma.map(|sigma| {
                     let mut g = rng::stream(seed, "camera-noise-table");
@@ -162,10 +169,7 @@ impl Renderer {
                 });
             },
         );
-        (r.background, r.noise) = (background.into(), noise);
-        if let Some((strength, period)) = effects.caustics {
-            r.caustic = Some(Caustic::new(strength, period));
-        }
+        (r.background, r.noise, r.caustic) = (background.into(), noise, caustic);
         if let Some(gain) = effects.exposure_gain {
             let mut lut = [0u8; 256];
             for (i, v) in lut.iter_mut().enumerate() {
@@ -388,10 +392,12 @@ impl Renderer {
         out: &mut [u8],
         effects: &FrameEffects,
     ) {
-        // Split where the work is halved: the beams' pixels, and the copies and
-        // effects that cost the same in every row. The finger's near end, with the
-        // longest, widest beams, is rarely in the middle of the frame.
-        let split = lines.map_or(H / 2, |(lines, _)| split_row(lines, self.row_cost()));
+        // Split where the work is shared as the last frames' times say: the beams'
+        // pixels, and the copies and effects that cost the same in every row. The
+        // finger's near end, with the longest, widest beams, is rarely in the middle
+        // of the frame.
+        let share = self.balance.top_share();
+        let split = lines.map_or(H / 2, |(lines, _)| split_row(lines, self.row_cost(), share));
         let band = |drawn: &mut [u8], out: &mut [u8], rows: (usize, usize)| {
             if let Some((lines, on_background)) = lines {
                 if !on_background {
@@ -408,10 +414,15 @@ impl Renderer {
         let (o_top, o_bottom) = out.split_at_mut(split * W * 3);
         // On the second core, kept awake between frames (a thread started per frame
         // began its band 140 µs late).
+        let (mut top_s, mut bottom_s) = (0.0, 0.0);
         crate::second_core::join(
-            || band(d_top, o_top, (0, split)),
-            || band(d_bottom, o_bottom, (split, H)),
+            || top_s = timed(|| band(d_top, o_top, (0, split))),
+            || bottom_s = timed(|| band(d_bottom, o_bottom, (split, H))),
         );
+        // Only frames that draw beams are split by their estimate.
+        if lines.is_some() {
+            self.balance.learn(share, top_s, bottom_s);
+        }
     }
 
     /// What a row's copies and declared per-pixel effects cost, in beam pixels
@@ -660,10 +671,16 @@ struct FrameEffects {
     noise_start: Option<usize>,
 }
 
-/// The row that splits a frame's work in halves: each beam's pixels (length ×
-/// width) spread evenly over the rows it spans, plus `row_cost` (in beam pixels) in
-/// every row for the copies and effects. The first row of the lower half, in `1..H`.
-fn split_row(lines: &[Line], row_cost: f32) -> usize {
+/// The row above which lies `top_share` of a frame's estimated work (a half:
+/// 0.5): each beam's pixels (length × width) spread evenly over the rows it spans,
+/// plus `row_cost` (in beam pixels) in every row for the copies and effects. The
+/// first row of the lower band, in `1..H`.
+fn split_row(lines: &[Line], row_cost: f32, top_share: f32) -> usize {
+    let top_share = if top_share.is_finite() {
+        top_share.clamp(0.0, 1.0)
+    } else {
+        0.5
+    };
     let mut per_row = vec![0f32; H + 1];
     if row_cost.is_finite() && row_cost > 0.0 {
         per_row[0] += row_cost;
@@ -700,11 +717,79 @@ fn split_row(lines: &[Line], row_cost: f32) -> usize {
     let mut sum = 0.0;
     for (y, c) in cumulative.iter().enumerate() {
         sum += c;
-        if sum >= total / 2.0 {
+        if sum >= total * top_share {
             return (y + 1).clamp(1, H - 1);
         }
     }
     H / 2
+}
+
+/// Seconds `f` took.
+fn timed(f: impl FnOnce()) -> f64 {
+    let t = std::time::Instant::now();
+    f();
+    t.elapsed().as_secs_f64()
+}
+
+/// The share of a frame's estimated work that the top band gets, learnt from how
+/// long the bands took. The estimate counts pixels; a pixel's cost depends on the
+/// beams' directions and widths, and so on where the finger is, so in a grasp trial
+/// the calling thread's band took up to half as long again as the other (1026 against
+/// 669 µs a frame over a water trial). Correcting the share from the last frames'
+/// times evens them out. Only the split moves: the bytes do not depend on it.
+#[derive(Debug)]
+struct BandBalance(std::sync::atomic::AtomicU32);
+
+impl Default for BandBalance {
+    fn default() -> Self {
+        Self(std::sync::atomic::AtomicU32::new(0.5f32.to_bits()))
+    }
+}
+
+impl Clone for BandBalance {
+    fn clone(&self) -> Self {
+        Self(std::sync::atomic::AtomicU32::new(
+            self.top_share().to_bits(),
+        ))
+    }
+}
+
+impl BandBalance {
+    /// The share is kept within this much of a half.
+    const REACH: f32 = 0.3;
+
+    fn top_share(&self) -> f32 {
+        f32::from_bits(self.0.load(std::sync::atomic::Ordering::Relaxed))
+    }
+
+    /// The bands split at `share` took `top_s` and `bottom_s` seconds.
+    fn learn(&self, share: f32, top_s: f64, bottom_s: f64) {
+        let next = next_share(share, top_s, bottom_s);
+        self.0
+            .store(next.to_bits(), std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+/// The top band's next share, halfway from `share` towards the share at which bands
+/// costing what these took per unit of estimated work would take equally long. A
+/// time that is not a positive number (a band with nothing in it, a clock that did
+/// not move) teaches nothing.
+fn next_share(share: f32, top_s: f64, bottom_s: f64) -> f32 {
+    let (lo, hi) = (0.5 - BandBalance::REACH, 0.5 + BandBalance::REACH);
+    let share = if share.is_finite() {
+        share.clamp(lo, hi)
+    } else {
+        0.5
+    };
+    let positive = |t: f64| t.is_finite() && t > 0.0;
+    if !(positive(top_s) && positive(bottom_s)) {
+        return share;
+    }
+    // Seconds per unit of estimated work in each band.
+    let top_rate = top_s / f64::from(share);
+    let bottom_rate = bottom_s / f64::from(1.0 - share);
+    let balanced = (bottom_rate / (top_rate + bottom_rate)) as f32;
+    (share + 0.5 * (balanced - share)).clamp(lo, hi)
 }
 
 /// Blend `c` into pixel `(x, y)` with coverage `a`.
@@ -999,30 +1084,30 @@ mod tests {
     #[test]
     fn the_split_halves_the_beams_pixels() {
         // Nothing to draw: the middle.
-        assert_eq!(split_row(&[], 0.0), H / 2);
+        assert_eq!(split_row(&[], 0.0, 0.5), H / 2);
         // Two equal beams: between them.
-        let s = split_row(&[line(100.0, 100.0), line(380.0, 380.0)], 0.0);
+        let s = split_row(&[line(100.0, 100.0), line(380.0, 380.0)], 0.0, 0.5);
         assert!((100..=380).contains(&s), "split at {s}");
         // All the work near the top: the split follows it.
         let top = [line(10.0, 10.0), line(20.0, 20.0), line(30.0, 30.0)];
-        let s = split_row(&top, 0.0);
+        let s = split_row(&top, 0.0, 0.5);
         assert!((10..=30).contains(&s), "split at {s}");
         // One long beam down the whole frame: about the middle.
-        let s = split_row(&[((320.0, -50.0), (320.0, 530.0), 3.0, [0.0; 3])], 0.0);
+        let s = split_row(&[((320.0, -50.0), (320.0, 530.0), 3.0, [0.0; 3])], 0.0, 0.5);
         assert!(s.abs_diff(H / 2) <= 2, "split at {s}");
     }
 
     #[test]
     fn the_split_counts_the_rows_copies_and_effects() {
         // Rows alone: the middle.
-        assert_eq!(split_row(&[], 53.0), H / 2);
+        assert_eq!(split_row(&[], 53.0, 0.5), H / 2);
         // Beams near the top pull the split up, less the more a row costs: three
         // beams of about 2 460 px near the top and 480 rows of 53 put half the work
         // in the first ~170 rows.
         let top = [line(10.0, 10.0), line(20.0, 20.0), line(30.0, 30.0)];
-        let beams_only = split_row(&top, 0.0);
-        let cheap_rows = split_row(&top, 1.0);
-        let dear_rows = split_row(&top, 53.0);
+        let beams_only = split_row(&top, 0.0, 0.5);
+        let cheap_rows = split_row(&top, 1.0, 0.5);
+        let dear_rows = split_row(&top, 53.0, 0.5);
         assert!(
             beams_only < cheap_rows && cheap_rows < dear_rows && dear_rows < H / 2,
             "splits {beams_only}, {cheap_rows}, {dear_rows}"
@@ -1030,8 +1115,82 @@ mod tests {
         assert!((150..=190).contains(&dear_rows), "split at {dear_rows}");
         // A cost that is not a number or not positive counts as none.
         for bad in [f32::NAN, f32::INFINITY, -5.0, 0.0] {
-            assert_eq!(split_row(&top, bad), beams_only, "row cost {bad}");
+            assert_eq!(split_row(&top, bad, 0.5), beams_only, "row cost {bad}");
         }
+    }
+
+    #[test]
+    fn the_split_gives_the_top_band_its_share() {
+        // Rows alone: the share of the rows.
+        for (share, row) in [(0.5, H / 2), (0.25, H / 4), (0.75, 3 * H / 4)] {
+            assert_eq!(split_row(&[], 53.0, share), row, "share {share}");
+        }
+        // A smaller share moves the split up, never out of the frame.
+        let beams = [line(100.0, 100.0), line(200.0, 200.0), line(380.0, 380.0)];
+        let splits: Vec<usize> = [0.0, 0.2, 0.5, 0.8, 1.0]
+            .iter()
+            .map(|&share| split_row(&beams, 13.0, share))
+            .collect();
+        assert!(splits.is_sorted(), "splits {splits:?}");
+        assert!(splits[1] < splits[2] && splits[2] < splits[3], "{splits:?}");
+        assert!(splits.iter().all(|s| (1..H).contains(s)), "{splits:?}");
+        // A share that is not a number is a half; one outside [0, 1] is clamped.
+        assert_eq!(split_row(&beams, 13.0, f32::NAN), splits[2]);
+        assert_eq!(split_row(&beams, 13.0, -3.0), splits[0]);
+        assert_eq!(split_row(&beams, 13.0, 7.0), splits[4]);
+    }
+
+    #[test]
+    fn the_bands_shares_follow_their_times() {
+        // Equal times: the share stays.
+        assert_eq!(next_share(0.5, 1e-3, 1e-3).to_bits(), 0.5f32.to_bits());
+        assert!((next_share(0.4, 1e-3, 1e-3) - 0.4).abs() < 1e-6);
+        // Times in proportion to the shares: the bands cost the same per unit of
+        // work, and the split goes halfway back to a half.
+        assert!((next_share(0.4, 0.4e-3, 0.6e-3) - 0.45).abs() < 1e-6);
+        // The top band slower: it gets less, halfway to where the times would match
+        // (a top band 1.5× as dear per unit of work balances at 0.4).
+        let s = next_share(0.5, 1.5e-3, 1e-3);
+        assert!((s - 0.45).abs() < 1e-6, "share {s}");
+        // Repeated, it settles where the times match.
+        let mut s = 0.5f32;
+        for _ in 0..40 {
+            let (top, bottom) = (1.5 * f64::from(s), f64::from(1.0 - s));
+            s = next_share(s, top, bottom);
+        }
+        assert!((s - 0.4).abs() < 1e-4, "share {s}");
+        // Never past the reach, however lopsided the times.
+        let (mut up, mut down) = (0.5f32, 0.5f32);
+        for _ in 0..10 {
+            up = next_share(up, 1e-9, 1.0);
+            down = next_share(down, 1.0, 1e-9);
+        }
+        assert_eq!(down.to_bits(), (0.5 - BandBalance::REACH).to_bits());
+        assert_eq!(up.to_bits(), (0.5 + BandBalance::REACH).to_bits());
+        // Times that teach nothing leave the share as it was (within reach).
+        for (top, bottom) in [
+            (0.0, 1e-3),
+            (1e-3, 0.0),
+            (f64::NAN, 1e-3),
+            (1e-3, f64::INFINITY),
+            (-1e-3, 1e-3),
+        ] {
+            assert_eq!(
+                next_share(0.45, top, bottom).to_bits(),
+                0.45f32.to_bits(),
+                "{top} {bottom}"
+            );
+        }
+        assert_eq!(next_share(f32::NAN, 1e-3, 1e-3).to_bits(), 0.5f32.to_bits());
+        assert_eq!(
+            next_share(0.99, 0.0, 0.0).to_bits(),
+            (0.5 + BandBalance::REACH).to_bits()
+        );
+        // What a renderer learns starts at a half and is what it then uses.
+        let balance = BandBalance::default();
+        assert_eq!(balance.top_share().to_bits(), 0.5f32.to_bits());
+        balance.learn(0.5, 1.5e-3, 1e-3);
+        assert!((balance.top_share() - 0.45).abs() < 1e-6);
     }
 
     #[test]
@@ -1047,7 +1206,7 @@ mod tests {
             vec![((5.0, 479.9), (600.0, 479.9), 3.0, [0.0; 3])],
         ] {
             for row_cost in [0.0, 53.0] {
-                let s = split_row(&lines, row_cost);
+                let s = split_row(&lines, row_cost, 0.5);
                 assert!((1..H).contains(&s), "split at {s} for {lines:?}");
             }
         }
