@@ -18,6 +18,7 @@ use burn::nn::conv::Conv2d;
 use burn::prelude::{Device, Tensor, TensorData};
 
 use crate::TrainError;
+use crate::preprocess::Fork;
 
 /// A feature map of one image: `c × h × w`, channel-major.
 #[derive(Debug, Clone, PartialEq)]
@@ -174,14 +175,18 @@ impl FlatConv {
         (stride > 0 && span >= k).then(|| (span - k) / stride + 1)
     }
 
-    /// The convolution of `x`: flex's im2col computation, or burn's call.
-    pub(crate) fn forward(&self, x: Feature) -> Result<Feature, TrainError> {
-        let device = &self.device;
+    /// The convolution of `x`: flex's im2col computation, or burn's call. `fork`:
+    /// the output pixels in two halves through it (e.g. on two cores) when the
+    /// layer is large enough to gain from it; the same values either way.
+    pub(crate) fn forward(
+        &self,
+        x: Feature,
+        fork: Option<&dyn Fork>,
+    ) -> Result<Feature, TrainError> {
         let weight = match &self.weight {
             Some(w) if self.runs(&x) => w,
-            _ => return Feature::from_tensor(self.conv.forward(x.into_tensor(device))),
+            _ => return Feature::from_tensor(self.conv.forward(x.into_tensor(&self.device))),
         };
-        let (c_in, c_out) = (self.c_in, self.c_out);
         let [kh, kw] = self.conv.kernel_size;
         let [sh, sw] = self.conv.stride;
         let [ph, pw] = self.padding.unwrap_or_default();
@@ -190,7 +195,7 @@ impl FlatConv {
             self.out_size(x.w, kw, sw, pw).unwrap_or(0),
         );
         // Channels last.
-        let (h, w) = (x.h, x.w);
+        let (c_in, h, w) = (self.c_in, x.h, x.w);
         let mut nhwc = vec![0.0f32; c_in * h * w];
         for y in 0..h {
             for xx in 0..w {
@@ -199,40 +204,36 @@ impl FlatConv {
                 }
             }
         }
-        let col_len = c_in * kh * kw;
         let spatial = oh * ow;
-        let mut out = vec![0.0f32; c_out * spatial];
-        for tile_start in (0..spatial).step_by(TILE) {
-            let tile_end = (tile_start + TILE).min(spatial);
-            let tile = tile_end - tile_start;
-            let mut col = vec![0.0f32; col_len * tile];
-            for (local, at) in (tile_start..tile_end).enumerate() {
-                let (oy, ox) = (at / ow, at % ow);
-                let row = &mut col[local * col_len..(local + 1) * col_len];
-                let mut offset = 0;
-                for ky in 0..kh {
-                    let iy = (oy * sh + ky) as isize - ph as isize;
-                    for kx in 0..kw {
-                        let ix = (ox * sw + kx) as isize - pw as isize;
-                        if iy >= 0 && iy < h as isize && ix >= 0 && ix < w as isize {
-                            let from = (iy as usize * w + ix as usize) * c_in;
-                            row[offset..offset + c_in].copy_from_slice(&nhwc[from..from + c_in]);
-                        }
-                        offset += c_in;
-                    }
+        let mut out = vec![0.0f32; self.c_out * spatial];
+        let im2col = Im2col {
+            nhwc: &nhwc,
+            h,
+            w,
+            ow,
+            kernel: [kh, kw],
+            stride: [sh, sw],
+            padding: [ph, pw],
+            c_in,
+        };
+        match fork.filter(|_| self.splits(spatial)) {
+            Some(fork) => {
+                let half = spatial / 2;
+                let (mut first, mut second) = (None, None);
+                fork.fork(
+                    &mut || first = Some(self.product(weight, &im2col, 0..half)),
+                    &mut || second = Some(self.product(weight, &im2col, half..spatial)),
+                );
+                for (range, part) in [(0..half, first), (half..spatial, second)] {
+                    let part = part.ok_or_else(|| {
+                        TrainError::Artifact("a convolution's half was not computed".into())
+                    })??;
+                    self.place(&mut out, spatial, range, &part);
                 }
             }
-            let col = Tensor::<2>::from_data(TensorData::new(col, [tile, col_len]), device);
-            let product = weight
-                .clone()
-                .matmul(col.transpose())
-                .into_data()
-                .try_into_vec::<f32>();
-            let product = product
-                .map_err(|e| TrainError::Artifact(format!("reading a convolution: {e:?}")))?;
-            for o in 0..c_out {
-                out[o * spatial + tile_start..o * spatial + tile_end]
-                    .copy_from_slice(&product[o * tile..(o + 1) * tile]);
+            None => {
+                let part = self.product(weight, &im2col, 0..spatial)?;
+                self.place(&mut out, spatial, 0..spatial, &part);
             }
         }
         if let Some(bias) = &self.bias {
@@ -244,16 +245,117 @@ impl FlatConv {
         }
         Ok(Feature {
             data: out,
-            c: c_out,
+            c: self.c_out,
             h: oh,
             w: ow,
         })
+    }
+
+    /// Whether a layer of `spatial` output pixels is worth splitting in two (a
+    /// handover costs a few microseconds), and each half's product still takes the
+    /// path the whole one takes: `gemm` works out a product of at most 16 × 16
+    /// outputs as dot products, in another order.
+    fn splits(&self, spatial: usize) -> bool {
+        spatial >= MIN_SPLIT_PIXELS && self.c_out * (spatial / 2) > GEMM_DOT_OUTPUTS
+    }
+
+    /// The products of the output pixels `range` (`c_out × range.len()`, channel
+    /// major), in flex's tiles of [`TILE`] pixels.
+    fn product(
+        &self,
+        weight: &Tensor<2>,
+        im2col: &Im2col<'_>,
+        range: std::ops::Range<usize>,
+    ) -> Result<Vec<f32>, TrainError> {
+        let c_out = self.c_out;
+        let col_len = im2col.col_len();
+        let len = range.len();
+        let mut out = vec![0.0f32; c_out * len];
+        for tile_start in range.clone().step_by(TILE) {
+            let tile_end = (tile_start + TILE).min(range.end);
+            let tile = tile_end - tile_start;
+            let mut col = vec![0.0f32; col_len * tile];
+            for (row, at) in col.chunks_exact_mut(col_len).zip(tile_start..tile_end) {
+                im2col.fill(row, at);
+            }
+            let col = Tensor::<2>::from_data(TensorData::new(col, [tile, col_len]), &self.device);
+            let product = weight
+                .clone()
+                .matmul(col.transpose())
+                .into_data()
+                .try_into_vec::<f32>()
+                .map_err(|e| TrainError::Artifact(format!("reading a convolution: {e:?}")))?;
+            let at = tile_start - range.start;
+            for o in 0..c_out {
+                out[o * len + at..o * len + at + tile]
+                    .copy_from_slice(&product[o * tile..(o + 1) * tile]);
+            }
+        }
+        Ok(out)
+    }
+
+    /// Copies `part` (the products of the output pixels `range`) into `out`.
+    fn place(&self, out: &mut [f32], spatial: usize, range: std::ops::Range<usize>, part: &[f32]) {
+        let len = range.len();
+        for o in 0..self.c_out {
+            out[o * spatial + range.start..o * spatial + range.end]
+                .copy_from_slice(&part[o * len..(o + 1) * len]);
+        }
+    }
+}
+
+/// Output pixels below which a convolution is not split.
+const MIN_SPLIT_PIXELS: usize = 64;
+
+/// `gemm` (0.19) computes a product of at most this many outputs with its dot
+/// product kernels when both operands are stored as ours are.
+const GEMM_DOT_OUTPUTS: usize = 16 * 16;
+
+/// One image in channels-last order and a convolution's geometry: the rows of the
+/// im2col matrix.
+struct Im2col<'a> {
+    nhwc: &'a [f32],
+    h: usize,
+    w: usize,
+    ow: usize,
+    kernel: [usize; 2],
+    stride: [usize; 2],
+    padding: [usize; 2],
+    c_in: usize,
+}
+
+impl Im2col<'_> {
+    fn col_len(&self) -> usize {
+        self.c_in * self.kernel[0] * self.kernel[1]
+    }
+
+    /// The row of output pixel `at`: its receptive field, `(ky, kx, c_in)` order,
+    /// zeros outside the image (`row` starts zeroed).
+    fn fill(&self, row: &mut [f32], at: usize) {
+        let (oy, ox) = (at / self.ow, at % self.ow);
+        let [kh, kw] = self.kernel;
+        let [sh, sw] = self.stride;
+        let [ph, pw] = self.padding;
+        let c_in = self.c_in;
+        let mut offset = 0;
+        for ky in 0..kh {
+            let iy = (oy * sh + ky) as isize - ph as isize;
+            for kx in 0..kw {
+                let ix = (ox * sw + kx) as isize - pw as isize;
+                if iy >= 0 && iy < self.h as isize && ix >= 0 && ix < self.w as isize {
+                    let from = (iy as usize * self.w + ix as usize) * c_in;
+                    row[offset..offset + c_in].copy_from_slice(&self.nhwc[from..from + c_in]);
+                }
+                offset += c_in;
+            }
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::preprocess::ScopedThread;
     use burn::nn::conv::Conv2dConfig;
     use burn::tensor::Distribution;
 
@@ -305,8 +407,11 @@ mod tests {
             assert_eq!(flat.runs(&x), im2col, "case {i}: path");
             let expected =
                 Feature::from_tensor(conv.forward(x.clone().into_tensor(&device))).expect("burn");
-            let got = flat.forward(x).expect("flat");
+            let got = flat.forward(x.clone(), None).expect("flat");
             assert_eq!(got, expected, "case {i}: values");
+            // In two halves, on two threads: the same values.
+            let got = flat.forward(x, Some(&ScopedThread)).expect("flat, split");
+            assert_eq!(got, expected, "case {i}: values in halves");
         }
     }
 

@@ -43,7 +43,8 @@ pub struct Predictor {
     input: Vec<f32>,
     /// The model's colour threshold as a lookup table (built once, about 0.1 s).
     table: FingerTable,
-    /// Preprocess a frame's halves through this ([`Self::split_preprocessing`]).
+    /// Preprocess a frame's halves, and run the larger convolutions' halves,
+    /// through this ([`Self::split_frames`]).
     split: Option<Arc<dyn Fork>>,
 }
 
@@ -70,10 +71,10 @@ impl Predictor {
         }
     }
 
-    /// Preprocess each frame's halves through `fork`, e.g. on two cores (`None`, the
-    /// default: on the caller; the control-cycle benchmark measures one core). The
-    /// same estimates.
-    pub fn split_preprocessing(&mut self, fork: Option<Arc<dyn Fork>>) {
+    /// Preprocess each frame's halves, and run the halves of the model's larger
+    /// convolutions, through `fork`, e.g. on two cores (`None`, the default: on the
+    /// caller; the control-cycle benchmark measures one core). The same estimates.
+    pub fn split_frames(&mut self, fork: Option<Arc<dyn Fork>>) {
         self.split = fork;
     }
 
@@ -125,7 +126,9 @@ impl Predictor {
             TensorData::new(image.to_vec(), [1, p.channels, p.size_px, p.size_px]),
             &self.device,
         );
-        let (mean, wrench) = self.net.forward_one(&self.blocks, x)?;
+        let (mean, wrench) = self
+            .net
+            .forward_one(&self.blocks, x, self.split.as_deref())?;
         let read = |t: Tensor<2>| {
             t.into_data()
                 .as_slice::<f32>()

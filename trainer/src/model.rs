@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::TrainError;
 use crate::im2col::{Feature, FlatConv};
-use crate::preprocess::Preprocess;
+use crate::preprocess::{Fork, Preprocess};
 
 /// Which of the paper's models.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -417,12 +417,12 @@ pub(crate) struct FlatBlock {
 }
 
 impl FlatBlock {
-    /// [`FoldedBlock::forward`], the same values.
-    fn forward(&self, x: Feature) -> Result<Feature, TrainError> {
-        let h = self.conv1.forward(x.clone())?.relu();
-        let h = self.conv2.forward(h)?;
+    /// [`FoldedBlock::forward`], the same values (`fork`: see [`FlatConv::forward`]).
+    fn forward(&self, x: Feature, fork: Option<&dyn Fork>) -> Result<Feature, TrainError> {
+        let h = self.conv1.forward(x.clone(), fork)?.relu();
+        let h = self.conv2.forward(h, fork)?;
         let s = match &self.skip {
-            Some(conv) => conv.forward(x)?,
+            Some(conv) => conv.forward(x, fork)?,
             None => x,
         };
         if (h.c, h.h, h.w) != (s.c, s.h, s.w) {
@@ -480,16 +480,18 @@ impl InferenceNet {
 
     /// [`Self::forward`] of one image (`[1, c, h, w]`), the residual stages through
     /// `blocks` (from [`Self::flat_blocks`]): the same values, without reordering
-    /// the stages' weights on every call.
+    /// the stages' weights on every call. `fork`: the larger convolutions' output
+    /// pixels in two halves through it (the same values).
     pub(crate) fn forward_one(
         &self,
         blocks: &[FlatBlock],
         image: Tensor<4>,
+        fork: Option<&dyn Fork>,
     ) -> Result<(Tensor<2>, Option<Tensor<2>>), TrainError> {
         let device = image.device();
         let mut x = Feature::from_tensor(relu(self.stem.forward(image)))?;
         for block in blocks {
-            x = block.forward(x)?;
+            x = block.forward(x, fork)?;
         }
         let mean = self.fc_mean.forward(x.into_tensor(&device).flatten(1, 3));
         let wrench = self.head.as_ref().map(|h| h.forward(relu(mean.clone())));
@@ -649,14 +651,26 @@ mod tests {
                 );
                 let x = if round == 2 { x.zeros_like() } else { x };
                 let (mean, wrench) = folded.forward(x.clone());
-                let (f_mean, f_wrench) = folded.forward_one(&blocks, x).expect("one image");
-                let what = format!("{kind} width {width} size {size_px} round {round}");
-                assert_eq!(values(mean), values(f_mean), "{what}: latent mean");
-                assert_eq!(wrench.map(values), f_wrench.map(values), "{what}: wrench");
+                let (mean, wrench) = (values(mean), wrench.map(values));
+                // On the caller, and with the larger convolutions in halves on two
+                // threads: the same values.
+                let forks: [Option<&dyn crate::preprocess::Fork>; 2] =
+                    [None, Some(&crate::preprocess::ScopedThread)];
+                for fork in forks {
+                    let (f_mean, f_wrench) = folded
+                        .forward_one(&blocks, x.clone(), fork)
+                        .expect("one image");
+                    let what = format!(
+                        "{kind} width {width} size {size_px} round {round} split {}",
+                        fork.is_some()
+                    );
+                    assert_eq!(mean, values(f_mean), "{what}: latent mean");
+                    assert_eq!(wrench, f_wrench.map(values), "{what}: wrench");
+                }
             }
             // A batch is not one image: a clear error, no panic.
             let two = Tensor::<4>::zeros([2, channels, size_px, size_px], &device);
-            assert!(folded.forward_one(&blocks, two).is_err());
+            assert!(folded.forward_one(&blocks, two, None).is_err());
         }
     }
 

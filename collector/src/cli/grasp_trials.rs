@@ -516,10 +516,11 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
     let objects = objects_of(&plan, &scenes)?;
     let modes = plan.modes()?;
     let mut predictor = Predictor::from_bytes(&bytes)?;
-    // A trial is one frame at a time: its drawing and preprocessing take the second
-    // core for half of each frame, and the model runs on one (burn's rayon workers
-    // spinning on both cores would only get in their way).
-    predictor.split_preprocessing(Some(Arc::new(SecondCore)));
+    // A trial is one frame at a time: its drawing, preprocessing and the model's
+    // larger convolutions take the second core for half of each frame's work, and
+    // the rest of the model runs on one (burn's rayon workers spinning on both cores
+    // would only get in their way).
+    predictor.split_frames(Some(Arc::new(SecondCore)));
     let inference_pool = Arc::new(
         rayon::ThreadPoolBuilder::new()
             .num_threads(1)
@@ -1044,8 +1045,9 @@ mod tests {
     }
 }
 
-/// The drivers' second core (kept awake between frames) for the preprocessing's
-/// other half: the one helper the simulated camera's drawing uses too.
+/// The drivers' second core (kept awake between frames) for the other half of the
+/// preprocessing and of the model's larger convolutions: the one helper the
+/// simulated camera's drawing uses too.
 #[derive(Debug)]
 struct SecondCore;
 
