@@ -1,6 +1,6 @@
 //! The second core, for the two halves of one frame's work (the simulated camera's
-//! drawing, the model's preprocessing), and for a grasp frame's canvas while the
-//! caller works out the finger's lattice.
+//! drawing, the model's preprocessing and its larger convolutions), and for a grasp
+//! frame's canvas while the caller works out the finger's lattice.
 //!
 //! A frame's half is a few hundred microseconds of work. Starting a thread for it
 //! cost 85–140 µs on the 2-core VMs this runs on, and waking a sleeping pool worker
