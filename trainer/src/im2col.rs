@@ -205,7 +205,6 @@ impl FlatConv {
             }
         }
         let spatial = oh * ow;
-        let mut out = vec![0.0f32; self.c_out * spatial];
         let im2col = Im2col {
             nhwc: &nhwc,
             h,
@@ -216,7 +215,8 @@ impl FlatConv {
             padding: [ph, pw],
             c_in,
         };
-        match fork.filter(|_| self.splits(spatial)) {
+        // The whole range's products are the output itself; halves are placed in it.
+        let mut out = match fork.filter(|_| self.splits(spatial)) {
             Some(fork) => {
                 let half = spatial / 2;
                 let (mut first, mut second) = (None, None);
@@ -224,18 +224,17 @@ impl FlatConv {
                     &mut || first = Some(self.product(weight, &im2col, 0..half)),
                     &mut || second = Some(self.product(weight, &im2col, half..spatial)),
                 );
+                let mut out = vec![0.0f32; self.c_out * spatial];
                 for (range, part) in [(0..half, first), (half..spatial, second)] {
                     let part = part.ok_or_else(|| {
                         TrainError::Artifact("a convolution's half was not computed".into())
                     })??;
                     self.place(&mut out, spatial, range, &part);
                 }
+                out
             }
-            None => {
-                let part = self.product(weight, &im2col, 0..spatial)?;
-                self.place(&mut out, spatial, 0..spatial, &part);
-            }
-        }
+            None => self.product(weight, &im2col, 0..spatial)?,
+        };
         if let Some(bias) = &self.bias {
             for (o, b) in bias.iter().enumerate() {
                 for v in &mut out[o * spatial..(o + 1) * spatial] {

@@ -654,8 +654,7 @@ mod tests {
                 let (mean, wrench) = (values(mean), wrench.map(values));
                 // On the caller, and with the larger convolutions in halves on two
                 // threads: the same values.
-                let forks: [Option<&dyn crate::preprocess::Fork>; 2] =
-                    [None, Some(&crate::preprocess::ScopedThread)];
+                let forks: [Option<&dyn Fork>; 2] = [None, Some(&crate::preprocess::ScopedThread)];
                 for fork in forks {
                     let (f_mean, f_wrench) = folded
                         .forward_one(&blocks, x.clone(), fork)

@@ -21,6 +21,7 @@ use super::lattice::{BeamKind, Deformed, Lattice};
 use super::rng;
 use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// Frame width, px.
@@ -738,19 +739,17 @@ fn timed(f: impl FnOnce()) -> f64 {
 /// 669 µs a frame over a water trial). Correcting the share from the last frames'
 /// times evens them out. Only the split moves: the bytes do not depend on it.
 #[derive(Debug)]
-struct BandBalance(std::sync::atomic::AtomicU32);
+struct BandBalance(AtomicU32);
 
 impl Default for BandBalance {
     fn default() -> Self {
-        Self(std::sync::atomic::AtomicU32::new(0.5f32.to_bits()))
+        Self(AtomicU32::new(0.5f32.to_bits()))
     }
 }
 
 impl Clone for BandBalance {
     fn clone(&self) -> Self {
-        Self(std::sync::atomic::AtomicU32::new(
-            self.top_share().to_bits(),
-        ))
+        Self(AtomicU32::new(self.top_share().to_bits()))
     }
 }
 
@@ -759,14 +758,13 @@ impl BandBalance {
     const REACH: f32 = 0.3;
 
     fn top_share(&self) -> f32 {
-        f32::from_bits(self.0.load(std::sync::atomic::Ordering::Relaxed))
+        f32::from_bits(self.0.load(Ordering::Relaxed))
     }
 
     /// The bands split at `share` took `top_s` and `bottom_s` seconds.
     fn learn(&self, share: f32, top_s: f64, bottom_s: f64) {
         let next = next_share(share, top_s, bottom_s);
-        self.0
-            .store(next.to_bits(), std::sync::atomic::Ordering::Relaxed);
+        self.0.store(next.to_bits(), Ordering::Relaxed);
     }
 }
 
