@@ -46,9 +46,9 @@ pub use stepper::{
     GainCheck, Step, StepOutcome, Stepper, StepperConfig, Stroke, check_gain, check_tolerance,
 };
 pub use trials::{
-    FailReason, Judge, Lift, LiftPlan, Mode, Observation, RigJudge, SimJudge, SimLift, TraceRow,
-    TrialConfig, TrialDevices, TrialResult, Verdict, Z_95, perturbation_m, run_trial, trial_seed,
-    wilson_interval,
+    FailReason, Judge, Lift, LiftPlan, Mode, Observation, OperatorJudge, RigJudge, SimJudge,
+    SimLift, TraceRow, TrialConfig, TrialDevices, TrialResult, Verdict, Z_95, perturbation_m,
+    run_trial, trial_seed, wilson_interval,
 };
 pub use wrist::{Wrist, WristConfig, WristLoop};
 

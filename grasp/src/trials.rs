@@ -7,8 +7,10 @@
 //! [`ForceEstimator`]) plus two narrow traits: [`Lift`] raises the gripper (the
 //! simulator's handle, or a real arm) and [`Judge`] decides the outcome (the
 //! simulator's physics through [`SimJudge`], or gOBJ, position and the estimate on a
-//! real rig through [`RigJudge`]). Outcomes are never drawn at random: the physics or
-//! the rig decides. No SQL and no files here.
+//! real rig through [`RigJudge`], optionally confirmed or corrected by an operator
+//! through [`OperatorJudge`]). Outcomes are never drawn at random: the physics, the
+//! rig or the operator decides. No SQL and no files here. `softtouch grasp trials`
+//! runs the simulator only so far: a real rig also needs a [`Lift`] on its arm.
 //!
 //! Perturbations are a pure function of `(seed, object, trial)` ([`perturbation_m`]),
 //! so any trial can be replayed alone; the same draws are scaled by σ, so a σ sweep
@@ -346,9 +348,13 @@ impl Lift for SimLift {
 }
 
 /// A real rig's judge: the object is held when, after the lift, the fingers stopped
-/// short of the closed end and the estimate still shows at least `min_force_n`. A
-/// grasp that never saw that force is a miss, one that lost it a slip. A crush cannot
-/// be seen this way; an operator confirmation can be layered on top.
+/// short of the closed end and either the estimate still shows at least
+/// `min_force_n` or the gripper reports contact while closing (gOBJ = 2: stopped by
+/// an object). The position is checked whatever gOBJ says: the manual warns that it
+/// is precise only to a few mm and that thin objects may never set it, and soft
+/// fingers stepped by position reach their request (gOBJ = 3) while they hold. A
+/// grasp that never saw `min_force_n` is a miss, one that lost it a slip. A crush
+/// cannot be seen this way: [`OperatorJudge`] asks someone who watched.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RigJudge {
     /// Least estimated grip force of a held object, N.
@@ -364,7 +370,8 @@ impl Judge for RigJudge {
         let at_closed_end =
             seen.last_status.position >= self.closed_count.saturating_sub(self.closed_margin);
         let ever = seen.peak_estimate_n.is_some_and(|f| f >= self.min_force_n);
-        let now = seen.last_estimate_n.is_some_and(|f| f >= self.min_force_n);
+        let now = seen.last_estimate_n.is_some_and(|f| f >= self.min_force_n)
+            || seen.last_status.object == ObjectStatus::ContactClosing;
         Ok(if !ever {
             Verdict::Failed(FailReason::Miss)
         } else if !seen.lifted {
@@ -374,6 +381,70 @@ impl Judge for RigJudge {
         } else {
             Verdict::Held
         })
+    }
+}
+
+/// An operator's word on every trial, after another judge's (a real rig cannot see a
+/// crush, and a lab may want eyes on every outcome): the judge's verdict is shown and
+/// the operator answers `y` (held), `n` (not held: the judge's reason, or slip where
+/// it saw the object held), a reason by name (`slip`, `crush`, `miss`, `timeout`,
+/// `device_fault`), or an empty line to keep the judge's verdict. Anything else is
+/// asked again. An input that closes or fails stops the trials
+/// ([`GraspError::Interrupted`]): no outcome is stored that nobody gave.
+#[derive(Debug)]
+pub struct OperatorJudge<J, R, W> {
+    /// The judge whose verdict is confirmed.
+    pub judge: J,
+    /// The operator's answers, one a line (stdin's lock in the CLI).
+    pub input: R,
+    /// Where the questions go.
+    pub output: W,
+}
+
+impl<J: Judge, R: std::io::BufRead + Send, W: std::io::Write + Send> Judge
+    for OperatorJudge<J, R, W>
+{
+    async fn judge(&mut self, seen: &Observation) -> Result<Verdict, GraspError> {
+        let machine = self.judge.judge(seen).await?;
+        let said = match machine {
+            Verdict::Held => "held",
+            Verdict::Failed(reason) => reason.as_str(),
+        };
+        let gone =
+            |e: std::io::Error| GraspError::Interrupted(format!("the operator's input ({e})"));
+        loop {
+            write!(
+                self.output,
+                "the judge says {said}; held? [y, n, slip, crush, miss, timeout, device_fault; Enter keeps {said}] "
+            )
+            .and_then(|()| self.output.flush())
+            .map_err(gone)?;
+            let mut line = String::new();
+            if self.input.read_line(&mut line).map_err(gone)? == 0 {
+                return Err(GraspError::Interrupted(
+                    "the operator's input closing before an answer".into(),
+                ));
+            }
+            let answer = line.trim().to_ascii_lowercase();
+            let verdict = match answer.as_str() {
+                "" => Some(machine),
+                "y" | "yes" | "held" => Some(Verdict::Held),
+                "n" | "no" => Some(match machine {
+                    Verdict::Held => Verdict::Failed(FailReason::Slip),
+                    failed => failed,
+                }),
+                other => FailReason::parse(other).ok().map(Verdict::Failed),
+            };
+            match verdict {
+                Some(v) => return Ok(v),
+                None => writeln!(
+                    self.output,
+                    "`{}`: expected y, n, a failure reason or an empty line",
+                    line.trim()
+                )
+                .map_err(gone)?,
+            }
+        }
     }
 }
 
@@ -952,6 +1023,106 @@ mod tests {
         assert_eq!(miss, Some(Verdict::Failed(FailReason::Miss)));
         let timeout = j.judge(&seen(false, 150, Some(1.0), Some(1.0))).await.ok();
         assert_eq!(timeout, Some(Verdict::Failed(FailReason::Timeout)));
+    }
+
+    #[tokio::test]
+    async fn the_rig_judge_takes_a_contact_stop_for_a_grip_but_not_at_the_closed_end() {
+        let mut j = RigJudge {
+            min_force_n: 0.3,
+            closed_count: 250,
+            closed_margin: 3,
+        };
+        // The estimate fell under the least force, but gOBJ = 2: an object stops them.
+        let mut low = seen(true, 150, Some(0.1), Some(1.2));
+        low.last_status.object = ObjectStatus::ContactClosing;
+        assert_eq!(j.judge(&low).await.ok(), Some(Verdict::Held));
+        // The same report at the closed end is not believed (gOBJ is coarse).
+        let mut closed = seen(true, 249, Some(0.1), Some(1.2));
+        closed.last_status.object = ObjectStatus::ContactClosing;
+        assert_eq!(
+            j.judge(&closed).await.ok(),
+            Some(Verdict::Failed(FailReason::Slip))
+        );
+        // A contact report never makes a grasp that never felt the force a hold.
+        let mut never = seen(true, 150, None, None);
+        never.last_status.object = ObjectStatus::ContactClosing;
+        assert_eq!(
+            j.judge(&never).await.ok(),
+            Some(Verdict::Failed(FailReason::Miss))
+        );
+    }
+
+    async fn operator(answers: &str, judged: Observation) -> (Result<Verdict, GraspError>, String) {
+        let mut j = OperatorJudge {
+            judge: RigJudge {
+                min_force_n: 0.3,
+                closed_count: 250,
+                closed_margin: 3,
+            },
+            input: std::io::Cursor::new(answers.as_bytes().to_vec()),
+            output: Vec::new(),
+        };
+        let verdict = j.judge(&judged).await;
+        (verdict, String::from_utf8_lossy(&j.output).into_owned())
+    }
+
+    #[tokio::test]
+    async fn the_operator_confirms_overrides_or_names_the_reason() {
+        let held = || seen(true, 150, Some(1.0), Some(1.2));
+        let slipped = || seen(true, 249, Some(1.0), Some(1.2));
+        let cases = [
+            ("\n", held(), Verdict::Held),
+            ("y\n", slipped(), Verdict::Held),
+            ("n\n", held(), Verdict::Failed(FailReason::Slip)),
+            ("N\n", slipped(), Verdict::Failed(FailReason::Slip)),
+            ("crush\n", held(), Verdict::Failed(FailReason::Crush)),
+            (" Miss \r\n", held(), Verdict::Failed(FailReason::Miss)),
+            ("\n", slipped(), Verdict::Failed(FailReason::Slip)),
+        ];
+        for (answers, judged, expected) in cases {
+            let (verdict, asked) = operator(answers, judged).await;
+            assert_eq!(verdict.ok(), Some(expected), "answers {answers:?}");
+            assert!(asked.contains("the judge says"), "{asked}");
+        }
+    }
+
+    #[tokio::test]
+    async fn the_operator_is_asked_again_and_a_closed_input_stops_the_trials() {
+        let (verdict, asked) = operator(
+            "maybe\n\u{1F600}\ncrush\n",
+            seen(true, 150, Some(1.0), Some(1.2)),
+        )
+        .await;
+        assert_eq!(verdict.ok(), Some(Verdict::Failed(FailReason::Crush)));
+        assert!(asked.contains("`maybe`: expected y, n"), "{asked}");
+        assert_eq!(asked.matches("the judge says held").count(), 3, "{asked}");
+        for answers in ["", "maybe\n", "maybe"] {
+            let (verdict, _) = operator(answers, seen(true, 150, Some(1.0), Some(1.2))).await;
+            assert!(
+                matches!(verdict, Err(GraspError::Interrupted(_))),
+                "answers {answers:?}: {verdict:?}"
+            );
+        }
+        // Bytes that are not UTF-8 are an unreadable input, not a panic.
+        let mut j = OperatorJudge {
+            judge: AlwaysHeld,
+            input: std::io::Cursor::new(vec![0xff, 0xfe, b'\n']),
+            output: std::io::sink(),
+        };
+        let verdict = j.judge(&seen(true, 150, Some(1.0), Some(1.2))).await;
+        assert!(
+            matches!(verdict, Err(GraspError::Interrupted(_))),
+            "{verdict:?}"
+        );
+    }
+
+    /// A judge that always says held.
+    struct AlwaysHeld;
+
+    impl Judge for AlwaysHeld {
+        async fn judge(&mut self, _: &Observation) -> Result<Verdict, GraspError> {
+            Ok(Verdict::Held)
+        }
     }
 
     /// A stand-in for the model: the simulator's true wrench on finger 0 at the
