@@ -9,13 +9,29 @@
 //! starts within a few microseconds) and only then goes to sleep. During a grasp
 //! trial, frames come every few milliseconds and the core stays awake; otherwise it
 //! sleeps again within milliseconds.
+//!
+//! The helper pays only while its core is free. When other work holds the cores
+//! (another process, more threads than cores), a half handed to it waits for the
+//! scheduler, a time slice of milliseconds at every join: a grasp trial beside a
+//! 2-core build ran about 30 ms a cycle instead of 1. So a half that starts
+//! [`LATE_START`] or more after it was handed over sends callers back to doing both
+//! halves themselves for [`BACK_OFF`], after which the helper is tried again. None
+//! of this changes what the halves compute.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 /// How long the helper keeps polling for work after its last job.
 pub const KEEP_WARM: Duration = Duration::from_millis(5);
+
+/// A half that starts this long after it was handed to the helper means the
+/// helper's core is taken (a warm helper starts one within microseconds, a
+/// sleeping one within 40–140 µs).
+pub const LATE_START: Duration = Duration::from_millis(1);
+
+/// How long callers do both halves themselves after a late start.
+pub const BACK_OFF: Duration = Duration::from_millis(200);
 
 /// The helper: a one-thread pool and whether its poller is running.
 #[derive(Debug)]
@@ -27,6 +43,12 @@ pub struct SecondCore {
     /// A caller's half is in flight: another caller does both of its halves itself
     /// (callers in parallel already keep the cores busy).
     busy: AtomicBool,
+    /// See [`LATE_START`] and [`BACK_OFF`].
+    late_start: Duration,
+    back_off: Duration,
+    /// Callers do both halves until this time, ns after `epoch` (0: no back-off).
+    back_off_until_ns: AtomicU64,
+    epoch: Instant,
 }
 
 /// The process's second core, or `None` on a one-core machine (or where no thread
@@ -58,8 +80,19 @@ pub fn join(here: impl FnOnce(), there: impl FnOnce() + Send) {
 }
 
 impl SecondCore {
-    /// A helper thread that polls for work for `keep_warm` after each job.
+    /// A helper thread that polls for work for `keep_warm` after each job, with the
+    /// default [`LATE_START`] and [`BACK_OFF`].
     pub fn new(keep_warm: Duration) -> Result<Self, rayon::ThreadPoolBuildError> {
+        Self::with_back_off(keep_warm, LATE_START, BACK_OFF)
+    }
+
+    /// [`Self::new`], with callers doing both halves for `back_off` after a half
+    /// started `late_start` or more after it was handed over.
+    pub fn with_back_off(
+        keep_warm: Duration,
+        late_start: Duration,
+        back_off: Duration,
+    ) -> Result<Self, rayon::ThreadPoolBuildError> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
             .thread_name(|_| "second-core".into())
@@ -69,12 +102,16 @@ impl SecondCore {
             keep_warm,
             warm: Arc::new(AtomicBool::new(false)),
             busy: AtomicBool::new(false),
+            late_start,
+            back_off,
+            back_off_until_ns: AtomicU64::new(0),
+            epoch: Instant::now(),
         })
     }
 
     /// See [`join`].
     pub fn join(&self, here: impl FnOnce(), there: impl FnOnce() + Send) {
-        if self.busy.swap(true, Ordering::Acquire) {
+        if self.backing_off() || self.busy.swap(true, Ordering::Acquire) {
             here();
             there();
             return;
@@ -85,11 +122,32 @@ impl SecondCore {
             self.pool
                 .spawn(poll_for_work(Arc::clone(&self.warm), self.keep_warm));
         }
+        let handed = Instant::now();
+        let start_ns = AtomicU64::new(0);
         self.pool.in_place_scope(|s| {
-            s.spawn(|_| there());
+            s.spawn(|_| {
+                start_ns.store(nanos(handed.elapsed()), Ordering::Relaxed);
+                there();
+            });
             here();
         });
+        if start_ns.load(Ordering::Relaxed) >= nanos(self.late_start) {
+            let until = nanos(self.epoch.elapsed().saturating_add(self.back_off));
+            self.back_off_until_ns
+                .store(until.max(1), Ordering::Relaxed);
+        }
     }
+
+    /// Whether callers do both halves themselves now (see [`BACK_OFF`]).
+    fn backing_off(&self) -> bool {
+        let until = self.back_off_until_ns.load(Ordering::Relaxed);
+        until != 0 && nanos(self.epoch.elapsed()) < until
+    }
+}
+
+/// A duration in whole nanoseconds, saturating (584 years).
+fn nanos(d: Duration) -> u64 {
+    u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)
 }
 
 /// Clears its flag when dropped.
@@ -175,6 +233,53 @@ mod tests {
         let mut ran = false;
         join(|| (), || ran = true);
         assert!(ran);
+    }
+
+    /// The thread each half ran on, for `joins` joins on `core`.
+    fn where_halves_ran(core: &SecondCore, joins: usize) -> Vec<(bool, bool)> {
+        let caller = std::thread::current().id();
+        (0..joins)
+            .map(|_| {
+                let (mut here, mut there) = (None, None);
+                core.join(
+                    || here = Some(std::thread::current().id()),
+                    || there = Some(std::thread::current().id()),
+                );
+                (here == Some(caller), there == Some(caller))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_late_start_sends_the_halves_back_to_the_caller_for_the_back_off() {
+        // Every start counts as late: the first join uses the helper, the rest of
+        // the (hour-long) back-off do both halves on the caller.
+        let taken = SecondCore::with_back_off(KEEP_WARM, Duration::ZERO, Duration::from_secs(3600))
+            .expect("a thread");
+        let ran = where_halves_ran(&taken, 5);
+        assert_eq!(ran[0], (true, false), "{ran:?}");
+        assert!(ran[1..].iter().all(|r| *r == (true, true)), "{ran:?}");
+        // A back-off of zero tries the helper again at once.
+        let retried =
+            SecondCore::with_back_off(KEEP_WARM, Duration::ZERO, Duration::ZERO).expect("a thread");
+        assert!(
+            where_halves_ran(&retried, 5)
+                .iter()
+                .all(|r| *r == (true, false))
+        );
+        // No start is an hour late: every far half runs on the helper.
+        let free = SecondCore::with_back_off(KEEP_WARM, Duration::from_secs(3600), Duration::MAX)
+            .expect("a thread");
+        assert!(
+            where_halves_ran(&free, 20)
+                .iter()
+                .all(|r| *r == (true, false))
+        );
+        // An unrepresentable back-off end saturates instead of wrapping into the past.
+        let forever =
+            SecondCore::with_back_off(KEEP_WARM, Duration::ZERO, Duration::MAX).expect("a thread");
+        let ran = where_halves_ran(&forever, 3);
+        assert!(ran[1..].iter().all(|r| *r == (true, true)), "{ran:?}");
     }
 
     #[test]
