@@ -114,6 +114,30 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
     let out = ok(&trials(d, &base));
     assert!(out.contains("grasp session 1"), "{out}");
     assert!(out.contains("Wilson 95%"), "{out}");
+    // The wall time of the 16 trials, one row per medium and mode with 4 trials each.
+    let timing = out
+        .split("wall time of the trials run now")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no timing table in: {out}"));
+    let timing_rows: Vec<Vec<&str>> = timing
+        .lines()
+        .skip(2)
+        .take(4)
+        .map(|l| l.split_whitespace().collect())
+        .collect();
+    for (row, (medium, mode)) in timing_rows.iter().zip([
+        ("land", "open"),
+        ("land", "closed"),
+        ("water", "open"),
+        ("water", "closed"),
+    ]) {
+        assert_eq!(row.len(), 8, "{row:?} in: {out}");
+        assert_eq!((row[0], row[1], row[2]), (medium, mode, "4"), "{out}");
+        let cycles: usize = row[3].parse().expect("cycles");
+        let ms: f64 = row[4].parse().expect("ms per cycle");
+        assert!(cycles > 4 && ms > 0.0 && ms.is_finite(), "{row:?}");
+        assert!(row[7].ends_with("/4"), "{row:?}");
+    }
     for needle in [
         "land", "water", "cylinder", "cake", "44%", "100%", "30%", "90%",
     ] {

@@ -437,6 +437,62 @@ fn pack_trace(r: &TrialResult) -> GraspTrace {
     }
 }
 
+/// One trial's wall time, for the timing table.
+#[derive(Debug, Clone, Copy)]
+struct TrialTiming {
+    medium: Medium,
+    mode: Mode,
+    wall_s: f64,
+    cycles: usize,
+}
+
+/// The wall time of the trials this invocation ran, per medium and mode: cycles (one
+/// a frame), ms per cycle, mean and slowest trial and how many took at most 1 s.
+fn print_timings(timings: &[TrialTiming], fps: f64, out: &mut dyn Write) -> Result<(), Failure> {
+    let w = io_failure;
+    writeln!(
+        out,
+        "\nwall time of the trials run now ({fps} Hz on virtual time):\n{:<7}{:<8}{:>7}{:>9}{:>10}{:>8}{:>8}{:>9}",
+        "medium", "mode", "trials", "cycles", "ms/cycle", "mean s", "max s", "≤ 1 s"
+    )
+    .map_err(w)?;
+    let mut groups: Vec<(Medium, Mode)> = Vec::new();
+    for t in timings {
+        if !groups.contains(&(t.medium, t.mode)) {
+            groups.push((t.medium, t.mode));
+        }
+    }
+    for (medium, mode) in groups {
+        let of: Vec<&TrialTiming> = timings
+            .iter()
+            .filter(|t| t.medium == medium && t.mode == mode)
+            .collect();
+        let wall_s: f64 = of.iter().map(|t| t.wall_s).sum();
+        let cycles: usize = of.iter().map(|t| t.cycles).sum();
+        let max_s = of.iter().map(|t| t.wall_s).fold(0.0, f64::max);
+        let within = of.iter().filter(|t| t.wall_s <= 1.0).count();
+        let per_cycle = if cycles == 0 {
+            "–".to_owned()
+        } else {
+            format!("{:.3}", 1e3 * wall_s / cycles as f64)
+        };
+        writeln!(
+            out,
+            "{:<7}{:<8}{:>7}{:>9}{:>10}{:>8.3}{:>8.3}{:>9}",
+            medium_name(medium),
+            mode.as_str(),
+            of.len(),
+            cycles,
+            per_cycle,
+            wall_s / of.len() as f64,
+            max_s,
+            format!("{within}/{}", of.len())
+        )
+        .map_err(w)?;
+    }
+    Ok(())
+}
+
 fn fmt_duration(s: f64) -> String {
     let s = s.max(0.0).round() as u64;
     if s >= 60 {
@@ -548,6 +604,7 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
     let mut gains: HashMap<(u32, String), f64> = HashMap::new();
     let bar = crate::progress::progress_bar(todo.len() as u64, true, "trials");
     let started = Instant::now();
+    let mut timings = Vec::with_capacity(todo.len());
     for (i, p) in todo.iter().enumerate() {
         let si = p.key.scene_index as usize;
         let scene = &scenes[si];
@@ -629,6 +686,12 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
         store
             .append_grasp_trial(session_id, &row, &pack_trace(&result))
             .await?;
+        timings.push(TrialTiming {
+            medium: scene.medium,
+            mode: p.mode,
+            wall_s,
+            cycles: result.trace.len(),
+        });
         bar.inc(1);
         let per = started.elapsed().as_secs_f64() / (i + 1) as f64;
         let opt = |v: Option<f64>| v.map_or_else(|| "–".to_owned(), |f| format!("{f:.2}"));
@@ -662,6 +725,7 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
             started.elapsed().as_secs_f64() / todo.len() as f64
         )
         .map_err(w)?;
+        print_timings(&timings, plan.fps, out)?;
     }
 
     let rows = store.grasp_trials(session_id).await?;
