@@ -13,10 +13,11 @@
 //! The helper pays only while its core is free. When other work holds the cores
 //! (another process, more threads than cores), a half handed to it waits for the
 //! scheduler, a time slice of milliseconds at every join: a grasp trial beside a
-//! 2-core build ran about 30 ms a cycle instead of 1. So a half that starts
-//! [`LATE_START`] or more after it was handed over sends callers back to doing both
-//! halves themselves for [`BACK_OFF`], after which the helper is tried again. None
-//! of this changes what the halves compute.
+//! 2-core build ran about 30 ms a cycle instead of 1. So a half handed to a polling
+//! helper that starts [`LATE_START`] or more later sends callers back to doing both
+//! halves themselves for [`BACK_OFF`], after which the helper is tried again. (A
+//! sleeping helper's start is not judged: waking it may take that long on a VM.)
+//! None of this changes what the halves compute.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
@@ -25,9 +26,8 @@ use std::time::{Duration, Instant};
 /// How long the helper keeps polling for work after its last job.
 pub const KEEP_WARM: Duration = Duration::from_millis(5);
 
-/// A half that starts this long after it was handed to the helper means the
-/// helper's core is taken (a warm helper starts one within microseconds, a
-/// sleeping one within 40–140 µs).
+/// A half that starts this long after it was handed to the polling helper means the
+/// helper's core is taken (a polling helper starts one within microseconds).
 pub const LATE_START: Duration = Duration::from_millis(1);
 
 /// How long callers do both halves themselves after a late start.
@@ -118,7 +118,8 @@ impl SecondCore {
         }
         // Clear `busy` even when a half panics (the scope resumes the panic).
         let _free = Free(&self.busy);
-        if !self.warm.swap(true, Ordering::AcqRel) {
+        let polling = self.warm.swap(true, Ordering::AcqRel);
+        if !polling {
             self.pool
                 .spawn(poll_for_work(Arc::clone(&self.warm), self.keep_warm));
         }
@@ -131,7 +132,7 @@ impl SecondCore {
             });
             here();
         });
-        if start_ns.load(Ordering::Relaxed) >= nanos(self.late_start) {
+        if polling && start_ns.load(Ordering::Relaxed) >= nanos(self.late_start) {
             let until = nanos(self.epoch.elapsed().saturating_add(self.back_off));
             self.back_off_until_ns
                 .store(until.max(1), Ordering::Relaxed);
@@ -252,13 +253,18 @@ mod tests {
 
     #[test]
     fn a_late_start_sends_the_halves_back_to_the_caller_for_the_back_off() {
-        // Every start counts as late: the first join uses the helper, the rest of
-        // the (hour-long) back-off do both halves on the caller.
+        // Every start on a polling helper counts as late: the first join (which
+        // wakes the helper, and is not judged) and the next use it, then the
+        // (hour-long) back-off does both halves on the caller.
+        let sent_back = |ran: &[(bool, bool)]| {
+            let first = ran.iter().position(|r| *r == (true, true));
+            first.is_some_and(|i| i >= 1 && ran[i..].iter().all(|r| *r == (true, true)))
+        };
         let taken = SecondCore::with_back_off(KEEP_WARM, Duration::ZERO, Duration::from_secs(3600))
             .expect("a thread");
-        let ran = where_halves_ran(&taken, 5);
-        assert_eq!(ran[0], (true, false), "{ran:?}");
-        assert!(ran[1..].iter().all(|r| *r == (true, true)), "{ran:?}");
+        let ran = where_halves_ran(&taken, 10);
+        assert!(ran.iter().all(|r| r.0), "{ran:?}");
+        assert!(sent_back(&ran), "{ran:?}");
         // A back-off of zero tries the helper again at once.
         let retried =
             SecondCore::with_back_off(KEEP_WARM, Duration::ZERO, Duration::ZERO).expect("a thread");
@@ -278,8 +284,8 @@ mod tests {
         // An unrepresentable back-off end saturates instead of wrapping into the past.
         let forever =
             SecondCore::with_back_off(KEEP_WARM, Duration::ZERO, Duration::MAX).expect("a thread");
-        let ran = where_halves_ran(&forever, 3);
-        assert!(ran[1..].iter().all(|r| *r == (true, true)), "{ran:?}");
+        let ran = where_halves_ran(&forever, 10);
+        assert!(sent_back(&ran), "{ran:?}");
     }
 
     #[test]
