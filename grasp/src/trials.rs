@@ -5,12 +5,13 @@
 //!
 //! The protocol is generic over the devices ([`Gripper`], [`Camera`], a
 //! [`ForceEstimator`]) plus two narrow traits: [`Lift`] raises the gripper (the
-//! simulator's handle, or a real arm) and [`Judge`] decides the outcome (the
-//! simulator's physics through [`SimJudge`], or gOBJ, position and the estimate on a
-//! real rig through [`RigJudge`], optionally confirmed or corrected by an operator
-//! through [`OperatorJudge`]). Outcomes are never drawn at random: the physics, the
-//! rig or the operator decides. No SQL and no files here. `softtouch grasp trials`
-//! runs the simulator only so far: a real rig also needs a [`Lift`] on its arm.
+//! simulator's handle; a real arm's is not written yet) and [`Judge`] decides the
+//! outcome (the simulator's physics through [`SimJudge`], or gOBJ, position and the
+//! estimate on a real rig through [`RigJudge`], optionally confirmed or corrected by
+//! an operator through [`OperatorJudge`]). Outcomes are never drawn at random: the
+//! physics, the rig or the operator decides. No SQL and no files here. `softtouch
+//! grasp trials` runs the simulator only so far: a real rig also needs a [`Lift`] on
+//! its arm.
 //!
 //! Perturbations are a pure function of `(seed, object, trial)` ([`perturbation_m`]),
 //! so any trial can be replayed alone; the same draws are scaled by σ, so a σ sweep
@@ -395,7 +396,7 @@ impl Judge for RigJudge {
 pub struct OperatorJudge<J, R, W> {
     /// The judge whose verdict is confirmed.
     pub judge: J,
-    /// The operator's answers, one a line (stdin's lock in the CLI).
+    /// The operator's answers, one a line (stdin's lock, say).
     pub input: R,
     /// Where the questions go.
     pub output: W,
