@@ -1007,13 +1007,16 @@ mod tests {
         }
     }
 
+    /// The rig judge the tests use: 0.3 N, closed end at 250 counts, 3 counts' margin.
+    const RIG_JUDGE: RigJudge = RigJudge {
+        min_force_n: 0.3,
+        closed_count: 250,
+        closed_margin: 3,
+    };
+
     #[tokio::test]
     async fn the_rig_judge_reads_position_and_estimate() {
-        let mut j = RigJudge {
-            min_force_n: 0.3,
-            closed_count: 250,
-            closed_margin: 3,
-        };
+        let mut j = RIG_JUDGE;
         let held = j.judge(&seen(true, 150, Some(1.0), Some(1.2))).await.ok();
         assert_eq!(held, Some(Verdict::Held));
         let slip = j.judge(&seen(true, 249, Some(1.0), Some(1.2))).await.ok();
@@ -1028,11 +1031,7 @@ mod tests {
 
     #[tokio::test]
     async fn the_rig_judge_takes_a_contact_stop_for_a_grip_but_not_at_the_closed_end() {
-        let mut j = RigJudge {
-            min_force_n: 0.3,
-            closed_count: 250,
-            closed_margin: 3,
-        };
+        let mut j = RIG_JUDGE;
         // The estimate fell under the least force, but gOBJ = 2: an object stops them.
         let mut low = seen(true, 150, Some(0.1), Some(1.2));
         low.last_status.object = ObjectStatus::ContactClosing;
@@ -1053,14 +1052,13 @@ mod tests {
         );
     }
 
-    async fn operator(answers: &str, judged: Observation) -> (Result<Verdict, GraspError>, String) {
+    async fn operator(
+        answers: &[u8],
+        judged: Observation,
+    ) -> (Result<Verdict, GraspError>, String) {
         let mut j = OperatorJudge {
-            judge: RigJudge {
-                min_force_n: 0.3,
-                closed_count: 250,
-                closed_margin: 3,
-            },
-            input: std::io::Cursor::new(answers.as_bytes().to_vec()),
+            judge: RIG_JUDGE,
+            input: std::io::Cursor::new(answers.to_vec()),
             output: Vec::new(),
         };
         let verdict = j.judge(&judged).await;
@@ -1081,7 +1079,7 @@ mod tests {
             ("\n", slipped(), Verdict::Failed(FailReason::Slip)),
         ];
         for (answers, judged, expected) in cases {
-            let (verdict, asked) = operator(answers, judged).await;
+            let (verdict, asked) = operator(answers.as_bytes(), judged).await;
             assert_eq!(verdict.ok(), Some(expected), "answers {answers:?}");
             assert!(asked.contains("the judge says"), "{asked}");
         }
@@ -1090,7 +1088,7 @@ mod tests {
     #[tokio::test]
     async fn the_operator_is_asked_again_and_a_closed_input_stops_the_trials() {
         let (verdict, asked) = operator(
-            "maybe\n\u{1F600}\ncrush\n",
+            "maybe\n\u{1F600}\ncrush\n".as_bytes(),
             seen(true, 150, Some(1.0), Some(1.2)),
         )
         .await;
@@ -1098,32 +1096,20 @@ mod tests {
         assert!(asked.contains("`maybe`: expected y, n"), "{asked}");
         assert_eq!(asked.matches("the judge says held").count(), 3, "{asked}");
         for answers in ["", "maybe\n", "maybe"] {
-            let (verdict, _) = operator(answers, seen(true, 150, Some(1.0), Some(1.2))).await;
+            let (verdict, _) =
+                operator(answers.as_bytes(), seen(true, 150, Some(1.0), Some(1.2))).await;
             assert!(
                 matches!(verdict, Err(GraspError::Interrupted(_))),
                 "answers {answers:?}: {verdict:?}"
             );
         }
         // Bytes that are not UTF-8 are an unreadable input, not a panic.
-        let mut j = OperatorJudge {
-            judge: AlwaysHeld,
-            input: std::io::Cursor::new(vec![0xff, 0xfe, b'\n']),
-            output: std::io::sink(),
-        };
-        let verdict = j.judge(&seen(true, 150, Some(1.0), Some(1.2))).await;
+        let (verdict, _) =
+            operator(&[0xff, 0xfe, b'\n'], seen(true, 150, Some(1.0), Some(1.2))).await;
         assert!(
             matches!(verdict, Err(GraspError::Interrupted(_))),
             "{verdict:?}"
         );
-    }
-
-    /// A judge that always says held.
-    struct AlwaysHeld;
-
-    impl Judge for AlwaysHeld {
-        async fn judge(&mut self, _: &Observation) -> Result<Verdict, GraspError> {
-            Ok(Verdict::Held)
-        }
     }
 
     /// A stand-in for the model: the simulator's true wrench on finger 0 at the
