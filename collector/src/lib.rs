@@ -12,10 +12,11 @@
 //!   trained models stored with their metrics.
 //! - [`experiments`]: Table 1, the latent sweep and the model benchmark: grids, rows,
 //!   CSV and plots, shared by the verbs and reports.
-//! - [`grasp_bench`]: `softtouch bench grasp`, the force loop measured over K, δ, camera
-//!   rate and model on the simulated soft grasp.
-//! - [`grasp_devices`]: a real Hand-E and the finger cameras from the rig config, end
-//!   calibration.
+//! - [`devices`]: a rig of boxed devices from the rig config, each real or simulated;
+//!   the one place that names both.
+//! - [`grasp`]: grasping experiments: the simulated soft grasp behind the grasp
+//!   library's traits (`grasp::sim`), a real Hand-E and finger cameras
+//!   (`grasp::devices`), `bench grasp` (`grasp::bench`).
 //! - [`transfer`]: land to water: a dataset's test split alone, and the water test
 //!   samples paired with land samples of the same pose (`collect --poses-from`).
 //! - [`configs`]: resolving the rig and scene from files or the embedded defaults.
@@ -34,10 +35,10 @@ pub mod cli;
 pub mod collect;
 pub mod configs;
 pub mod dataset;
+pub mod devices;
 pub mod experiments;
 pub mod finetune;
-pub mod grasp_bench;
-pub mod grasp_devices;
+pub mod grasp;
 pub mod latent;
 pub mod models;
 pub mod plot;

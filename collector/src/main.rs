@@ -49,7 +49,9 @@ fn filter(default: &str) -> EnvFilter {
 
 /// Install the subscribers; the guard flushes the log file when dropped.
 fn init_logging(cli: &Cli) -> Option<tracing_appender::non_blocking::WorkerGuard> {
+    // Colour only for a person at a terminal, never into a file or a pipe.
     let stderr = tracing_subscriber::fmt::layer()
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_writer(std::io::stderr)
         .with_filter(filter(STDERR_FILTER));
     let path = log_path(&cli.db);
@@ -117,13 +119,10 @@ fn main() -> ExitCode {
             ExitCode::from(cli::EXIT_OK)
         }
         Err(failure) => {
-            eprintln!("error: {:#}", failure.error());
+            let message = cli::error_text(failure.error());
+            eprintln!("error: {message}");
             // Not `error!`: stderr already has it; the file gets it at info.
-            tracing::info!(
-                exit_code = failure.exit_code(),
-                "failed: {:#}",
-                failure.error()
-            );
+            tracing::info!(exit_code = failure.exit_code(), "failed: {message}");
             ExitCode::from(failure.exit_code())
         }
     }

@@ -14,14 +14,14 @@
 //!   (Robotiq Hand-E, Modbus RTU through tokio-modbus, with a simulated Hand-E),
 //!   [`franka`] (Panda through franka-rs on its own thread), `v4l_camera` (V4L2,
 //!   behind feature `v4l`, which needs libclang to build).
-//! - [`select`]: a rig of boxed devices from the rig config, real or simulated.
-//! - [`second_core`]: the other core for the halves of one frame's work (drawing,
-//!   preprocessing), kept awake between frames.
-//! - [`sim`]: the simulated scene (finger, contact, lattice, renderer, effects) and the
-//!   simulated twin of every device.
+//! - [`guard`]: [`ForceGuard`], the one force/torque check of every reading wherever an
+//!   actuator moves under load.
+//! - [`open`]: the real driver of a rig entry (`None` for a simulated one).
 //!
-//! Traits are async (tokio) and object-safe, so the CLI can build a rig of boxed
-//! devices from the rig config, real and simulated alike.
+//! Traits are async (tokio) and object-safe, so the collector can build a rig of boxed
+//! devices from the rig config, real and simulated alike. This crate must not depend
+//! on the simulator (`softtouch-sim`, which implements these traits), a store or a
+//! model: it is what a rig's hardware needs and nothing more.
 
 pub mod arm;
 pub mod ati_serial;
@@ -31,11 +31,10 @@ pub mod error;
 pub mod force;
 pub mod franka;
 pub mod gripper;
+pub mod guard;
 pub mod hande;
 pub mod netft;
-pub mod second_core;
-pub mod select;
-pub mod sim;
+pub mod open;
 #[cfg(feature = "v4l")]
 pub mod v4l_camera;
 
@@ -45,3 +44,4 @@ pub use clock::{Clock, TokioClock};
 pub use error::DeviceError;
 pub use force::ForceSensor;
 pub use gripper::{Gripper, GripperCommand, GripperStatus, ObjectStatus};
+pub use guard::{ForceGuard, GuardTrip};

@@ -6,22 +6,20 @@ mod common;
 
 use softtouch_drivers::gripper::{GripperCommand, ObjectStatus, opening_mm};
 use softtouch_drivers::hande::{self, HandE, HandEConfig, HandEService, regs};
-use softtouch_drivers::sim::SimRig;
 use softtouch_drivers::{Clock, DeviceError, Gripper, TokioClock};
 use softtouch_schemas::defaults;
+use softtouch_sim::SimRig;
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
-fn sim_service() -> HandEService<softtouch_drivers::sim::SimGripper> {
+fn sim_service() -> HandEService<softtouch_sim::SimGripper> {
     let rig =
         SimRig::new(&defaults::rig(), &defaults::scene(), 3, TokioClock::new()).expect("sim rig");
     HandEService::new(rig.gripper, 9)
 }
 
-fn pipe_pair(
-    service: HandEService<softtouch_drivers::sim::SimGripper>,
-) -> (HandE, Arc<TokioClock>) {
+fn pipe_pair(service: HandEService<softtouch_sim::SimGripper>) -> (HandE, Arc<TokioClock>) {
     let (a, b) = tokio::io::duplex(1024);
     tokio::spawn(hande::serve_rtu(service, b, std::future::pending()));
     let clock = Arc::new(TokioClock::new());

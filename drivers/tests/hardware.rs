@@ -13,7 +13,7 @@ use softtouch_drivers::ati_serial::{self, AtiSerial, AtiSerialConfig};
 use softtouch_drivers::gripper::{GripperCommand, ObjectStatus, opening_mm, position_for_opening};
 use softtouch_drivers::hande::{self, HandE, HandEConfig};
 use softtouch_drivers::netft::{self, NetFtClient, Scaling};
-use softtouch_drivers::{Clock, ForceSensor, Gripper, TokioClock, select};
+use softtouch_drivers::{Clock, ForceSensor, Gripper, TokioClock, open};
 use softtouch_schemas::FtReading;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -66,7 +66,7 @@ async fn hardware_netft_reads_its_calibration_and_streams_at_its_rate() {
     let address = required("SOFTTOUCH_NETFT_ADDRESS");
     // The rate configured on the sensor's web page.
     let rate_hz: f64 = optional("SOFTTOUCH_NETFT_RATE_HZ", 1000.0);
-    let config = select::netft_config(&address, rate_hz, None, None)
+    let config = open::netft_config(&address, rate_hz, None, None)
         .await
         .expect("resolve the address");
     let Scaling::CalibrationRequest(cal_addr) = config.scaling else {

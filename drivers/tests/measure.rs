@@ -64,13 +64,9 @@ async fn netft_sustained_rate_on_loopback() {
 #[ignore = "measurement: run with --ignored --nocapture"]
 async fn hande_round_trip_per_command() {
     use softtouch_schemas::defaults;
-    let rig = softtouch_drivers::sim::SimRig::new(
-        &defaults::rig(),
-        &defaults::scene(),
-        1,
-        TokioClock::new(),
-    )
-    .expect("rig");
+    let rig =
+        softtouch_sim::SimRig::new(&defaults::rig(), &defaults::scene(), 1, TokioClock::new())
+            .expect("rig");
     let service = HandEService::new(rig.gripper, 9);
     let (a, b) = tokio::io::duplex(1024);
     tokio::spawn(hande::serve_rtu(service.clone(), b, std::future::pending()));
@@ -100,13 +96,9 @@ async fn hande_round_trip_per_command() {
         "hand-e over an in-memory pipe, pacing off: {per:.1} µs per transaction (the wire at 115200 baud adds ~1.4 ms per 16-byte exchange; the gripper allows one per 5 ms)"
     );
     if let Some(pair) = common::pty_pair() {
-        let rig = softtouch_drivers::sim::SimRig::new(
-            &defaults::rig(),
-            &defaults::scene(),
-            1,
-            TokioClock::new(),
-        )
-        .expect("rig");
+        let rig =
+            softtouch_sim::SimRig::new(&defaults::rig(), &defaults::scene(), 1, TokioClock::new())
+                .expect("rig");
         let sp = hande::open_port(&pair.b).expect("b");
         tokio::spawn(hande::serve_serial(
             HandEService::new(rig.gripper, 9),

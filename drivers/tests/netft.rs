@@ -187,13 +187,9 @@ async fn readings_the_sensor_loses_are_counted_from_sequence_gaps() {
 #[tokio::test]
 async fn the_simulators_force_sensor_served_over_rdt_reaches_the_client() {
     use softtouch_schemas::defaults;
-    let rig = softtouch_drivers::sim::SimRig::new(
-        &defaults::rig(),
-        &defaults::scene(),
-        7,
-        TokioClock::new(),
-    )
-    .expect("sim rig");
+    let rig =
+        softtouch_sim::SimRig::new(&defaults::rig(), &defaults::scene(), 7, TokioClock::new())
+            .expect("sim rig");
     let srv = spawn_server(rig.force_sensor, 10).await;
     let mut c = NetFtClient::connect(client_config(srv.rdt, srv.cal, 1000.0), clock())
         .await

@@ -14,10 +14,10 @@ use std::hint::black_box;
 use criterion::{Criterion, criterion_group, criterion_main};
 use softtouch_drivers::Frame;
 use softtouch_drivers::hande::regs;
-use softtouch_drivers::sim::SceneSim;
 use softtouch_drivers::{GripperCommand, gripper::STROKE_MM};
 use softtouch_grasp::{ForceEstimator, Projection, Stepper, StepperConfig, Stroke};
 use softtouch_schemas::{ArmPose, ContactPose, FrameFormat, FrameMeta, TimestampNs, defaults};
+use softtouch_sim::SceneSim;
 use softtouch_trainer::{ModelArtifact, ModelConfig, Predictor};
 
 fn frame() -> Frame {

@@ -363,30 +363,6 @@ mod tests {
     }
 
     #[test]
-    fn the_simulated_soft_gripper_calibrates_to_its_whole_scale() {
-        rt().block_on(async {
-            let clock = TokioClock::new();
-            let (mut gripper, _camera, handle) = softtouch_drivers::sim::soft_grasp(
-                &softtouch_schemas::defaults::scene(),
-                softtouch_drivers::sim::GraspObject::cylinder("rod", 0.02),
-                60.0,
-                1,
-                clock,
-            )
-            .expect("builds");
-            handle.set_object(false).expect("removes");
-            let c = calibrate_ends(&mut gripper, &clock, &CalibrationConfig::default())
-                .await
-                .expect("calibrates");
-            assert_eq!((c.open_reached, c.closed_reached), (0, 255));
-            assert_eq!((c.stroke.open_count, c.stroke.closed_count), (2, 253));
-            assert!((c.stroke.mm_per_count - STROKE_MM / 255.0).abs() < 1e-12);
-            // It ends open.
-            assert!((handle.opening_mm().expect("opening") - STROKE_MM).abs() < 0.5);
-        });
-    }
-
-    #[test]
     fn a_short_travel_or_bad_settings_are_refused() {
         let c = CalibrationConfig::default();
         let e = derive_stroke(100, 120, &c).expect_err("short").to_string();

@@ -44,11 +44,12 @@ pub use metrics::{HoldMetrics, hold_metrics};
 pub use projection::Projection;
 pub use stepper::{
     GainCheck, Step, StepOutcome, Stepper, StepperConfig, Stroke, check_gain, check_tolerance,
+    one_count_force_n,
 };
 pub use trials::{
-    FailReason, Judge, Lift, LiftPlan, Mode, Observation, OperatorJudge, RigJudge, SimJudge,
-    SimLift, TraceRow, TrialConfig, TrialDevices, TrialResult, Verdict, Z_95, perturbation_m,
-    run_trial, trial_seed, wilson_interval,
+    FailReason, Judge, Lift, LiftPlan, Mode, ObjectState, Observation, OperatorJudge, RigJudge,
+    TOUCH_N, TraceRow, TrialConfig, TrialDevices, TrialResult, Verdict, Z_95, perturbation_m,
+    physics_verdict, run_trial, trial_seed, wilson_interval,
 };
 pub use wrist::{Wrist, WristConfig, WristLoop};
 

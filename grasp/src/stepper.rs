@@ -296,10 +296,8 @@ pub fn check_gain(
             "stiffness Λ {max_stiffness_n_per_mm} N/mm: expected a finite value ≥ 0"
         )));
     }
+    // No logging here: the caller says what the verdict means, once, to its user.
     if max_stiffness_n_per_mm == 0.0 {
-        tracing::warn!(
-            "contact stiffness Λ = 0: the force does not follow position, no target can be reached"
-        );
         return Ok(GainCheck::NoStiffness);
     }
     let ratio = max_stiffness_n_per_mm / gain_n_per_mm;
@@ -308,11 +306,6 @@ pub fn check_gain(
             contraction_at_max: (1.0 - ratio).abs(),
         })
     } else {
-        tracing::warn!(
-            gain_n_per_mm,
-            max_stiffness_n_per_mm,
-            "K ≤ Λ_max/2 (Method S4): the force loop may oscillate instead of converging"
-        );
         Ok(GainCheck::MayNotConverge {
             amplification: (1.0 - ratio).abs(),
         })
@@ -321,18 +314,15 @@ pub fn check_gain(
 
 /// Whether δ resolves one count: with `δ < Λ_max·mm_per_count/2` a one-count step can
 /// jump over the tolerance band and the loop dithers around the target (δ = 0 always
-/// does). Logs a warning then; returns whether the band is wide enough.
+/// does). Returns whether the band is wide enough; the caller warns its user.
 pub fn check_tolerance(tolerance_n: f64, max_stiffness_n_per_mm: f64, stroke: &Stroke) -> bool {
-    let one_count_n = max_stiffness_n_per_mm * stroke.mm_per_count;
-    let ok = tolerance_n >= one_count_n / 2.0;
-    if !ok {
-        tracing::warn!(
-            tolerance_n,
-            one_count_n,
-            "δ is below half the force of one count: the loop will dither around the target"
-        );
-    }
-    ok
+    tolerance_n >= one_count_force_n(max_stiffness_n_per_mm, stroke) / 2.0
+}
+
+/// The force one count of position changes at stiffness Λ, N.
+#[must_use]
+pub fn one_count_force_n(max_stiffness_n_per_mm: f64, stroke: &Stroke) -> f64 {
+    max_stiffness_n_per_mm * stroke.mm_per_count
 }
 
 #[cfg(test)]

@@ -5,13 +5,13 @@
 //!
 //! The protocol is generic over the devices ([`Gripper`], [`Camera`], a
 //! [`ForceEstimator`]) plus two narrow traits: [`Lift`] raises the gripper (the
-//! simulator's handle; a real arm's is not written yet) and [`Judge`] decides the
-//! outcome (the simulator's physics through [`SimJudge`], or gOBJ, position and the
-//! estimate on a real rig through [`RigJudge`], optionally confirmed or corrected by
-//! an operator through [`OperatorJudge`]). Outcomes are never drawn at random: the
-//! physics, the rig or the operator decides. No SQL and no files here. `softtouch
-//! grasp trials` runs the simulator only so far: a real rig also needs a [`Lift`] on
-//! its arm.
+//! simulator's, in the collector; a real arm's is not written yet) and [`Judge`]
+//! decides the outcome (where the object ended, through [`physics_verdict`], for the
+//! simulator's judge in the collector; gOBJ, position and the estimate on a real rig
+//! through [`RigJudge`], optionally confirmed or corrected by an operator through
+//! [`OperatorJudge`]). Outcomes are never drawn at random: the physics, the rig or the
+//! operator decides. No SQL, no files and no simulator here. `softtouch grasp trials`
+//! runs the simulator only so far: a real rig also needs a [`Lift`] on its arm.
 //!
 //! Perturbations are a pure function of `(seed, object, trial)` ([`perturbation_m`]),
 //! so any trial can be replayed alone; the same draws are scaled by σ, so a σ sweep
@@ -24,7 +24,6 @@ use std::time::Duration;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
-use softtouch_drivers::sim::{HoldState, SoftGraspHandle};
 use softtouch_drivers::{
     Camera, Clock, DeviceError, Frame, Gripper, GripperCommand, GripperStatus, ObjectStatus,
 };
@@ -298,53 +297,42 @@ pub trait Judge: Send {
 }
 
 /// Below this true force the fingers never touched the object, N.
-const TOUCH_N: f64 = 0.02;
+pub const TOUCH_N: f64 = 0.02;
 
-/// The simulator's judge: the physics' [`HoldState`] after the hold.
-#[derive(Debug, Clone)]
-pub struct SimJudge(pub SoftGraspHandle);
-
-impl Judge for SimJudge {
-    async fn judge(&mut self, seen: &Observation) -> Result<Verdict, GraspError> {
-        let state = self
-            .0
-            .hold_state()
-            .map_err(|e| GraspError::Config(format!("simulated grasp: {e}")))?;
-        let touched = seen.peak_true_n.is_some_and(|f| f > TOUCH_N);
-        Ok(match state {
-            HoldState::Held => Verdict::Held,
-            HoldState::Crushed { .. } => Verdict::Failed(FailReason::Crush),
-            HoldState::Absent => Verdict::Failed(FailReason::Miss),
-            HoldState::Slipped { .. } if !touched => Verdict::Failed(FailReason::Miss),
-            HoldState::Slipped { .. } => Verdict::Failed(FailReason::Slip),
-            // Never lifted: the loop did not confirm its force.
-            HoldState::Resting if !touched && seen.mode == Mode::Open => {
-                Verdict::Failed(FailReason::Miss)
-            }
-            HoldState::Resting => Verdict::Failed(FailReason::Timeout),
-        })
-    }
+/// Where the object is after the hold, as something that can see it reports it (a
+/// simulator's physics; a camera watching the rig).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ObjectState {
+    /// Lifted with the fingers and still between them.
+    Held,
+    /// Squeezed past what it survives.
+    Crushed,
+    /// Not between the fingers at all.
+    Absent,
+    /// Lifted, then slid out of the grip.
+    Slipped,
+    /// Still where it stood: never lifted.
+    Resting,
 }
 
-/// The simulator's lift: [`SoftGraspHandle::start_lift`] at the clock's present.
-#[derive(Debug, Clone)]
-pub struct SimLift {
-    /// The grasp.
-    pub handle: SoftGraspHandle,
-    /// The clock the devices run on.
-    pub clock: Arc<dyn Clock>,
-}
-
-impl Lift for SimLift {
-    async fn start_lift(&mut self, plan: &LiftPlan) -> Result<(), GraspError> {
-        self.handle
-            .start_lift(
-                self.clock.now(),
-                plan.height_m,
-                plan.speed_m_s,
-                plan.accel_m_s2,
-            )
-            .map_err(|e| GraspError::Config(format!("simulated lift: {e}")))
+/// The verdict on a trial from where the object ended ([`ObjectState`]) and what the
+/// trial saw: an object the fingers never touched (true force at most [`TOUCH_N`]) is
+/// a miss rather than a slip, and one never lifted is a timeout of the loop (or, open
+/// loop, a miss when untouched).
+#[must_use]
+pub fn physics_verdict(state: ObjectState, seen: &Observation) -> Verdict {
+    let touched = seen.peak_true_n.is_some_and(|f| f > TOUCH_N);
+    match state {
+        ObjectState::Held => Verdict::Held,
+        ObjectState::Crushed => Verdict::Failed(FailReason::Crush),
+        ObjectState::Absent => Verdict::Failed(FailReason::Miss),
+        ObjectState::Slipped if !touched => Verdict::Failed(FailReason::Miss),
+        ObjectState::Slipped => Verdict::Failed(FailReason::Slip),
+        // Never lifted: the loop did not confirm its force.
+        ObjectState::Resting if !touched && seen.mode == Mode::Open => {
+            Verdict::Failed(FailReason::Miss)
+        }
+        ObjectState::Resting => Verdict::Failed(FailReason::Timeout),
     }
 }
 
@@ -877,10 +865,6 @@ impl Run {
 #[allow(clippy::float_cmp)] // exact values are the point of some checks
 mod tests {
     use super::*;
-    use softtouch_drivers::TokioClock;
-    use softtouch_drivers::sim::{GraspObject, soft_grasp};
-    use softtouch_schemas::scene::ObjectProfile;
-    use softtouch_schemas::{ArmPose, RodShape};
 
     fn close(a: f64, b: f64, tol: f64) -> bool {
         (a - b).abs() <= tol
@@ -1109,130 +1093,6 @@ mod tests {
         assert!(
             matches!(verdict, Err(GraspError::Interrupted(_))),
             "{verdict:?}"
-        );
-    }
-
-    /// A stand-in for the model: the simulator's true wrench on finger 0 at the
-    /// frame's time (what a perfect model would read).
-    struct Perfect(SoftGraspHandle);
-
-    impl ForceEstimator for Perfect {
-        fn estimate(&mut self, frame: &Frame) -> Result<Option<Wrench>, GraspError> {
-            self.0
-                .true_wrench(frame.meta.t)
-                .map(Some)
-                .map_err(|e| GraspError::Estimate(e.to_string()))
-        }
-    }
-
-    struct Truth(SoftGraspHandle, crate::Projection);
-
-    impl TrueForce for Truth {
-        fn true_force_n(&mut self, t: TimestampNs) -> Option<f64> {
-            self.0
-                .true_wrench(t)
-                .ok()
-                .and_then(|w| self.1.grip_force_n(&w))
-        }
-    }
-
-    fn projection() -> crate::Projection {
-        crate::Projection::along_world_y(ArmPose::from_translation_yaw(
-            [0.0; 3],
-            -std::f64::consts::FRAC_PI_2,
-        ))
-        .unwrap_or_else(|e| panic!("{e}"))
-    }
-
-    fn cylinder() -> GraspObject {
-        GraspObject::standing(
-            "cylinder",
-            RodShape::Circle,
-            0.03,
-            1.0,
-            ObjectProfile::Prism { height_m: 0.05 },
-        )
-    }
-
-    async fn trial(
-        object: GraspObject,
-        mode: Mode,
-        grasp_opening_mm: f64,
-        target_n: f64,
-    ) -> TrialResult {
-        let scene = softtouch_schemas::defaults::scene();
-        let clock = TokioClock::new();
-        let (gripper, camera, handle) =
-            soft_grasp(&scene, object, 30.0, 1, clock).unwrap_or_else(|e| panic!("{e}"));
-        let touch = handle.contact_count(0.02).ok().flatten().unwrap_or(0);
-        let lambda = handle.max_stiffness_n_per_mm(touch, 255).unwrap_or(1.0);
-        let mut config = ControllerConfig::new(projection());
-        config.stepper.gain_n_per_mm = 0.75 * lambda.max(0.1);
-        let shared: Arc<dyn Clock> = Arc::new(clock);
-        let mut estimator = Perfect(handle.clone());
-        let devices = TrialDevices {
-            gripper,
-            camera,
-            estimator: &mut estimator,
-            truth: Truth(handle.clone(), config.projection),
-            lift: SimLift {
-                handle: handle.clone(),
-                clock: Arc::clone(&shared),
-            },
-            judge: SimJudge(handle.clone()),
-            clock: shared,
-        };
-        let trial = TrialConfig {
-            mode,
-            grasp_position: softtouch_drivers::gripper::position_for_opening(grasp_opening_mm),
-            pregrasp_position: touch.saturating_sub(6),
-            target_n,
-            confirm: Duration::from_millis(200),
-            close_timeout: Duration::from_secs(3),
-            move_timeout: Duration::from_secs(3),
-            lift: LiftPlan {
-                height_m: 0.05,
-                speed_m_s: 0.1,
-                accel_m_s2: 2.0,
-            },
-            hold: Duration::from_millis(500),
-        };
-        run_trial(devices, config, &trial)
-            .await
-            .unwrap_or_else(|e| panic!("{e}"))
-    }
-
-    #[tokio::test(start_paused = true)]
-    async fn a_closed_loop_grasp_holds_and_an_open_width_that_misses_is_a_miss() {
-        let held = trial(cylinder(), Mode::Closed, 28.0, 1.5).await;
-        assert_eq!(held.verdict, Verdict::Held, "{held:?}");
-        assert!(held.confirmed_after_ns.is_some());
-        assert!(held.peak_true_n.is_some_and(|f| f > 1.0));
-        let wide = trial(cylinder(), Mode::Open, 45.0, 1.5).await;
-        assert_eq!(
-            wide.verdict,
-            Verdict::Failed(FailReason::Miss),
-            "{:?}",
-            wide.verdict
-        );
-        assert!(!wide.trace.is_empty());
-        let tight = trial(cylinder(), Mode::Open, 28.0, 1.5).await;
-        assert!(tight.peak_true_n.is_some_and(|f| f > 0.02));
-        // The same trial again gives the same record.
-        assert_eq!(trial(cylinder(), Mode::Closed, 28.0, 1.5).await, held);
-    }
-
-    #[tokio::test(start_paused = true)]
-    async fn a_delicate_object_squeezed_past_its_limit_is_crushed() {
-        let mut cake = cylinder();
-        cake.name = "cake".into();
-        cake.crush_force_n = Some(1.0);
-        let r = trial(cake, Mode::Closed, 28.0, 2.0).await;
-        assert_eq!(
-            r.verdict,
-            Verdict::Failed(FailReason::Crush),
-            "{:?}",
-            r.verdict
         );
     }
 }

@@ -8,8 +8,8 @@
 //! outside the band, the rate capped and the target kept inside ±`max_yaw_rad`. A
 //! missing or non-finite τz holds the target (it never moves the arm).
 //!
-//! [`Wrist`] is what the loop drives. The simulated soft grasp implements it through
-//! its handle; on a real rig it is the arm's last joint: for the Panda a joint-7
+//! [`Wrist`] is what the loop drives. The simulated soft grasp's handle drives it in
+//! the collector (this crate names no simulator); on a real rig it is the arm's last joint: for the Panda a joint-7
 //! position set-point streamed by the arm's control task (franka-rs joint position
 //! motion generator), the loop only handing it targets.
 
@@ -118,26 +118,6 @@ impl WristLoop {
         }
         self.target_rad = next;
         Some(next)
-    }
-}
-
-fn sim_fault(e: &softtouch_drivers::sim::SimError) -> GraspError {
-    GraspError::Device(softtouch_drivers::DeviceError::Fault {
-        device: "sim-wrist".into(),
-        code: None,
-        message: e.to_string(),
-    })
-}
-
-/// The simulated soft grasp's wrist: it turns the gripper at up to
-/// [`softtouch_drivers::sim::WRIST_MAX_RAD_S`].
-impl Wrist for softtouch_drivers::sim::SoftGraspHandle {
-    fn set_yaw_target(&mut self, yaw_rad: f64) -> Result<(), GraspError> {
-        self.set_wrist_target(yaw_rad).map_err(|e| sim_fault(&e))
-    }
-
-    fn yaw_rad(&mut self) -> Result<f64, GraspError> {
-        self.wrist_yaw_now().map_err(|e| sim_fault(&e))
     }
 }
 

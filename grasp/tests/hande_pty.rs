@@ -12,13 +12,13 @@ use std::time::Duration;
 
 use rand::{RngExt, SeedableRng};
 use softtouch_drivers::hande::{self, HandE, HandEConfig, HandEService};
-use softtouch_drivers::sim::{GraspObject, SoftGraspHandle, soft_grasp};
 use softtouch_drivers::{Clock, Gripper, TokioClock};
 use softtouch_grasp::{
     CalibrationConfig, Controller, ControllerConfig, Projection, StepperConfig, TrueForce,
     calibrate_ends, hold_metrics,
 };
 use softtouch_schemas::{ArmPose, ContactPose, TimestampNs};
+use softtouch_sim::{GraspObject, SoftGraspHandle, soft_grasp};
 use softtouch_trainer::labels::label_from_si;
 use softtouch_trainer::{
     Example, ModelConfig, ModelKind, Predictor, Preprocess, Quiet, Splits, TrainConfig, train,
@@ -102,7 +102,7 @@ fn predictor() -> Predictor {
             size_m: DIAMETER_M,
             aspect: 1.0,
         });
-        let sim = softtouch_drivers::sim::SceneSim::new(&scene, 3).expect("scene");
+        let sim = softtouch_sim::SceneSim::new(&scene, 3).expect("scene");
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
         let p = Preprocess {
             size_px: 16,

@@ -6,7 +6,6 @@ use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use rand::{RngExt, SeedableRng};
-use softtouch_drivers::sim::{GraspObject, SoftGraspHandle, soft_grasp};
 use softtouch_drivers::{
     Clock, DeviceError, Frame, Gripper, GripperCommand, GripperStatus, TokioClock,
 };
@@ -15,6 +14,7 @@ use softtouch_grasp::{
     Projection, StepOutcome, StepperConfig, Stroke, TrueForce, check_gain, hold_metrics,
 };
 use softtouch_schemas::{ArmPose, ContactPose, TimestampNs, Wrench};
+use softtouch_sim::{GraspObject, SoftGraspHandle, soft_grasp};
 use softtouch_trainer::labels::label_from_si;
 use softtouch_trainer::{
     Example, ModelConfig, ModelKind, Predictor, Preprocess, Quiet, Splits, TrainConfig, train,
@@ -40,7 +40,7 @@ fn training_scene() -> softtouch_schemas::SceneSpec {
 fn model_bytes() -> &'static [u8] {
     static BYTES: OnceLock<Vec<u8>> = OnceLock::new();
     BYTES.get_or_init(|| {
-        let sim = softtouch_drivers::sim::SceneSim::new(&training_scene(), 3).expect("scene");
+        let sim = softtouch_sim::SceneSim::new(&training_scene(), 3).expect("scene");
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
         let p = Preprocess {
             size_px: 16,
@@ -152,12 +152,8 @@ fn config(gain_n_per_mm: f64, tolerance_n: f64) -> ControllerConfig {
     }
 }
 
-type Loop<E> = Controller<
-    Recording<softtouch_drivers::sim::SoftGripper>,
-    softtouch_drivers::sim::SoftFingerCamera,
-    E,
-    SimTruth,
->;
+type Loop<E> =
+    Controller<Recording<softtouch_sim::SoftGripper>, softtouch_sim::SoftFingerCamera, E, SimTruth>;
 
 fn rig<E: ForceEstimator>(
     estimator: E,
@@ -704,6 +700,39 @@ async fn turning_an_oval_tube_disturbs_the_hold_and_the_loop_recovers() {
             m.settling_time_s.is_some(),
             "phase {i}: estimate not back within δ by {}: {m:?}",
             t_s(last)
+        );
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_simulated_soft_gripper_calibrates_to_its_whole_scale() {
+    {
+        let clock = TokioClock::new();
+        let (mut gripper, _camera, handle) = soft_grasp(
+            &softtouch_schemas::defaults::scene(),
+            GraspObject::cylinder("rod", 0.02),
+            60.0,
+            1,
+            clock,
+        )
+        .expect("builds");
+        handle.set_object(false).expect("removes");
+        let c = softtouch_grasp::calibrate::calibrate_ends(
+            &mut gripper,
+            &clock,
+            &softtouch_grasp::calibrate::CalibrationConfig::default(),
+        )
+        .await
+        .expect("calibrates");
+        assert_eq!((c.open_reached, c.closed_reached), (0, 255));
+        assert_eq!((c.stroke.open_count, c.stroke.closed_count), (2, 253));
+        assert!(
+            (c.stroke.mm_per_count - softtouch_drivers::gripper::STROKE_MM / 255.0).abs() < 1e-12
+        );
+        // It ends open.
+        assert!(
+            (handle.opening_mm().expect("opening") - softtouch_drivers::gripper::STROKE_MM).abs()
+                < 0.5
         );
     }
 }

@@ -116,7 +116,12 @@ impl Check {
         if !(v.is_finite() && v >= lo && v <= hi) {
             self.fail(
                 field,
-                format!("expected a value in [{lo}, {hi}] {unit}, found {v}"),
+                format!(
+                    "expected a value in [{}, {}] {unit}, found {}",
+                    readable(lo),
+                    readable(hi),
+                    readable(v)
+                ),
             );
         }
     }
@@ -128,7 +133,8 @@ impl Check {
                 field,
                 format!(
                     "expected [min, max] with finite min <= max in {unit}, found [{}, {}]",
-                    r.min, r.max
+                    readable(r.min),
+                    readable(r.max)
                 ),
             );
         }
@@ -218,8 +224,33 @@ fn line_of(text: &str, byte: usize) -> usize {
         + 1
 }
 
+/// A number as a person reads it in a message: plain where that is short, in
+/// scientific notation where plain would run to hundreds of digits (`5e-324`,
+/// `1e308`).
+#[must_use]
+pub fn readable(v: f64) -> String {
+    let a = v.abs();
+    if a.classify() == std::num::FpCategory::Zero || !v.is_finite() || (1e-4..1e15).contains(&a) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn numbers_in_messages_stay_short() {
+        assert_eq!(super::readable(5e-324), "5e-324");
+        assert_eq!(super::readable(1e308), "1e308");
+        assert_eq!(super::readable(-2.5e-7), "-2.5e-7");
+        assert_eq!(super::readable(0.0001), "0.0001");
+        assert_eq!(super::readable(10.0), "10");
+        assert_eq!(super::readable(0.0), "0");
+        assert_eq!(super::readable(f64::NAN), "NaN");
+        assert_eq!(super::readable(f64::NEG_INFINITY), "-inf");
+    }
+
     use super::*;
 
     #[test]

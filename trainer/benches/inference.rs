@@ -6,8 +6,8 @@
 //! `cargo bench -p softtouch-trainer --bench inference`
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use softtouch_drivers::sim::SceneSim;
 use softtouch_schemas::ContactPose;
+use softtouch_sim::SceneSim;
 use softtouch_trainer::{FingerTable, ModelArtifact, ModelConfig, Predictor};
 
 fn frame() -> (usize, usize, Vec<u8>) {

@@ -4,8 +4,8 @@
 //! `cargo run --release -p softtouch-trainer --example sim_train -- [samples] [epochs] [width] [size] [latent] [kind]`
 
 use rand::{RngExt, SeedableRng};
-use softtouch_drivers::sim::SceneSim;
 use softtouch_schemas::ContactPose;
+use softtouch_sim::SceneSim;
 use softtouch_trainer::labels::label_from_si;
 use softtouch_trainer::train::Observer;
 use softtouch_trainer::{EpochReport, Example, ModelConfig, Preprocess, Splits, TrainConfig};

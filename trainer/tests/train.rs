@@ -5,8 +5,8 @@
 use std::sync::OnceLock;
 
 use rand::{RngExt, SeedableRng};
-use softtouch_drivers::sim::SceneSim;
 use softtouch_schemas::ContactPose;
+use softtouch_sim::SceneSim;
 use softtouch_trainer::labels::label_from_si;
 use softtouch_trainer::{
     Example, InitFrom, ModelArtifact, ModelConfig, ModelKind, Predictor, Preprocess, Quiet, Splits,

@@ -225,7 +225,7 @@ fn ingest_frames() -> Result<Vec<Frame>, Failure> {
                 z_m: 0.01,
                 theta_rad: f64::from(k),
             };
-            let r = softtouch_drivers::sim::render_contact(&scene, "circle-10", &pose, 0)
+            let r = softtouch_sim::render_contact(&scene, "circle-10", &pose, 0)
                 .map_err(|e| Failure::Runtime(e.into()))?;
             let (w, h) = r.image.dimensions();
             Ok(Frame {

@@ -7,11 +7,12 @@ use std::path::{Path, PathBuf};
 
 use anyhow::anyhow;
 use clap::Args;
-use softtouch_drivers::sim::GraspObject;
 use softtouch_grasp::GraspError;
+use softtouch_sim::GraspObject;
 
 use super::{Failure, io_failure, open_existing};
-use crate::grasp_bench::{CSV_HEADER, Outcome, Point, Setup, csv_row, grid, run_point};
+use crate::grasp::bench::{CSV_HEADER, Outcome, Point, Setup, csv_row, grid, run_point};
+use crate::grasp::settings;
 use crate::plot::{Series, SeriesStyle, XyChart, xy_chart};
 
 /// Options of `bench grasp`.
@@ -72,28 +73,15 @@ fn check(args: &BenchGraspArgs) -> Result<(), Failure> {
             ));
         }
     }
-    for d in &args.tolerances {
-        if !(d.is_finite() && *d >= 0.0 && *d <= 5.0) {
-            return bad(format!("--tolerances {d}: expected a force in [0, 5] N"));
-        }
-    }
-    for f in &args.fps {
-        if !(f.is_finite() && (1.0..=1000.0).contains(f)) {
-            return bad(format!("--fps {f}: expected a rate in [1, 1000] Hz"));
-        }
-    }
+    settings::TOLERANCE_N.check_all("--tolerances", &args.tolerances)?;
+    settings::FPS_HZ.check_all("--fps", &args.fps)?;
     if !(args.target.is_finite() && args.target > 0.0) {
         return bad(format!(
             "--target {}: expected a force above 0 N",
             args.target
         ));
     }
-    if !(args.hold_s.is_finite() && args.hold_s > 0.0 && args.hold_s <= 600.0) {
-        return bad(format!(
-            "--hold-s {}: expected a time in (0, 600] s",
-            args.hold_s
-        ));
-    }
+    settings::duration_s(false).check("--hold-s", args.hold_s)?;
     Ok(())
 }
 

@@ -8,18 +8,18 @@ use std::time::Duration;
 
 use anyhow::anyhow;
 use clap::{Args, Subcommand};
-use softtouch_drivers::sim::{
-    GraspObject, SoftFingerCamera, SoftGraspHandle, SoftGripper, soft_grasp,
-};
 use softtouch_drivers::{Clock, TokioClock};
 use softtouch_grasp::{
-    Controller, ControllerConfig, Cycle, ExitAction, GainCheck, GraspError, Projection, TrueForce,
+    Controller, ControllerConfig, Cycle, ExitAction, GainCheck, GraspError, Projection,
     WristConfig, WristLoop, check_gain, check_tolerance, hold_metrics,
 };
 use softtouch_schemas::{ArmPose, Medium, SceneSpec, TimestampNs};
+use softtouch_sim::{GraspObject, SoftFingerCamera, SoftGraspHandle, SoftGripper, soft_grasp};
 use softtouch_trainer::Predictor;
 
 use super::{Failure, io_failure, open_existing};
+use crate::grasp::settings;
+use crate::grasp::sim::{LoggedTruth, SimWrist, TruthSample};
 use crate::plot::{Series, SeriesStyle, XyChart, xy_chart};
 
 /// The grasp scene shipped in `scenes/grasp.toml`: the default for `disturb` and
@@ -33,7 +33,7 @@ pub enum GraspCommand {
     /// estimate closing the loop (Algorithm 1); prints rise time, settling time,
     /// overshoot, steady-state and RMS error per target; writes a CSV and a PNG.
     #[command(
-        after_help = "Example:\n  softtouch grasp follow --model land-v1 --targets 0.4,1.6,3\n  softtouch grasp follow --model land-v1 --scene scenes/grasp.toml --object ball --fingers 2\n  softtouch grasp follow --model land-v1 --rig lab.toml --gain 4 --targets 0.4,1.6   # a real Hand-E"
+        after_help = "Example:\n  softtouch grasp follow --model land-v1-svae --targets 0.4,1.6,3\n  softtouch grasp follow --model land-v1-svae --scene scenes/grasp.toml --object ball --fingers 2\n  softtouch grasp follow --model land-v1-svae --rig lab.toml --gain 4 --targets 0.4,1.6   # a real Hand-E"
     )]
     Follow(FollowArgs),
     /// Hold 0.4 N on land or 1.6 N in water (the scene's medium) on an oval tube while
@@ -41,7 +41,7 @@ pub enum GraspCommand {
     /// turn the peak deviation, the recovery time to within δ and the RMS error;
     /// writes `grasp-disturb.csv` and `grasp-disturb.png`.
     #[command(
-        after_help = "Example:\n  softtouch grasp disturb --model land-v1\n  softtouch grasp disturb --model water-v1 --scene scenes/grasp-water.toml --fingers 2"
+        after_help = "Example:\n  softtouch grasp disturb --model land-v1-svae\n  softtouch grasp disturb --model water-v1-svae --scene scenes/grasp-water.toml --fingers 2"
     )]
     Disturb(DisturbArgs),
     /// Hold a grip force on a cylinder that the simulator turns about the fingers'
@@ -49,7 +49,7 @@ pub enum GraspCommand {
     /// estimate; runs with and without the wrist loop and prints the τz RMS of both;
     /// writes `grasp-twist.csv` and `grasp-twist.png`.
     #[command(
-        after_help = "Example:\n  softtouch grasp twist --model land-v1\n  softtouch grasp twist --model land-v1 --turn-deg 30 --wrist-gain 1000"
+        after_help = "Example:\n  softtouch grasp twist --model land-v1-svae\n  softtouch grasp twist --model land-v1-svae --turn-deg 30 --wrist-gain 1000"
     )]
     Twist(TwistArgs),
     /// Grasp success-rate trials (Figure 4): per object, mode (open, closed) and medium
@@ -59,10 +59,10 @@ pub enum GraspCommand {
     /// continues. Prints success rates with Wilson 95 % intervals beside the paper's;
     /// writes `grasp-trials.csv`, `grasp-trials-rows.csv` and `grasp-trials.png`.
     #[command(after_help = "Example:
-  softtouch grasp trials --model land-v1 --trials 10 --sigma-mm 5 --modes open,closed
-  softtouch grasp trials --model land-v1 --objects cake,ball --scene scenes/grasp.toml
+  softtouch grasp trials --model land-v1-svae --trials 10 --sigma-mm 5 --modes open,closed
+  softtouch grasp trials --model land-v1-svae --objects cake,ball --scene scenes/grasp.toml
   softtouch grasp trials --resume 3
-  softtouch grasp trials --model land-v1 --sweep-sigma 0,2,5,8,12 --trials 5")]
+  softtouch grasp trials --model land-v1-svae --sweep-sigma 0,2,5,8,12 --trials 5")]
     Trials(super::grasp_trials::TrialsArgs),
 }
 
@@ -199,46 +199,6 @@ fn projections() -> Result<[Projection; 2], GraspError> {
     ])
 }
 
-/// The simulator's truth at one cycle, for the record.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct TruthSample {
-    t: TimestampNs,
-    /// Mean true τz over the fingers read, N·m.
-    torque_z_nm: f64,
-    /// The wrist's yaw, rad.
-    wrist_rad: f64,
-}
-
-/// The simulator's truth for the record (the loop never reads it): the mean of the
-/// fingers the loop reads, projected like the estimate; τz and the wrist are logged.
-#[derive(Debug)]
-struct SimTruth {
-    handle: SoftGraspHandle,
-    projections: [Projection; 2],
-    fingers: usize,
-    log: Arc<std::sync::Mutex<Vec<TruthSample>>>,
-}
-
-impl TrueForce for SimTruth {
-    fn true_force_n(&mut self, t: TimestampNs) -> Option<f64> {
-        let (mut force, mut torque) = (0.0, 0.0);
-        for k in 0..self.fingers {
-            let w = self.handle.true_wrench_on(k, t).ok()?;
-            force += self.projections[k].grip_force_n(&w)?;
-            torque += w.torque_nm[2];
-        }
-        let n = self.fingers as f64;
-        if let (Ok(wrist_rad), Ok(mut log)) = (self.handle.wrist_yaw(t), self.log.lock()) {
-            log.push(TruthSample {
-                t,
-                torque_z_nm: torque / n,
-                wrist_rad,
-            });
-        }
-        Some(force / n)
-    }
-}
-
 fn grasp_failure(e: GraspError) -> Failure {
     match e {
         GraspError::Config(_) | GraspError::UnreachableTarget { .. } => Failure::BadInput(e.into()),
@@ -248,7 +208,7 @@ fn grasp_failure(e: GraspError) -> Failure {
     }
 }
 
-fn sim_failure(e: softtouch_drivers::sim::SimError) -> Failure {
+fn sim_failure(e: softtouch_sim::SimError) -> Failure {
     Failure::Runtime(e.into())
 }
 
@@ -266,7 +226,7 @@ pub async fn run(cmd: GraspCommand, db: &Path, out: &mut dyn Write) -> Result<()
     }
 }
 
-type SimController = Controller<SoftGripper, SoftFingerCamera, Predictor, SimTruth>;
+type SimController = Controller<SoftGripper, SoftFingerCamera, Predictor, LoggedTruth>;
 
 /// A loop made ready on the simulated soft grasp: approached to just before the
 /// first touch.
@@ -278,29 +238,15 @@ struct Prepared {
 }
 
 fn check_common(c: &LoopArgs) -> Result<(), Failure> {
-    if !(c.fps.is_finite() && (1.0..=1000.0).contains(&c.fps)) {
-        return Err(bad(format!(
-            "--fps {}: expected a rate in [1, 1000] Hz",
-            c.fps
-        )));
-    }
-    if !matches!(c.fingers, 1 | 2) {
-        return Err(bad(format!(
-            "--fingers {}: expected 1 or 2 sensorised fingers",
-            c.fingers
-        )));
-    }
+    settings::FPS_HZ.check("--fps", c.fps)?;
+    settings::TOLERANCE_N.check("--tolerance", c.tolerance)?;
+    settings::check_fingers(c.fingers)?;
     Ok(())
 }
 
-fn check_duration(flag: &str, v: f64, lo_inclusive: bool) -> Result<(), Failure> {
-    let lo_ok = if lo_inclusive { v >= 0.0 } else { v > 0.0 };
-    if v.is_finite() && lo_ok && v <= 600.0 {
-        Ok(())
-    } else {
-        let lo = if lo_inclusive { "[0" } else { "(0" };
-        Err(bad(format!("{flag} {v}: expected a time in {lo}, 600] s")))
-    }
+fn check_duration(flag: &str, v: f64, zero_allowed: bool) -> Result<(), Failure> {
+    settings::duration_s(zero_allowed).check(flag, v)?;
+    Ok(())
 }
 
 /// The scene of `--scene`, else `fallback` (the embedded default or grasp scene).
@@ -354,6 +300,17 @@ async fn prepare(
     on_exit: ExitAction,
     out: &mut dyn Write,
 ) -> Result<Prepared, Failure> {
+    // The targets first: K is derived from them, so a bad target must not read as a
+    // bad K (a flag the user never gave).
+    let probe = softtouch_grasp::StepperConfig {
+        tolerance_n: c.tolerance,
+        ..softtouch_grasp::StepperConfig::default()
+    };
+    for t in targets_n {
+        probe
+            .check_target(*t)
+            .map_err(|e| bad(format!("--targets: {e}")))?;
+    }
     // Λ is measured up to half again the largest target.
     let top_n = 1.5 * targets_n.iter().copied().fold(0.0, f64::max);
     let predictor = Predictor::from_bytes(model_bytes)?;
@@ -379,6 +336,12 @@ async fn prepare(
         .max_stiffness_n_per_mm(touch, end)
         .map_err(sim_failure)?;
     let gain = c.gain.unwrap_or(0.75 * lambda_max);
+    if c.gain.is_none() && !(gain.is_finite() && gain > 0.0) {
+        return Err(bad(format!(
+            "object `{}`: the stiffness measured from first touch up to {top_n:.3} N (1.5 × the largest target) is {lambda_max} N/mm, so K = 0.75 Λ_max is unusable; ask for a larger target or give --gain",
+            object.name
+        )));
+    }
     let projections = projections().map_err(grasp_failure)?;
     let mut config = ControllerConfig::new(projections[0]);
     config.stepper.gain_n_per_mm = gain;
@@ -406,15 +369,18 @@ async fn prepare(
         GainCheck::Converges { .. } => {}
     }
     if !check_tolerance(c.tolerance, lambda_max, &config.stepper.stroke) {
+        let one_count_n = softtouch_grasp::one_count_force_n(lambda_max, &config.stepper.stroke);
         writeln!(
             out,
-            "warning: δ is below half the force of one count: expect dithering"
+            "warning: δ = {} N is below half the force of one count ({one_count_n:.3} N at Λ_max): expect dithering; --tolerance {:.3} or more avoids it",
+            c.tolerance,
+            (one_count_n / 2.0 * 1000.0).ceil() / 1000.0
         )
         .map_err(w)?;
     }
     let fingers = usize::from(c.fingers);
     let truth_log = Arc::new(std::sync::Mutex::new(Vec::new()));
-    let truth = SimTruth {
+    let truth = LoggedTruth {
         handle: handle.clone(),
         projections,
         fingers,
@@ -453,7 +419,7 @@ async fn follow(args: FollowArgs, db: &Path, out: &mut dyn Write) -> Result<(), 
     check_common(c)?;
     if let Some(rig_path) = &args.rig {
         let rig = crate::configs::resolve(Some(rig_path), None)?.rig;
-        if crate::grasp_devices::has_real_gripper(&rig) {
+        if crate::grasp::devices::has_real_gripper(&rig) {
             return follow_on_rig(&args, &rig, db, out).await;
         }
     }
@@ -528,7 +494,7 @@ async fn follow_on_rig(
     .map_err(io_failure)?;
     let second = (c.fingers == 2).then_some(projections[1]);
     let signals = super::signals::SignalWatch::start();
-    let run = crate::grasp_devices::follow_on_rig(
+    let run = crate::grasp::devices::follow_on_rig(
         rig,
         predictor,
         config,
@@ -539,8 +505,8 @@ async fn follow_on_rig(
     .await
     .map_err(|e| match e {
         // Its Display already names the device and the cause.
-        crate::grasp_devices::RigFollowError::Open(e) => Failure::Runtime(anyhow!("{e}")),
-        crate::grasp_devices::RigFollowError::Grasp(e) => grasp_failure(e),
+        crate::grasp::devices::RigFollowError::Open(e) => Failure::Runtime(anyhow!("{e}")),
+        crate::grasp::devices::RigFollowError::Grasp(e) => grasp_failure(e),
     })?;
     let cal = run.calibration;
     writeln!(
@@ -572,14 +538,14 @@ fn print_table(
     let opt = |v: Option<f64>| v.map_or_else(|| "never".to_owned(), |s| format!("{s:.3}"));
     writeln!(
         out,
-        "{:>8} {:>9} {:>10} {:>11} {:>11} {:>9} {:>12} {:>10}",
+        "{:>8} {:>9} {:>10} {:>11} {:>11} {:>9} {:>13} {:>10}",
         "target N",
         "rise s",
         "settle s",
         "overshoot N",
         "ss error N",
         "RMS N",
-        "true ss N",
+        "true ss err N",
         "true RMS N"
     )
     .map_err(io_failure)?;
@@ -595,7 +561,7 @@ fn print_table(
         match est {
             Some(m) => writeln!(
                 out,
-                "{:>8.2} {:>9} {:>10} {:>11.3} {:>11.3} {:>9.3} {:>12} {:>10}",
+                "{:>8.2} {:>9} {:>10} {:>11.3} {:>11.3} {:>9.3} {:>13} {:>10}",
                 target,
                 opt(m.rise_time_s),
                 opt(m.settling_time_s),
@@ -614,7 +580,7 @@ fn print_table(
 
 fn write_csv(path: &Path, cycles: &[Cycle]) -> Result<(), Failure> {
     let mut text = String::from(
-        "t_s,frame,target_n,estimate_n,true_n,measured_count,request_count,outcome,object\n",
+        "t_s,frame,target_n,estimate_n,true_n,measured_count,request_count,outcome,gripper_object_status\n",
     );
     let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
     for c in cycles {
@@ -920,6 +886,9 @@ async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Result<(), Fa
     let model = load_model_and_pause(c, db).await?;
     let mut runs = Vec::new();
     for with_wrist in [false, true] {
+        // The same grasp twice: its setup and warnings are printed once.
+        let mut sink = std::io::sink();
+        let setup_out: &mut dyn Write = if with_wrist { &mut sink } else { &mut *out };
         let p = prepare(
             c,
             &model,
@@ -927,7 +896,7 @@ async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Result<(), Fa
             object.clone(),
             &[args.target],
             ExitAction::Open,
-            out,
+            setup_out,
         )
         .await?;
         let start = p.clock.now();
@@ -946,7 +915,7 @@ async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Result<(), Fa
         let total_s = args.settle_s + 2.0 * (args.turn_s + args.hold_s);
         let mut controller = if with_wrist {
             p.controller
-                .with_wrist(Box::new(p.handle.clone()), wrist_loop)
+                .with_wrist(Box::new(SimWrist(p.handle.clone())), wrist_loop)
         } else {
             p.controller
         };

@@ -19,19 +19,20 @@ use anyhow::anyhow;
 use clap::Args;
 use serde::{Deserialize, Serialize};
 use softtouch_drivers::gripper::{STROKE_MM, opening_mm, position_for_opening};
-use softtouch_drivers::sim::{GraspObject, soft_grasp};
 use softtouch_drivers::{Clock, TokioClock};
 use softtouch_grasp::{
-    ControllerConfig, FailReason, GraspError, LiftPlan, Mode, SimJudge, SimLift, TrialConfig,
-    TrialDevices, TrialResult, Z_95, perturbation_m, run_trial, trial_seed, wilson_interval,
+    ControllerConfig, FailReason, GraspError, LiftPlan, Mode, TrialConfig, TrialDevices,
+    TrialResult, Z_95, perturbation_m, run_trial, trial_seed, wilson_interval,
 };
 use softtouch_schemas::config::{ConfigSource, parse_toml};
 use softtouch_schemas::{Medium, SceneSpec};
+use softtouch_sim::{GraspObject, soft_grasp};
 use softtouch_trainer::Predictor;
 
 use super::{Failure, io_failure, open_existing};
 use crate::dataset::export::sha256_hex;
-use crate::grasp_bench::{SimTruth, projection, stiffness};
+use crate::grasp::settings;
+use crate::grasp::sim::{SimJudge, SimLift, SimTruth, projection, stiffness};
 use crate::plot::{BarChart, BarSeries, Series, SeriesStyle, XyChart, bar_chart, xy_chart};
 use crate::store::{GraspTrace, GraspTrialKey, GraspTrialRow};
 
@@ -165,13 +166,13 @@ fn check_range(flag: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Result<(), F
 
 impl Plan {
     fn from_args(args: &TrialsArgs) -> Result<Self, Failure> {
-        check_range("--fps", args.fps, 0.999, 1000.0, "Hz")?;
+        settings::FPS_HZ.check("--fps", args.fps)?;
         check_range("--target-n", args.target_n, 0.0, 50.0, "N")?;
-        check_range("--tolerance", args.tolerance, 0.0, 10.0, "N")?;
+        settings::TOLERANCE_N.check("--tolerance", args.tolerance)?;
         check_range("--confirm-s", args.confirm_s, 0.0, 60.0, "s")?;
         check_range("--close-timeout-s", args.close_timeout_s, 0.0, 600.0, "s")?;
         check_range("--lift-mm", args.lift_mm, 0.0, 500.0, "mm")?;
-        check_range("--hold-s", args.hold_s, 0.0, 600.0, "s")?;
+        settings::duration_s(false).check("--hold-s", args.hold_s)?;
         if args.trials == 0 || args.trials > 10_000 {
             return Err(bad(format!(
                 "--trials {}: expected 1 to 10000 trials per object and mode",
@@ -388,7 +389,7 @@ fn run_job(job: Job, mut predictor: Predictor) -> (Predictor, Result<TrialResult
     let result = rt.block_on(async {
         let clock = TokioClock::new();
         let placed = job.template.placed(job.offset_m);
-        let sim_err = |e: softtouch_drivers::sim::SimError| {
+        let sim_err = |e: softtouch_sim::SimError| {
             GraspError::Config(format!("object `{}`: {e}", job.template.name))
         };
         let (gripper, camera, handle) = soft_grasp(
@@ -1117,6 +1118,6 @@ struct SecondCore;
 
 impl softtouch_trainer::Fork for SecondCore {
     fn fork(&self, here: &mut (dyn FnMut() + Send), there: &mut (dyn FnMut() + Send)) {
-        softtouch_drivers::second_core::join(here, there);
+        softtouch_sim::second_core::join(here, there);
     }
 }

@@ -17,7 +17,9 @@ use std::time::Duration;
 
 use anyhow::anyhow;
 use clap::Args;
-use softtouch_drivers::{Arm, Camera, Clock, DeviceError, ForceSensor, Frame};
+use softtouch_drivers::{
+    Arm, Camera, Clock, DeviceError, ForceGuard, ForceSensor, Frame, GuardTrip,
+};
 use softtouch_grasp::ForceEstimator;
 use softtouch_schemas::rig::{ArmDevice, CameraDevice};
 use softtouch_schemas::{ArmPose, ContactPose, FtReading, RigConfig, TimestampNs, Wrench};
@@ -109,8 +111,13 @@ fn press_script(rig: &RigConfig, depth_m: f64) -> Result<Vec<Step>, String> {
             let target = ArmPose::from_contact(&w.base_from_rod, p);
             if !p.is_finite() || (!home && !w.contains_contact(p)) || !w.contains_arm(&target) {
                 return Err(format!(
-                    "the press to x = {:.4} m (--depth-m {depth_m}) lies outside the rig's workspace (x_m {:?}, flange at {:?} m)",
-                    p.x_m, w.x_m, target.translation_m
+                    "the press to x = {:.4} m (--depth-m {depth_m}) lies outside the rig's workspace (workspace x_m [{}, {}] m, flange at [{:.4}, {:.4}, {:.4}] m)",
+                    p.x_m,
+                    w.x_m.min,
+                    w.x_m.max,
+                    target.translation_m[0],
+                    target.translation_m[1],
+                    target.translation_m[2]
                 ));
             }
         }
@@ -431,33 +438,6 @@ impl Output<'_> {
     }
 }
 
-/// Checks a batch of readings against the rig's limits (the press's guard).
-fn guard(
-    readings: &[FtReading],
-    limits: &softtouch_schemas::rig::ForceLimits,
-) -> Result<(), String> {
-    for r in readings {
-        let w = r.wrench_in_sensor;
-        if !w.is_finite() {
-            return Err(format!(
-                "force/torque sensor: a non-finite reading at {} ns",
-                r.t.0
-            ));
-        }
-        let torque = w.torque_nm.iter().map(|t| t * t).sum::<f64>().sqrt();
-        if w.force_norm_n() > limits.max_force_n || torque > limits.max_torque_nm {
-            return Err(format!(
-                "force/torque guard: {:.2} N, {:.3} N·m exceeds the rig's limits ({} N, {} N·m)",
-                w.force_norm_n(),
-                torque,
-                limits.max_force_n,
-                limits.max_torque_nm
-            ));
-        }
-    }
-    Ok(())
-}
-
 impl Session<'_> {
     /// Frames, sensor and script run side by side: a frame's estimate is computed when
     /// it arrives and written once the sensor has delivered a reading at or after its
@@ -505,6 +485,14 @@ impl Session<'_> {
         let mut readings: VecDeque<FtReading> = VecDeque::new();
         let mut pending: VecDeque<Pending> = VecDeque::new();
         let mut buf = Vec::new();
+        // The one guard collection uses: every reading, every torque axis, a stale stream.
+        let guard = ForceGuard {
+            max_force_n: self.rig.limits.max_force_n,
+            max_torque_nm: self.rig.limits.max_torque_nm,
+            stale: Duration::from_secs_f64(self.rig.procedure.ft_stale_s),
+        };
+        let tripped = |t: GuardTrip| format!("force/torque guard: {t}");
+        let mut last_reading = tokio::time::Instant::now();
         let script = run_script(arm, self.rig, steps);
         tokio::pin!(script);
         let stop = super::signals::requested(self.stop.clone());
@@ -534,8 +522,10 @@ impl Session<'_> {
                     script_end = Some(self.clock.now());
                 }
                 got = sensor.read(&mut buf) => {
-                    got.map_err(|e| format!("force/torque sensor: {e}"))?;
-                    guard(&buf, &self.rig.limits)?;
+                    if got.map_err(|e| format!("force/torque sensor: {e}"))? > 0 {
+                        last_reading = tokio::time::Instant::now();
+                    }
+                    guard.check_all(&buf).map_err(tripped)?;
                     readings.extend(buf.drain(..));
                     let newest = readings.back().map_or(0, |r| r.t.0);
                     while readings
@@ -544,6 +534,9 @@ impl Session<'_> {
                     {
                         readings.pop_front();
                     }
+                }
+                () = tokio::time::sleep_until(last_reading + guard.stale) => {
+                    guard.check_silence(last_reading.elapsed()).map_err(tripped)?;
                 }
                 frame = camera.frame_after(next_t, self.frame_timeout_ms) => {
                     let frame: Frame = frame.map_err(|e: DeviceError| format!("camera: {e}"))?;

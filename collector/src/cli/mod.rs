@@ -189,6 +189,30 @@ impl Failure {
     }
 }
 
+/// An error and its causes on one line, each said once: a cause whose text an outer
+/// message already quotes (as `"cannot open …: {source}"` does) is not repeated.
+#[must_use]
+pub fn error_text(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if text.is_empty() || out.contains(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
+}
+
+impl From<crate::grasp::settings::SettingError> for Failure {
+    fn from(e: crate::grasp::settings::SettingError) -> Self {
+        Self::BadInput(e.into())
+    }
+}
+
 impl From<softtouch_schemas::ConfigError> for Failure {
     fn from(e: softtouch_schemas::ConfigError) -> Self {
         Self::BadInput(e.into())
@@ -272,4 +296,42 @@ pub(crate) async fn open_existing(path: &std::path::Path) -> Result<crate::store
 /// Write to the output, treating a closed pipe (`softtouch runs | head`) as a runtime failure.
 pub(crate) fn io_failure(e: std::io::Error) -> Failure {
     Failure::Runtime(anyhow::Error::new(e).context("cannot write output"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::error_text;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("(code: 26) file is not a database")]
+    struct Inner;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("cannot open database t.db: {source}")]
+    struct Quoting {
+        #[source]
+        source: Inner,
+    }
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("cannot open database")]
+    struct Terse {
+        #[source]
+        source: Inner,
+    }
+
+    #[test]
+    fn a_cause_is_said_once_whether_or_not_the_message_quotes_it() {
+        let quoted = anyhow::Error::new(Quoting { source: Inner });
+        assert_eq!(
+            error_text(&quoted),
+            "cannot open database t.db: (code: 26) file is not a database"
+        );
+        let terse = anyhow::Error::new(Terse { source: Inner }).context("report");
+        assert_eq!(
+            error_text(&terse),
+            "report: cannot open database: (code: 26) file is not a database"
+        );
+        assert_eq!(error_text(&anyhow::anyhow!("")), "");
+    }
 }

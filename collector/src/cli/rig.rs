@@ -16,13 +16,13 @@ use std::time::Duration;
 
 use anyhow::anyhow;
 use clap::{Args, Subcommand};
-use softtouch_drivers::select::{real_arm, real_camera, real_force_sensor, real_gripper};
-use softtouch_drivers::sim::SimRig;
+use softtouch_drivers::open::{real_arm, real_camera, real_force_sensor, real_gripper};
 use softtouch_drivers::{
     Arm, Camera, Clock, DeviceError, ForceSensor, Gripper, GripperCommand, ObjectStatus, TokioClock,
 };
 use softtouch_schemas::rig::{ArmDevice, CameraDevice, ForceSensorDevice, GripperDevice};
 use softtouch_schemas::{FrameFormat, RigConfig};
+use softtouch_sim::SimRig;
 
 use super::{Failure, io_failure};
 

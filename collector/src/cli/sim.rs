@@ -107,7 +107,7 @@ pub async fn run(cmd: SimCommand, out: &mut dyn Write) -> Result<(), Failure> {
             softtouch_schemas::config::Validate::validate(&rig, &mut check);
             check.finish(&softtouch_schemas::ConfigSource::Stored("--rate-hz".into()))?;
             let clock = softtouch_drivers::TokioClock::new();
-            let mut sim = softtouch_drivers::sim::SimRig::new(&rig, &scene, seed, clock)
+            let mut sim = softtouch_sim::SimRig::new(&rig, &scene, seed, clock)
                 .map_err(|e| Failure::BadInput(e.into()))?;
             let target =
                 softtouch_schemas::ArmPose::from_contact(&rig.workspace.base_from_rod, &pose);
@@ -156,10 +156,10 @@ pub async fn run(cmd: SimCommand, out: &mut dyn Write) -> Result<(), Failure> {
                     .map(|r| r.name.clone())
                     .unwrap_or_default(),
             };
-            let rendered = softtouch_drivers::sim::render_contact(&scene, &rod, &pose, seed)
+            let rendered = softtouch_sim::render_contact(&scene, &rod, &pose, seed)
                 .map_err(|e| Failure::BadInput(anyhow!("{source}: {e}")))?;
             if let Some(path) = &png {
-                let bytes = softtouch_drivers::sim::encode_png(&rendered.image)
+                let bytes = softtouch_sim::encode_png(&rendered.image)
                     .map_err(|e| Failure::Runtime(e.into()))?;
                 std::fs::write(path, bytes).map_err(|e| {
                     Failure::Runtime(anyhow!("cannot write {}: {e}", path.display()))

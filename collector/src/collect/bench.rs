@@ -9,12 +9,12 @@ use super::rods::RodChanger;
 use super::{CollectDevices, CollectPlan, Counters, Progress, collect, sampler::RodSchedule};
 use crate::store::{OwnedNewRun, StoreError, SyncStore, WriterStats};
 use async_trait::async_trait;
-use softtouch_drivers::sim::{SceneSim, SimRig};
 use softtouch_drivers::{
     Arm, ArmState, Camera, Clock as _, DeviceError, ForceSensor, Frame, TokioClock,
 };
 use softtouch_schemas::config::to_toml;
 use softtouch_schemas::{ArmPose, ContactPose, FtReading, RigConfig, SceneSpec, TimestampNs};
+use softtouch_sim::{SceneSim, SimRig};
 use std::future::Future;
 use std::pin::Pin;
 use std::sync::Arc;

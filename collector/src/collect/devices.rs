@@ -1,7 +1,7 @@
 //! The devices of a collection, built from the rig config.
 
 use super::rods::{RodChanger, TerminalOperator};
-use softtouch_drivers::select::SelectError;
+use crate::devices::SelectError;
 use softtouch_drivers::{Arm, Camera, ForceSensor, TokioClock};
 use softtouch_schemas::{
     ArmDevice, CameraDevice, ForceSensorDevice, RigConfig, SceneSpec, TimestampNs,
@@ -71,7 +71,7 @@ pub async fn build_devices_at(
         tokio::time::pause();
     }
     let clock = TokioClock::starting_at(start);
-    let devices = softtouch_drivers::select::build(rig, scene, seed, clock).await?;
+    let devices = crate::devices::build(rig, scene, seed, clock).await?;
     // The rod is part of the simulated world when the arm is simulated; on a real rig
     // an operator changes it.
     let rods: Box<dyn RodChanger> = match (&rig.arm, devices.sim) {

@@ -48,17 +48,17 @@ pub mod window;
 pub use devices::{CollectDevices, build_devices, build_devices_at};
 pub use plan::{CollectPlan, NewRunRequest, PlanError, Resumed};
 
+use crate::devices::SelectError;
 use crate::store::{EventKind, EventLevel, RunId, RunStatus, StoreError, SyncStore};
 use procedure::SampleEnd;
 use rods::RodChanger;
 use sampler::PoseSampler;
-use softtouch_drivers::select::SelectError;
+pub use softtouch_drivers::GuardTrip;
 use softtouch_drivers::{Arm, Camera, Clock, DeviceError, TokioClock};
 use softtouch_schemas::rig::{FT_BUFFER_S, Tare};
 use softtouch_schemas::{ArmPose, SampleStatus, TimestampNs};
 use std::time::Duration;
 use tokio::sync::watch;
-pub use window::GuardTrip;
 use window::{FtStream, WindowRules};
 
 /// How a collection ended.

@@ -1,10 +1,11 @@
 //! One sample: `approach → settle → record → retreat`, with its retries, and storing
 //! it (accepted or rejected).
 
-use super::window::{GuardTrip, WindowStats, frame_covered, window_bounds, window_stats};
+use super::window::{WindowStats, frame_covered, window_bounds, window_stats};
 use super::{CollectError, Job, recovery_backoff};
 use crate::store::{EventKind, EventLevel};
 use softtouch_drivers::{Clock as _, DeviceError, Frame};
+use softtouch_drivers::{ForceGuard, GuardTrip};
 use softtouch_schemas::rig::Tare;
 use softtouch_schemas::sample::RejectReason;
 use softtouch_schemas::{
@@ -196,9 +197,9 @@ impl Job<'_> {
                     last_reject = match trip {
                         GuardTrip::NonFinite(_) => RejectReason::NonFinite,
                         GuardTrip::Stale { .. } => RejectReason::StreamStalled,
-                        GuardTrip::SensorError(_) | GuardTrip::OverLimit(_) => {
-                            RejectReason::SensorFault
-                        }
+                        GuardTrip::SensorError(_)
+                        | GuardTrip::SensorFault(_)
+                        | GuardTrip::OverLimit(_) => RejectReason::SensorFault,
                     };
                     self.events.log(
                         EventKind::GuardStop,
@@ -356,8 +357,12 @@ impl Job<'_> {
         }
 
         // approach, guarded
-        let stale = Duration::from_secs_f64(p.ft_stale_s);
-        let guard = self.ft.guard(l.max_force_n, l.max_torque_nm, stale);
+        let limits = ForceGuard {
+            max_force_n: l.max_force_n,
+            max_torque_nm: l.max_torque_nm,
+            stale: Duration::from_secs_f64(p.ft_stale_s),
+        };
+        let guard = self.ft.guard(&limits);
         let moved = tokio::select! {
             moved = self.arm.move_to(&target, p.approach_speed_m_s) => moved,
             trip = guard => {

@@ -5,7 +5,7 @@
 
 use async_trait::async_trait;
 use softtouch_drivers::DeviceError;
-use softtouch_drivers::sim::SimHandle;
+use softtouch_sim::SimHandle;
 use std::io::{BufRead as _, IsTerminal as _, Write as _};
 
 /// Puts a rod in place (the arm is at home when this is called).

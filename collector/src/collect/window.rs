@@ -6,12 +6,11 @@
 //! by the driver (and show as sequence gaps, which reject a window); the ring holds
 //! seconds of readings, far longer than any window waits.
 
-use softtouch_drivers::{DeviceError, ForceSensor};
+use softtouch_drivers::{DeviceError, ForceGuard, ForceSensor, GuardTrip};
 use softtouch_schemas::sample::RejectReason;
 use softtouch_schemas::{DurationNs, FtReading, TimestampNs, Wrench};
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::Duration;
 use tokio::sync::{Notify, mpsc, oneshot, watch};
 use tokio::task::JoinHandle;
 
@@ -193,11 +192,12 @@ impl FtStream {
         }
     }
 
-    /// The approach guard: returns as soon as a reading arriving from now on has a
-    /// force magnitude over `max_force_n`, a torque over `max_torque_nm` or a NaN or
-    /// infinite value; when no reading arrives for `stale`; or when the sensor reports
-    /// an error. Every reading of every packet is checked, not only the newest.
-    pub async fn guard(&self, max_force_n: f64, max_torque_nm: f64, stale: Duration) -> GuardTrip {
+    /// The approach guard: returns as soon as a reading arriving from now on trips
+    /// `guard` ([`ForceGuard::check`]: NaN or ∞, force magnitude or any torque axis
+    /// over its limit, a fault status), when no reading arrives for its stale limit,
+    /// or when the sensor reports an error. Every reading of every packet is checked,
+    /// not only the newest.
+    pub async fn guard(&self, guard: &ForceGuard) -> GuardTrip {
         let mut seen = self.received();
         let mut last_reading = tokio::time::Instant::now();
         loop {
@@ -217,25 +217,19 @@ impl FtStream {
                         .readings
                         .len()
                         .saturating_sub(usize::try_from(new).unwrap_or(usize::MAX));
-                    for x in r.readings.iter().skip(skip) {
-                        let w = &x.wrench_in_sensor;
-                        if !w.to_array().iter().all(|v| v.is_finite()) {
-                            return GuardTrip::NonFinite(*x);
-                        }
-                        if w.force_norm_n() > max_force_n
-                            || w.torque_nm.iter().any(|t| t.abs() > max_torque_nm)
-                        {
-                            return GuardTrip::OverLimit(*x);
-                        }
+                    if let Err(trip) = guard.check_all(r.readings.iter().skip(skip)) {
+                        return trip;
                     }
                     seen = r.received;
                 }
             }
             tokio::select! {
                 () = &mut notified => {}
-                () = tokio::time::sleep_until(last_reading + stale) => {
-                    if self.received() == seen {
-                        return GuardTrip::Stale { silent: stale };
+                () = tokio::time::sleep_until(last_reading + guard.stale) => {
+                    if self.received() == seen
+                        && let Err(trip) = guard.check_silence(last_reading.elapsed())
+                    {
+                        return trip;
                     }
                 }
             }
@@ -251,42 +245,6 @@ impl FtStream {
             .filter(|x| x.t >= start && x.t <= end)
             .copied()
             .collect()
-    }
-}
-
-/// Why the approach guard stopped the arm.
-#[derive(Debug, Clone, PartialEq)]
-pub enum GuardTrip {
-    /// A reading over the force or torque limit.
-    OverLimit(FtReading),
-    /// A reading holding NaN or infinity.
-    NonFinite(FtReading),
-    /// No reading arrived for this long.
-    Stale {
-        /// The configured limit (`procedure.ft_stale_s`).
-        silent: Duration,
-    },
-    /// The sensor reported an error.
-    SensorError(DeviceError),
-}
-
-impl std::fmt::Display for GuardTrip {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::OverLimit(r) => write!(f, "reading over the limit at {}", r.wrench_in_sensor),
-            Self::NonFinite(r) => write!(
-                f,
-                "non-finite reading (sequence {}): {:?}",
-                r.rdt_sequence,
-                r.wrench_in_sensor.to_array()
-            ),
-            Self::Stale { silent } => write!(
-                f,
-                "stale stream: no force/torque reading for {:.3} s (procedure.ft_stale_s)",
-                silent.as_secs_f64()
-            ),
-            Self::SensorError(e) => write!(f, "sensor error: {e}"),
-        }
     }
 }
 

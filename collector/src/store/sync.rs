@@ -167,6 +167,10 @@ pub struct WriterStats {
     pub encode: Duration,
     /// Time spent in the database.
     pub write: Duration,
+    /// Samples dropped because an earlier one failed to commit (never committed past
+    /// the gap). They are not a failure of their own: the first failure, which the
+    /// caller is told of, already stops the run, and a resume takes them.
+    pub refused_after_failure: u64,
 }
 
 #[derive(Debug, Default)]
@@ -557,15 +561,21 @@ async fn serve(store: &Store, op: Op, shared: &Mutex<Shared>) {
             window,
             time_base,
         } => {
-            if lock(shared).append_failed {
-                return fail(StoreError::Invalid {
-                    what: "sample",
-                    why: format!(
-                        "sample {} not written: an earlier sample failed to commit, and later ones \
-                         are not committed past the gap",
-                        sample.index
-                    ),
-                });
+            {
+                // Reported once, as the first failure: whether a later sample reached
+                // the writer before the job saw that failure is a matter of timing, and
+                // must not change what the run reports.
+                let mut s = lock(shared);
+                if s.append_failed {
+                    s.stats.refused_after_failure += 1;
+                    drop(s);
+                    tracing::warn!(
+                        sample = sample.index,
+                        "sample not written: an earlier sample failed to commit, and later \
+                         ones are not committed past the gap"
+                    );
+                    return;
+                }
             }
             let started = Instant::now();
             let encoded = match frame.as_ref().map(encode_for_store).transpose() {

@@ -1,5 +1,6 @@
 use super::*;
 use softtouch_schemas::FtStatus;
+use std::time::Duration;
 
 fn reading(i: u32, f: f64) -> FtReading {
     FtReading {
@@ -174,7 +175,13 @@ fn guard_on(packets: Vec<Vec<FtReading>>) -> (GuardTrip, Duration) {
         let stream = FtStream::spawn(Box::new(Packets(packets.into())), 64)
             .await
             .unwrap_or_else(|e| panic!("{e}"));
-        let trip = stream.guard(15.0, 0.8, Duration::from_millis(100)).await;
+        let trip = stream
+            .guard(&ForceGuard {
+                max_force_n: 15.0,
+                max_torque_nm: 0.8,
+                stale: Duration::from_millis(100),
+            })
+            .await;
         let after = t0.elapsed();
         let _ = stream.shutdown().await;
         (trip, after)

@@ -18,7 +18,7 @@
 use super::super::SimError;
 use super::super::contact::{ContactParams, FingerGeometry};
 use super::object::GraspObject;
-use crate::sim::contact::{Contact, Strip};
+use crate::contact::{Contact, Strip};
 use softtouch_schemas::Wrench;
 use std::sync::Arc;
 

@@ -4,11 +4,11 @@
 use super::render::{HEIGHT, WIDTH};
 use super::world::SimWorld;
 use super::{lock, rng};
-use crate::camera::{Camera, Frame};
-use crate::clock::TokioClock;
-use crate::error::DeviceError;
 use async_trait::async_trait;
 use rand::RngExt;
+use softtouch_drivers::camera::{Camera, Frame};
+use softtouch_drivers::clock::TokioClock;
+use softtouch_drivers::error::DeviceError;
 use softtouch_schemas::{FrameFormat, FrameMeta, TimestampNs};
 use std::sync::{Arc, Mutex};
 

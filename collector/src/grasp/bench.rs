@@ -15,35 +15,14 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use softtouch_drivers::sim::{GraspObject, SoftGraspHandle, soft_grasp};
+use super::sim::{SimTruth, projection, sim_err, stiffness};
 use softtouch_drivers::{Clock, Frame, TokioClock};
 use softtouch_grasp::{
-    Controller, ControllerConfig, ForceEstimator, GraspError, HoldMetrics, Projection, TrueForce,
-    hold_metrics,
+    Controller, ControllerConfig, ForceEstimator, GraspError, HoldMetrics, hold_metrics,
 };
-use softtouch_schemas::{ArmPose, SceneSpec, TimestampNs, Wrench};
+use softtouch_schemas::{SceneSpec, Wrench};
+use softtouch_sim::{GraspObject, soft_grasp};
 use softtouch_trainer::Predictor;
-
-/// The soft finger's sensor +x faces the object, so its push (−x) is the world's +y.
-pub fn projection() -> Result<Projection, GraspError> {
-    Projection::along_world_y(ArmPose::from_translation_yaw(
-        [0.0; 3],
-        -std::f64::consts::FRAC_PI_2,
-    ))
-}
-
-/// The simulator's truth, recorded beside the estimate (never fed to the loop).
-#[derive(Debug)]
-pub struct SimTruth(pub SoftGraspHandle, pub Projection);
-
-impl TrueForce for SimTruth {
-    fn true_force_n(&mut self, t: TimestampNs) -> Option<f64> {
-        self.0
-            .true_wrench(t)
-            .ok()
-            .and_then(|w| self.1.grip_force_n(&w))
-    }
-}
 
 /// Records, per frame, how long after its exposure the estimate was ready (on the
 /// loop's clock): the lateness of the cycle.
@@ -117,26 +96,6 @@ pub struct Setup {
     pub hold_s: f64,
     /// Seed of the scene's effects.
     pub seed: u64,
-}
-
-fn sim_err(e: softtouch_drivers::sim::SimError) -> GraspError {
-    GraspError::Config(format!("simulated grasp: {e}"))
-}
-
-/// The pre-grasp count and Λ_max from first touch to 1.5 × the target.
-pub fn stiffness(handle: &SoftGraspHandle, target_n: f64) -> Result<(u8, f64), GraspError> {
-    let touch = handle
-        .contact_count(0.02)
-        .map_err(sim_err)?
-        .ok_or_else(|| GraspError::Config("the closing fingers never touch the object".into()))?;
-    let counts: Vec<u8> = (touch..=255).collect();
-    let curve = handle.grip_force_curve(&counts).map_err(sim_err)?;
-    let end = curve
-        .iter()
-        .find(|(_, f)| *f > 1.5 * target_n)
-        .map_or(255, |(p, _)| *p);
-    let lambda = handle.max_stiffness_n_per_mm(touch, end).map_err(sim_err)?;
-    Ok((touch, lambda))
 }
 
 /// One run of the loop at `point` with `predictor`, on tokio's clock as it is (paused:

@@ -10,7 +10,7 @@
 use super::super::SimError;
 use super::super::contact::RodProfile;
 use super::touch::Grip;
-use crate::gripper::STROKE_MM;
+use softtouch_drivers::gripper::STROKE_MM;
 use softtouch_schemas::scene::{ObjectProfile, ObjectSpec};
 use softtouch_schemas::{RodShape, RodSpec};
 

@@ -55,15 +55,15 @@ use super::gripper::{G_M_S2, SPEED_MM_S, grip_force_n};
 use super::lattice::Deformed;
 use super::render::FrameBuffers;
 use super::world::{Look, Model, Scene};
-use crate::camera::{Camera, Frame};
-use crate::clock::{Clock, TokioClock};
-use crate::error::DeviceError;
-use crate::gripper::{
+use async_trait::async_trait;
+use rand::RngExt;
+use softtouch_drivers::camera::{Camera, Frame};
+use softtouch_drivers::clock::{Clock, TokioClock};
+use softtouch_drivers::error::DeviceError;
+use softtouch_drivers::gripper::{
     Gripper, GripperCommand, GripperStatus, ObjectStatus, STROKE_MM, opening_mm,
     position_for_opening,
 };
-use async_trait::async_trait;
-use rand::RngExt;
 use softtouch_schemas::{FrameFormat, FrameMeta, SceneSpec, TimestampNs, Wrench};
 use std::cell::RefCell;
 use std::sync::{Arc, Mutex, MutexGuard};

@@ -6,7 +6,8 @@
 
 use std::sync::Arc;
 
-use softtouch_drivers::select::{SelectError, real_camera, real_gripper};
+use crate::devices::SelectError;
+use softtouch_drivers::open::{real_camera, real_gripper};
 use std::time::Duration;
 
 use softtouch_drivers::{Camera, Clock, DeviceError, Gripper, TokioClock};

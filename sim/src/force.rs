@@ -14,12 +14,12 @@
 use super::effects::FtEffects;
 use super::world::{SimWorld, relaxed};
 use super::{lock, rng};
-use crate::clock::{Clock, TokioClock};
-use crate::error::DeviceError;
-use crate::force::ForceSensor;
 use async_trait::async_trait;
 use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
+use softtouch_drivers::clock::{Clock, TokioClock};
+use softtouch_drivers::error::DeviceError;
+use softtouch_drivers::force::ForceSensor;
 use softtouch_schemas::{FtReading, FtStatus, TimestampNs, Wrench};
 use std::sync::{Arc, Mutex};
 

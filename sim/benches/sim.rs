@@ -8,8 +8,8 @@
 //! `cargo bench --workspace --bench sim`
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use softtouch_drivers::sim::{SceneSim, encode_png};
 use softtouch_schemas::{ContactPose, SceneSpec, config, defaults};
+use softtouch_sim::{SceneSim, encode_png};
 use std::hint::black_box;
 
 fn scenes() -> (SceneSpec, SceneSpec) {

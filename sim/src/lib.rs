@@ -1,4 +1,6 @@
-//! The simulated scene and the simulated twin of every device.
+//! The simulated scene and the simulated twin of every device, behind the drivers'
+//! traits. It must not depend on a store, a model or the CLI; nothing outside tests,
+//! benches and the collector's device building should name it.
 //!
 //! # The finger and the contact
 //!
@@ -94,6 +96,7 @@ mod gripper;
 mod lattice;
 mod render;
 mod rng;
+pub mod second_core;
 mod world;
 
 pub use arm::{MAX_ACCEL_M_S2, MAX_ROT_ACCEL_RAD_S2, MAX_ROT_SPEED_RAD_S, MAX_SPEED_M_S, SimArm};
@@ -111,10 +114,10 @@ pub use lattice::LatticeParams;
 pub use render::{FINGER_RGB, HEIGHT, WIDTH};
 pub use world::{SimParams, SimWorld};
 
-use crate::clock::TokioClock;
-use crate::error::DeviceError;
-use crate::{Arm, Camera, ForceSensor, Gripper};
 use image::RgbImage;
+use softtouch_drivers::clock::TokioClock;
+use softtouch_drivers::error::DeviceError;
+use softtouch_drivers::{Arm, Camera, ForceSensor, Gripper};
 use softtouch_schemas::rig::{ArmDevice, CameraDevice, ForceSensorDevice, GripperDevice};
 use softtouch_schemas::{ArmPose, ContactPose, RigConfig, SceneSpec, Wrench};
 use std::sync::{Arc, Mutex, MutexGuard};

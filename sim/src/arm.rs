@@ -4,11 +4,11 @@
 
 use super::world::{Segment, SimWorld};
 use super::{lock, rng};
-use crate::arm::{Arm, ArmState};
-use crate::clock::{Clock, TokioClock};
-use crate::error::DeviceError;
 use async_trait::async_trait;
 use rand::RngExt;
+use softtouch_drivers::arm::{Arm, ArmState};
+use softtouch_drivers::clock::{Clock, TokioClock};
+use softtouch_drivers::error::DeviceError;
 use softtouch_schemas::{ArmPose, ContactPose, DurationNs, TimestampNs};
 use std::sync::{Arc, Mutex};
 

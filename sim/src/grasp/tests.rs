@@ -2,7 +2,7 @@
 
 use super::touch::{Grip, SqueezeAlongShift, Strips, finger_contact};
 use super::*;
-use crate::sim::SceneSim;
+use crate::SceneSim;
 use softtouch_schemas::scene::ObjectProfile;
 use softtouch_schemas::{ContactPose, Effect, RodShape};
 use std::time::Duration;

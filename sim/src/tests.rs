@@ -2,9 +2,9 @@
 #![allow(clippy::float_cmp)]
 
 use super::*;
-use crate::clock::Clock;
-use crate::gripper::{GripperCommand, ObjectStatus};
 use proptest::prelude::*;
+use softtouch_drivers::clock::Clock;
+use softtouch_drivers::gripper::{GripperCommand, ObjectStatus};
 use softtouch_schemas::{Effect, FrameFormat, FtReading, FtStatus, Medium, TimestampNs, defaults};
 use std::f64::consts::PI;
 

@@ -4,10 +4,12 @@
 
 use super::lock;
 use super::world::SimWorld;
-use crate::clock::{Clock, TokioClock};
-use crate::error::DeviceError;
-use crate::gripper::{Gripper, GripperCommand, GripperStatus, ObjectStatus, STROKE_MM, opening_mm};
 use async_trait::async_trait;
+use softtouch_drivers::clock::{Clock, TokioClock};
+use softtouch_drivers::error::DeviceError;
+use softtouch_drivers::gripper::{
+    Gripper, GripperCommand, GripperStatus, ObjectStatus, STROKE_MM, opening_mm,
+};
 use softtouch_schemas::TimestampNs;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -185,7 +187,7 @@ impl Gripper for SimGripper {
             object: self.object,
             fault: 0,
             requested_position: self.cmd.position,
-            position: crate::gripper::position_for_opening(self.opening_mm),
+            position: softtouch_drivers::gripper::position_for_opening(self.opening_mm),
             current_ma,
         })
     }

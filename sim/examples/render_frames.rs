@@ -4,8 +4,8 @@
 //! `cargo run -p softtouch-drivers --example render_frames --release`
 
 use rand::{RngExt, SeedableRng};
-use softtouch_drivers::sim::{SceneSim, encode_png};
 use softtouch_schemas::{ContactPose, SceneSpec, config};
+use softtouch_sim::{SceneSim, encode_png};
 use std::path::Path;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

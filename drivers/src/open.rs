@@ -1,60 +1,15 @@
-//! Building a rig of boxed devices from the rig config: the simulated twin for a
-//! device whose driver is `sim`, the real driver otherwise. Real and simulated
-//! devices mix (a real sensor on a simulated arm, for instance).
+//! Opening the real driver of a rig entry: `None` for a simulated entry (the
+//! simulator, a crate above this one, builds those), the driver connected otherwise.
 
 use crate::arm::Arm;
 use crate::camera::Camera;
-use crate::clock::{Clock, TokioClock};
+use crate::clock::Clock;
 use crate::error::DeviceError;
 use crate::force::ForceSensor;
 use crate::gripper::Gripper;
-use crate::sim::{SimError, SimHandle, SimRig};
 use softtouch_schemas::rig::{ArmDevice, CameraDevice, ForceSensorDevice, GripperDevice};
-use softtouch_schemas::{RigConfig, SceneSpec};
 use std::net::SocketAddr;
 use std::sync::Arc;
-
-/// The devices of a rig.
-pub struct Devices {
-    /// The arm.
-    pub arm: Box<dyn Arm>,
-    /// The force/torque sensor.
-    pub force_sensor: Box<dyn ForceSensor>,
-    /// The camera.
-    pub camera: Box<dyn Camera>,
-    /// The gripper.
-    pub gripper: Box<dyn Gripper>,
-    /// The simulated world, when any device is simulated.
-    pub sim: Option<SimHandle>,
-}
-
-impl std::fmt::Debug for Devices {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Devices")
-            .field("sim", &self.sim)
-            .finish_non_exhaustive()
-    }
-}
-
-/// Why a rig could not be built.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum SelectError {
-    /// The simulator could not be built.
-    #[error("simulated rig: {0}")]
-    Sim(#[from] SimError),
-    /// A real device could not be opened.
-    #[error("{device}: {source}")]
-    Device {
-        /// Which device (`arm`, `force_sensor`, `camera`, `gripper`).
-        device: &'static str,
-        /// What went wrong.
-        source: DeviceError,
-    },
-}
-
-fn dev(device: &'static str) -> impl FnOnce(DeviceError) -> SelectError {
-    move |source| SelectError::Device { device, source }
-}
 
 /// Resolve `host` or `host:port`; without a port, `default_port`.
 pub async fn resolve(address: &str, default_port: u16) -> Result<SocketAddr, DeviceError> {
@@ -215,102 +170,5 @@ pub async fn real_gripper(
             };
             Some(Box::new(crate::hande::HandE::new(io, config, clock)))
         }
-    })
-}
-
-/// The rig config with every real device replaced by a simulated one (so the
-/// simulator can be built for the devices that are simulated).
-fn all_sim(rig: &RigConfig) -> RigConfig {
-    let mut r = rig.clone();
-    if let ArmDevice::Franka { reflex_force_n, .. } = r.arm {
-        r.arm = ArmDevice::Sim { reflex_force_n };
-    }
-    match r.force_sensor {
-        ForceSensorDevice::Sim { .. } => {}
-        ForceSensorDevice::NetFt { rate_hz, .. } => {
-            r.force_sensor = ForceSensorDevice::Sim { rate_hz }
-        }
-        ForceSensorDevice::AtiSerial { .. } => {
-            r.force_sensor = ForceSensorDevice::Sim { rate_hz: 1000.0 }
-        }
-    }
-    if let CameraDevice::V4l { .. } = r.camera {
-        r.camera = CameraDevice::Sim { fps: 120.0 };
-    }
-    if let GripperDevice::HandE { .. } = r.gripper {
-        r.gripper = GripperDevice::Sim {};
-    }
-    r
-}
-
-fn any_sim(rig: &RigConfig) -> bool {
-    matches!(rig.arm, ArmDevice::Sim { .. })
-        || matches!(rig.force_sensor, ForceSensorDevice::Sim { .. })
-        || matches!(rig.camera, CameraDevice::Sim { .. })
-        || matches!(rig.gripper, GripperDevice::Sim {})
-}
-
-/// Build every device of `rig`: simulated ones from [`SimRig`] on one world (seeded
-/// by `seed`, with `scene`), real ones from their drivers. Every device reads `clock`.
-pub async fn build(
-    rig: &RigConfig,
-    scene: &SceneSpec,
-    seed: u64,
-    clock: TokioClock,
-) -> Result<Devices, SelectError> {
-    let shared: Arc<dyn Clock> = Arc::new(clock);
-    let arm = real_arm(&rig.arm, shared.clone())
-        .await
-        .map_err(dev("arm"))?;
-    let force_sensor = real_force_sensor(&rig.force_sensor, shared.clone())
-        .await
-        .map_err(dev("force_sensor"))?;
-    let camera = real_camera(&rig.camera, shared.clone())
-        .await
-        .map_err(dev("camera"))?;
-    let gripper = real_gripper(&rig.gripper, shared)
-        .await
-        .map_err(dev("gripper"))?;
-    let sim = if any_sim(rig) {
-        Some(SimRig::new(&all_sim(rig), scene, seed, clock)?)
-    } else {
-        None
-    };
-    let handle = sim.as_ref().map(|s| s.handle.clone());
-    let (sa, sf, sc, sg) = match sim {
-        Some(s) => (
-            Some(s.arm),
-            Some(s.force_sensor),
-            Some(s.camera),
-            Some(s.gripper),
-        ),
-        None => (None, None, None, None),
-    };
-    // A device is either real or simulated; `any_sim` guarantees the simulated one exists.
-    let missing = |device: &'static str| SelectError::Device {
-        device,
-        source: DeviceError::InvalidCommand {
-            device: device.into(),
-            message: "no driver selected".into(),
-        },
-    };
-    Ok(Devices {
-        arm: match arm {
-            Some(a) => a,
-            None => Box::new(sa.ok_or_else(|| missing("arm"))?),
-        },
-        force_sensor: match force_sensor {
-            Some(f) => f,
-            None => Box::new(sf.ok_or_else(|| missing("force_sensor"))?),
-        },
-        camera: match camera {
-            Some(c) => c,
-            None => Box::new(sc.ok_or_else(|| missing("camera"))?),
-        },
-        gripper: match gripper {
-            Some(g) => g,
-            None => Box::new(sg.ok_or_else(|| missing("gripper"))?),
-        },
-        sim: handle,
     })
 }

@@ -1,6 +1,6 @@
 //! The finger, the rod, and the contact between them.
 //!
-//! See the module docs of [`crate::sim`] for the geometric reading of `(x, z, θ)`.
+//! See the module docs of [`crate`] for the geometric reading of `(x, z, θ)`.
 //! Everything here is in the sensor frame, metres and newtons.
 
 use super::SimError;

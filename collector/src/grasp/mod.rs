@@ -1,0 +1,17 @@
+//! Grasping experiments on a soft-finger Hand-E, as a library the verbs call.
+//!
+//! - [`sim`]: the simulated soft grasp behind the grasp library's traits (judge, lift,
+//!   wrist, the recorded truth) and the simulator's measured stiffness.
+//! - [`devices`]: a real Hand-E and the finger cameras from the rig config, end
+//!   calibration, force following on a rig.
+//! - [`settings`]: each setting's one validation (rate, δ, durations, fingers), shared
+//!   by every verb that takes it.
+//! - [`bench`]: `softtouch bench grasp`, the force loop measured over K, δ, camera rate
+//!   and model on the simulated soft grasp.
+//!
+//! Nothing here parses arguments; the verbs under `cli/` do, and print.
+
+pub mod bench;
+pub mod devices;
+pub mod settings;
+pub mod sim;

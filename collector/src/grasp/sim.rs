@@ -1,0 +1,171 @@
+//! The simulated soft grasp behind the grasp library's narrow traits: its judge
+//! ([`SimJudge`]), lift ([`SimLift`]), wrist ([`SimWrist`]) and the truth recorded
+//! beside the estimate ([`SimTruth`], [`LoggedTruth`]; never fed to a loop). These
+//! adapters live here so that `softtouch-grasp` names no simulator.
+
+use std::sync::{Arc, Mutex};
+
+use softtouch_drivers::{Clock, DeviceError};
+use softtouch_grasp::{
+    GraspError, Judge, Lift, LiftPlan, ObjectState, Observation, Projection, TrueForce, Verdict,
+    Wrist, physics_verdict,
+};
+use softtouch_schemas::{ArmPose, TimestampNs};
+use softtouch_sim::{HoldState, SimError, SoftGraspHandle};
+
+/// The soft finger's sensor +x faces the object, so its push (−x) is the world's +y.
+///
+/// # Errors
+/// Never in practice (the pose is a fixed rotation); the projection checks it.
+pub fn projection() -> Result<Projection, GraspError> {
+    Projection::along_world_y(ArmPose::from_translation_yaw(
+        [0.0; 3],
+        -std::f64::consts::FRAC_PI_2,
+    ))
+}
+
+pub(crate) fn sim_err(e: SimError) -> GraspError {
+    GraspError::Config(format!("simulated grasp: {e}"))
+}
+
+/// The simulator's truth, recorded beside the estimate (never fed to the loop).
+#[derive(Debug)]
+pub struct SimTruth(pub SoftGraspHandle, pub Projection);
+
+impl TrueForce for SimTruth {
+    fn true_force_n(&mut self, t: TimestampNs) -> Option<f64> {
+        self.0
+            .true_wrench(t)
+            .ok()
+            .and_then(|w| self.1.grip_force_n(&w))
+    }
+}
+
+/// The simulator's truth at one cycle, as [`LoggedTruth`] records it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TruthSample {
+    /// When, on the devices' clock.
+    pub t: TimestampNs,
+    /// Mean true τz over the fingers read, N·m.
+    pub torque_z_nm: f64,
+    /// The wrist's yaw, rad.
+    pub wrist_rad: f64,
+}
+
+/// The simulator's truth for the record (the loop never reads it): the mean of the
+/// fingers the loop reads, projected like the estimate; τz and the wrist are logged.
+#[derive(Debug)]
+pub struct LoggedTruth {
+    /// The grasp.
+    pub handle: SoftGraspHandle,
+    /// Each finger's projection onto the grip axis.
+    pub projections: [Projection; 2],
+    /// How many fingers the loop reads (1 or 2).
+    pub fingers: usize,
+    /// Every cycle's τz and wrist yaw.
+    pub log: Arc<Mutex<Vec<TruthSample>>>,
+}
+
+impl TrueForce for LoggedTruth {
+    fn true_force_n(&mut self, t: TimestampNs) -> Option<f64> {
+        let (mut force, mut torque) = (0.0, 0.0);
+        for k in 0..self.fingers {
+            let w = self.handle.true_wrench_on(k, t).ok()?;
+            force += self.projections[k].grip_force_n(&w)?;
+            torque += w.torque_nm[2];
+        }
+        let n = self.fingers as f64;
+        if let (Ok(wrist_rad), Ok(mut log)) = (self.handle.wrist_yaw(t), self.log.lock()) {
+            log.push(TruthSample {
+                t,
+                torque_z_nm: torque / n,
+                wrist_rad,
+            });
+        }
+        Some(force / n)
+    }
+}
+
+/// The pre-grasp count and Λ_max from first touch to 1.5 × the target, from the
+/// simulator's true force-against-position curve.
+///
+/// # Errors
+/// The fingers never touch the object, or the simulator fails.
+pub fn stiffness(handle: &SoftGraspHandle, target_n: f64) -> Result<(u8, f64), GraspError> {
+    let touch = handle
+        .contact_count(0.02)
+        .map_err(sim_err)?
+        .ok_or_else(|| GraspError::Config("the closing fingers never touch the object".into()))?;
+    let counts: Vec<u8> = (touch..=255).collect();
+    let curve = handle.grip_force_curve(&counts).map_err(sim_err)?;
+    let end = curve
+        .iter()
+        .find(|(_, f)| *f > 1.5 * target_n)
+        .map_or(255, |(p, _)| *p);
+    let lambda = handle.max_stiffness_n_per_mm(touch, end).map_err(sim_err)?;
+    Ok((touch, lambda))
+}
+
+/// The simulator's judge: where the physics left the object after the hold.
+#[derive(Debug, Clone)]
+pub struct SimJudge(pub SoftGraspHandle);
+
+impl Judge for SimJudge {
+    async fn judge(&mut self, seen: &Observation) -> Result<Verdict, GraspError> {
+        let state = match self.0.hold_state().map_err(sim_err)? {
+            HoldState::Held => ObjectState::Held,
+            HoldState::Crushed { .. } => ObjectState::Crushed,
+            HoldState::Absent => ObjectState::Absent,
+            HoldState::Slipped { .. } => ObjectState::Slipped,
+            HoldState::Resting => ObjectState::Resting,
+        };
+        Ok(physics_verdict(state, seen))
+    }
+}
+
+/// The simulator's lift: [`SoftGraspHandle::start_lift`] at the clock's present.
+#[derive(Debug, Clone)]
+pub struct SimLift {
+    /// The grasp.
+    pub handle: SoftGraspHandle,
+    /// The clock the devices run on.
+    pub clock: Arc<dyn Clock>,
+}
+
+impl Lift for SimLift {
+    async fn start_lift(&mut self, plan: &LiftPlan) -> Result<(), GraspError> {
+        self.handle
+            .start_lift(
+                self.clock.now(),
+                plan.height_m,
+                plan.speed_m_s,
+                plan.accel_m_s2,
+            )
+            .map_err(|e| GraspError::Config(format!("simulated lift: {e}")))
+    }
+}
+
+/// The simulated soft grasp's wrist: it turns the gripper at up to
+/// [`softtouch_sim::WRIST_MAX_RAD_S`].
+#[derive(Debug, Clone)]
+pub struct SimWrist(pub SoftGraspHandle);
+
+fn wrist_fault(e: &SimError) -> GraspError {
+    GraspError::Device(DeviceError::Fault {
+        device: "sim-wrist".into(),
+        code: None,
+        message: e.to_string(),
+    })
+}
+
+impl Wrist for SimWrist {
+    fn set_yaw_target(&mut self, yaw_rad: f64) -> Result<(), GraspError> {
+        self.0
+            .set_wrist_target(yaw_rad)
+            .map_err(|e| wrist_fault(&e))
+    }
+
+    fn yaw_rad(&mut self) -> Result<f64, GraspError> {
+        self.0.wrist_yaw_now().map_err(|e| wrist_fault(&e))
+    }
+}

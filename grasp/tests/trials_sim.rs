@@ -1,0 +1,179 @@
+//! Grasp trials on the simulated soft grasp: the protocol of `trials.rs` run end to
+//! end, the physics deciding through [`physics_verdict`].
+#![allow(clippy::float_cmp)]
+
+use softtouch_drivers::gripper::position_for_opening;
+use softtouch_drivers::{Clock, Frame, TokioClock};
+use softtouch_grasp::{
+    ControllerConfig, FailReason, ForceEstimator, GraspError, Judge, Lift, LiftPlan, Mode,
+    ObjectState, Observation, Projection, TrialConfig, TrialDevices, TrialResult, TrueForce,
+    Verdict, physics_verdict, run_trial,
+};
+use softtouch_schemas::scene::ObjectProfile;
+use softtouch_schemas::{ArmPose, RodShape, TimestampNs, Wrench};
+use softtouch_sim::{GraspObject, HoldState, SoftGraspHandle, soft_grasp};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// The simulator's judge, as the collector's: the physics' hold state.
+struct SimJudge(SoftGraspHandle);
+
+impl Judge for SimJudge {
+    async fn judge(&mut self, seen: &Observation) -> Result<Verdict, GraspError> {
+        let state = match self
+            .0
+            .hold_state()
+            .map_err(|e| GraspError::Config(e.to_string()))?
+        {
+            HoldState::Held => ObjectState::Held,
+            HoldState::Crushed { .. } => ObjectState::Crushed,
+            HoldState::Absent => ObjectState::Absent,
+            HoldState::Slipped { .. } => ObjectState::Slipped,
+            HoldState::Resting => ObjectState::Resting,
+        };
+        Ok(physics_verdict(state, seen))
+    }
+}
+
+/// The simulator's lift at the clock's present.
+struct SimLift {
+    handle: SoftGraspHandle,
+    clock: Arc<dyn Clock>,
+}
+
+impl Lift for SimLift {
+    async fn start_lift(&mut self, plan: &LiftPlan) -> Result<(), GraspError> {
+        self.handle
+            .start_lift(
+                self.clock.now(),
+                plan.height_m,
+                plan.speed_m_s,
+                plan.accel_m_s2,
+            )
+            .map_err(|e| GraspError::Config(e.to_string()))
+    }
+}
+
+/// A stand-in for the model: the simulator's true wrench on finger 0 at the
+/// frame's time (what a perfect model would read).
+struct Perfect(SoftGraspHandle);
+
+impl ForceEstimator for Perfect {
+    fn estimate(&mut self, frame: &Frame) -> Result<Option<Wrench>, GraspError> {
+        self.0
+            .true_wrench(frame.meta.t)
+            .map(Some)
+            .map_err(|e| GraspError::Estimate(e.to_string()))
+    }
+}
+
+struct Truth(SoftGraspHandle, Projection);
+
+impl TrueForce for Truth {
+    fn true_force_n(&mut self, t: TimestampNs) -> Option<f64> {
+        self.0
+            .true_wrench(t)
+            .ok()
+            .and_then(|w| self.1.grip_force_n(&w))
+    }
+}
+
+fn projection() -> Projection {
+    Projection::along_world_y(ArmPose::from_translation_yaw(
+        [0.0; 3],
+        -std::f64::consts::FRAC_PI_2,
+    ))
+    .unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn cylinder() -> GraspObject {
+    GraspObject::standing(
+        "cylinder",
+        RodShape::Circle,
+        0.03,
+        1.0,
+        ObjectProfile::Prism { height_m: 0.05 },
+    )
+}
+
+async fn trial(
+    object: GraspObject,
+    mode: Mode,
+    grasp_opening_mm: f64,
+    target_n: f64,
+) -> TrialResult {
+    let scene = softtouch_schemas::defaults::scene();
+    let clock = TokioClock::new();
+    let (gripper, camera, handle) =
+        soft_grasp(&scene, object, 30.0, 1, clock).unwrap_or_else(|e| panic!("{e}"));
+    let touch = handle.contact_count(0.02).ok().flatten().unwrap_or(0);
+    let lambda = handle.max_stiffness_n_per_mm(touch, 255).unwrap_or(1.0);
+    let mut config = ControllerConfig::new(projection());
+    config.stepper.gain_n_per_mm = 0.75 * lambda.max(0.1);
+    let shared: Arc<dyn Clock> = Arc::new(clock);
+    let mut estimator = Perfect(handle.clone());
+    let devices = TrialDevices {
+        gripper,
+        camera,
+        estimator: &mut estimator,
+        truth: Truth(handle.clone(), config.projection),
+        lift: SimLift {
+            handle: handle.clone(),
+            clock: Arc::clone(&shared),
+        },
+        judge: SimJudge(handle.clone()),
+        clock: shared,
+    };
+    let trial = TrialConfig {
+        mode,
+        grasp_position: position_for_opening(grasp_opening_mm),
+        pregrasp_position: touch.saturating_sub(6),
+        target_n,
+        confirm: Duration::from_millis(200),
+        close_timeout: Duration::from_secs(3),
+        move_timeout: Duration::from_secs(3),
+        lift: LiftPlan {
+            height_m: 0.05,
+            speed_m_s: 0.1,
+            accel_m_s2: 2.0,
+        },
+        hold: Duration::from_millis(500),
+    };
+    run_trial(devices, config, &trial)
+        .await
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_closed_loop_grasp_holds_and_an_open_width_that_misses_is_a_miss() {
+    let held = trial(cylinder(), Mode::Closed, 28.0, 1.5).await;
+    assert_eq!(held.verdict, Verdict::Held, "{held:?}");
+    assert!(held.confirmed_after_ns.is_some());
+    assert!(held.peak_true_n.is_some_and(|f| f > 1.0));
+    let wide = trial(cylinder(), Mode::Open, 45.0, 1.5).await;
+    assert_eq!(
+        wide.verdict,
+        Verdict::Failed(FailReason::Miss),
+        "{:?}",
+        wide.verdict
+    );
+    assert!(!wide.trace.is_empty());
+    let tight = trial(cylinder(), Mode::Open, 28.0, 1.5).await;
+    assert!(tight.peak_true_n.is_some_and(|f| f > 0.02));
+    // The same trial again gives the same record.
+    assert_eq!(trial(cylinder(), Mode::Closed, 28.0, 1.5).await, held);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_delicate_object_squeezed_past_its_limit_is_crushed() {
+    let mut cake = cylinder();
+    cake.name = "cake".into();
+    cake.crush_force_n = Some(1.0);
+    let r = trial(cake, Mode::Closed, 28.0, 2.0).await;
+    assert_eq!(
+        r.verdict,
+        Verdict::Failed(FailReason::Crush),
+        "{:?}",
+        r.verdict
+    );
+}
