@@ -207,6 +207,16 @@ pub fn error_text(e: &anyhow::Error) -> String {
     out
 }
 
+impl From<crate::grasp::trials::TrialsError> for Failure {
+    fn from(e: crate::grasp::trials::TrialsError) -> Self {
+        if e.is_bad_input() {
+            Self::BadInput(e.into())
+        } else {
+            Self::Runtime(e.into())
+        }
+    }
+}
+
 impl From<crate::grasp::settings::SettingError> for Failure {
     fn from(e: crate::grasp::settings::SettingError) -> Self {
         Self::BadInput(e.into())

@@ -6,6 +6,8 @@
 //!   calibration, force following on a rig.
 //! - [`settings`]: each setting's one validation (rate, δ, durations, fingers), shared
 //!   by every verb that takes it.
+//! - [`trials`]: the success-rate trials of Figure 4: sessions, trials run and stored
+//!   one at a time, the table with Wilson intervals, its CSVs and charts.
 //! - [`bench`]: `softtouch bench grasp`, the force loop measured over K, δ, camera rate
 //!   and model on the simulated soft grasp.
 //!
@@ -15,3 +17,4 @@ pub mod bench;
 pub mod devices;
 pub mod settings;
 pub mod sim;
+pub mod trials;

@@ -1,0 +1,265 @@
+//! Running a session's trials: each on a fresh simulated grasp on virtual time, on
+//! its own thread with the model, stored as it ends.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use softtouch_drivers::gripper::{opening_mm, position_for_opening};
+use softtouch_drivers::{Clock, TokioClock};
+use softtouch_grasp::{
+    ControllerConfig, GraspError, Mode, TrialConfig, TrialDevices, TrialResult, perturbation_m,
+    run_trial, trial_seed,
+};
+use softtouch_schemas::{Medium, SceneSpec};
+use softtouch_sim::{GraspObject, soft_grasp};
+use softtouch_trainer::Predictor;
+
+use super::{Planned, Session, TrialsError, invalid, medium_name, objects_of};
+use crate::grasp::sim::{SimJudge, SimLift, SimTruth, projection, stiffness};
+use crate::store::{GraspTrace, GraspTrialRow, Store};
+
+/// One trial, as it ends: its stored row and its timing.
+#[derive(Debug, Clone)]
+pub struct TrialDone {
+    /// The stored row.
+    pub row: GraspTrialRow,
+    /// The σ it ran at, mm.
+    pub sigma_mm: f64,
+    /// Its medium and mode, and how many cycles it ran (for the timing table).
+    pub timing: TrialTiming,
+}
+
+/// One trial's wall time, for the timing table.
+#[derive(Debug, Clone, Copy)]
+pub struct TrialTiming {
+    /// The scene's medium.
+    pub medium: Medium,
+    /// Open or closed loop.
+    pub mode: Mode,
+    /// Wall time, s.
+    pub wall_s: f64,
+    /// Control cycles (one a frame).
+    pub cycles: usize,
+}
+
+/// Runs `todo` (from [`Session::progress`]) one trial at a time, each stored as it
+/// ends; `done` hears of each (to print progress; its error stops the session).
+/// K per (scene, object) is 0.75 × Λ_max measured on the simulator's contact physics,
+/// before any trial, on the unperturbed object.
+///
+/// # Errors
+/// A trial that fails (a device, the model), the store, or `done`.
+pub async fn run_trials(
+    store: &Store,
+    session: &Session,
+    todo: &[Planned],
+    done: &mut dyn FnMut(&TrialDone) -> Result<(), TrialsError>,
+) -> Result<(), TrialsError> {
+    let plan = &session.plan;
+    let scenes = &session.scenes;
+    let seed = session.seed;
+    let objects = objects_of(plan, scenes)?;
+    let mut predictor = Predictor::from_bytes(&session.model_bytes)?;
+    // A trial is one frame at a time: its drawing, preprocessing and the model's
+    // larger convolutions take the second core for half of each frame's work, and
+    // the rest of the model runs on one (burn's rayon workers spinning on both cores
+    // would only get in their way).
+    predictor.split_frames(Some(Arc::new(SecondCore)));
+    let inference_pool = Arc::new(
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .map_err(|e| TrialsError::Failed(format!("cannot build a thread pool: {e}")))?,
+    );
+    let mut predictor = Some(predictor);
+    let mut gains: HashMap<(u32, String), f64> = HashMap::new();
+    for p in todo {
+        let si = p.key.scene_index as usize;
+        let scene = &scenes[si];
+        let oi = plan
+            .objects
+            .iter()
+            .position(|o| *o == p.key.object)
+            .unwrap_or(0);
+        let template = objects[si][oi].clone();
+        let gain_key = (p.key.scene_index, p.key.object.clone());
+        let gain = match gains.get(&gain_key) {
+            Some(g) => *g,
+            None => {
+                let (_, _, handle) =
+                    soft_grasp(scene, template.clone(), plan.fps, seed, TokioClock::new())
+                        .map_err(|e| invalid(format!("object `{}`: {e}", template.name)))?;
+                let (_, lambda) = stiffness(&handle, plan.target_n)?;
+                let g = plan.gain_over_lambda * lambda.max(0.05);
+                gains.insert(gain_key, g);
+                g
+            }
+        };
+        let mut controller = ControllerConfig::new(projection()?);
+        controller.stepper.gain_n_per_mm = gain;
+        controller.stepper.tolerance_n = plan.tolerance_n;
+        let grasp_mm = plan
+            .open_width_mm
+            .unwrap_or(template.grasp_width_m * 1000.0);
+        let trial = TrialConfig {
+            mode: p.mode,
+            grasp_position: position_for_opening(grasp_mm),
+            pregrasp_position: position_for_opening(grasp_mm + plan.pregrasp_margin_mm),
+            target_n: plan.target_n,
+            confirm: Duration::from_secs_f64(plan.confirm_s),
+            close_timeout: Duration::from_secs_f64(plan.close_timeout_s),
+            move_timeout: Duration::from_secs(5),
+            lift: plan.lift(),
+            hold: Duration::from_secs_f64(plan.hold_s),
+        };
+        let offset_m = perturbation_m(seed, &p.key.object, u64::from(p.key.trial), p.sigma_m);
+        let job = Job {
+            scene: scene.clone(),
+            template,
+            offset_m,
+            seed: trial_seed(seed, &p.key.object, u64::from(p.key.trial)),
+            fps: plan.fps,
+            controller,
+            trial,
+        };
+        let t0 = Instant::now();
+        let Some(pred) = predictor.take() else {
+            return Err(TrialsError::Failed(
+                "the model was lost by a failed trial".into(),
+            ));
+        };
+        let pool = Arc::clone(&inference_pool);
+        let (pred, result) =
+            tokio::task::spawn_blocking(move || pool.install(|| run_job(job, pred)))
+                .await
+                .map_err(|e| TrialsError::Failed(format!("a trial's thread failed: {e}")))?;
+        predictor = Some(pred);
+        let result = result?;
+        let wall_s = t0.elapsed().as_secs_f64();
+        let row = GraspTrialRow {
+            key: p.key.clone(),
+            medium: medium_name(scene.medium).to_owned(),
+            sigma_m: p.sigma_m,
+            offset_m,
+            commanded_width_m: opening_mm(result.commanded_position) / 1000.0,
+            final_width_m: opening_mm(result.final_position) / 1000.0,
+            peak_estimate_n: result.peak_estimate_n,
+            peak_true_n: result.peak_true_n,
+            success: result.verdict.success(),
+            reason: result.verdict.reason().map(|r| r.as_str().to_owned()),
+            detail: result.detail.clone(),
+            confirmed_after_s: result.confirmed_after_ns.map(|n| n as f64 * 1e-9),
+            wall_s,
+        };
+        store
+            .append_grasp_trial(session.id, &row, &pack_trace(&result))
+            .await?;
+        done(&TrialDone {
+            sigma_mm: plan.sigmas_mm[p.key.sigma_index as usize],
+            timing: TrialTiming {
+                medium: scene.medium,
+                mode: p.mode,
+                wall_s,
+                cycles: result.trace.len(),
+            },
+            row,
+        })?;
+    }
+    Ok(())
+}
+
+/// Everything one simulated trial needs, owned (it runs on its own thread and paused
+/// clock).
+struct Job {
+    scene: SceneSpec,
+    template: GraspObject,
+    offset_m: [f64; 3],
+    seed: u64,
+    fps: f64,
+    controller: ControllerConfig,
+    trial: TrialConfig,
+}
+
+/// Runs one trial on a fresh simulated grasp, on virtual time.
+fn run_job(job: Job, mut predictor: Predictor) -> (Predictor, Result<TrialResult, GraspError>) {
+    let rt = match tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .start_paused(true)
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            return (
+                predictor,
+                Err(GraspError::Config(format!(
+                    "cannot start a trial's runtime: {e}"
+                ))),
+            );
+        }
+    };
+    let result = rt.block_on(async {
+        let clock = TokioClock::new();
+        let placed = job.template.placed(job.offset_m);
+        let sim_err = |e: softtouch_sim::SimError| {
+            GraspError::Config(format!("object `{}`: {e}", job.template.name))
+        };
+        let (gripper, camera, handle) = soft_grasp(
+            &job.scene,
+            placed.clone().unwrap_or_else(|| job.template.clone()),
+            job.fps,
+            job.seed,
+            clock,
+        )
+        .map_err(sim_err)?;
+        if placed.is_none() {
+            // The fingers miss it: nothing between them.
+            handle.set_object(false).map_err(sim_err)?;
+        }
+        let shared: Arc<dyn Clock> = Arc::new(clock);
+        let devices = TrialDevices {
+            gripper,
+            camera,
+            estimator: &mut predictor,
+            truth: SimTruth(handle.clone(), job.controller.projection),
+            lift: SimLift {
+                handle: handle.clone(),
+                clock: Arc::clone(&shared),
+            },
+            judge: SimJudge(handle),
+            clock: shared,
+        };
+        run_trial(devices, job.controller, &job.trial).await
+    });
+    (predictor, result)
+}
+
+/// A trial's trace as the store packs it.
+#[must_use]
+pub fn pack_trace(r: &TrialResult) -> GraspTrace {
+    let t0 = r.trace.first().map_or(0, |c| c.t.0);
+    let f = |v: Option<f64>| v.map_or(f32::NAN, |x| x as f32);
+    GraspTrace {
+        t_s: r
+            .trace
+            .iter()
+            .map(|c| (c.t.0.saturating_sub(t0) as f64 * 1e-9) as f32)
+            .collect(),
+        estimate_n: r.trace.iter().map(|c| f(c.estimate_n)).collect(),
+        true_n: r.trace.iter().map(|c| f(c.true_n)).collect(),
+        measured_count: r.trace.iter().map(|c| c.measured_position).collect(),
+        request_count: r.trace.iter().map(|c| c.position_request).collect(),
+    }
+}
+
+/// The drivers' second core (kept awake between frames) for the other half of the
+/// preprocessing and of the model's larger convolutions: the one helper the
+/// simulated camera's drawing uses too.
+#[derive(Debug)]
+struct SecondCore;
+
+impl softtouch_trainer::Fork for SecondCore {
+    fn fork(&self, here: &mut (dyn FnMut() + Send), there: &mut (dyn FnMut() + Send)) {
+        softtouch_sim::second_core::join(here, there);
+    }
+}
