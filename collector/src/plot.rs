@@ -6,6 +6,7 @@
 //! - [`histogram_grid`]: a grid of histogram panels, one per value series.
 //! - [`xy_chart`]: several labelled x–y series as lines, points or both.
 //! - [`bar_chart`]: grouped bars with interval whiskers and reference ticks.
+//! - [`two_panel_chart`]: two x–y charts over one time axis, one above the other.
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -483,6 +484,87 @@ pub fn bar_chart(path: &Path, chart: &BarChart<'_>, size: (u32, u32)) -> Result<
         .draw()
         .map_err(draw_err(path))?;
     root.present().map_err(draw_err(path))?;
+    Ok(())
+}
+
+/// Two charts over the same time axis (seconds), one above the other, in one PNG of
+/// 900×700: `top` and `bottom` are their series and y labels.
+///
+/// # Errors
+/// The font, the drawing or the file.
+pub fn two_panel_chart(
+    path: &Path,
+    title: &str,
+    top: (&[Series], &str),
+    bottom: (&[Series], &str),
+) -> Result<(), PlotError> {
+    let fail = draw_err::<String>(path);
+    register_font()?;
+    let finite = |s: &[Series]| -> Vec<(f64, f64)> {
+        s.iter()
+            .flat_map(|s| s.points.iter().copied())
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .collect()
+    };
+    let (all_top, all_bottom) = (finite(top.0), finite(bottom.0));
+    let bounds = |p: &[(f64, f64)], axis: usize| {
+        let v = p.iter().map(|q| if axis == 0 { q.0 } else { q.1 });
+        let (lo, hi) = v.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+            (l.min(x), h.max(x))
+        });
+        if !lo.is_finite() {
+            return (0.0, 1.0);
+        }
+        let m = if hi > lo { (hi - lo) * 0.05 } else { 0.5 };
+        (lo - m, hi + m)
+    };
+    let both: Vec<(f64, f64)> = all_top.iter().chain(&all_bottom).copied().collect();
+    let (x0, x1) = bounds(&both, 0);
+    let root = BitMapBackend::new(path, (900, 700)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+    let root = root
+        .titled(title, (FONT_FAMILY, 22))
+        .map_err(|e| fail(e.to_string()))?;
+    let (upper, lower) = root.split_vertically(390);
+    for (area, (series, y_label), points) in [(upper, top, &all_top), (lower, bottom, &all_bottom)]
+    {
+        let (y0, y1) = bounds(points, 1);
+        let mut ctx = ChartBuilder::on(&area)
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(64)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(|e| fail(e.to_string()))?;
+        ctx.configure_mesh()
+            .x_desc("time (s)")
+            .y_desc(y_label)
+            .label_style((FONT_FAMILY, 13))
+            .axis_desc_style((FONT_FAMILY, 15))
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+        for (i, s) in series.iter().enumerate() {
+            let colour = PALETTE[i % PALETTE.len()];
+            let pts: Vec<(f64, f64)> = s
+                .points
+                .iter()
+                .copied()
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .collect();
+            ctx.draw_series(LineSeries::new(pts, colour.stroke_width(2)))
+                .map_err(|e| fail(e.to_string()))?
+                .label(s.label.as_str())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+                });
+        }
+        ctx.configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font((FONT_FAMILY, 13))
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+    }
+    root.present().map_err(|e| fail(e.to_string()))?;
     Ok(())
 }
 

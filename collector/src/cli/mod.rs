@@ -12,6 +12,7 @@ pub mod db;
 pub mod eval;
 pub mod grasp;
 pub mod grasp_trials;
+pub mod grasp_turns;
 pub mod latent;
 pub mod live;
 pub mod report;
@@ -209,6 +210,16 @@ pub fn error_text(e: &anyhow::Error) -> String {
 
 impl From<crate::grasp::trials::TrialsError> for Failure {
     fn from(e: crate::grasp::trials::TrialsError) -> Self {
+        if e.is_bad_input() {
+            Self::BadInput(e.into())
+        } else {
+            Self::Runtime(e.into())
+        }
+    }
+}
+
+impl From<crate::grasp::soft::GraspRunError> for Failure {
+    fn from(e: crate::grasp::soft::GraspRunError) -> Self {
         if e.is_bad_input() {
             Self::BadInput(e.into())
         } else {

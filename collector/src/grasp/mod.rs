@@ -6,6 +6,9 @@
 //!   calibration, force following on a rig.
 //! - [`settings`]: each setting's one validation (rate, δ, durations, fingers), shared
 //!   by every verb that takes it.
+//! - [`soft`]: Algorithm 1 made ready on the simulated soft grasp (Λ_max measured, K
+//!   chosen, the fingers approached), shared by [`follow`], [`disturb`] and [`twist`],
+//!   Figure 5's force following, disturbance and twist.
 //! - [`trials`]: the success-rate trials of Figure 4: sessions, trials run and stored
 //!   one at a time, the table with Wilson intervals, its CSVs and charts.
 //! - [`bench`]: `softtouch bench grasp`, the force loop measured over K, δ, camera rate
@@ -15,6 +18,10 @@
 
 pub mod bench;
 pub mod devices;
+pub mod disturb;
+pub mod follow;
 pub mod settings;
 pub mod sim;
+pub mod soft;
 pub mod trials;
+pub mod twist;

@@ -1,0 +1,279 @@
+//! Algorithm 1 made ready on the simulated soft grasp, for the experiments of Figure 5
+//! (`follow`, `disturb`, `twist`): the grasp of one object built, Λ_max measured on
+//! the simulator from first touch to half again the largest target, K = 0.75 Λ_max
+//! unless given, and the fingers approached to four counts before the touch. The
+//! model's estimate is the only force the loop sees; the simulator's truth is logged
+//! beside it ([`LoggedTruth`]).
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use softtouch_drivers::TokioClock;
+use softtouch_grasp::{
+    Controller, ControllerConfig, ExitAction, GainCheck, GraspError, Projection, StepperConfig,
+    check_gain, check_tolerance, one_count_force_n,
+};
+use softtouch_schemas::config::{ConfigSource, parse_toml};
+use softtouch_schemas::{ArmPose, SceneSpec};
+use softtouch_sim::{
+    GraspObject, SimError, SoftFingerCamera, SoftGraspHandle, SoftGripper, soft_grasp,
+};
+use softtouch_trainer::Predictor;
+
+use super::sim::{LoggedTruth, TruthSample};
+use crate::models::ModelError;
+
+/// The grasp scene shipped in `scenes/grasp.toml`: the default for `disturb` and
+/// `twist` (its oval tube and cylinder).
+const GRASP_SCENE_TOML: &str = include_str!("../../../scenes/grasp.toml");
+
+/// What can go wrong in a grasp experiment on the simulator.
+#[derive(Debug, thiserror::Error)]
+pub enum GraspRunError {
+    /// A request that cannot work (an unknown object, a target the loop cannot
+    /// hold); the message says what is expected.
+    #[error("{0}")]
+    Invalid(String),
+    /// The loop's settings or devices.
+    #[error(transparent)]
+    Grasp(#[from] GraspError),
+    /// The model cannot be loaded.
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    /// The simulator failed.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    /// An output that cannot be written.
+    #[error("{0}")]
+    Failed(String),
+}
+
+impl GraspRunError {
+    /// Whether the user's input is at fault (rather than the machine).
+    #[must_use]
+    pub fn is_bad_input(&self) -> bool {
+        match self {
+            Self::Invalid(_) => true,
+            Self::Grasp(GraspError::Config(_) | GraspError::UnreachableTarget { .. }) => true,
+            Self::Model(e) => e.is_bad_input(),
+            Self::Grasp(_) | Self::Sim(_) | Self::Failed(_) => false,
+        }
+    }
+}
+
+impl From<softtouch_trainer::TrainError> for GraspRunError {
+    fn from(e: softtouch_trainer::TrainError) -> Self {
+        Self::Model(e.into())
+    }
+}
+
+fn invalid(m: String) -> GraspRunError {
+    GraspRunError::Invalid(m)
+}
+
+/// The built-in grasp scene (`scenes/grasp.toml`).
+///
+/// # Errors
+/// Never in a released build (the scene is checked by the tests).
+pub fn grasp_scene() -> Result<SceneSpec, GraspRunError> {
+    parse_toml(GRASP_SCENE_TOML, &ConfigSource::Embedded("grasp scene"))
+        .map_err(|e| GraspRunError::Failed(format!("the embedded grasp scene: {e}")))
+}
+
+/// The scene's object `name`.
+///
+/// # Errors
+/// The scene declares no such object (the message lists those it has).
+pub fn named_object(scene: &SceneSpec, name: &str) -> Result<GraspObject, GraspRunError> {
+    scene
+        .object(name)
+        .map(GraspObject::from_spec)
+        .ok_or_else(|| {
+            invalid(format!(
+                "--object {name}: the scene declares no such object (it has: {})",
+                scene
+                    .objects
+                    .iter()
+                    .map(|o| o.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })
+}
+
+/// Finger 0's sensor +x faces the object, so its push (−x) is the world's +y, the
+/// paper's gripping direction. Finger 1 is turned half a turn about z: its push is the
+/// world's −y, which counts as squeezing for it.
+///
+/// # Errors
+/// Never in practice (fixed rotations); the projection checks them.
+pub fn projections() -> Result<[Projection; 2], GraspError> {
+    let half_pi = std::f64::consts::FRAC_PI_2;
+    Ok([
+        Projection::along_world_y(ArmPose::from_translation_yaw([0.0; 3], -half_pi))?,
+        Projection::new(
+            ArmPose::from_translation_yaw([0.0; 3], half_pi),
+            [0.0, -1.0, 0.0],
+        )?,
+    ])
+}
+
+/// The loop's settings shared by the experiments.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopSettings {
+    /// K, N/mm; `None`: 0.75 × the measured Λ_max.
+    pub gain_n_per_mm: Option<f64>,
+    /// δ, N.
+    pub tolerance_n: f64,
+    /// Camera rate, Hz (one cycle per frame).
+    pub fps: f64,
+    /// Sensorised fingers the loop reads (1 or 2).
+    pub fingers: usize,
+    /// Seed of the simulated scene's effects.
+    pub seed: u64,
+}
+
+/// What the setup measured and chose, and Method S4's verdicts on it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Setup {
+    /// The first count at which the closing fingers touch the object.
+    pub touch: u8,
+    /// Λ_max from first touch to half again the largest target, N/mm.
+    pub lambda_max: f64,
+    /// K, N/mm.
+    pub gain: f64,
+    /// Method S4 on K against Λ_max.
+    pub gain_check: GainCheck,
+    /// The force of one count at Λ_max, N: δ below half of it dithers.
+    pub one_count_n: f64,
+    /// Whether δ resolves one count.
+    pub tolerance_ok: bool,
+}
+
+/// The loop on the simulated soft grasp.
+pub type SimController = Controller<SoftGripper, SoftFingerCamera, Predictor, LoggedTruth>;
+
+/// A loop made ready on the simulated soft grasp: approached to just before the
+/// first touch.
+#[derive(Debug)]
+pub struct Prepared {
+    /// The loop.
+    pub controller: SimController,
+    /// The simulated grasp (to turn the object, read the truth).
+    pub handle: SoftGraspHandle,
+    /// The devices' clock (virtual time).
+    pub clock: TokioClock,
+    /// The truth the loop logged (τz, wrist).
+    pub truth_log: Arc<Mutex<Vec<TruthSample>>>,
+    /// What was measured and chosen.
+    pub setup: Setup,
+}
+
+/// Builds the soft grasp of `object`, measures Λ_max, configures Algorithm 1 and
+/// approaches to four counts before the touch. Run on a paused tokio clock.
+///
+/// # Errors
+/// A target the loop cannot hold (checked before K is derived from the targets), an
+/// object the fingers never touch, a Λ_max too small for a gain, the model, the
+/// simulator.
+pub async fn prepare(
+    settings: &LoopSettings,
+    model_bytes: &[u8],
+    scene: &SceneSpec,
+    object: GraspObject,
+    targets_n: &[f64],
+    on_exit: ExitAction,
+) -> Result<Prepared, GraspRunError> {
+    // The targets first: K is derived from them, so a bad target must not read as a
+    // bad K (a flag the user never gave).
+    let probe = StepperConfig {
+        tolerance_n: settings.tolerance_n,
+        ..StepperConfig::default()
+    };
+    for t in targets_n {
+        probe
+            .check_target(*t)
+            .map_err(|e| invalid(format!("--targets: {e}")))?;
+    }
+    // Λ is measured up to half again the largest target.
+    let top_n = 1.5 * targets_n.iter().copied().fold(0.0, f64::max);
+    let predictor = Predictor::from_bytes(model_bytes)?;
+    let clock = TokioClock::new();
+    let (gripper, camera, handle) =
+        soft_grasp(scene, object.clone(), settings.fps, settings.seed, clock)
+            .map_err(|e| invalid(format!("object `{}`: {e}", object.name)))?;
+    let touch = handle.contact_count(0.02)?.ok_or_else(|| {
+        invalid(format!(
+            "object `{}` is never touched by the closing fingers",
+            object.name
+        ))
+    })?;
+    let counts: Vec<u8> = (touch..=255).collect();
+    let curve = handle.grip_force_curve(&counts)?;
+    let end = curve
+        .iter()
+        .find(|(_, f)| *f > top_n)
+        .map_or(255, |(p, _)| *p);
+    let lambda_max = handle.max_stiffness_n_per_mm(touch, end)?;
+    let gain = settings.gain_n_per_mm.unwrap_or(0.75 * lambda_max);
+    if settings.gain_n_per_mm.is_none() && !(gain.is_finite() && gain > 0.0) {
+        return Err(invalid(format!(
+            "object `{}`: the stiffness measured from first touch up to {top_n:.3} N (1.5 × the largest target) is {lambda_max} N/mm, so K = 0.75 Λ_max is unusable; ask for a larger target or give --gain",
+            object.name
+        )));
+    }
+    let projections = projections()?;
+    let mut config = ControllerConfig::new(projections[0]);
+    config.stepper.gain_n_per_mm = gain;
+    config.stepper.tolerance_n = settings.tolerance_n;
+    config.on_exit = on_exit;
+    // Every setting and target is checked before the fingers move.
+    let checked: Vec<(f64, Duration)> = targets_n.iter().map(|t| (*t, Duration::ZERO)).collect();
+    config.check(&checked)?;
+    let setup = Setup {
+        touch,
+        lambda_max,
+        gain,
+        gain_check: check_gain(gain, lambda_max)?,
+        one_count_n: one_count_force_n(lambda_max, &config.stepper.stroke),
+        tolerance_ok: check_tolerance(settings.tolerance_n, lambda_max, &config.stepper.stroke),
+    };
+    let truth_log = Arc::new(Mutex::new(Vec::new()));
+    let truth = LoggedTruth {
+        handle: handle.clone(),
+        projections,
+        fingers: settings.fingers,
+        log: Arc::clone(&truth_log),
+    };
+    let mut controller =
+        Controller::new(gripper, camera, predictor, truth, Arc::new(clock), config)?;
+    if settings.fingers == 2 {
+        let second = handle.second_camera()?;
+        controller = controller.with_second_finger(Box::new(second), projections[1]);
+    }
+    controller
+        .approach(touch.saturating_sub(4), Duration::from_secs(5))
+        .await?;
+    Ok(Prepared {
+        controller,
+        handle,
+        clock,
+        truth_log,
+        setup,
+    })
+}
+
+/// Writes `text` to `path`.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_text(path: &std::path::Path, text: &str) -> Result<(), GraspRunError> {
+    std::fs::write(path, text)
+        .map_err(|e| GraspRunError::Failed(format!("cannot write {}: {e}", path.display())))
+}
+
+/// Seconds of a timestamp.
+#[must_use]
+pub fn t_s(t: softtouch_schemas::TimestampNs) -> f64 {
+    t.0 as f64 * 1e-9
+}
