@@ -21,6 +21,9 @@
 //!   samples paired with land samples of the same pose (`collect --poses-from`).
 //! - [`configs`]: resolving the rig and scene from files or the embedded defaults.
 //! - [`plot`]: PNG histograms and x–y charts (plotters).
+//! - [`live`]: `softtouch live`'s session, the estimate beside the sensor during a
+//!   scripted press.
+//! - [`rig_check`]: `rig check`'s device checks, a typed result per device.
 //! - [`report`]: `softtouch report`, one self-contained HTML page (inline SVG, maud
 //!   templates) of runs, datasets, models and sweeps, read from a read-only database.
 //! - `progress`: the progress bar and the per-epoch training lines.
@@ -40,10 +43,12 @@ pub mod experiments;
 pub mod finetune;
 pub mod grasp;
 pub mod latent;
+pub mod live;
 pub mod models;
 pub mod plot;
 pub(crate) mod progress;
 pub mod report;
+pub mod rig_check;
 pub mod store;
 pub mod synthetic;
 #[cfg(any(test, feature = "testing"))]

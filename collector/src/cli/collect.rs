@@ -342,7 +342,10 @@ pub async fn run_status(db: &Path, run: Option<i64>, out: &mut dyn Write) -> Res
         let hours = r.hours;
         let done = r.ok + r.rejected;
         let rate = if hours > 0.0 {
-            format!("{:.0} samples/h", done as f64 / hours)
+            format!(
+                "{:.0} samples/h (wall clock, start to last update)",
+                done as f64 / hours
+            )
         } else {
             "-".into()
         };

@@ -1,0 +1,662 @@
+//! `softtouch rig check`'s checks: every device the rig config names exercised briefly,
+//! each with a typed result ([`Measured`] or a [`CheckFailure`] saying what was
+//! expected and what happened).
+//!
+//! Each device is opened and checked on its own, so one dead device fails its row and
+//! the others are still checked: the arm's state (pose, fault flag), the force/torque
+//! stream (rate over a short window against the configured rate, status words,
+//! finite values), a frame from each finger camera (size, format, byte count), and
+//! the gripper (activation, a small close and open with the gPR echo, status). A
+//! simulated device is the simulator's twin of the real one; with every device
+//! simulated the check runs on tokio's paused clock and takes no real time.
+
+use std::fmt;
+use std::sync::Arc;
+use std::time::Duration;
+
+use softtouch_drivers::open::{real_arm, real_camera, real_force_sensor, real_gripper};
+use softtouch_drivers::{
+    Arm, Camera, Clock, DeviceError, ForceSensor, Gripper, GripperCommand, ObjectStatus, TokioClock,
+};
+use softtouch_schemas::rig::{ArmDevice, CameraDevice, ForceSensorDevice, GripperDevice};
+use softtouch_schemas::{FrameFormat, RigConfig};
+use softtouch_sim::SimRig;
+
+/// One device's row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckRow {
+    /// Which device (`arm`, `force_sensor`, `camera`, `second_camera`, `gripper`, or
+    /// `simulator` when the simulated twins cannot be built).
+    pub device: &'static str,
+    /// Its driver.
+    pub driver: String,
+    /// What was measured, or why it failed.
+    pub outcome: Result<Measured, CheckFailure>,
+}
+
+impl CheckRow {
+    /// Whether the device passed.
+    #[must_use]
+    pub fn pass(&self) -> bool {
+        self.outcome.is_ok()
+    }
+}
+
+/// Why a device failed its check.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CheckFailure {
+    /// What was expected and what happened.
+    #[error("{0}")]
+    Failed(String),
+    /// The check did not finish in time.
+    #[error(
+        "expected the check to finish within {:.1} s (--timeout-s); the device did not answer in time",
+        .0.as_secs_f64()
+    )]
+    TimedOut(Duration),
+}
+
+/// What a passed check measured, per kind of device.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Measured {
+    /// The arm.
+    Arm(ArmCheck),
+    /// The force/torque stream.
+    ForceSensor(StreamCheck),
+    /// A camera.
+    Camera(FrameCheck),
+    /// The gripper.
+    Gripper(GripperCheck),
+}
+
+/// The arm's state: a valid pose and no fault.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ArmCheck {
+    /// The finger's position in the base frame, m.
+    pub translation_m: [f64; 3],
+}
+
+/// The force/torque stream over the window.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StreamCheck {
+    /// Readings in the window.
+    pub readings: usize,
+    /// The window's length, s.
+    pub elapsed_s: f64,
+    /// Readings per second measured.
+    pub measured_hz: f64,
+    /// The configured rate, Hz.
+    pub rate_hz: f64,
+    /// Readings the link reports lost.
+    pub lost: u64,
+    /// Readings with a warning status.
+    pub warnings: usize,
+    /// Mean Fz, N.
+    pub mean_fz_n: f64,
+}
+
+/// One frame of a camera.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameCheck {
+    /// Its sequence number.
+    pub sequence: u64,
+    /// Width, px.
+    pub width: u32,
+    /// Height, px.
+    pub height: u32,
+    /// Pixel format.
+    pub format: FrameFormat,
+    /// Bytes of data.
+    pub bytes: usize,
+    /// Frames the camera reports dropped.
+    pub dropped: u64,
+}
+
+/// The gripper's small move and back.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GripperCheck {
+    /// Where it started, counts.
+    pub start: u8,
+    /// Where the move reached, counts.
+    pub reached: u8,
+    /// Where it came back to, counts.
+    pub back: u8,
+    /// gOBJ at the end.
+    pub object: ObjectStatus,
+    /// Motor current at the end, mA.
+    pub current_ma: u32,
+}
+
+impl From<ArmCheck> for Measured {
+    fn from(c: ArmCheck) -> Self {
+        Self::Arm(c)
+    }
+}
+impl From<StreamCheck> for Measured {
+    fn from(c: StreamCheck) -> Self {
+        Self::ForceSensor(c)
+    }
+}
+impl From<FrameCheck> for Measured {
+    fn from(c: FrameCheck) -> Self {
+        Self::Camera(c)
+    }
+}
+impl From<GripperCheck> for Measured {
+    fn from(c: GripperCheck) -> Self {
+        Self::Gripper(c)
+    }
+}
+
+impl fmt::Display for StreamCheck {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{} readings in {:.2} s: {:.0} Hz of {:.0} Hz configured, {} lost, {} warnings, mean Fz {:.3} N",
+            self.readings,
+            self.elapsed_s,
+            self.measured_hz,
+            self.rate_hz,
+            self.lost,
+            self.warnings,
+            self.mean_fz_n
+        )
+    }
+}
+
+impl fmt::Display for Measured {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Arm(a) => {
+                let [x, y, z] = a.translation_m;
+                write!(
+                    f,
+                    "pose ({x:.3}, {y:.3}, {z:.3}) m in the base frame, no fault"
+                )
+            }
+            Self::ForceSensor(s) => s.fmt(f),
+            Self::Camera(c) => write!(
+                f,
+                "frame {} {}×{} {:?}, {} bytes, {} dropped",
+                c.sequence, c.width, c.height, c.format, c.bytes, c.dropped
+            ),
+            Self::Gripper(g) => write!(
+                f,
+                "activated; moved {} → {} → {} counts, gOBJ {:?}, current {} mA, no fault",
+                g.start, g.reached, g.back, g.object, g.current_ma
+            ),
+        }
+    }
+}
+
+/// Least measured rate of the force/torque stream, as a fraction of the configured one.
+const MIN_RATE_FRACTION: f64 = 0.8;
+/// Counts of the gripper's test move.
+const GRIPPER_TEST_COUNTS: u8 = 20;
+
+fn all_simulated(rig: &RigConfig) -> bool {
+    matches!(rig.arm, ArmDevice::Sim { .. })
+        && matches!(rig.force_sensor, ForceSensorDevice::Sim { .. })
+        && matches!(rig.camera, CameraDevice::Sim { .. })
+        && matches!(rig.second_camera, None | Some(CameraDevice::Sim { .. }))
+        && matches!(rig.gripper, GripperDevice::Sim {})
+}
+
+/// The rig with every real device replaced by its simulated twin.
+fn simulated_twin(rig: &RigConfig) -> RigConfig {
+    let mut r = rig.clone();
+    if let ArmDevice::Franka { reflex_force_n, .. } = r.arm {
+        r.arm = ArmDevice::Sim { reflex_force_n };
+    }
+    r.force_sensor = ForceSensorDevice::Sim {
+        rate_hz: rig.force_sensor.rate_hz(),
+    };
+    if let CameraDevice::V4l { .. } = r.camera {
+        r.camera = CameraDevice::Sim { fps: 120.0 };
+    }
+    r.second_camera = None;
+    r.gripper = GripperDevice::Sim {};
+    r
+}
+
+fn where_arm(d: &ArmDevice) -> String {
+    match d {
+        ArmDevice::Sim { .. } => "the simulator".into(),
+        ArmDevice::Franka { address, .. } => address.clone(),
+    }
+}
+
+fn where_sensor(d: &ForceSensorDevice) -> String {
+    match d {
+        ForceSensorDevice::Sim { .. } => "the simulator".into(),
+        ForceSensorDevice::NetFt { address, .. } => format!(
+            "{address} (Net F/T: RDT over UDP, calibration over TCP unless counts_per_force and counts_per_torque are given)"
+        ),
+        ForceSensorDevice::AtiSerial { port, baud, .. } => format!("{port} at {baud} baud"),
+    }
+}
+
+fn where_camera(d: &CameraDevice) -> String {
+    match d {
+        CameraDevice::Sim { .. } => "the simulator".into(),
+        CameraDevice::V4l { device, .. } => device.clone(),
+    }
+}
+
+fn where_gripper(d: &GripperDevice) -> String {
+    match d {
+        GripperDevice::Sim {} => "the simulator".into(),
+        GripperDevice::HandE { port, slave_id } => {
+            format!("{port}, Modbus RTU slave {slave_id} at 115200 baud")
+        }
+    }
+}
+
+fn driver_of_arm(d: &ArmDevice) -> &'static str {
+    match d {
+        ArmDevice::Sim { .. } => "sim",
+        ArmDevice::Franka { .. } => "franka",
+    }
+}
+
+fn driver_of_sensor(d: &ForceSensorDevice) -> &'static str {
+    match d {
+        ForceSensorDevice::Sim { .. } => "sim",
+        ForceSensorDevice::NetFt { .. } => "net-ft",
+        ForceSensorDevice::AtiSerial { .. } => "ati-serial",
+    }
+}
+
+fn driver_of_camera(d: &CameraDevice) -> &'static str {
+    match d {
+        CameraDevice::Sim { .. } => "sim",
+        CameraDevice::V4l { .. } => "v4l",
+    }
+}
+
+fn driver_of_gripper(d: &GripperDevice) -> &'static str {
+    match d {
+        GripperDevice::Sim {} => "sim",
+        GripperDevice::HandE { .. } => "hand-e",
+    }
+}
+
+/// Runs `check` under `timeout`; a timeout or an error fails the row.
+async fn row<F, M>(device: &'static str, driver: &str, timeout: Duration, check: F) -> CheckRow
+where
+    F: std::future::Future<Output = Result<M, String>>,
+    M: Into<Measured>,
+{
+    let outcome = match tokio::time::timeout(timeout, check).await {
+        Ok(Ok(m)) => Ok(m.into()),
+        Ok(Err(why)) => Err(CheckFailure::Failed(why)),
+        Err(_) => Err(CheckFailure::TimedOut(timeout)),
+    };
+    CheckRow {
+        device,
+        driver: driver.to_owned(),
+        outcome,
+    }
+}
+
+/// Checks every device of `rig`; simulated ones run on the simulator built from
+/// `scene`. Never fails as a whole: every problem is a failed row.
+pub async fn check_rig(
+    rig: &RigConfig,
+    scene: &softtouch_schemas::SceneSpec,
+    window: Duration,
+    timeout: Duration,
+) -> Vec<CheckRow> {
+    if all_simulated(rig) {
+        tokio::time::pause();
+    }
+    let clock = TokioClock::new();
+    let shared: Arc<dyn Clock> = Arc::new(clock);
+    let mut rows = Vec::new();
+    let sim = match SimRig::new(&simulated_twin(rig), scene, 0, clock) {
+        Ok(s) => Some(s),
+        Err(e) => {
+            rows.push(CheckRow {
+                device: "simulator",
+                driver: "sim".into(),
+                outcome: Err(CheckFailure::Failed(format!(
+                    "the simulated devices cannot be built: {e}"
+                ))),
+            });
+            None
+        }
+    };
+    let (mut sim_arm, mut sim_sensor, mut sim_camera, mut sim_gripper, handle) = match sim {
+        Some(s) => (
+            Some(s.arm),
+            Some(s.force_sensor),
+            Some(s.camera),
+            Some(s.gripper),
+            Some(s.handle),
+        ),
+        None => (None, None, None, None, None),
+    };
+    let no_sim = || "the simulator is not available (see the simulator row)".to_owned();
+
+    rows.push(
+        row("arm", driver_of_arm(&rig.arm), timeout, async {
+            let arm: Box<dyn Arm> = match real_arm(&rig.arm, shared.clone()).await.map_err(|e| {
+                format!("expected the arm answering at {}: {e}", where_arm(&rig.arm))
+            })? {
+                Some(a) => a,
+                None => Box::new(sim_arm.take().ok_or_else(no_sim)?),
+            };
+            check_arm(arm).await
+        })
+        .await,
+    );
+    rows.push(
+        row(
+            "force_sensor",
+            driver_of_sensor(&rig.force_sensor),
+            timeout,
+            async {
+                let sensor: Box<dyn ForceSensor> =
+                    match real_force_sensor(&rig.force_sensor, shared.clone())
+                        .await
+                        .map_err(|e| {
+                            format!(
+                                "expected the sensor answering at {}: {e}",
+                                where_sensor(&rig.force_sensor)
+                            )
+                        })? {
+                        Some(s) => s,
+                        None => Box::new(sim_sensor.take().ok_or_else(no_sim)?),
+                    };
+                check_force_sensor(sensor, rig.force_sensor.rate_hz(), window, &*shared).await
+            },
+        )
+        .await,
+    );
+    rows.push(
+        row("camera", driver_of_camera(&rig.camera), timeout, async {
+            let camera: Box<dyn Camera> = match real_camera(&rig.camera, shared.clone())
+                .await
+                .map_err(|e| format!("expected a camera at {}: {e}", where_camera(&rig.camera)))?
+            {
+                Some(c) => c,
+                None => Box::new(sim_camera.take().ok_or_else(no_sim)?),
+            };
+            check_camera(camera, &*shared).await
+        })
+        .await,
+    );
+    if let Some(second) = &rig.second_camera {
+        rows.push(
+            row("second_camera", driver_of_camera(second), timeout, async {
+                let camera: Box<dyn Camera> = match real_camera(second, shared.clone())
+                    .await
+                    .map_err(|e| format!("expected a camera at {}: {e}", where_camera(second)))?
+                {
+                    Some(c) => c,
+                    // The rod-press simulator has one finger camera; its twin stands in.
+                    None => Box::new(
+                        SimRig::new(&simulated_twin(rig), scene, 1, clock)
+                            .map_err(|e| format!("simulated camera: {e}"))?
+                            .camera,
+                    ),
+                };
+                check_camera(camera, &*shared).await
+            })
+            .await,
+        );
+    }
+    rows.push(
+        row("gripper", driver_of_gripper(&rig.gripper), timeout, async {
+            let gripper: Box<dyn Gripper> = match real_gripper(&rig.gripper, shared.clone())
+                .await
+                .map_err(|e| {
+                format!("expected a gripper at {}: {e}", where_gripper(&rig.gripper))
+            })? {
+                Some(g) => g,
+                None => Box::new(sim_gripper.take().ok_or_else(no_sim)?),
+            };
+            check_gripper(gripper, &*shared).await
+        })
+        .await,
+    );
+    drop(handle);
+    rows
+}
+
+async fn check_arm(mut arm: Box<dyn Arm>) -> Result<ArmCheck, String> {
+    let s = arm
+        .state()
+        .await
+        .map_err(|e| format!("expected a state read: {e}"))?;
+    let p = s.base_from_finger;
+    if !p.is_valid() {
+        return Err(format!(
+            "expected a finite pose with a unit quaternion, read {p:?}"
+        ));
+    }
+    if s.faulted {
+        return Err(format!(
+            "expected no fault: the arm reports a reflex/error state at {:?} m; recover it first",
+            p.translation_m
+        ));
+    }
+    Ok(ArmCheck {
+        translation_m: p.translation_m,
+    })
+}
+
+async fn check_force_sensor(
+    mut sensor: Box<dyn ForceSensor>,
+    rate_hz: f64,
+    window: Duration,
+    clock: &dyn Clock,
+) -> Result<StreamCheck, String> {
+    sensor
+        .start()
+        .await
+        .map_err(|e| format!("expected the stream to start: {e}"))?;
+    let result = read_window(sensor.as_mut(), rate_hz, window, clock).await;
+    // Stop the stream whatever the result; the reading's outcome is the one to report.
+    let _ = sensor.stop().await;
+    result
+}
+
+async fn read_window(
+    sensor: &mut dyn ForceSensor,
+    rate_hz: f64,
+    window: Duration,
+    clock: &dyn Clock,
+) -> Result<StreamCheck, String> {
+    let mut readings = Vec::new();
+    // The first read waits for the stream; the window starts at its first reading.
+    sensor
+        .read(&mut readings)
+        .await
+        .map_err(|e| format!("expected readings at {rate_hz} Hz: {e}"))?;
+    readings.clear();
+    let start = clock.now();
+    let window_ns = u64::try_from(window.as_nanos()).unwrap_or(u64::MAX);
+    while clock.now().0.saturating_sub(start.0) < window_ns {
+        sensor
+            .read(&mut readings)
+            .await
+            .map_err(|e| format!("expected readings at {rate_hz} Hz: {e}"))?;
+    }
+    let elapsed_s = clock.now().0.saturating_sub(start.0) as f64 * 1e-9;
+    let measured_hz = readings.len() as f64 / elapsed_s.max(1e-9);
+    let faults = readings
+        .iter()
+        .filter(|r| !r.status.is_ok() && !r.status.is_warning())
+        .count();
+    let warnings = readings.iter().filter(|r| r.status.is_warning()).count();
+    let non_finite = readings
+        .iter()
+        .filter(|r| !r.wrench_in_sensor.is_finite())
+        .count();
+    let lost = sensor.lost_readings();
+    let mean_fz = readings
+        .iter()
+        .map(|r| r.wrench_in_sensor.force_n[2])
+        .sum::<f64>()
+        / readings.len().max(1) as f64;
+    let stream = StreamCheck {
+        readings: readings.len(),
+        elapsed_s,
+        measured_hz,
+        rate_hz,
+        lost,
+        warnings,
+        mean_fz_n: mean_fz,
+    };
+    let summary = stream.to_string();
+    if measured_hz < MIN_RATE_FRACTION * rate_hz {
+        return Err(format!(
+            "{summary}; expected at least {:.0} Hz ({:.0}% of the configured rate)",
+            MIN_RATE_FRACTION * rate_hz,
+            MIN_RATE_FRACTION * 100.0
+        ));
+    }
+    if faults > 0 {
+        let first = readings
+            .iter()
+            .find(|r| !r.status.is_ok() && !r.status.is_warning())
+            .map(|r| r.status.to_string())
+            .unwrap_or_default();
+        return Err(format!(
+            "{summary}; expected no faulted status word, {faults} had one (first {first})"
+        ));
+    }
+    if non_finite > 0 {
+        return Err(format!(
+            "{summary}; expected finite values, {non_finite} readings had NaN/∞"
+        ));
+    }
+    Ok(stream)
+}
+
+async fn check_camera(
+    mut camera: Box<dyn Camera>,
+    clock: &dyn Clock,
+) -> Result<FrameCheck, String> {
+    let frame = camera
+        .frame_after(clock.now(), 2000)
+        .await
+        .map_err(|e| format!("expected a frame within 2 s: {e}"))?;
+    let m = &frame.meta;
+    if m.width == 0 || m.height == 0 {
+        return Err(format!(
+            "expected a non-empty frame, got {}×{}",
+            m.width, m.height
+        ));
+    }
+    if m.format == FrameFormat::Rgb8 {
+        let want = m.width as usize * m.height as usize * 3;
+        if frame.data.len() != want {
+            return Err(format!(
+                "expected {want} bytes of RGB8 for {}×{}, got {}",
+                m.width,
+                m.height,
+                frame.data.len()
+            ));
+        }
+    } else if frame.data.is_empty() {
+        return Err(format!("expected {:?} bytes, got none", m.format));
+    }
+    Ok(FrameCheck {
+        sequence: m.sequence,
+        width: m.width,
+        height: m.height,
+        format: m.format,
+        bytes: frame.data.len(),
+        dropped: camera.dropped_frames(),
+    })
+}
+
+/// Sends `position` and waits (re-sending within the keep-alive) until the echo and
+/// arrival or a contact stop.
+async fn move_gripper(
+    gripper: &mut dyn Gripper,
+    clock: &dyn Clock,
+    position: u8,
+) -> Result<softtouch_drivers::GripperStatus, String> {
+    let cmd = GripperCommand {
+        position,
+        speed: 128,
+        force: 20,
+    };
+    let fail = |e: DeviceError| format!("expected the move to count {position}: {e}");
+    gripper.command(cmd).await.map_err(fail)?;
+    let start = clock.now();
+    let mut sent = start;
+    loop {
+        tokio::time::sleep(Duration::from_millis(10)).await;
+        let s = gripper.status().await.map_err(fail)?;
+        if s.fault != 0 {
+            return Err(format!(
+                "expected no fault while moving to count {position}: gFLT 0x{:02X}",
+                s.fault
+            ));
+        }
+        if s.requested_position == position && s.object != ObjectStatus::Moving {
+            return Ok(s);
+        }
+        let now = clock.now();
+        if now.0.saturating_sub(sent.0) >= 200_000_000 {
+            gripper.command(cmd).await.map_err(fail)?;
+            sent = now;
+        }
+        if now.0.saturating_sub(start.0) > 3_000_000_000 {
+            return Err(format!(
+                "expected the fingers at count {position} within 3 s, they are at {} (gPR echo {}, gOBJ {:?})",
+                s.position, s.requested_position, s.object
+            ));
+        }
+    }
+}
+
+async fn check_gripper(
+    mut gripper: Box<dyn Gripper>,
+    clock: &dyn Clock,
+) -> Result<GripperCheck, String> {
+    gripper
+        .activate()
+        .await
+        .map_err(|e| format!("expected activation: {e}"))?;
+    let before = gripper
+        .status()
+        .await
+        .map_err(|e| format!("expected a status read: {e}"))?;
+    if !before.activated {
+        return Err("expected gSTA = 3 (activated) after activation".into());
+    }
+    if before.fault != 0 {
+        return Err(format!(
+            "expected no fault after activation: gFLT 0x{:02X}",
+            before.fault
+        ));
+    }
+    // A small move towards the middle of the scale and back.
+    let start = before.position;
+    let target = if start < 128 {
+        start.saturating_add(GRIPPER_TEST_COUNTS)
+    } else {
+        start.saturating_sub(GRIPPER_TEST_COUNTS)
+    };
+    let there = move_gripper(gripper.as_mut(), clock, target).await?;
+    let back = move_gripper(gripper.as_mut(), clock, start).await?;
+    let moved = i32::from(there.position) - i32::from(start);
+    if moved.unsigned_abs() < u32::from(GRIPPER_TEST_COUNTS) / 2 {
+        return Err(format!(
+            "expected the fingers to move about {GRIPPER_TEST_COUNTS} counts from {start} to {target}, they reached {} (gOBJ {:?})",
+            there.position, there.object
+        ));
+    }
+    Ok(GripperCheck {
+        start,
+        reached: there.position,
+        back: back.position,
+        object: back.object,
+        current_ma: back.current_ma,
+    })
+}
