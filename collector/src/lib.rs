@@ -49,7 +49,10 @@ pub mod plot;
 pub(crate) mod progress;
 pub mod report;
 pub mod rig_check;
-pub mod store;
+/// The store is its own crate; `crate::store` keeps its paths.
+pub use softtouch_store as store;
+#[cfg(test)]
+mod store_tests;
 pub mod synthetic;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;

@@ -6,7 +6,7 @@
 
 use crate::dataset::{self, DatasetError, query_err};
 use crate::store::Store;
-use crate::store::rows::now_sql;
+use crate::store::now_sql;
 use futures_util::TryStreamExt as _;
 use softtouch_schemas::FrameFormat;
 use softtouch_trainer::labels::label_from_si;
@@ -85,22 +85,7 @@ macro_rules! member_rows_sql {
     };
 }
 
-#[derive(Debug, FromRow)]
-pub(crate) struct MemberRow {
-    pub(crate) split: String,
-    pub(crate) run_id: i64,
-    pub(crate) sample_index: i64,
-    pub(crate) fx_n: f64,
-    pub(crate) fy_n: f64,
-    pub(crate) fz_n: f64,
-    pub(crate) tx_nm: f64,
-    pub(crate) ty_nm: f64,
-    pub(crate) tz_nm: f64,
-    pub(crate) format: String,
-    pub(crate) width: i64,
-    pub(crate) height: i64,
-    pub(crate) data: Vec<u8>,
-}
+pub(crate) use crate::store::MemberRow;
 
 /// Decodes a stored frame into RGB8.
 fn decode(row: &MemberRow) -> Result<(usize, usize, Vec<u8>), String> {

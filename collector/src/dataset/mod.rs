@@ -29,7 +29,8 @@ pub mod stats;
 
 pub use split::{Split, SplitError, SplitRatio};
 
-use crate::store::rows::{now_sql, seed_to_sql};
+use crate::store::now_sql;
+use crate::store::rows::seed_to_sql;
 use crate::store::{RunId, Store, StoreError};
 use futures_util::TryStreamExt as _;
 use serde::{Deserialize, Serialize};

@@ -23,46 +23,10 @@ use std::path::{Path, PathBuf};
 /// The report failed.
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
-    /// No database file.
-    #[error("no database at {}: collect with `softtouch collect` (or pass --db PATH)", .0.display())]
-    NoDatabase(PathBuf),
-    /// The database cannot be opened.
-    #[error("cannot open database {} read-only: {source}", path.display())]
-    Open {
-        /// The file.
-        path: PathBuf,
-        /// Why.
-        #[source]
-        source: sqlx::Error,
-    },
-    /// The database's schema is older than this build's (or it is not a softtouch one).
-    #[error(
-        "database {} is at schema {found}, this build reads schema {expected}: migrate it with `softtouch --db {} db init` (the report itself never writes)",
-        path.display(), path.display()
-    )]
-    Schema {
-        /// The file.
-        path: PathBuf,
-        /// Its newest migration (0: none).
-        found: i64,
-        /// This build's newest migration.
-        expected: i64,
-    },
-    /// A query failed.
-    #[error("database error while {doing}: {source}")]
-    Query {
-        /// What we were doing.
-        doing: &'static str,
-        /// Why.
-        #[source]
-        source: sqlx::Error,
-    },
-    /// `--runs` names a run that is not there.
-    #[error("--runs: no run {0} in this database (see `softtouch runs`)")]
-    NoSuchRun(i64),
-    /// `--models` names a model that is not there.
-    #[error("--models: no model named `{0}` in this database (see `softtouch models`)")]
-    NoSuchModel(String),
+    /// Reading the database failed (no file, an old schema, a missing run or
+    /// model, a query).
+    #[error(transparent)]
+    Db(#[from] crate::store::report::ReadError),
     /// A stored model cannot be loaded.
     #[error("model {model_id}: cannot load its artifact: {why}")]
     Model {
@@ -114,15 +78,10 @@ impl ReportError {
     /// Whether the user's input is at fault (exit code 2).
     #[must_use]
     pub const fn is_bad_input(&self) -> bool {
-        matches!(
-            self,
-            Self::NoDatabase(_)
-                | Self::Schema { .. }
-                | Self::NoSuchRun(_)
-                | Self::NoSuchModel(_)
-                | Self::Read { .. }
-                | Self::Csv { .. }
-        )
+        match self {
+            Self::Db(e) => e.is_bad_input(),
+            other => matches!(other, Self::Read { .. } | Self::Csv { .. }),
+        }
     }
 }
 
@@ -216,7 +175,7 @@ pub(crate) struct Content {
 }
 
 async fn gather(
-    pool: &sqlx::SqlitePool,
+    pool: &data::ReadOnly,
     db: &Path,
     options: &ReportOptions,
 ) -> Result<Content, ReportError> {

@@ -7,9 +7,9 @@
 
 use super::ReportError;
 use super::data;
+use super::data::ReadOnly;
 use crate::models::ModelError;
 use softtouch_trainer::{Example, FingerTable, ModelArtifact, Preprocess, WrenchLabel, evaluate};
-use sqlx::SqlitePool;
 use std::collections::HashMap;
 
 /// A model's predictions on the subset, in N and N·mm.
@@ -31,7 +31,7 @@ pub(crate) struct Cache {
 
 /// Reads, decodes and preprocesses up to `max` evenly spaced test samples of a dataset.
 async fn subset(
-    pool: &SqlitePool,
+    pool: &ReadOnly,
     dataset_id: i64,
     preprocess: &Preprocess,
     max: usize,
@@ -62,7 +62,7 @@ async fn subset(
 /// Runs model `model_id` (trained on `dataset_id`) on up to `max` test samples.
 /// `None` for a model that predicts no wrench (the VAE) or an empty test split.
 pub(crate) async fn predict(
-    pool: &SqlitePool,
+    pool: &ReadOnly,
     cache: &mut Cache,
     model_id: i64,
     dataset_id: i64,

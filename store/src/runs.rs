@@ -58,6 +58,7 @@ pub struct NewRun<'a> {
 /// and `e`) and the `FROM` that computes them. One definition, so that what counts as
 /// ok, rejected, retried or a fault cannot drift between listings. Macros, because sqlx
 /// takes `&'static str` and `concat!` takes literals.
+#[macro_export]
 macro_rules! run_counts_columns {
     () => {
         "r.run_id, r.status, r.seed, r.scene_name, r.medium, r.samples_planned,
@@ -68,9 +69,9 @@ macro_rules! run_counts_columns {
          (julianday(r.updated_at) - julianday(r.created_at)) * 24.0 AS hours"
     };
 }
-pub(crate) use run_counts_columns;
 
 /// See [`run_counts_columns`]; `s` also carries the first and last frame time.
+#[macro_export]
 macro_rules! run_counts_from {
     () => {
         " FROM runs r
@@ -84,7 +85,6 @@ macro_rules! run_counts_from {
                     FROM events GROUP BY run_id) e ON e.run_id = r.run_id"
     };
 }
-pub(crate) use run_counts_from;
 
 /// One run with its counts, for listings.
 #[derive(Debug, Clone, PartialEq, FromRow)]

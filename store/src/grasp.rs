@@ -403,7 +403,7 @@ mod tests {
 
     #[tokio::test]
     async fn a_trial_and_its_trace_store_once_and_read_back() {
-        let dir = crate::testing::tempdir();
+        let dir = tempfile::tempdir().expect("temp dir");
         let store = Store::open(&dir.path().join("g.db"))
             .await
             .unwrap_or_else(|e| panic!("{e}"));

@@ -1,6 +1,11 @@
-use super::*;
+//! The store's tests that need the collector's fixtures (synthetic samples, planned
+//! runs): what a sample, its frame and its window look like after a round trip.
+
+use crate::store::*;
 use crate::testing::{RunPlan, SampleBuilder, temp_store, tempdir};
+use softtouch_schemas::sample::RejectReason;
 use softtouch_schemas::{ContactPose, FrameFormat, FtStatus, TimestampNs, Wrench};
+use softtouch_schemas::{FrameMeta, FtReading, Sample, SampleStatus};
 
 /// The builder's default sample, measured and with a negative skew.
 pub(crate) fn sample(index: u64) -> Sample {

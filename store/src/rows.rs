@@ -13,39 +13,37 @@ use sqlx::SqliteConnection;
 
 /// Wall-clock "now" in SQL, ISO-8601 UTC with milliseconds. A macro, not a const, so
 /// queries can `concat!` it and stay `&'static str` (sqlx refuses run-time strings).
+#[macro_export]
 macro_rules! now_sql {
     () => {
         "strftime('%Y-%m-%dT%H:%M:%fZ', 'now')"
     };
 }
-pub(crate) use now_sql;
+pub use crate::now_sql;
 
 /// A seed as stored: SQLite integers are signed, so a `u64` keeps its bit pattern.
 #[must_use]
-pub(crate) const fn seed_to_sql(seed: u64) -> i64 {
+pub const fn seed_to_sql(seed: u64) -> i64 {
     i64::from_ne_bytes(seed.to_ne_bytes())
 }
 
 /// A stored seed back as given (inverse of [`seed_to_sql`]).
 #[must_use]
-pub(crate) const fn seed_from_sql(seed: i64) -> u64 {
+pub const fn seed_from_sql(seed: i64) -> u64 {
     u64::from_ne_bytes(seed.to_ne_bytes())
 }
 
 /// A rod schedule as stored in `runs.rod_schedule`: a JSON array of the names, so that
 /// any name (commas, quotes, unicode, blanks) reads back exactly.
 #[must_use]
-pub(crate) fn rod_schedule_json<S: AsRef<str>>(rods: &[S]) -> String {
+pub fn rod_schedule_json<S: AsRef<str>>(rods: &[S]) -> String {
     let names: Vec<&str> = rods.iter().map(AsRef::as_ref).collect();
     // A list of strings always serialises.
     serde_json::to_string(&names).unwrap_or_else(|_| String::from("[]"))
 }
 
 /// A stored rod schedule back as names (inverse of [`rod_schedule_json`]).
-pub(crate) fn rod_schedule_from_json(
-    run_id: RunId,
-    stored: &str,
-) -> Result<Vec<String>, StoreError> {
+pub fn rod_schedule_from_json(run_id: RunId, stored: &str) -> Result<Vec<String>, StoreError> {
     serde_json::from_str::<Vec<String>>(stored).map_err(|e| StoreError::Damaged {
         what: "rod schedule",
         why: format!("run {run_id}: expected a JSON array of rod names, found `{stored}` ({e})"),
@@ -54,7 +52,7 @@ pub(crate) fn rod_schedule_from_json(
 
 /// A row of `runs`, collected or imported.
 #[derive(Debug, Clone, Copy)]
-pub(crate) struct RunRow<'a> {
+pub struct RunRow<'a> {
     /// `running` leaves `finished_at` empty; any other status stamps it now.
     pub status: RunStatus,
     pub seed: u64,
@@ -75,7 +73,7 @@ pub(crate) struct RunRow<'a> {
 }
 
 /// Insert a run; its new id.
-pub(crate) async fn insert_run(
+pub async fn insert_run(
     conn: &mut SqliteConnection,
     run: &RunRow<'_>,
 ) -> Result<RunId, StoreError> {
@@ -112,7 +110,7 @@ pub(crate) async fn insert_run(
 }
 
 /// Record where an imported run came from (`provenance` is JSON text).
-pub(crate) async fn insert_run_import(
+pub async fn insert_run_import(
     conn: &mut SqliteConnection,
     run_id: RunId,
     layout: &str,
@@ -138,7 +136,7 @@ pub(crate) async fn insert_run_import(
 }
 
 /// Insert a sample; `false` (and nothing written) if `(run, index)` is already there.
-pub(crate) async fn insert_sample(
+pub async fn insert_sample(
     conn: &mut SqliteConnection,
     run_id: RunId,
     sample: &Sample,
@@ -193,7 +191,7 @@ pub(crate) async fn insert_sample(
 }
 
 /// Insert a sample's frame (the sample must be there).
-pub(crate) async fn insert_frame(
+pub async fn insert_frame(
     conn: &mut SqliteConnection,
     run_id: RunId,
     sample_index: u64,
@@ -218,7 +216,7 @@ pub(crate) async fn insert_frame(
 }
 
 /// Insert a sample's raw force/torque window, packed as [`WINDOW_ENCODING`].
-pub(crate) async fn insert_ft_window(
+pub async fn insert_ft_window(
     conn: &mut SqliteConnection,
     run_id: RunId,
     sample_index: u64,
@@ -243,7 +241,7 @@ pub(crate) async fn insert_ft_window(
 }
 
 /// Insert an event, stamped now.
-pub(crate) async fn insert_event(
+pub async fn insert_event(
     conn: &mut SqliteConnection,
     run_id: RunId,
     sample_index: Option<u64>,

@@ -11,17 +11,16 @@
 
 mod event;
 mod grasp;
+pub mod report;
 pub use event::EventKind;
 pub use grasp::{
     GraspSessionRow, GraspTrace, GraspTrialKey, GraspTrialRow, TRACE_ENCODING, unpack_f32,
 };
-pub(crate) mod rows;
+pub mod rows;
 mod runs;
-pub(crate) use runs::{run_counts_columns, run_counts_from};
 mod sync;
 mod window;
 
-use rows::now_sql;
 pub use runs::{
     LEASE_STALE_S, LeaseHolder, LeaseRow, LeaseTaken, NewRun, RunRecord, RunStatus, RunSummary,
     host_name,
@@ -30,15 +29,43 @@ pub use sync::{LabelRow, OwnedNewRun, SyncStore, WriterStats, encode_for_store};
 
 pub use window::{WINDOW_ENCODING, decode_window, encode_window};
 
+/// A dataset member (or any sample) with its label and its frame, as the trainer's
+/// readers take it: split, identity, the label (N, N·m) and the stored frame.
+#[derive(Debug, Clone, FromRow)]
+pub struct MemberRow {
+    /// `train`, `val` or `test`.
+    pub split: String,
+    /// Its run.
+    pub run_id: i64,
+    /// Its index in the run.
+    pub sample_index: i64,
+    /// Force x, N.
+    pub fx_n: f64,
+    /// Force y, N.
+    pub fy_n: f64,
+    /// Force z, N.
+    pub fz_n: f64,
+    /// Torque x, N·m.
+    pub tx_nm: f64,
+    /// Torque y, N·m.
+    pub ty_nm: f64,
+    /// Torque z, N·m.
+    pub tz_nm: f64,
+    /// The frame's format as stored.
+    pub format: String,
+    /// Width, px.
+    pub width: i64,
+    /// Height, px.
+    pub height: i64,
+    /// The frame's bytes as stored.
+    pub data: Vec<u8>,
+}
+
 use softtouch_schemas::{FrameMeta, FtReading, Sample, SampleStatus};
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 use sqlx::{FromRow, Row, SqlitePool};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
-
-// store/tests.rs takes it through `use super::*`; only rows.rs uses it now.
-#[cfg(test)]
-use softtouch_schemas::sample::RejectReason;
 
 /// The migrations, embedded at build time.
 pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("../migrations");
@@ -128,7 +155,8 @@ pub enum StoreError {
     },
 }
 
-fn query_err(doing: &'static str) -> impl FnOnce(sqlx::Error) -> StoreError {
+/// Maps a query's error to [`StoreError::Query`], saying what was being done.
+pub fn query_err(doing: &'static str) -> impl FnOnce(sqlx::Error) -> StoreError {
     move |source| StoreError::Query { doing, source }
 }
 
@@ -433,6 +461,3 @@ pub fn parse_status(status: &str, reason: Option<&str>) -> Result<SampleStatus, 
         )),
     }
 }
-
-#[cfg(test)]
-mod tests;
