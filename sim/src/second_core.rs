@@ -18,6 +18,20 @@
 //! halves themselves for [`BACK_OFF`], after which the helper is tried again. (A
 //! sleeping helper's start is not judged: waking it may take that long on a VM.)
 //! None of this changes what the halves compute.
+//!
+//! # Against `rayon::join`
+//! Measured here (`cargo bench -p softtouch-sim --bench second_core`, 2-core VM,
+//! 2026-11-27): two halves of 100 µs joined from a thread outside any pool, as the
+//! camera, the predictor and the grasp loop call it, take 175 µs with a 2 ms gap
+//! between joins (a grasp trial's frame period) and 107 µs back to back; the same
+//! through `rayon::join` on a 2-thread pool take 513 µs and 241 µs, slower than doing
+//! both halves in turn (202 µs): from outside the pool rayon hands the whole join to a
+//! worker and sleeps until it is done, so every join pays two wake-ups. Empty halves
+//! cost 0.27 µs here against 12 µs (back to back) and 26 µs against 256 µs (2 ms
+//! gap). So the helper stays. Beside other work its 5 ms of polling competes for a
+//! core only until a late start sends the halves home ([`BACK_OFF`]): the last session
+//! measured a closed water trial beside two busy loops at 4.3 ms a cycle with the back
+//! off and 27.6 ms without.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
