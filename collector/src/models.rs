@@ -4,14 +4,14 @@
 //! The trainer knows nothing of SQL; this module is the bridge. Frames are decoded
 //! and preprocessed on every core ([`load_splits`]).
 
-use crate::dataset::{self, DatasetError, query_err};
-use crate::store::Store;
-use crate::store::now_sql;
+use crate::dataset::{self, DatasetError};
+use crate::store::{Members, NewModel, Store, StoreError};
 use futures_util::TryStreamExt as _;
 use softtouch_schemas::FrameFormat;
 use softtouch_trainer::labels::label_from_si;
 use softtouch_trainer::{Example, FingerTable, Preprocess, Splits, Trained};
-use sqlx::FromRow;
+
+pub use crate::store::ModelInfo;
 
 /// A model operation failed.
 #[derive(Debug, thiserror::Error)]
@@ -19,15 +19,10 @@ pub enum ModelError {
     /// The dataset side failed (no such dataset, a query).
     #[error(transparent)]
     Dataset(#[from] DatasetError),
-    /// A query failed.
-    #[error("database error while {doing}: {source}")]
-    Query {
-        /// What we were doing.
-        doing: &'static str,
-        /// Why.
-        #[source]
-        source: sqlx::Error,
-    },
+    /// The database failed (boxed: a store error is large, and every verb's result
+    /// carries this type).
+    #[error(transparent)]
+    Store(Box<StoreError>),
     /// A stored frame cannot be used.
     #[error("run {run}, sample {index}: {why}")]
     Frame {
@@ -54,6 +49,12 @@ pub enum ModelError {
     Train(#[from] softtouch_trainer::TrainError),
 }
 
+impl From<StoreError> for ModelError {
+    fn from(e: StoreError) -> Self {
+        Self::Store(Box::new(e))
+    }
+}
+
 impl ModelError {
     /// Whether the user's input is at fault (exit code 2).
     #[must_use]
@@ -62,27 +63,9 @@ impl ModelError {
             Self::Dataset(e) => e.is_bad_input(),
             Self::Exists(_) | Self::NotFound(_) | Self::NoForce(_) => true,
             Self::Train(e) => e.is_bad_input(),
-            Self::Query { .. } | Self::Frame { .. } => false,
+            Self::Store(_) | Self::Frame { .. } => false,
         }
     }
-}
-
-fn model_query(doing: &'static str) -> impl FnOnce(sqlx::Error) -> ModelError {
-    move |source| ModelError::Query { doing, source }
-}
-
-/// A dataset's members with their labels and frames ([`MemberRow`]); the caller adds
-/// the order. A macro, because sqlx takes `&'static str` and `concat!` takes literals.
-macro_rules! member_rows_sql {
-    () => {
-        "SELECT m.split, m.run_id, m.sample_index,
-                s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
-                f.format, f.width, f.height, f.data
-         FROM dataset_members m
-         JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
-         JOIN frames f ON f.run_id = m.run_id AND f.sample_index = m.sample_index
-         WHERE m.dataset_id = ?"
-    };
 }
 
 pub(crate) use crate::store::MemberRow;
@@ -129,20 +112,14 @@ pub async fn load_splits(
 ) -> Result<Splits, ModelError> {
     let info = dataset::get(store, name).await?;
     let total = u64::try_from(info.sample_count).unwrap_or(0);
-    let mut rows =
-        sqlx::query_as::<_, MemberRow>(concat!(member_rows_sql!(), " ORDER BY m.position"))
-            .bind(info.dataset_id)
-            .fetch(store.pool());
+    let mut rows = store.member_rows(info.dataset_id, Members::All);
     // The colour threshold as a lookup, built once for the whole dataset.
     let table = FingerTable::new(preprocess);
     let mut splits = Splits::default();
     let mut chunk = Vec::with_capacity(256);
     let mut done = 0u64;
     loop {
-        let row = rows
-            .try_next()
-            .await
-            .map_err(query_err("reading the dataset's frames"))?;
+        let row = rows.try_next().await?;
         let last = row.is_none();
         if let Some(row) = row {
             chunk.push(row);
@@ -173,14 +150,7 @@ pub async fn first_test_frame(
     name: &str,
 ) -> Result<(usize, usize, Vec<u8>), ModelError> {
     let info = dataset::get(store, name).await?;
-    let row = sqlx::query_as::<_, MemberRow>(concat!(
-        member_rows_sql!(),
-        " ORDER BY m.split = 'test' DESC, m.position LIMIT 1"
-    ))
-    .bind(info.dataset_id)
-    .fetch_optional(store.pool())
-    .await
-    .map_err(query_err("reading a frame of the dataset"))?;
+    let row = store.first_test_member(info.dataset_id).await?;
     let Some(row) = row else {
         return Err(ModelError::Frame {
             run: 0,
@@ -242,29 +212,6 @@ pub(crate) fn preprocess_parallel(
     })
 }
 
-/// A stored model, without its artifact.
-#[derive(Debug, Clone, FromRow)]
-pub struct ModelInfo {
-    /// Row id.
-    pub model_id: i64,
-    /// Name.
-    pub name: String,
-    /// The dataset it was trained on.
-    pub dataset_name: String,
-    /// svae, vae or convnet.
-    pub kind: String,
-    /// Model config (JSON).
-    pub config_json: String,
-    /// Training settings (JSON).
-    pub train_json: String,
-    /// Mean test R² (absent for the VAE).
-    pub test_r2_mean: Option<f64>,
-    /// Test image MSE (absent for the ConvNet).
-    pub test_image_mse: Option<f64>,
-    /// When (UTC).
-    pub created_at: String,
-}
-
 /// Records a trained model. Fails if the name is taken.
 pub async fn record(
     store: &Store,
@@ -287,57 +234,32 @@ pub async fn record(
     let metrics_json = json(serde_json::to_string(&summary))?;
     let history_json = json(serde_json::to_string(&trained.history))?;
     let artifact = trained.artifact.to_bytes()?;
-    let result = sqlx::query(concat!(
-        "INSERT INTO models (name, dataset_id, dataset_name, kind, config_json, train_json,
-                             metrics_json, history_json, test_r2_mean, test_image_mse, artifact,
-                             software_version, created_at)
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ",
-        now_sql!(),
-        ")"
-    ))
-    .bind(name)
-    .bind(info.dataset_id)
-    .bind(&info.name)
-    .bind(header.config.kind.name())
-    .bind(config_json)
-    .bind(train_json)
-    .bind(metrics_json)
-    .bind(history_json)
-    .bind(summary.and_then(|s| s.test.r2_mean))
-    .bind(summary.and_then(|s| s.test.image_mse))
-    .bind(artifact)
-    .bind(env!("CARGO_PKG_VERSION"))
-    .execute(store.pool())
-    .await
-    .map_err(model_query("recording the model"))?;
-    Ok(result.last_insert_rowid())
-}
-
-macro_rules! info_select {
-    ($rest:literal) => {
-        concat!(
-            "SELECT model_id, name, dataset_name, kind, config_json, train_json, \
-             test_r2_mean, test_image_mse, created_at FROM models ",
-            $rest
-        )
-    };
+    Ok(store
+        .insert_model(&NewModel {
+            name,
+            dataset_id: info.dataset_id,
+            dataset_name: &info.name,
+            kind: header.config.kind.name(),
+            config_json: &config_json,
+            train_json: &train_json,
+            metrics_json: &metrics_json,
+            history_json: &history_json,
+            test_r2_mean: summary.and_then(|s| s.test.r2_mean),
+            test_image_mse: summary.and_then(|s| s.test.image_mse),
+            artifact: &artifact,
+            software_version: env!("CARGO_PKG_VERSION"),
+        })
+        .await?)
 }
 
 /// The model called `name`, if any.
 pub async fn find(store: &Store, name: &str) -> Result<Option<ModelInfo>, ModelError> {
-    sqlx::query_as::<_, ModelInfo>(info_select!("WHERE name = ?"))
-        .bind(name)
-        .fetch_optional(store.pool())
-        .await
-        .map_err(model_query("looking up a model"))
+    Ok(store.model(name).await?)
 }
 
 /// Every model, oldest first.
 pub async fn list(store: &Store) -> Result<Vec<ModelInfo>, ModelError> {
-    sqlx::query_as::<_, ModelInfo>(info_select!("ORDER BY model_id"))
-        .fetch_all(store.pool())
-        .await
-        .map_err(model_query("listing models"))
+    Ok(store.models().await?)
 }
 
 /// A stored model's artifact for a verb that acts on its force estimate (`live`, the
@@ -347,13 +269,7 @@ pub async fn list(store: &Store) -> Result<Vec<ModelInfo>, ModelError> {
 /// # Errors
 /// No such model, a VAE, or a query failure.
 pub async fn force_artifact(store: &Store, name: &str) -> Result<Vec<u8>, ModelError> {
-    let row: Option<(Vec<u8>, String)> =
-        sqlx::query_as("SELECT artifact, kind FROM models WHERE name = ?")
-            .bind(name)
-            .fetch_optional(store.pool())
-            .await
-            .map_err(model_query("reading a model"))?;
-    match row {
+    match store.model_artifact(name).await? {
         None => Err(ModelError::NotFound(name.to_owned())),
         Some((_, kind)) if kind == "vae" => Err(ModelError::NoForce(name.to_owned())),
         Some((artifact, _)) => Ok(artifact),
@@ -362,11 +278,9 @@ pub async fn force_artifact(store: &Store, name: &str) -> Result<Vec<u8>, ModelE
 
 /// The artifact bytes of model `name`.
 pub async fn artifact(store: &Store, name: &str) -> Result<Vec<u8>, ModelError> {
-    let row: Option<(Vec<u8>,)> = sqlx::query_as("SELECT artifact FROM models WHERE name = ?")
-        .bind(name)
-        .fetch_optional(store.pool())
-        .await
-        .map_err(model_query("reading a model"))?;
-    row.map(|(a,)| a)
+    store
+        .model_artifact(name)
+        .await?
+        .map(|(a, _)| a)
         .ok_or_else(|| ModelError::NotFound(name.to_owned()))
 }

@@ -6,10 +6,9 @@
 
 use crate::dataset;
 use crate::models::{MemberRow, ModelError, preprocess_parallel};
-use crate::store::Store;
+use crate::store::{Members, Store};
 use futures_util::TryStreamExt as _;
 use softtouch_trainer::{Example, FingerTable};
-use sqlx::FromRow;
 use std::collections::HashMap;
 
 /// Paired test examples: `land[i]` and `water[i]` are the same pose and rod.
@@ -59,25 +58,19 @@ impl TransferError {
 /// A sample's key: (run, index).
 type Key = (i64, i64);
 
-/// The member rows of dataset `dataset_id` that `filter` (an SQL condition on `m`,
-/// a dataset member) keeps, preprocessed for `table` in chunks as they stream in (a
+/// The member rows of dataset `dataset_id` that `which` keeps, preprocessed for `table` in chunks as they stream in (a
 /// 6000-sample split holds about a gigabyte of encoded frames), with their keys.
 async fn load_keyed(
     store: &Store,
     dataset_id: i64,
-    sql: &'static str,
+    which: Members,
     table: &FingerTable,
 ) -> Result<Vec<(Key, Example)>, ModelError> {
-    let mut rows = sqlx::query_as::<_, MemberRow>(sql)
-        .bind(dataset_id)
-        .fetch(store.pool());
+    let mut rows = store.member_rows(dataset_id, which);
     let mut out = Vec::new();
     let mut chunk: Vec<MemberRow> = Vec::with_capacity(256);
     loop {
-        let row = rows.try_next().await.map_err(|source| ModelError::Query {
-            doing: "reading frames",
-            source,
-        })?;
+        let row = rows.try_next().await?;
         let last = row.is_none();
         if let Some(row) = row {
             chunk.push(row);
@@ -92,24 +85,6 @@ async fn load_keyed(
             return Ok(out);
         }
     }
-}
-
-/// Member rows of one dataset (`?1`) with their labels and frames, in dataset order;
-/// `$split` is an extra condition on the member `m`.
-macro_rules! members_sql {
-    ($split:literal) => {
-        concat!(
-            "SELECT m.split, m.run_id, m.sample_index,
-                    s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
-                    f.format, f.width, f.height, f.data
-             FROM dataset_members m
-             JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
-             JOIN frames f ON f.run_id = m.run_id AND f.sample_index = m.sample_index
-             WHERE m.dataset_id = ?1 AND ",
-            $split,
-            " ORDER BY m.position"
-        )
-    };
 }
 
 /// A dataset's test split, keyed, for [`paired_test`].
@@ -136,28 +111,16 @@ pub async fn test_split(
     table: &FingerTable,
 ) -> Result<TestSplit, ModelError> {
     let info = dataset::get(store, name).await?;
-    let (keys, examples) = load_keyed(
-        store,
-        info.dataset_id,
-        members_sql!("m.split = 'test'"),
-        table,
-    )
-    .await?
-    .into_iter()
-    .unzip();
+    let (keys, examples) = load_keyed(store, info.dataset_id, Members::Test, table)
+        .await?
+        .into_iter()
+        .unzip();
     Ok(TestSplit {
         name: name.to_owned(),
         dataset_id: info.dataset_id,
         keys,
         examples,
     })
-}
-
-#[derive(FromRow)]
-struct PairKey {
-    water_run: i64,
-    sample_index: i64,
-    land_run: i64,
 }
 
 /// The water test samples whose run repeats the poses of a run in the land dataset,
@@ -173,23 +136,9 @@ pub async fn paired_test(
     water: &TestSplit,
     table: &FingerTable,
 ) -> Result<Pairs, TransferError> {
-    let query = |doing| {
-        move |source| TransferError::Store(crate::store::StoreError::Query { doing, source })
-    };
-    let keys: Vec<PairKey> = sqlx::query_as(
-        "SELECT w.run_id AS water_run, w.sample_index, r.poses_from_run_id AS land_run
-         FROM dataset_members w
-         JOIN runs r ON r.run_id = w.run_id
-         JOIN dataset_members l ON l.dataset_id = ?1 AND l.run_id = r.poses_from_run_id
-                               AND l.sample_index = w.sample_index
-         WHERE w.dataset_id = ?2 AND w.split = 'test'
-         ORDER BY w.position",
-    )
-    .bind(land.dataset_id)
-    .bind(water.dataset_id)
-    .fetch_all(store.pool())
-    .await
-    .map_err(query("finding paired samples"))?;
+    let keys = store
+        .paired_test_keys(land.dataset_id, water.dataset_id)
+        .await?;
     if keys.is_empty() {
         return Err(TransferError::NoPairs {
             land: land.name.clone(),
@@ -222,14 +171,7 @@ pub async fn paired_test(
             .map(|k| (k.land_run, k.sample_index))
             .filter(|k| !land_at.contains_key(k))
             .collect();
-        for (k, e) in load_keyed(
-            store,
-            land.dataset_id,
-            members_sql!("m.split <> 'test'"),
-            table,
-        )
-        .await?
-        {
+        for (k, e) in load_keyed(store, land.dataset_id, Members::NotTest, table).await? {
             if wanted.contains(&k) {
                 extra.insert(k, e);
             }

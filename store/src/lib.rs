@@ -9,8 +9,10 @@
 //! Each table's INSERT is in `rows.rs`, shared with the dataset import; runs are in
 //! `runs.rs`, the writer thread in `sync.rs`.
 
+pub mod datasets;
 mod event;
 mod grasp;
+mod models;
 pub mod report;
 pub use event::EventKind;
 pub use grasp::{
@@ -27,6 +29,7 @@ pub use runs::{
 };
 pub use sync::{LabelRow, OwnedNewRun, SyncStore, WriterStats, encode_for_store};
 
+pub use models::{Members, ModelInfo, NewModel, PairKey};
 pub use window::{WINDOW_ENCODING, decode_window, encode_window};
 
 /// A dataset member (or any sample) with its label and its frame, as the trainer's

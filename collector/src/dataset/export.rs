@@ -32,15 +32,13 @@ pub use super::manifest::{
 };
 
 use super::manifest::columns;
-use super::{DatasetError, EXPORT_FORMAT_VERSION, Split, csv, get, query_err};
+use super::{DatasetError, EXPORT_FORMAT_VERSION, Split, csv, get};
 use crate::progress::progress_bar;
 use crate::store::Store;
-use crate::store::now_sql;
 use crate::store::rows::seed_from_sql;
 use futures_util::TryStreamExt as _;
 use sha2::{Digest as _, Sha256};
 use softtouch_schemas::FrameFormat;
-use sqlx::FromRow;
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -56,46 +54,7 @@ pub struct ExportSummary {
     pub image_bytes: u64,
 }
 
-#[derive(Debug, FromRow)]
-struct RunRow {
-    run_id: i64,
-    seed: i64,
-    status: String,
-    scene_name: String,
-    medium: String,
-    rig_toml: String,
-    scene_toml: String,
-    software_version: String,
-    schema_version: i64,
-    created_at: String,
-    origin_run_id: Option<i64>,
-    layout: Option<String>,
-    source_path: Option<String>,
-    provenance: Option<String>,
-}
-
-#[derive(Debug, FromRow)]
-struct SampleRow {
-    position: i64,
-    split: String,
-    run_id: i64,
-    sample_index: i64,
-    rod: String,
-    medium: String,
-    cmd_x_m: f64,
-    cmd_z_m: f64,
-    cmd_theta_rad: f64,
-    fx_n: f64,
-    fy_n: f64,
-    fz_n: f64,
-    tx_nm: f64,
-    ty_nm: f64,
-    tz_nm: f64,
-    format: String,
-    width: i64,
-    height: i64,
-    data: Vec<u8>,
-}
+use crate::store::datasets::ExportRun as RunRow;
 
 /// sha256 as lowercase hex.
 #[must_use]
@@ -239,18 +198,7 @@ async fn write_into(
     std::fs::create_dir_all(&images).map_err(DatasetError::io("create", &images))?;
 
     // The runs, and the id each shows in the `run` column.
-    let runs = sqlx::query_as::<_, RunRow>(
-        "SELECT r.run_id, r.seed, r.status, r.scene_name, r.medium, r.rig_toml, r.scene_toml,
-                r.software_version, r.schema_version, r.created_at,
-                i.origin_run_id, i.layout, i.source_path, i.provenance
-         FROM runs r LEFT JOIN run_imports i ON i.run_id = r.run_id
-         WHERE r.run_id IN (SELECT DISTINCT run_id FROM dataset_members WHERE dataset_id = ?)
-         ORDER BY r.run_id",
-    )
-    .bind(info.dataset_id)
-    .fetch_all(store.pool())
-    .await
-    .map_err(query_err("reading the dataset's runs"))?;
+    let runs: Vec<RunRow> = store.dataset_runs(info.dataset_id).await?;
     let origin: Vec<i64> = runs
         .iter()
         .map(|r| r.origin_run_id.unwrap_or(r.run_id))
@@ -282,23 +230,8 @@ async fn write_into(
         "export",
     );
     let (mut samples, mut image_bytes) = (0u64, 0u64);
-    let mut rows = sqlx::query_as::<_, SampleRow>(
-        "SELECT m.position, m.split, m.run_id, m.sample_index, s.rod, s.medium,
-                s.cmd_x_m, s.cmd_z_m, s.cmd_theta_rad,
-                s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
-                f.format, f.width, f.height, f.data
-         FROM dataset_members m
-         JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
-         JOIN frames f ON f.run_id = m.run_id AND f.sample_index = m.sample_index
-         WHERE m.dataset_id = ? ORDER BY m.position",
-    )
-    .bind(info.dataset_id)
-    .fetch(store.pool());
-    while let Some(r) = rows
-        .try_next()
-        .await
-        .map_err(query_err("reading dataset samples"))?
-    {
+    let mut rows = store.dataset_samples(info.dataset_id);
+    while let Some(r) = rows.try_next().await? {
         let image = image_name(r.position, info.sample_count);
         let (run, index) = (r.run_id, r.sample_index);
         let png = frame_to_png(&r.format, r.width, r.height, r.data, &|| {
@@ -351,10 +284,7 @@ async fn write_into(
         .map_err(DatasetError::io("sync", &labels_path))?;
     sha256.insert("labels.csv".to_owned(), hex(&hash.finalize()));
 
-    let exported_at: String = sqlx::query_scalar(concat!("SELECT ", now_sql!()))
-        .fetch_one(store.pool())
-        .await
-        .map_err(query_err("reading the clock"))?;
+    let exported_at: String = store.now().await?;
     let manifest = Manifest {
         format: MANIFEST_FORMAT.into(),
         format_version: EXPORT_FORMAT_VERSION,

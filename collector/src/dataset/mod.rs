@@ -29,13 +29,11 @@ pub mod stats;
 
 pub use split::{Split, SplitError, SplitRatio};
 
-use crate::store::now_sql;
-use crate::store::rows::seed_to_sql;
+use crate::store::datasets::DatasetRow;
 use crate::store::{RunId, Store, StoreError};
 use futures_util::TryStreamExt as _;
 use serde::{Deserialize, Serialize};
 use softtouch_schemas::Medium;
-use sqlx::{FromRow, Row as _};
 use std::path::PathBuf;
 
 /// Version of the export layout written by [`export`] and read by [`import`].
@@ -276,22 +274,7 @@ pub struct DatasetInfo {
     pub created_at: String,
 }
 
-#[derive(Debug, FromRow)]
-struct Candidate {
-    run_id: i64,
-    sample_index: i64,
-    rod: String,
-    medium: String,
-    status: String,
-    fx_n: f64,
-    fy_n: f64,
-    fz_n: f64,
-    tx_nm: f64,
-    ty_nm: f64,
-    tz_nm: f64,
-    sync_skew_ns: i64,
-    reading_count: i64,
-}
+pub(crate) use crate::store::datasets::Candidate;
 
 /// Check a dataset name: non-empty, at most 100 characters, letters, digits, `-_.`,
 /// not starting with `.` (it names files: `NAME-histograms.png`).
@@ -327,34 +310,15 @@ pub async fn create(store: &Store, new: &NewDataset) -> Result<DatasetInfo, Data
         return Err(DatasetError::Exists(new.name.clone()));
     }
     for &run in &runs {
-        let exists: Option<i64> = sqlx::query_scalar("SELECT run_id FROM runs WHERE run_id = ?")
-            .bind(run)
-            .fetch_optional(store.pool())
-            .await
-            .map_err(query_err("looking up a run"))?;
-        if exists.is_none() {
+        if !store.run_exists(run).await? {
             return Err(DatasetError::NoSuchRun(run));
         }
     }
 
     let mut selected: Vec<(i64, i64)> = Vec::new();
     for &run in &runs {
-        let mut rows = sqlx::query_as::<_, Candidate>(
-            "SELECT s.run_id, s.sample_index, s.rod, s.medium, s.status,
-                    s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm, s.sync_skew_ns, s.reading_count
-             FROM samples s
-             WHERE s.run_id = ?
-               AND EXISTS (SELECT 1 FROM frames f
-                           WHERE f.run_id = s.run_id AND f.sample_index = s.sample_index)
-             ORDER BY s.sample_index",
-        )
-        .bind(run)
-        .fetch(store.pool());
-        while let Some(c) = rows
-            .try_next()
-            .await
-            .map_err(query_err("selecting samples"))?
-        {
+        let mut rows = store.candidates(run);
+        while let Some(c) = rows.try_next().await? {
             if new.filters.accepts(&c) {
                 selected.push((c.run_id, c.sample_index));
             }
@@ -397,61 +361,29 @@ pub(crate) async fn insert_dataset(
 ) -> Result<i64, DatasetError> {
     let json = serde_json::to_string(definition)
         .map_err(|e| DatasetError::Invalid(format!("cannot encode the definition: {e}")))?;
-    let count = i64::try_from(members.len())
-        .map_err(|_| DatasetError::Invalid("too many samples".into()))?;
-    let inserted = sqlx::query(concat!(
-        "INSERT INTO datasets (name, definition_json, seed, split_ratio, sample_count,
-                               software_version, schema_version, created_at)
-         VALUES (?, ?, ?, ?, ?, ?, ?, ",
-        now_sql!(),
-        ") ON CONFLICT (name) DO NOTHING"
-    ))
-    .bind(name)
-    .bind(json)
-    .bind(seed_to_sql(definition.seed))
-    .bind(&definition.split)
-    .bind(count)
-    .bind(softtouch_schemas::SOFTWARE_VERSION)
-    .bind(Store::schema_version())
-    .execute(&mut *tx)
-    .await
-    .map_err(query_err("inserting a dataset"))?;
-    if inserted.rows_affected() == 0 {
-        return Err(DatasetError::Exists(name.to_owned()));
-    }
-    let dataset_id = inserted.last_insert_rowid();
-    for (position, &(run, index, split)) in members.iter().enumerate() {
-        sqlx::query(
-            "INSERT INTO dataset_members (dataset_id, position, run_id, sample_index, split)
-             VALUES (?, ?, ?, ?, ?)",
-        )
-        .bind(dataset_id)
-        .bind(i64::try_from(position).unwrap_or(i64::MAX))
-        .bind(run)
-        .bind(index)
-        .bind(split.as_str())
-        .execute(&mut *tx)
-        .await
-        .map_err(query_err("inserting dataset members"))?;
-    }
-    Ok(dataset_id)
+    let members: Vec<(i64, i64, &str)> = members
+        .iter()
+        .map(|&(run, index, split)| (run, index, split.as_str()))
+        .collect();
+    let new = crate::store::datasets::NewDataset {
+        name,
+        definition_json: &json,
+        seed: definition.seed,
+        split_ratio: &definition.split,
+        members: &members,
+    };
+    crate::store::datasets::insert_dataset(tx, &new)
+        .await?
+        .ok_or_else(|| DatasetError::Exists(name.to_owned()))
 }
 
 /// The dataset of that name, if any.
 pub async fn find(store: &Store, name: &str) -> Result<Option<DatasetInfo>, DatasetError> {
-    let row = sqlx::query(
-        "SELECT d.dataset_id, d.name, d.definition_json, d.sample_count, d.software_version,
-                d.schema_version, d.created_at,
-                (SELECT COUNT(*) FROM dataset_members m WHERE m.dataset_id = d.dataset_id AND m.split = 'train'),
-                (SELECT COUNT(*) FROM dataset_members m WHERE m.dataset_id = d.dataset_id AND m.split = 'val'),
-                (SELECT COUNT(*) FROM dataset_members m WHERE m.dataset_id = d.dataset_id AND m.split = 'test')
-         FROM datasets d WHERE d.name = ?",
-    )
-    .bind(name)
-    .fetch_optional(store.pool())
-    .await
-    .map_err(query_err("looking up a dataset"))?;
-    row.map(|row| info_from_row(&row)).transpose()
+    store
+        .dataset(name)
+        .await?
+        .map(|row| info_from_row(&row))
+        .transpose()
 }
 
 /// The dataset of that name, or [`DatasetError::NoSuchDataset`].
@@ -461,32 +393,28 @@ pub async fn get(store: &Store, name: &str) -> Result<DatasetInfo, DatasetError>
         .ok_or_else(|| DatasetError::NoSuchDataset(name.to_owned()))
 }
 
-fn info_from_row(row: &sqlx::sqlite::SqliteRow) -> Result<DatasetInfo, DatasetError> {
-    let json: String = row.get(2);
-    let name: String = row.get(1);
-    let definition = serde_json::from_str(&json).map_err(|e| {
+fn info_from_row(row: &DatasetRow) -> Result<DatasetInfo, DatasetError> {
+    let definition = serde_json::from_str(&row.definition_json).map_err(|e| {
         DatasetError::Invalid(format!(
-            "dataset `{name}` has an unreadable definition: {e}"
+            "dataset `{}` has an unreadable definition: {e}",
+            row.name
         ))
     })?;
     Ok(DatasetInfo {
-        dataset_id: row.get(0),
-        name,
+        dataset_id: row.dataset_id,
+        name: row.name.clone(),
         definition,
-        sample_count: row.get(3),
-        software_version: row.get(4),
-        schema_version: row.get(5),
-        created_at: row.get(6),
-        split_counts: [row.get(7), row.get(8), row.get(9)],
+        sample_count: row.sample_count,
+        software_version: row.software_version.clone(),
+        schema_version: row.schema_version,
+        created_at: row.created_at.clone(),
+        split_counts: row.split_counts,
     })
 }
 
 /// Every dataset, oldest first.
 pub async fn list(store: &Store) -> Result<Vec<DatasetInfo>, DatasetError> {
-    let names: Vec<String> = sqlx::query_scalar("SELECT name FROM datasets ORDER BY dataset_id")
-        .fetch_all(store.pool())
-        .await
-        .map_err(query_err("listing datasets"))?;
+    let names = store.dataset_names().await?;
     let mut out = Vec::with_capacity(names.len());
     for name in names {
         out.push(get(store, &name).await?);

@@ -2,12 +2,11 @@
 //! standard deviation (force in N, torque in N·mm); histograms of the six axes as a
 //! PNG (the paper's Fig. S1e) and as a text sparkline.
 
-use super::{DatasetError, DatasetInfo, Split, get, query_err};
+use super::{DatasetError, DatasetInfo, Split, get};
 use crate::plot::{self, HistogramPanel};
 use crate::store::Store;
 use futures_util::TryStreamExt as _;
 use softtouch_schemas::wrench::AXES;
-use sqlx::FromRow;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -47,19 +46,6 @@ pub struct Stats {
     pub values: [Vec<f64>; 6],
 }
 
-#[derive(Debug, FromRow)]
-struct Row {
-    split: String,
-    rod: String,
-    medium: String,
-    fx_n: f64,
-    fy_n: f64,
-    fz_n: f64,
-    tx_nm: f64,
-    ty_nm: f64,
-    tz_nm: f64,
-}
-
 /// Compute the statistics of a dataset (one streaming pass over its members).
 pub async fn compute(store: &Store, name: &str) -> Result<Stats, DatasetError> {
     let info = get(store, name).await?;
@@ -68,19 +54,8 @@ pub async fn compute(store: &Store, name: &str) -> Result<Stats, DatasetError> {
     let mut per_medium: BTreeMap<String, [u64; 3]> = BTreeMap::new();
     let capacity = usize::try_from(info.sample_count).unwrap_or(0);
     let mut values: [Vec<f64>; 6] = std::array::from_fn(|_| Vec::with_capacity(capacity));
-    let mut rows = sqlx::query_as::<_, Row>(
-        "SELECT m.split, s.rod, s.medium, s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm
-         FROM dataset_members m
-         JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
-         WHERE m.dataset_id = ? ORDER BY m.position",
-    )
-    .bind(info.dataset_id)
-    .fetch(store.pool());
-    while let Some(r) = rows
-        .try_next()
-        .await
-        .map_err(query_err("reading dataset samples"))?
-    {
+    let mut rows = store.dataset_labels(info.dataset_id);
+    while let Some(r) = rows.try_next().await? {
         let split: Split = r
             .split
             .parse()
