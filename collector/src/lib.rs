@@ -1,8 +1,9 @@
-//! The softtouch collector: the store, config resolution and the `softtouch` CLI.
+//! The library a lab's verbs call (collection, datasets, experiments, the report) and
+//! the `softtouch` CLI; the one crate that names both real and simulated devices.
 //!
 //! # Layout
-//! - [`store`]: SQLite through sqlx (runs, samples, frames, force/torque windows,
-//!   events), one transaction per sample; one insert function per table.
+//! - [`store`]: the store crate (`softtouch-store`, the only one with SQL), re-exported
+//!   so its paths read `crate::store`.
 //! - [`collect`]: the collection job (planning a new or resumed run, building the
 //!   devices, pose sampler, per-sample procedure, force/torque stream and windows,
 //!   faults and retries, the collection benchmark).
@@ -14,13 +15,16 @@
 //!   CSV and plots, shared by the verbs and reports.
 //! - [`devices`]: a rig of boxed devices from the rig config, each real or simulated;
 //!   the one place that names both.
-//! - [`grasp`]: grasping experiments: the simulated soft grasp behind the grasp
-//!   library's traits (`grasp::sim`), a real Hand-E and finger cameras
-//!   (`grasp::devices`), `bench grasp` (`grasp::bench`).
+//! - [`grasp`]: the grasp experiments as a library (settings in, rows out, their own
+//!   errors): Figure 5's `follow`, `disturb`, `twist` on the loop `soft` makes ready,
+//!   Figure 4's `trials`, `bench`; the simulated soft grasp behind the grasp
+//!   library's traits (`sim`), a real Hand-E and finger cameras (`devices`), one
+//!   validation per setting (`settings`).
 //! - [`transfer`]: land to water: a dataset's test split alone, and the water test
 //!   samples paired with land samples of the same pose (`collect --poses-from`).
 //! - [`configs`]: resolving the rig and scene from files or the embedded defaults.
-//! - [`plot`]: PNG histograms and x–y charts (plotters).
+//! - [`plot`]: PNG histograms, x–y, bar and two-panel charts (plotters).
+//! - [`finetune`], [`latent`]: the fine-tuning curve and the latent figures.
 //! - [`live`]: `softtouch live`'s session, the estimate beside the sensor during a
 //!   scripted press.
 //! - [`rig_check`]: `rig check`'s device checks, a typed result per device.
@@ -28,7 +32,8 @@
 //!   templates) of runs, datasets, models and sweeps, read from a read-only database.
 //! - `progress`: the progress bar and the per-epoch training lines.
 //! - [`synthetic`]: synthetic samples and windows (`bench ingest`, tests, examples).
-//! - `testing` (the `testing` feature, on in tests and examples): test fixtures.
+//! - `testing` (the `testing` feature, on in tests and examples): test fixtures;
+//!   `store_tests` runs the store's round trips on them.
 //! - [`cli`]: the `softtouch` command line (clap): one file per verb group, each only
 //!   parsing, calling the library and printing; exit codes.
 //!

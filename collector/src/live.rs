@@ -1,7 +1,7 @@
 //! `softtouch live`'s session: the model's estimate at camera rate beside the
 //! force/torque sensor, paired frame by frame, while a scripted press runs (home,
 //! approach, press in, hold, out, home; every move workspace-checked, every reading
-//! through the one force guard). The verb builds the devices, runs a [`Session`] and
+//! through the one force guard). The verb builds the devices, runs a `Session` and
 //! stops the arm on every exit.
 
 use std::collections::VecDeque;

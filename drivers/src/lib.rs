@@ -1,5 +1,5 @@
 //! Devices: one narrow trait per kind, the clock every reading is stamped with, and
-//! the drivers behind them.
+//! the real drivers behind them; it must not depend on the simulator, a store or a model.
 //!
 //! # Layout
 //! - [`clock`]: the injected [`Clock`]; [`TokioClock`] reads tokio's clock, which is

@@ -1,3 +1,6 @@
+//! The grasp library: Algorithm 1, the force loop and the trial protocol over narrow
+//! device traits; it must name no simulator and know no SQL (the collector adapts both).
+//!
 //! Grasping with the learned touch: the finger's own force estimate closes the loop on
 //! a parallel gripper (the paper's Results "Tactile Sensorimotor Grasping
 //! Adaptability", Algorithm 1, Methods S3 and S4).

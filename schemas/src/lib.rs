@@ -1,4 +1,5 @@
-//! Plain data of the softtouch domain.
+//! Plain data of the softtouch domain: poses, wrenches, readings, samples, rig and
+//! scene configs with validation. It must depend on no other softtouch crate and do no I/O.
 //!
 //! Everything here is a value type with its unit and frame in its name: SI units in
 //! storage (m, rad, N, N·m, ns), torque shown in N·mm where the paper does.

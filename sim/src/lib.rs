@@ -1,6 +1,6 @@
 //! The simulated scene and the simulated twin of every device, behind the drivers'
-//! traits. It must not depend on a store, a model or the CLI; nothing outside tests,
-//! benches and the collector's device building should name it.
+//! traits; it must not depend on a store, a model or the CLI (only the collector's
+//! device building and experiments, and tests and benches, name it).
 //!
 //! # The finger and the contact
 //!

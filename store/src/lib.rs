@@ -1,3 +1,6 @@
+//! The database: one writer per table, typed rows for every reader, migrations
+//! applied; the only crate with SQL, and it must depend on no model, simulator or CLI.
+//!
 //! The store: SQLite through sqlx, WAL, foreign keys on, migrations embedded from the
 //! workspace's `migrations/`.
 //!

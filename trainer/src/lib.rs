@@ -1,3 +1,6 @@
+//! The models that read touch, and their training; it must know no SQL and no device
+//! (data comes in as examples, models go out as artifacts).
+//!
 //! softtouch's learning half: the supervised variational autoencoder (SVAE) that reads
 //! a 6-axis wrench from the soft finger's camera image, its VAE and ConvNet baselines,
 //! the paper's loss and metrics, training with checkpoints and resume, the model

@@ -34,7 +34,7 @@
 //! - [`sampler`]: contact poses and the rod schedule;
 //! - [`window`]: the force/torque stream and a sample's label window;
 //! - [`rods`]: changing the rod (an operator, or the simulator);
-//! - [`bench`]: what collection costs, and where its time goes.
+//! - [`bench`](mod@bench): what collection costs, and where its time goes.
 
 pub mod bench;
 pub mod devices;

@@ -11,7 +11,7 @@
 //!   Figure 5's force following, disturbance and twist.
 //! - [`trials`]: the success-rate trials of Figure 4: sessions, trials run and stored
 //!   one at a time, the table with Wilson intervals, its CSVs and charts.
-//! - [`bench`]: `softtouch bench grasp`, the force loop measured over K, δ, camera rate
+//! - [`bench`](mod@bench): `softtouch bench grasp`, the force loop measured over K, δ, camera rate
 //!   and model on the simulated soft grasp.
 //!
 //! Nothing here parses arguments; the verbs under `cli/` do, and print.
