@@ -31,6 +31,8 @@
 //! - [`report`]: `softtouch report`, one self-contained HTML page (inline SVG, maud
 //!   templates) of runs, datasets, models and sweeps, read from a read-only database.
 //! - `progress`: the progress bar and the per-epoch training lines.
+//! - [`stop`]: a stop request as a session's loop hears it (the CLI's signal watch
+//!   sends it).
 //! - [`synthetic`]: synthetic samples and windows (`bench ingest`, tests, examples).
 //! - `testing` (the `testing` feature, on in tests and examples): test fixtures;
 //!   `store_tests` runs the store's round trips on them.
@@ -56,6 +58,7 @@ pub mod report;
 pub mod rig_check;
 /// The store is its own crate; `crate::store` keeps its paths.
 pub use softtouch_store as store;
+pub mod stop;
 #[cfg(test)]
 mod store_tests;
 pub mod synthetic;

@@ -14,8 +14,6 @@ use softtouch_drivers::{
 use softtouch_grasp::ForceEstimator;
 use softtouch_schemas::{ArmPose, ContactPose, FtReading, RigConfig, TimestampNs, Wrench};
 
-use crate::cli::{Failure, io_failure};
-
 /// Time the hold at depth lasts, s.
 pub(crate) const HOLD_S: f64 = 1.0;
 /// Time watched after the script ends, s.
@@ -151,7 +149,7 @@ pub(crate) struct Session<'a> {
     pub(crate) frame_timeout_ms: u64,
     pub(crate) clock: &'a dyn Clock,
     /// A signal's stop request: the session ends there and the arm is stopped.
-    pub(crate) stop: crate::cli::signals::StopRequest,
+    pub(crate) stop: crate::stop::StopRequest,
 }
 
 #[derive(Debug, Default)]
@@ -188,7 +186,7 @@ impl Summary {
         }
     }
 
-    pub(crate) fn print(&self, out: &mut dyn Write) -> Result<(), Failure> {
+    pub(crate) fn print(&self, out: &mut dyn Write) -> std::io::Result<()> {
         let span = self.last_t_s - self.first_t_s.unwrap_or(self.last_t_s);
         let rate = if span > 0.0 {
             (self.frames.saturating_sub(1)) as f64 / span
@@ -210,16 +208,18 @@ impl Summary {
             "{} frames at {rate:.1} Hz over {span:.1} s (the rig's clock), {} without an estimate, script {}; peak |F| on the sensor {:.3} N",
             self.frames,
             self.no_estimate,
-            if self.script_done { "done" } else { "not run to the end" },
+            if self.script_done {
+                "done"
+            } else {
+                "not run to the end"
+            },
             self.peak_sensor_force_n
-        )
-        .map_err(io_failure)?;
+        )?;
         writeln!(
             out,
             "RMS estimate − sensor over {} frames: Fx Fy Fz {} {} {} N, Tx Ty Tz {} {} {} N·mm",
             self.paired, rms[0], rms[1], rms[2], rms[3], rms[4], rms[5]
         )
-        .map_err(io_failure)
     }
 }
 
@@ -344,7 +344,7 @@ impl Session<'_> {
         let mut last_reading = tokio::time::Instant::now();
         let script = run_script(arm, self.rig, steps);
         tokio::pin!(script);
-        let stop = crate::cli::signals::requested(self.stop.clone());
+        let stop = crate::stop::requested(self.stop.clone());
         tokio::pin!(stop);
         loop {
             let now = self.clock.now();

@@ -166,7 +166,7 @@ pub async fn run(args: LiveArgs, db: &Path, out: &mut dyn Write) -> Result<(), F
     })?;
     stopped.map_err(|e| Failure::Runtime(anyhow!("stopping the arm: {e}")))?;
     flushed.map_err(|e| Failure::Runtime(anyhow!("cannot write {}: {e}", args.out.display())))?;
-    summary.print(out)?;
+    summary.print(out).map_err(io_failure)?;
     writeln!(out, "wrote {}", args.out.display()).map_err(io_failure)?;
     Ok(())
 }
