@@ -5,7 +5,7 @@
 //! even a bug here cannot change it. No migration runs either; a database older
 //! than this build is refused with the command that migrates it.
 
-use crate::{MemberRow, Store, run_counts_columns, run_counts_from};
+use crate::{MemberRow, RunSummary, Store, run_counts_columns, run_counts_from};
 use sqlx::sqlite::{SqliteConnectOptions, SqlitePool, SqlitePoolOptions};
 use sqlx::{FromRow, Row as _};
 use std::collections::BTreeMap;
@@ -125,29 +125,22 @@ pub async fn open_read_only(path: &Path) -> Result<ReadOnly, ReadError> {
     }
 }
 
-/// A run with its counts and provenance.
+/// A run with its counts (the listing's [`RunSummary`], one definition of them) and its
+/// provenance.
 #[derive(Debug, Clone, FromRow)]
 pub struct RunRow {
-    pub run_id: i64,
-    pub status: String,
-    pub seed: i64,
-    pub scene_name: String,
-    pub medium: String,
-    pub samples_planned: i64,
-    pub ok: i64,
-    pub rejected: i64,
-    pub retried: i64,
-    pub events: i64,
-    pub faults: i64,
+    /// Status, counts and times, as `softtouch runs` lists them.
+    #[sqlx(flatten)]
+    pub counts: RunSummary,
+    /// The software that collected it.
     pub software_version: String,
+    /// Its rig, as run (TOML).
     pub rig_toml: String,
+    /// Its scene, as run (TOML).
     pub scene_toml: String,
-    pub created_at: String,
-    pub updated_at: String,
-    /// Wall-clock hours from creation to the last change.
-    pub hours: f64,
-    /// Run clock of the first and last frame, ns.
+    /// Run clock of the first frame, ns.
     pub first_t_ns: Option<i64>,
+    /// Run clock of the last frame, ns.
     pub last_t_ns: Option<i64>,
 }
 
@@ -188,13 +181,13 @@ pub async fn runs(db: &ReadOnly, only: Option<&[i64]>) -> Result<Vec<RunData>, R
     if let Some(only) = only
         && let Some(missing) = only
             .iter()
-            .find(|id| !rows.iter().any(|r| r.run_id == **id))
+            .find(|id| !rows.iter().any(|r| r.counts.run_id == **id))
     {
         return Err(ReadError::NoSuchRun(*missing));
     }
     let mut out = Vec::new();
     for row in rows {
-        if only.is_some_and(|ids| !ids.contains(&row.run_id)) {
+        if only.is_some_and(|ids| !ids.contains(&row.counts.run_id)) {
             continue;
         }
         out.push(run_data(db, row).await?);
@@ -203,7 +196,7 @@ pub async fn runs(db: &ReadOnly, only: Option<&[i64]>) -> Result<Vec<RunData>, R
 }
 
 async fn run_data(db: &ReadOnly, row: RunRow) -> Result<RunData, ReadError> {
-    let id = row.run_id;
+    let id = row.counts.run_id;
     let rejects: Vec<(String, i64)> = sqlx::query_as(
         "SELECT COALESCE(reject_reason, '?'), COUNT(*) FROM samples
          WHERE run_id = ? AND status = 'rejected' GROUP BY 1 ORDER BY 2 DESC, 1",

@@ -170,23 +170,23 @@ fn runs_section(c: &Content) -> Result<Markup, ReportError> {
                     }
                     @for d in &c.runs {
                         @let r = &d.row;
-                        @let id = r.run_id;
-                        @let taken = r.ok + r.rejected;
+                        @let id = r.counts.run_id;
+                        @let taken = r.counts.ok + r.counts.rejected;
                         tr {
                             td data-k=(format!("run-{id}-id")) { (id) }
-                            td.l { (r.status) }
-                            td.l data-k=(format!("run-{id}-scene")) { (r.scene_name) }
-                            td.l { (r.medium) }
-                            td data-k=(format!("run-{id}-seed")) { (seed_from_sql(r.seed)) }
-                            td { (r.samples_planned) }
-                            td data-k=(format!("run-{id}-ok")) { (r.ok) }
-                            td data-k=(format!("run-{id}-rejected")) { (r.rejected) }
-                            td data-k=(format!("run-{id}-retried")) { (r.retried) }
-                            td { @if taken > 0 { (f(100.0 * r.ok as f64 / taken as f64, 1)) } @else { "–" } }
+                            td.l { (r.counts.status) }
+                            td.l data-k=(format!("run-{id}-scene")) { (r.counts.scene_name) }
+                            td.l { (r.counts.medium) }
+                            td data-k=(format!("run-{id}-seed")) { (seed_from_sql(r.counts.seed)) }
+                            td { (r.counts.samples_planned) }
+                            td data-k=(format!("run-{id}-ok")) { (r.counts.ok) }
+                            td data-k=(format!("run-{id}-rejected")) { (r.counts.rejected) }
+                            td data-k=(format!("run-{id}-retried")) { (r.counts.retried) }
+                            td { @if taken > 0 { (f(100.0 * r.counts.ok as f64 / taken as f64, 1)) } @else { "–" } }
                             td data-k=(format!("run-{id}-rate")) { (run_rate(r).map_or_else(|| "–".into(), |v| f(v, 0))) }
-                            td { (f(r.hours, 3)) }
-                            td data-k=(format!("run-{id}-events")) { (r.events) }
-                            td { (r.faults) }
+                            td { (f(r.counts.hours, 3)) }
+                            td data-k=(format!("run-{id}-events")) { (r.counts.events) }
+                            td { (r.counts.faults) }
                         }
                     }
                 }
@@ -201,12 +201,12 @@ fn runs_section(c: &Content) -> Result<Markup, ReportError> {
 /// Accepted samples per hour of run clock, from the first frame to the last.
 fn run_rate(r: &super::data::RunRow) -> Option<f64> {
     let span_h = (r.last_t_ns? - r.first_t_ns?) as f64 / 3.6e12;
-    (span_h > 0.0).then(|| r.ok as f64 / span_h)
+    (span_h > 0.0).then(|| r.counts.ok as f64 / span_h)
 }
 
 fn run_detail(d: &RunData) -> Result<Markup, ReportError> {
     let r = &d.row;
-    let id = r.run_id;
+    let id = r.counts.run_id;
     let origin = r
         .first_t_ns
         .into_iter()
@@ -285,11 +285,11 @@ fn run_detail(d: &RunData) -> Result<Markup, ReportError> {
         )?)
     };
     Ok(html! {
-        h3 id=(format!("run-{id}")) { "Run " (id) ": " (r.scene_name) ", " (r.medium) }
+        h3 id=(format!("run-{id}")) { "Run " (id) ": " (r.counts.scene_name) ", " (r.counts.medium) }
         p.prov {
-            "seed " (seed_from_sql(r.seed)) " · rig " code { (config_hash(&r.rig_toml)) }
+            "seed " (seed_from_sql(r.counts.seed)) " · rig " code { (config_hash(&r.rig_toml)) }
             " · scene " code { (config_hash(&r.scene_toml)) } " · softtouch " (r.software_version)
-            " · created " (r.created_at) " · last change " (r.updated_at)
+            " · created " (r.counts.created_at) " · last change " (r.counts.updated_at)
         }
         div.figs {
             (figure(progress_svg))
