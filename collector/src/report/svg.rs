@@ -4,7 +4,7 @@
 //! database can go into a figure as they are. Axis labels always carry the unit.
 
 use super::ReportError;
-use crate::plot::{FONT_FAMILY, PALETTE, Series, SeriesStyle, register_font};
+use crate::plot::{FONT_FAMILY, PALETTE, Series, SeriesStyle, format_tick_in, register_font};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -22,25 +22,6 @@ fn draw_err(what: &str) -> impl Fn(String) -> ReportError + '_ {
 fn pad(lo: f64, hi: f64) -> (f64, f64) {
     let m = if hi > lo { (hi - lo) * 0.05 } else { 0.5 };
     (lo - m, hi + m)
-}
-
-/// Tick text: few digits, scientific for tiny values.
-fn tick(v: f64, span: f64) -> String {
-    let a = v.abs();
-    if a != 0.0 && !(1e-3..1e5).contains(&a) {
-        return format!("{v:.1e}");
-    }
-    let decimals = if span.is_finite() && span > 0.0 {
-        (-(span / 5.0).log10()).ceil().clamp(0.0, 4.0) as usize
-    } else {
-        2
-    };
-    let t = format!("{v:.decimals$}");
-    match t.strip_prefix('-') {
-        // No "-0.0" for a value that rounds to zero.
-        Some(rest) if rest.chars().all(|c| c == '0' || c == '.') => rest.to_owned(),
-        _ => t,
-    }
 }
 
 /// The finite range of all points, if any.
@@ -115,8 +96,8 @@ fn draw_xy(
         .y_desc(fig.y_label)
         .x_labels(6)
         .y_labels(6)
-        .x_label_formatter(&|v| tick(*v, x1 - x0))
-        .y_label_formatter(&|v| tick(*v, y1 - y0))
+        .x_label_formatter(&|v| format_tick_in(*v, x1 - x0))
+        .y_label_formatter(&|v| format_tick_in(*v, y1 - y0))
         .label_style((FONT_FAMILY, 12))
         .axis_desc_style((FONT_FAMILY, 13))
         .light_line_style(WHITE)
@@ -221,7 +202,7 @@ pub(crate) fn histograms(
                     .y_desc("samples")
                     .x_labels(5)
                     .y_labels(4)
-                    .x_label_formatter(&|v| tick(*v, x1 - x0))
+                    .x_label_formatter(&|v| format_tick_in(*v, x1 - x0))
                     .y_label_formatter(&|v| format!("{v:.0}"))
                     .label_style((FONT_FAMILY, 11))
                     .axis_desc_style((FONT_FAMILY, 12))
@@ -285,7 +266,7 @@ pub(crate) fn bars(
                         String::new()
                     }
                 })
-                .y_label_formatter(&|v| tick(*v, top))
+                .y_label_formatter(&|v| format_tick_in(*v, top))
                 .disable_x_mesh()
                 .label_style((FONT_FAMILY, 12))
                 .axis_desc_style((FONT_FAMILY, 13))
@@ -354,7 +335,7 @@ pub(crate) fn timeline(
                 .x_desc("run clock, h")
                 .x_labels(6)
                 .y_labels(kinds.len() * 2 + 1)
-                .x_label_formatter(&|v| tick(*v, x1 - x0))
+                .x_label_formatter(&|v| format_tick_in(*v, x1 - x0))
                 .y_label_formatter(&|v| {
                     let i = v.round();
                     if (v - i).abs() < 1e-6 && i >= 0.0 {
@@ -477,10 +458,11 @@ mod tests {
     }
 
     #[test]
-    fn ticks_are_short() {
-        assert_eq!(tick(0.5, 1.0), "0.5");
-        assert_eq!(tick(-0.0, 1.0), "0.0");
-        assert_eq!(tick(1234.0, 2000.0), "1234");
-        assert_eq!(tick(0.0001, 0.001), "1.0e-4");
+    fn the_page_and_the_png_label_ticks_alike() {
+        // One formatter (`plot::format_tick_in`) for both; these were the page's own.
+        assert_eq!(format_tick_in(0.5, 1.0), "0.5");
+        assert_eq!(format_tick_in(-0.0, 1.0), "0");
+        assert_eq!(format_tick_in(1234.0, 2000.0), "1234");
+        assert_eq!(format_tick_in(0.0001, 0.001), "1.0e-4");
     }
 }
