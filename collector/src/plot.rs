@@ -4,7 +4,9 @@
 //! Helpers meant for reuse across the collector (dataset statistics, bench results,
 //! trainer sweeps):
 //! - [`histogram_grid`]: a grid of histogram panels, one per value series.
-//! - [`xy_chart`]: several labelled x–y series as lines, points or both.
+//! - [`xy_chart`]: several labelled x–y series as lines, points or both; its drawing
+//!   ([`draw_xy`]) is generic over the backend, so the report's SVG figures are drawn
+//!   by the same code in their own [`XyLook`].
 //! - [`bar_chart`]: grouped bars with interval whiskers and reference ticks.
 //! - [`two_panel_chart`]: two x–y charts over one time axis, one above the other.
 
@@ -253,54 +255,128 @@ pub struct XyChart<'a> {
     pub series: &'a [Series],
 }
 
-/// Draw an x–y chart into a PNG of `size` pixels. Axis ranges cover every finite
-/// point with a small margin.
-pub fn xy_chart(path: &Path, chart: &XyChart<'_>, size: (u32, u32)) -> Result<(), PlotError> {
-    register_font()?;
-    let points = || {
-        chart
-            .series
-            .iter()
-            .flat_map(|s| s.points.iter().copied())
-            .filter(|(x, y)| x.is_finite() && y.is_finite())
+/// How an x–y chart looks where it is shown: [`XyLook::PNG`] for files a person opens,
+/// [`XyLook::PAGE`] for the report's inline figures (smaller type, a light mesh, a
+/// legend only where there are several series).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct XyLook {
+    /// Title size, px.
+    pub title_px: u32,
+    /// Margin around the plot, px.
+    pub margin_px: u32,
+    /// Room for the x and the y axis labels, px.
+    pub label_areas_px: (u32, u32),
+    /// Tick label and axis description sizes, px.
+    pub text_px: (u32, u32),
+    /// Ticks per axis (`None`: plotters' default) and whether the light mesh is hidden.
+    pub ticks: Option<usize>,
+    /// Marker radius of point series, px.
+    pub marker_px: u32,
+    /// Legend entries as filled swatches (the page) or as the series' own line or
+    /// marker (the PNG).
+    pub swatches: bool,
+    /// Points of a points-only series drawn translucent (a dense scatter).
+    pub translucent_points: bool,
+    /// Legend text size, px; its box's border darkness (0–1); whether it sits at the
+    /// lower right (else plotters' default); whether a single series gets one.
+    pub legend: (u32, f64, bool, bool),
+}
+
+impl XyLook {
+    /// A PNG file's chart.
+    pub const PNG: Self = Self {
+        title_px: 22,
+        margin_px: 12,
+        label_areas_px: (44, 64),
+        text_px: (13, 15),
+        ticks: None,
+        marker_px: 3,
+        swatches: false,
+        translucent_points: false,
+        legend: (14, 1.0, false, true),
     };
-    let Some((x0, x1, y0, y1)) =
-        points().fold(None, |acc: Option<(f64, f64, f64, f64)>, (x, y)| {
+    /// The report's inline figure.
+    pub const PAGE: Self = Self {
+        title_px: 17,
+        margin_px: 10,
+        label_areas_px: (40, 58),
+        text_px: (12, 13),
+        ticks: Some(6),
+        marker_px: 2,
+        swatches: true,
+        translucent_points: true,
+        legend: (12, 0.3, true, false),
+    };
+}
+
+/// The finite range of every point of `series`, each side padded by 5 % (±0.5 for
+/// a single value); `None` when no point is finite.
+#[must_use]
+pub fn xy_ranges(series: &[Series]) -> Option<(f64, f64, f64, f64)> {
+    let (x0, x1, y0, y1) = series
+        .iter()
+        .flat_map(|s| s.points.iter().copied())
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .fold(None, |acc: Option<(f64, f64, f64, f64)>, (x, y)| {
             Some(match acc {
                 None => (x, x, y, y),
                 Some((a, b, c, d)) => (a.min(x), b.max(x), c.min(y), d.max(y)),
             })
-        })
-    else {
-        return Err(PlotError::Invalid {
-            path: path.display().to_string(),
-            why: "no finite points".into(),
-        });
-    };
-    let pad = |lo: f64, hi: f64| {
-        let m = if hi > lo { (hi - lo) * 0.05 } else { 0.5 };
-        (lo - m, hi + m)
-    };
+        })?;
     let (x0, x1) = pad(x0, x1);
     let (y0, y1) = pad(y0, y1);
-    let root = BitMapBackend::new(path, size).into_drawing_area();
-    root.fill(&WHITE).map_err(draw_err(path))?;
-    let mut ctx = ChartBuilder::on(&root)
-        .caption(chart.title, (FONT_FAMILY, 22))
-        .margin(12)
-        .x_label_area_size(44)
-        .y_label_area_size(64)
+    Some((x0, x1, y0, y1))
+}
+
+/// Pads a range by 5 % (or ±0.5 for a single value).
+#[must_use]
+pub fn pad(lo: f64, hi: f64) -> (f64, f64) {
+    let m = if hi > lo { (hi - lo) * 0.05 } else { 0.5 };
+    (lo - m, hi + m)
+}
+
+/// Draws an x–y chart on any plotters backend (a PNG, the report's SVG) over the given
+/// ranges, with `look`; `diagonal` adds y = x (predicted against true). Non-finite
+/// points are left out.
+///
+/// # Errors
+/// The backend's error, as text.
+pub fn draw_xy<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    chart: &XyChart<'_>,
+    look: &XyLook,
+    (x0, x1, y0, y1): (f64, f64, f64, f64),
+    diagonal: bool,
+) -> Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(e)?;
+    let mut ctx = ChartBuilder::on(root)
+        .caption(chart.title, (FONT_FAMILY, look.title_px))
+        .margin(look.margin_px)
+        .x_label_area_size(look.label_areas_px.0)
+        .y_label_area_size(look.label_areas_px.1)
         .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(draw_err(path))?;
-    ctx.configure_mesh()
-        .x_desc(chart.x_label)
+        .map_err(e)?;
+    let x_tick = |v: &f64| format_tick_in(*v, x1 - x0);
+    let y_tick = |v: &f64| format_tick_in(*v, y1 - y0);
+    let mut mesh = ctx.configure_mesh();
+    mesh.x_desc(chart.x_label)
         .y_desc(chart.y_label)
-        .x_label_formatter(&|v| format_tick_in(*v, x1 - x0))
-        .y_label_formatter(&|v| format_tick_in(*v, y1 - y0))
-        .label_style((FONT_FAMILY, 13))
-        .axis_desc_style((FONT_FAMILY, 15))
-        .draw()
-        .map_err(draw_err(path))?;
+        .x_label_formatter(&x_tick)
+        .y_label_formatter(&y_tick)
+        .label_style((FONT_FAMILY, look.text_px.0))
+        .axis_desc_style((FONT_FAMILY, look.text_px.1));
+    if let Some(n) = look.ticks {
+        mesh.x_labels(n).y_labels(n).light_line_style(WHITE);
+    }
+    mesh.draw().map_err(e)?;
+    if diagonal {
+        ctx.draw_series(LineSeries::new(
+            [(x0, x0), (x1, x1)],
+            BLACK.mix(0.4).stroke_width(1),
+        ))
+        .map_err(e)?;
+    }
     for (i, s) in chart.series.iter().enumerate() {
         let colour = PALETTE[i % PALETTE.len()];
         let pts: Vec<(f64, f64)> = s
@@ -309,37 +385,75 @@ pub fn xy_chart(path: &Path, chart: &XyChart<'_>, size: (u32, u32)) -> Result<()
             .copied()
             .filter(|(x, y)| x.is_finite() && y.is_finite())
             .collect();
-        let legend = move |(x, y): (i32, i32)| {
-            PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+        let swatch = move |(x, y): (i32, i32)| {
+            Rectangle::new([(x, y - 4), (x + 12, y + 4)], colour.filled())
         };
         if matches!(s.style, SeriesStyle::Line | SeriesStyle::LinePoints) {
-            ctx.draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
-                .map_err(draw_err(path))?
-                .label(s.label.as_str())
-                .legend(legend);
+            let drawn = ctx
+                .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
+                .map_err(e)?
+                .label(s.label.as_str());
+            if look.swatches {
+                drawn.legend(swatch);
+            } else {
+                drawn.legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+                });
+            }
         }
         if matches!(s.style, SeriesStyle::Points | SeriesStyle::LinePoints) {
-            let drawn = ctx
-                .draw_series(PointSeries::of_element(
-                    pts,
-                    3,
-                    colour.filled(),
-                    &|c, s, st| EmptyElement::at(c) + Circle::new((0, 0), s, st),
-                ))
-                .map_err(draw_err(path))?;
+            let r = look.marker_px;
+            let style = if look.translucent_points && s.style == SeriesStyle::Points {
+                colour.mix(0.55).filled()
+            } else {
+                colour.filled()
+            };
+            let drawn = if look.swatches {
+                ctx.draw_series(pts.into_iter().map(|p| Circle::new(p, r, style)))
+                    .map_err(e)?
+            } else {
+                ctx.draw_series(PointSeries::of_element(pts, r, style, &|c, s, st| {
+                    EmptyElement::at(c) + Circle::new((0, 0), s, st)
+                }))
+                .map_err(e)?
+            };
             if s.style == SeriesStyle::Points {
-                drawn
-                    .label(s.label.as_str())
-                    .legend(move |(x, y)| Circle::new((x + 9, y), 3, colour.filled()));
+                let drawn = drawn.label(s.label.as_str());
+                if look.swatches {
+                    drawn.legend(swatch);
+                } else {
+                    drawn.legend(move |(x, y)| Circle::new((x + 9, y), 3, colour.filled()));
+                }
             }
         }
     }
-    ctx.configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FONT_FAMILY, 14))
-        .draw()
-        .map_err(draw_err(path))?;
+    let (legend_px, border, lower_right, single) = look.legend;
+    if single || chart.series.len() > 1 {
+        let mut labels = ctx.configure_series_labels();
+        labels
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(border))
+            .label_font((FONT_FAMILY, legend_px));
+        if lower_right {
+            labels.position(SeriesLabelPosition::LowerRight);
+        }
+        labels.draw().map_err(e)?;
+    }
+    Ok(())
+}
+
+/// Draw an x–y chart into a PNG of `size` pixels. Axis ranges cover every finite
+/// point with a small margin.
+pub fn xy_chart(path: &Path, chart: &XyChart<'_>, size: (u32, u32)) -> Result<(), PlotError> {
+    register_font()?;
+    let Some(ranges) = xy_ranges(chart.series) else {
+        return Err(PlotError::Invalid {
+            path: path.display().to_string(),
+            why: "no finite points".into(),
+        });
+    };
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    draw_xy(&root, chart, &XyLook::PNG, ranges, false).map_err(draw_err(path))?;
     root.present().map_err(draw_err(path))?;
     Ok(())
 }

@@ -4,8 +4,9 @@
 //! database can go into a figure as they are. Axis labels always carry the unit.
 
 use super::ReportError;
-use crate::plot::{FONT_FAMILY, PALETTE, Series, SeriesStyle, format_tick_in, register_font};
-use plotters::coord::Shift;
+use crate::plot::{
+    FONT_FAMILY, PALETTE, Series, XyChart, XyLook, draw_xy, format_tick_in, pad, register_font,
+};
 use plotters::prelude::*;
 
 /// Width and height of a figure, px.
@@ -16,12 +17,6 @@ fn draw_err(what: &str) -> impl Fn(String) -> ReportError + '_ {
         what: what.to_owned(),
         why,
     }
-}
-
-/// Pads a range by 5 % (or ±0.5 for a single value).
-fn pad(lo: f64, hi: f64) -> (f64, f64) {
-    let m = if hi > lo { (hi - lo) * 0.05 } else { 0.5 };
-    (lo - m, hi + m)
 }
 
 /// The finite range of all points, if any.
@@ -54,6 +49,7 @@ pub(crate) struct Xy<'a> {
 }
 
 /// Draws an x–y figure. Non-finite points are left out; `None` when no point is finite.
+/// The drawing is the PNG charts' ([`crate::plot::draw_xy`]), in the page's look.
 pub(crate) fn xy(fig: &Xy<'_>, size: Size) -> Result<Option<String>, ReportError> {
     register_font().map_err(|e| draw_err(fig.title)(e.to_string()))?;
     let Some((x0, x1, y0, y1)) = bounds(fig.series.iter().flat_map(|s| s.points.iter())) else {
@@ -67,92 +63,25 @@ pub(crate) fn xy(fig: &Xy<'_>, size: Size) -> Result<Option<String>, ReportError
     };
     let (x0, x1) = pad(x0, x1);
     let (y0, y1) = fig.y_range.unwrap_or_else(|| pad(y0, y1));
+    let chart = XyChart {
+        title: fig.title,
+        x_label: fig.x_label,
+        y_label: fig.y_label,
+        series: fig.series,
+    };
+    let look = XyLook {
+        marker_px: fig.marker_px,
+        ..XyLook::PAGE
+    };
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
-        draw_xy(&root, fig, (x0, x1, y0, y1)).map_err(draw_err(fig.title))?;
+        draw_xy(&root, &chart, &look, (x0, x1, y0, y1), fig.diagonal)
+            .map_err(draw_err(fig.title))?;
         root.present()
             .map_err(|e| draw_err(fig.title)(e.to_string()))?;
     }
     Ok(Some(svg))
-}
-
-fn draw_xy(
-    root: &DrawingArea<SVGBackend<'_>, Shift>,
-    fig: &Xy<'_>,
-    (x0, x1, y0, y1): (f64, f64, f64, f64),
-) -> Result<(), String> {
-    let e = |e: DrawingAreaErrorKind<_>| e.to_string();
-    root.fill(&WHITE).map_err(e)?;
-    let mut ctx = ChartBuilder::on(root)
-        .caption(fig.title, (FONT_FAMILY, 17))
-        .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(58)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(e)?;
-    ctx.configure_mesh()
-        .x_desc(fig.x_label)
-        .y_desc(fig.y_label)
-        .x_labels(6)
-        .y_labels(6)
-        .x_label_formatter(&|v| format_tick_in(*v, x1 - x0))
-        .y_label_formatter(&|v| format_tick_in(*v, y1 - y0))
-        .label_style((FONT_FAMILY, 12))
-        .axis_desc_style((FONT_FAMILY, 13))
-        .light_line_style(WHITE)
-        .draw()
-        .map_err(e)?;
-    if fig.diagonal {
-        ctx.draw_series(LineSeries::new(
-            [(x0, x0), (x1, x1)],
-            BLACK.mix(0.4).stroke_width(1),
-        ))
-        .map_err(e)?;
-    }
-    for (i, s) in fig.series.iter().enumerate() {
-        let colour = PALETTE[i % PALETTE.len()];
-        let pts: Vec<(f64, f64)> = s
-            .points
-            .iter()
-            .copied()
-            .filter(|(x, y)| x.is_finite() && y.is_finite())
-            .collect();
-        let legend = move |(x, y): (i32, i32)| {
-            Rectangle::new([(x, y - 4), (x + 12, y + 4)], colour.filled())
-        };
-        if matches!(s.style, SeriesStyle::Line | SeriesStyle::LinePoints) {
-            ctx.draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
-                .map_err(e)?
-                .label(s.label.as_str())
-                .legend(legend);
-        }
-        if matches!(s.style, SeriesStyle::Points | SeriesStyle::LinePoints) {
-            let r = fig.marker_px;
-            let style = if s.style == SeriesStyle::Points {
-                colour.mix(0.55).filled()
-            } else {
-                colour.filled()
-            };
-            let drawn = ctx
-                .draw_series(pts.into_iter().map(|p| Circle::new(p, r, style)))
-                .map_err(e)?;
-            if s.style == SeriesStyle::Points {
-                drawn.label(s.label.as_str()).legend(legend);
-            }
-        }
-    }
-    // One series is named by the title; a legend would only hide data.
-    if fig.series.len() > 1 {
-        ctx.configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK.mix(0.3))
-            .label_font((FONT_FAMILY, 12))
-            .position(SeriesLabelPosition::LowerRight)
-            .draw()
-            .map_err(e)?;
-    }
-    Ok(())
 }
 
 /// One histogram panel: `(low, high, count)` bins and the axis label with its unit.
