@@ -331,6 +331,7 @@ pub(crate) fn downsample_indices(n: usize, max: usize) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plot::SeriesStyle;
 
     #[test]
     fn downsampling_keeps_order_bounds_and_the_first_point() {
