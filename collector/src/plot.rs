@@ -309,20 +309,26 @@ impl XyLook {
     };
 }
 
-/// The finite range of every point of `series`, each side padded by 5 % (±0.5 for
-/// a single value); `None` when no point is finite.
+/// The finite range `(x0, x1, y0, y1)` of every point of `series`; `None` when no
+/// point is finite.
 #[must_use]
-pub fn xy_ranges(series: &[Series]) -> Option<(f64, f64, f64, f64)> {
-    let (x0, x1, y0, y1) = series
+pub fn finite_bounds(series: &[Series]) -> Option<(f64, f64, f64, f64)> {
+    series
         .iter()
         .flat_map(|s| s.points.iter().copied())
         .filter(|(x, y)| x.is_finite() && y.is_finite())
-        .fold(None, |acc: Option<(f64, f64, f64, f64)>, (x, y)| {
+        .fold(None, |acc, (x, y)| {
             Some(match acc {
                 None => (x, x, y, y),
                 Some((a, b, c, d)) => (a.min(x), b.max(x), c.min(y), d.max(y)),
             })
-        })?;
+        })
+}
+
+/// [`finite_bounds`], each side padded by [`pad`].
+#[must_use]
+pub fn xy_ranges(series: &[Series]) -> Option<(f64, f64, f64, f64)> {
+    let (x0, x1, y0, y1) = finite_bounds(series)?;
     let (x0, x1) = pad(x0, x1);
     let (y0, y1) = pad(y0, y1);
     Some((x0, x1, y0, y1))
@@ -629,8 +635,7 @@ pub fn two_panel_chart(
         if !lo.is_finite() {
             return (0.0, 1.0);
         }
-        let m = if hi > lo { (hi - lo) * 0.05 } else { 0.5 };
-        (lo - m, hi + m)
+        pad(lo, hi)
     };
     let both: Vec<(f64, f64)> = all_top.iter().chain(&all_bottom).copied().collect();
     let (x0, x1) = bounds(&both, 0);

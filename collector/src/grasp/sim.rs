@@ -86,24 +86,38 @@ impl TrueForce for LoggedTruth {
     }
 }
 
-/// The pre-grasp count and Λ_max from first touch to 1.5 × the target, from the
-/// simulator's true force-against-position curve.
+/// The first count at which the closing fingers touch the object (true force above
+/// 0.02 N), and Λ_max from there to the first count whose true force exceeds `top_n`
+/// (else the closed end), from the simulator's force-against-position curve; `None`
+/// when the fingers never touch it.
+///
+/// # Errors
+/// The simulator fails.
+pub fn measure_stiffness(
+    handle: &SoftGraspHandle,
+    top_n: f64,
+) -> Result<Option<(u8, f64)>, SimError> {
+    let Some(touch) = handle.contact_count(0.02)? else {
+        return Ok(None);
+    };
+    let counts: Vec<u8> = (touch..=255).collect();
+    let curve = handle.grip_force_curve(&counts)?;
+    let end = curve
+        .iter()
+        .find(|(_, f)| *f > top_n)
+        .map_or(255, |(p, _)| *p);
+    Ok(Some((touch, handle.max_stiffness_n_per_mm(touch, end)?)))
+}
+
+/// The pre-grasp count and Λ_max from first touch to 1.5 × the target
+/// ([`measure_stiffness`]).
 ///
 /// # Errors
 /// The fingers never touch the object, or the simulator fails.
 pub fn stiffness(handle: &SoftGraspHandle, target_n: f64) -> Result<(u8, f64), GraspError> {
-    let touch = handle
-        .contact_count(0.02)
+    measure_stiffness(handle, 1.5 * target_n)
         .map_err(sim_err)?
-        .ok_or_else(|| GraspError::Config("the closing fingers never touch the object".into()))?;
-    let counts: Vec<u8> = (touch..=255).collect();
-    let curve = handle.grip_force_curve(&counts).map_err(sim_err)?;
-    let end = curve
-        .iter()
-        .find(|(_, f)| *f > 1.5 * target_n)
-        .map_or(255, |(p, _)| *p);
-    let lambda = handle.max_stiffness_n_per_mm(touch, end).map_err(sim_err)?;
-    Ok((touch, lambda))
+        .ok_or_else(|| GraspError::Config("the closing fingers never touch the object".into()))
 }
 
 /// The simulator's judge: where the physics left the object after the hold.

@@ -20,7 +20,7 @@ use softtouch_sim::{
 };
 use softtouch_trainer::Predictor;
 
-use super::sim::{LoggedTruth, TruthSample};
+use super::sim::{LoggedTruth, TruthSample, measure_stiffness};
 use crate::models::ModelError;
 
 /// The grasp scene shipped in `scenes/grasp.toml`: the default for `disturb` and
@@ -202,19 +202,12 @@ pub async fn prepare(
     let (gripper, camera, handle) =
         soft_grasp(scene, object.clone(), settings.fps, settings.seed, clock)
             .map_err(|e| invalid(format!("object `{}`: {e}", object.name)))?;
-    let touch = handle.contact_count(0.02)?.ok_or_else(|| {
-        invalid(format!(
+    let Some((touch, lambda_max)) = measure_stiffness(&handle, top_n)? else {
+        return Err(invalid(format!(
             "object `{}` is never touched by the closing fingers",
             object.name
-        ))
-    })?;
-    let counts: Vec<u8> = (touch..=255).collect();
-    let curve = handle.grip_force_curve(&counts)?;
-    let end = curve
-        .iter()
-        .find(|(_, f)| *f > top_n)
-        .map_or(255, |(p, _)| *p);
-    let lambda_max = handle.max_stiffness_n_per_mm(touch, end)?;
+        )));
+    };
     let gain = settings.gain_n_per_mm.unwrap_or(0.75 * lambda_max);
     if settings.gain_n_per_mm.is_none() && !(gain.is_finite() && gain > 0.0) {
         return Err(invalid(format!(

@@ -5,7 +5,8 @@
 
 use super::ReportError;
 use crate::plot::{
-    FONT_FAMILY, PALETTE, Series, XyChart, XyLook, draw_xy, format_tick_in, pad, register_font,
+    FONT_FAMILY, PALETTE, Series, XyChart, XyLook, draw_xy, finite_bounds, format_tick_in, pad,
+    register_font,
 };
 use plotters::prelude::*;
 
@@ -17,18 +18,6 @@ fn draw_err(what: &str) -> impl Fn(String) -> ReportError + '_ {
         what: what.to_owned(),
         why,
     }
-}
-
-/// The finite range of all points, if any.
-fn bounds<'a>(points: impl Iterator<Item = &'a (f64, f64)>) -> Option<(f64, f64, f64, f64)> {
-    points
-        .filter(|(x, y)| x.is_finite() && y.is_finite())
-        .fold(None, |acc, &(x, y)| {
-            Some(match acc {
-                None => (x, x, y, y),
-                Some((a, b, c, d)) => (a.min(x), b.max(x), c.min(y), d.max(y)),
-            })
-        })
 }
 
 /// An x–y figure.
@@ -52,7 +41,7 @@ pub(crate) struct Xy<'a> {
 /// The drawing is the PNG charts' ([`crate::plot::draw_xy`]), in the page's look.
 pub(crate) fn xy(fig: &Xy<'_>, size: Size) -> Result<Option<String>, ReportError> {
     register_font().map_err(|e| draw_err(fig.title)(e.to_string()))?;
-    let Some((x0, x1, y0, y1)) = bounds(fig.series.iter().flat_map(|s| s.points.iter())) else {
+    let Some((x0, x1, y0, y1)) = finite_bounds(fig.series) else {
         return Ok(None);
     };
     let (x0, x1, y0, y1) = if fig.diagonal {

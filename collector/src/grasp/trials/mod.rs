@@ -23,7 +23,7 @@ use softtouch_schemas::config::{ConfigSource, parse_toml};
 use softtouch_schemas::{ConfigError, Medium, SceneSpec};
 use softtouch_sim::GraspObject;
 
-use super::settings::{self, SettingError};
+use super::settings::{self, Setting, SettingError};
 use crate::dataset::export::sha256_hex;
 use crate::models::ModelError;
 use crate::store::{GraspTrialKey, Store, StoreError};
@@ -166,14 +166,14 @@ impl Default for TrialPlan {
     }
 }
 
-fn check_range(flag: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Result<(), TrialsError> {
-    if v.is_finite() && v > lo && v <= hi {
-        Ok(())
-    } else {
-        Err(invalid(format!(
-            "{flag} {}: expected a value in ({lo}, {hi}] {unit}",
-            softtouch_schemas::config::readable(v)
-        )))
+/// A value in `(0, hi]`, with its kind and unit for the message.
+const fn above_zero(what: &'static str, hi: f64, unit: &'static str) -> Setting {
+    Setting {
+        what,
+        lo: 0.0,
+        lo_inclusive: false,
+        hi,
+        unit,
     }
 }
 
@@ -186,11 +186,11 @@ impl TrialPlan {
     /// The first setting out of range.
     pub fn checked(mut self) -> Result<Self, TrialsError> {
         settings::FPS_HZ.check("--fps", self.fps)?;
-        check_range("--target-n", self.target_n, 0.0, 50.0, "N")?;
+        above_zero("a value", 50.0, "N").check("--target-n", self.target_n)?;
         settings::TOLERANCE_N.check("--tolerance", self.tolerance_n)?;
-        check_range("--confirm-s", self.confirm_s, 0.0, 60.0, "s")?;
-        check_range("--close-timeout-s", self.close_timeout_s, 0.0, 600.0, "s")?;
-        check_range("--lift-mm", self.lift_mm, 0.0, 500.0, "mm")?;
+        above_zero("a value", 60.0, "s").check("--confirm-s", self.confirm_s)?;
+        above_zero("a value", 600.0, "s").check("--close-timeout-s", self.close_timeout_s)?;
+        above_zero("a value", 500.0, "mm").check("--lift-mm", self.lift_mm)?;
         settings::duration_s(false).check("--hold-s", self.hold_s)?;
         if self.trials == 0 || self.trials > 10_000 {
             return Err(invalid(format!(
@@ -217,7 +217,7 @@ impl TrialPlan {
         }
         self.modes = modes;
         if let Some(w) = self.open_width_mm {
-            check_range("--open-width-mm", w, 0.0, STROKE_MM, "mm")?;
+            above_zero("a value", STROKE_MM, "mm").check("--open-width-mm", w)?;
         }
         let mut objects: Vec<String> = Vec::new();
         for o in &self.objects {

@@ -24,8 +24,6 @@ use crate::store::{GraspTrace, GraspTrialRow, Store};
 pub struct TrialDone {
     /// The stored row.
     pub row: GraspTrialRow,
-    /// The σ it ran at, mm.
-    pub sigma_mm: f64,
     /// Its medium and mode, and how many cycles it ran (for the timing table).
     pub timing: TrialTiming,
 }
@@ -156,7 +154,6 @@ pub async fn run_trials(
             .append_grasp_trial(session.id, &row, &pack_trace(&result))
             .await?;
         done(&TrialDone {
-            sigma_mm: plan.sigmas_mm[p.key.sigma_index as usize],
             timing: TrialTiming {
                 medium: scene.medium,
                 mode: p.mode,
