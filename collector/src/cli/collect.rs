@@ -120,108 +120,6 @@ fn plan_failure(e: PlanError) -> Failure {
     }
 }
 
-/// How long the first stop request waits for others sent with it: rounds of a step.
-#[cfg(unix)]
-const GATHER_ROUNDS: u32 = 25;
-#[cfg(unix)]
-const GATHER_STEP: std::time::Duration = std::time::Duration::from_millis(2);
-
-/// Count stop requests into `stop` (1: finish the sample, 2: stop at once): Ctrl-C
-/// (SIGINT), and on Unix SIGTERM and SIGHUP alike (a service manager, a closed
-/// terminal). Ends if no handler can be installed.
-async fn count_stop_signals(stop: tokio::sync::watch::Sender<u32>) {
-    #[cfg(unix)]
-    let (mut term, mut hup) = {
-        use tokio::signal::unix::{SignalKind, signal};
-        match (
-            signal(SignalKind::terminate()),
-            signal(SignalKind::hangup()),
-        ) {
-            (Ok(t), Ok(h)) => (t, h),
-            (Err(e), _) | (_, Err(e)) => {
-                eprintln!("warning: cannot watch SIGTERM/SIGHUP ({e}); only Ctrl-C stops the run");
-                return ctrl_c_only(stop).await;
-            }
-        }
-    };
-    let mut requests = 0;
-    loop {
-        #[cfg(unix)]
-        let name = tokio::select! {
-            r = tokio::signal::ctrl_c() => match r { Ok(()) => "Ctrl-C", Err(_) => break },
-            Some(()) = term.recv() => "SIGTERM",
-            Some(()) = hup.recv() => "SIGHUP",
-            else => break,
-        };
-        #[cfg(not(unix))]
-        let name = match tokio::signal::ctrl_c().await {
-            Ok(()) => "Ctrl-C",
-            Err(_) => break,
-        };
-        let mut names = vec![name];
-        // Signals that came together count together, so the loop never acts on the
-        // first while the second is already here (a stopped shell's HUP and TERM). Sent
-        // together, they can still reach their handlers apart (another thread takes
-        // one; on a busy machine it runs milliseconds later): gather for a moment of
-        // real time before acting. The wait is on the blocking pool, so a paused
-        // (simulated) clock does not move meanwhile.
-        #[cfg(unix)]
-        if requests == 0 {
-            for _ in 0..GATHER_ROUNDS {
-                // Lets the driver hand over what has reached the handlers.
-                tokio::task::yield_now().await;
-                names.extend(
-                    [
-                        already_here(&mut term, "SIGTERM"),
-                        already_here(&mut hup, "SIGHUP"),
-                    ]
-                    .into_iter()
-                    .flatten(),
-                );
-                if names.len() > 1 {
-                    break;
-                }
-                let _ = tokio::task::spawn_blocking(|| std::thread::sleep(GATHER_STEP)).await;
-            }
-        }
-        for name in names {
-            requests += 1;
-            if requests == 1 {
-                eprintln!("\n{name}: stopping after this sample (again to stop the arm at once)");
-            } else {
-                eprintln!("\n{name}: stopping the arm now");
-            }
-        }
-        if stop.send(requests).is_err() {
-            break;
-        }
-    }
-}
-
-/// `name` if a notification of `signal` is already waiting (taken), without waiting.
-#[cfg(unix)]
-fn already_here(
-    signal: &mut tokio::signal::unix::Signal,
-    name: &'static str,
-) -> Option<&'static str> {
-    let mut cx = std::task::Context::from_waker(std::task::Waker::noop());
-    match signal.poll_recv(&mut cx) {
-        std::task::Poll::Ready(Some(())) => Some(name),
-        _ => None,
-    }
-}
-
-#[cfg(unix)]
-async fn ctrl_c_only(stop: tokio::sync::watch::Sender<u32>) {
-    let mut requests = 0;
-    while tokio::signal::ctrl_c().await.is_ok() {
-        requests += 1;
-        if stop.send(requests).is_err() {
-            break;
-        }
-    }
-}
-
 /// A bar on a terminal, log lines otherwise.
 fn progress_reporter(total: u64) -> Box<dyn Progress> {
     if std::io::stderr().is_terminal() {
@@ -297,7 +195,7 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
     .map_err(io_failure)?;
 
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
-    let signals = tokio::spawn(count_stop_signals(stop_tx));
+    let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx));
     let mut progress = progress_reporter(plan.remaining());
     let started = Instant::now();
     let (outcome, counters) =
