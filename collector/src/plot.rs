@@ -193,7 +193,7 @@ fn draw_histogram(
 /// `1.2e-4`: no trailing zeros), with enough decimals that
 /// neighbouring ticks (about a tenth of the span apart) read differently: an R² axis
 /// from 0.9971 to 0.9983 needs four, where two would label every tick "1".
-pub(crate) fn format_tick_in(v: f64, span: f64) -> String {
+pub fn format_tick_in(v: f64, span: f64) -> String {
     let a = v.abs();
     let step = span / 10.0;
     let usable = step.is_finite() && step > 0.0;

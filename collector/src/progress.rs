@@ -9,7 +9,7 @@ use std::io::Write;
 use std::time::Instant;
 
 /// A progress bar on stderr, hidden when stderr is not a terminal.
-pub(crate) fn progress_bar(len: u64, enabled: bool, what: &str) -> indicatif::ProgressBar {
+pub fn progress_bar(len: u64, enabled: bool, what: &str) -> indicatif::ProgressBar {
     use std::io::IsTerminal as _;
     if !enabled || !std::io::stderr().is_terminal() {
         return indicatif::ProgressBar::hidden();
@@ -25,7 +25,7 @@ pub(crate) fn progress_bar(len: u64, enabled: bool, what: &str) -> indicatif::Pr
 
 /// Prints one line per epoch (loss, validation R², throughput, ETA) and drives a
 /// progress bar over the batches.
-pub(crate) struct TrainProgress<'a> {
+pub struct TrainProgress<'a> {
     out: &'a mut dyn Write,
     bar: indicatif::ProgressBar,
     epochs: usize,
@@ -45,7 +45,7 @@ impl std::fmt::Debug for TrainProgress<'_> {
 
 impl<'a> TrainProgress<'a> {
     /// Report to `out` over up to `epochs` epochs.
-    pub(crate) fn new(out: &'a mut dyn Write, epochs: usize, show_bar: bool) -> Self {
+    pub fn new(out: &'a mut dyn Write, epochs: usize, show_bar: bool) -> Self {
         Self {
             out,
             bar: indicatif::ProgressBar::hidden(),

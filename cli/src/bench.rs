@@ -1,0 +1,445 @@
+//! `softtouch bench collection|ingest|model`.
+
+use super::train::{ModelArgs, load};
+use super::{Failure, io_failure};
+use anyhow::anyhow;
+use clap::Args;
+use clap::Subcommand;
+use softtouch_collector::collect::bench::{Breakdown, SweepPoint, sweep_point};
+use softtouch_collector::configs;
+use softtouch_collector::plot::{Series, SeriesStyle, XyChart, xy_chart};
+use softtouch_collector::progress::TrainProgress;
+use softtouch_collector::synthetic::SampleBuilder;
+use softtouch_drivers::Frame;
+use softtouch_lab::experiments::{self, fmt_opt};
+use softtouch_schemas::{ContactPose, FrameFormat, FrameMeta, Medium, TimestampNs};
+use softtouch_store::{OwnedNewRun, SyncStore};
+use softtouch_trainer::Splits;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// The force loop on the simulated soft grasp: settling time, overshoot and
+    /// steady-state error (estimate and truth) against K (below Λ/2 too), δ, camera
+    /// rate and model; a table, CSV and PNG. `--wall-clock` also runs it on real time.
+    #[command(after_help = "Examples:
+  softtouch bench grasp --model air-svae
+  softtouch bench grasp --model air-svae,air-small --gains 0.3,0.75,1.5 --wall-clock")]
+    Grasp(super::bench_grasp::BenchGraspArgs),
+    /// Accuracy costs time, for the model: over input size, encoder width and latent
+    /// size, train on a dataset and report test R², training time per epoch and
+    /// inference latency at batch 1 on one core; a table, CSV and a PNG of R² against
+    /// latency.
+    #[command(after_help = "Examples:
+  softtouch bench model --dataset air
+  softtouch bench model --dataset air --sizes 32,64 --widths 8,16 --latents 32 --epochs 10")]
+    Model(BenchModelArgs),
+    /// Accuracy costs time: sweep settle time and force/torque window on the simulated
+    /// scene (whose true wrench is known); print label error against samples per hour,
+    /// and write a CSV and PNG plots. Also reports where a sample's time goes.
+    #[command(after_help = "Examples:
+  softtouch bench collection
+  softtouch bench collection --samples 100 --settle 0,0.1,0.3 --window 0.01,0.05 --out bench-out
+
+Runs on virtual time; the scratch database DIR/bench.db is replaced on each run.")]
+    Collection {
+        /// Samples per point.
+        #[arg(long, default_value_t = 40)]
+        samples: u64,
+        /// Settle times to try, s.
+        #[arg(long, value_delimiter = ',', default_value = "0,0.05,0.1,0.2,0.3,0.5")]
+        settle: Vec<f64>,
+        /// Window lengths to try, s.
+        #[arg(long, value_delimiter = ',', default_value = "0.005,0.02,0.05,0.1")]
+        window: Vec<f64>,
+        /// Rig config (default: the embedded simulated rig).
+        #[arg(long)]
+        rig: Option<PathBuf>,
+        /// Scene (default: the embedded on-land scene).
+        #[arg(long)]
+        scene: Option<PathBuf>,
+        /// Where the CSV, plots and scratch database go.
+        #[arg(long, default_value = "bench-out")]
+        out: PathBuf,
+        /// Seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+    /// Store ingest: samples per second written with 640×480 frames, with and without
+    /// PNG encoding.
+    #[command(after_help = "Example:\n  softtouch bench ingest --samples 2000")]
+    Ingest {
+        /// Samples to write per case.
+        #[arg(long, default_value_t = 2000)]
+        samples: u64,
+        /// Where the scratch database goes.
+        #[arg(long, default_value = "bench-out")]
+        out: PathBuf,
+    },
+}
+
+fn scratch_db(out: &Path) -> Result<PathBuf, Failure> {
+    std::fs::create_dir_all(out)
+        .map_err(|e| Failure::Runtime(anyhow!("cannot create {}: {e}", out.display())))?;
+    let db = out.join("bench.db");
+    for suffix in ["", "-wal", "-shm"] {
+        let p = PathBuf::from(format!("{}{suffix}", db.display()));
+        if p.exists() {
+            std::fs::remove_file(&p)
+                .map_err(|e| Failure::Runtime(anyhow!("cannot remove {}: {e}", p.display())))?;
+        }
+    }
+    Ok(db)
+}
+
+pub async fn run(cmd: BenchCommand, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    match cmd {
+        BenchCommand::Grasp(args) => super::bench_grasp::run(args, db, out).await,
+        BenchCommand::Model(args) => run_bench_model(args, db, out).await,
+        BenchCommand::Collection {
+            samples,
+            settle,
+            window,
+            rig,
+            scene,
+            out: dir,
+            seed,
+        } => {
+            if samples < 2 {
+                return Err(Failure::BadInput(anyhow!("--samples: expected at least 2")));
+            }
+            for (flag, v) in settle
+                .iter()
+                .map(|v| ("--settle", v))
+                .chain(window.iter().map(|v| ("--window", v)))
+            {
+                if !(v.is_finite() && *v >= 0.0) || (flag == "--window" && *v <= 0.0) {
+                    return Err(Failure::BadInput(anyhow!(
+                        "{flag}: {v} is not a valid time in seconds"
+                    )));
+                }
+            }
+            let resolved = configs::resolve(rig.as_deref(), scene.as_deref())?;
+            let db = scratch_db(&dir)?;
+            let store = SyncStore::open(&db)?;
+            tokio::time::pause(); // virtual time for the simulated rig
+            let default_point = (
+                resolved.rig.procedure.settle_s,
+                resolved.rig.procedure.ft_window_s,
+            );
+            let (_, breakdown) = sweep_point(
+                &store,
+                &resolved.rig,
+                &resolved.scene,
+                seed,
+                default_point.0,
+                default_point.1,
+                samples.max(100),
+            )
+            .await
+            .map_err(|e| Failure::Runtime(e.into()))?;
+            let mut points = Vec::new();
+            for &s in &settle {
+                for &w in &window {
+                    let (p, _) =
+                        sweep_point(&store, &resolved.rig, &resolved.scene, seed, s, w, samples)
+                            .await
+                            .map_err(|e| Failure::Runtime(e.into()))?;
+                    eprintln!(
+                        "settle {s} s, window {w} s: {:.4} N, {:.2} N·mm, {:.0} samples/h",
+                        p.force_rmse_n, p.torque_rmse_nmm, p.samples_per_hour
+                    );
+                    points.push(p);
+                }
+            }
+            store.close();
+            report_collection(&dir, &points, &breakdown, default_point, out)
+        }
+        BenchCommand::Ingest { samples, out: dir } => {
+            let db = scratch_db(&dir)?;
+            let store = SyncStore::open(&db)?;
+            let raw = ingest_frames()?;
+            let mut text =
+                String::from("case                      samples   seconds   samples/s\n");
+            for (case, encoded) in [("raw RGB → PNG → SQLite", false), ("PNG → SQLite", true)]
+            {
+                let run = store.create_run(OwnedNewRun {
+                    seed: 0,
+                    samples_planned: samples,
+                    rod_schedule: vec!["circle-10".into()],
+                    rod_block: samples.max(1),
+                    scene_name: format!("bench ingest: {case}"),
+                    medium: Medium::Air,
+                    rig_toml: String::new(),
+                    scene_toml: String::new(),
+                    poses_from: None,
+                })?;
+                let frames: Vec<Frame> = if encoded {
+                    raw.iter()
+                        .map(|f| {
+                            softtouch_store::encode_for_store(f)
+                                .map(|(meta, data)| Frame { meta, data })
+                        })
+                        .collect::<Result<_, _>>()?
+                } else {
+                    raw.clone()
+                };
+                let started = Instant::now();
+                for i in 0..samples {
+                    let frame = frames[usize::try_from(i).unwrap_or(0) % frames.len()].clone();
+                    let sample = SampleBuilder::new(i);
+                    let window = sample.window();
+                    store.submit_sample(run, sample.build(), Some(frame), window)?;
+                }
+                store.flush()?;
+                let secs = started.elapsed().as_secs_f64();
+                text.push_str(&format!(
+                    "{case:<24}  {samples:>7}  {secs:>8.2}  {:>10.0}\n",
+                    samples as f64 / secs
+                ));
+            }
+            store.close();
+            let size = std::fs::metadata(&db).map(|m| m.len()).unwrap_or(0)
+                + std::fs::metadata(format!("{}-wal", db.display()))
+                    .map(|m| m.len())
+                    .unwrap_or(0);
+            text.push_str(&format!(
+                "database size: {:.1} MB ({})\n",
+                size as f64 / 1e6,
+                db.display()
+            ));
+            out.write_all(text.as_bytes()).map_err(io_failure)
+        }
+    }
+}
+
+/// A few real rendered frames of the default scene (raw RGB, 640×480).
+fn ingest_frames() -> Result<Vec<Frame>, Failure> {
+    let scene = softtouch_schemas::defaults::scene();
+    (0..4)
+        .map(|k| {
+            let pose = ContactPose {
+                x_m: 0.01 * f64::from(k),
+                z_m: 0.01,
+                theta_rad: f64::from(k),
+            };
+            let r = softtouch_sim::render_contact(&scene, "circle-10", &pose, 0)
+                .map_err(|e| Failure::Runtime(e.into()))?;
+            let (w, h) = r.image.dimensions();
+            Ok(Frame {
+                meta: FrameMeta {
+                    t: TimestampNs(0),
+                    sequence: u64::try_from(k).unwrap_or(0),
+                    width: w,
+                    height: h,
+                    format: FrameFormat::Rgb8,
+                },
+                data: r.image.into_raw(),
+            })
+        })
+        .collect()
+}
+
+fn report_collection(
+    dir: &Path,
+    points: &[SweepPoint],
+    b: &Breakdown,
+    default_point: (f64, f64),
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    let mut table = format!(
+        "Where a sample's time goes (rig defaults: settle {} s, window {} s; {} samples):\n\
+         \x20 job thread, median per sample: {:.2} ms wall = {:.2} ms in device code (simulation) + {:.3} ms orchestration (p95 {:.3} ms)\n\
+         \x20 writer thread (second core), mean per sample: {:.2} ms PNG encode + {:.2} ms SQLite\n\n",
+        default_point.0,
+        default_point.1,
+        b.samples,
+        b.wall_ms,
+        b.device_ms,
+        b.orchestration_ms,
+        b.orchestration_p95_ms,
+        b.encode_ms,
+        b.write_ms
+    );
+    table.push_str(
+        "settle_s  window_s  accepted  force_rmse_N  torque_rmse_Nmm  samples_per_hour\n",
+    );
+    let mut csv = String::from(
+        "settle_s,window_s,samples,accepted,force_rmse_n,torque_rmse_nmm,samples_per_hour,wall_s\n",
+    );
+    for p in points {
+        table.push_str(&format!(
+            "{:>8}  {:>8}  {:>4}/{:<3}  {:>12.5}  {:>15.3}  {:>16.0}\n",
+            p.settle_s,
+            p.window_s,
+            p.accepted,
+            p.samples,
+            p.force_rmse_n,
+            p.torque_rmse_nmm,
+            p.samples_per_hour
+        ));
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{},{}\n",
+            p.settle_s,
+            p.window_s,
+            p.samples,
+            p.accepted,
+            p.force_rmse_n,
+            p.torque_rmse_nmm,
+            p.samples_per_hour,
+            p.wall_s
+        ));
+    }
+    let csv_path = dir.join("collection-sweep.csv");
+    std::fs::write(&csv_path, csv)
+        .map_err(|e| Failure::Runtime(anyhow!("cannot write {}: {e}", csv_path.display())))?;
+    let mut windows: Vec<f64> = points.iter().map(|p| p.window_s).collect();
+    windows.sort_by(f64::total_cmp);
+    windows.dedup();
+    let mut written = vec![csv_path];
+    for (name, unit, pick) in [
+        (
+            "force",
+            "N",
+            (|p: &SweepPoint| p.force_rmse_n) as fn(&SweepPoint) -> f64,
+        ),
+        ("torque", "N·mm", |p: &SweepPoint| p.torque_rmse_nmm),
+    ] {
+        let series: Vec<Series> = windows
+            .iter()
+            .map(|w| Series {
+                label: format!("window {w} s"),
+                points: points
+                    .iter()
+                    .filter(|p| p.window_s.total_cmp(w).is_eq())
+                    .map(|p| (p.samples_per_hour, pick(p)))
+                    .collect(),
+                style: SeriesStyle::LinePoints,
+            })
+            .collect();
+        let path = dir.join(format!("collection-sweep-{name}.png"));
+        let title = format!("{name} label error vs throughput (points: settle times)");
+        let y = format!("{name} RMS error [{unit}]");
+        xy_chart(
+            &path,
+            &XyChart {
+                title: &title,
+                x_label: "samples per hour (rig clock)",
+                y_label: &y,
+                series: &series,
+            },
+            (900, 600),
+        )
+        .map_err(|e| Failure::Runtime(e.into()))?;
+        written.push(path);
+    }
+    for p in written {
+        table.push_str(&format!("wrote {}\n", p.display()));
+    }
+    out.write_all(table.as_bytes()).map_err(io_failure)
+}
+
+/// `softtouch bench model`.
+#[derive(Debug, Args)]
+pub struct BenchModelArgs {
+    /// The dataset.
+    #[arg(long)]
+    pub dataset: String,
+    /// Input sizes to try, px.
+    #[arg(long, value_delimiter = ',', default_value = "32,64")]
+    pub sizes: Vec<usize>,
+    /// Encoder widths to try.
+    #[arg(long, value_delimiter = ',', default_value = "8,12,16")]
+    pub widths: Vec<usize>,
+    /// Latent sizes to try.
+    #[arg(long, value_delimiter = ',', default_value = "32")]
+    pub latents: Vec<usize>,
+    /// Single-image inferences timed per point.
+    #[arg(long, default_value_t = 200)]
+    pub runs: usize,
+    /// Where the CSV and PNG go.
+    #[arg(long, default_value = "bench-out")]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub model: ModelArgs,
+}
+
+/// `softtouch bench model`: train each point of the grid, then time it on one core.
+async fn run_bench_model(
+    args: BenchModelArgs,
+    db: &Path,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    let (base, train) = args.model.configs()?;
+    let wanted = experiments::model_grid(&base, &args.sizes, &args.widths, &args.latents)?;
+    let store = super::open_existing(db).await?;
+    experiments::prepare_out(&args.out)?;
+    let (w, h, rgb) = softtouch_lab::models::first_test_frame(&store, &args.dataset).await?;
+    let mut rows = Vec::new();
+    let mut loaded: Option<(usize, Splits)> = None;
+    for (label, config) in wanted {
+        let size = config.preprocess.size_px;
+        if loaded.as_ref().is_none_or(|(s, _)| *s != size) {
+            let splits = load(&store, &args.dataset, &config.preprocess, out).await?;
+            loaded = Some((size, splits));
+        }
+        let Some((_, splits)) = loaded.as_ref() else {
+            continue;
+        };
+        writeln!(out, "— {label}").map_err(io_failure)?;
+        let (mut row, trained) = {
+            let mut progress = TrainProgress::new(out, train.epochs, true);
+            experiments::train_row(label, config, &train, splits, &mut progress)?
+        };
+        let image = splits
+            .test
+            .first()
+            .map(|e| e.image.clone())
+            .unwrap_or_default();
+        let (latency, frame_latency) =
+            experiments::measure_row(&mut row, trained, &image, (w, h, &rgb), args.runs)?;
+        writeln!(
+            out,
+            "   test R² {:.5} (min {:.5}), {:.1} s/epoch, {:.0} img/s, on one core: model {:.3} ms median / {:.3} ms p95, {w}×{h} frame → wrench {:.3} ms median / {:.3} ms p95",
+            row.test.r2_mean.unwrap_or(f64::NAN),
+            row.test.r2_min().unwrap_or(f64::NAN),
+            row.seconds_per_epoch,
+            row.images_per_s,
+            latency.median_ms,
+            latency.p95_ms,
+            frame_latency.median_ms,
+            frame_latency.p95_ms
+        )
+        .map_err(io_failure)?;
+        rows.push(row);
+    }
+    store.close().await;
+    writeln!(
+        out,
+        "\n{:<16} {:>9} {:>9} {:>9} {:>9} {:>11} {:>11}",
+        "input/width/lat", "R² avg", "R² min", "s/epoch", "img/s", "model ms", "frame ms"
+    )
+    .map_err(io_failure)?;
+    for r in &rows {
+        writeln!(
+            out,
+            "{:<16} {:>9} {:>9} {:>9.1} {:>9.0} {:>11} {:>11}",
+            r.label,
+            fmt_opt(r.test.r2_mean, |v| format!("{v:.5}")),
+            fmt_opt(r.test.r2_min(), |v| format!("{v:.5}")),
+            r.seconds_per_epoch,
+            r.images_per_s,
+            fmt_opt(r.latency_ms, |v| format!("{v:.3}")),
+            fmt_opt(r.frame_latency_ms, |v| format!("{v:.3}"))
+        )
+        .map_err(io_failure)?;
+    }
+    let csv = args.out.join("bench-model.csv");
+    experiments::write_csv(&csv, &rows)?;
+    let png = args.out.join("bench-model.png");
+    experiments::plot_bench_model(&png, &rows)?;
+    writeln!(out, "wrote {} and {}", csv.display(), png.display()).map_err(io_failure)?;
+    Ok(())
+}

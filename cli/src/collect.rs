@@ -1,0 +1,317 @@
+//! `softtouch collect` and `softtouch status`.
+
+use super::{Failure, io_failure, open_existing};
+use anyhow::anyhow;
+use clap::Args;
+use softtouch_collector::collect::{
+    CollectPlan, Counters, NewRunRequest, Outcome, PlanError, Progress, Resumed, abandon,
+    build_run_devices, collect,
+};
+use softtouch_store::SyncStore;
+use std::io::{IsTerminal as _, Write};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Arguments of `softtouch collect`.
+#[derive(Debug, Args)]
+#[command(after_help = "Examples:
+  softtouch collect --samples 200 --seed 1          # simulated rig, on-land scene
+  softtouch collect --scene scenes/water.toml --samples 30000
+  softtouch collect --rig lab-rig.toml --scene rods.toml --rods circle-10 --samples 5000
+  softtouch collect --scene scenes/water.toml --poses-from 1   # run 1's poses, underwater
+  softtouch collect --resume 3                      # continue run 3 where it stopped
+  softtouch collect --resume 3 --rig lab-rig.toml   # ... with the F/T box on a new port
+
+Ctrl-C, SIGTERM or SIGHUP finishes the current sample, retreats and exits 0 (resume later
+with --resume); a second one stops the arm at once, wherever it is. A run being collected
+is leased to its process: a second `collect --resume` of it is refused while that process
+lives. A log is written beside the database (DB.log).")]
+pub struct CollectArgs {
+    /// Rig config (default: the embedded all-simulated rig). With --resume: the run's
+    /// rig with devices reached elsewhere (addresses, ports, device paths may differ
+    /// from the stored rig, nothing else); default the stored rig.
+    #[arg(long)]
+    pub rig: Option<PathBuf>,
+    /// Scene (default: the embedded on-land scene).
+    #[arg(long, conflicts_with = "resume")]
+    pub scene: Option<PathBuf>,
+    /// Samples to take.
+    #[arg(
+        long,
+        required_unless_present_any = ["resume", "poses_from"],
+        conflicts_with_all = ["resume", "poses_from"]
+    )]
+    pub samples: Option<u64>,
+    /// Seed of the pose sampler and the simulation (default: from the clock; printed
+    /// and stored with the run).
+    #[arg(long, conflicts_with_all = ["resume", "poses_from"])]
+    pub seed: Option<u64>,
+    /// Rods to use, in order, comma-separated (default: every rod of the scene).
+    #[arg(long, value_delimiter = ',', conflicts_with_all = ["resume", "poses_from"])]
+    pub rods: Vec<String>,
+    /// Samples per rod before changing to the next (default: an equal share each).
+    #[arg(long, conflicts_with_all = ["resume", "poses_from"])]
+    pub block: Option<u64>,
+    /// Repeat run RUN's poses and rods (its seed, sample count and rod schedule) in
+    /// this scene: the finger meets the same deformations, e.g. on land and underwater.
+    /// The scene must have the same pose ranges and rods; the finished run is checked
+    /// against RUN pose by pose.
+    #[arg(long, value_name = "RUN", conflicts_with = "resume")]
+    pub poses_from: Option<i64>,
+    /// Continue run RUN at its next sample, with its stored seed, rig and scene (the
+    /// database must exist).
+    #[arg(long, value_name = "RUN")]
+    pub resume: Option<i64>,
+}
+
+struct BarProgress {
+    bar: indicatif::ProgressBar,
+}
+
+impl Progress for BarProgress {
+    fn sample_done(&mut self, _index: u64, c: &Counters) {
+        self.bar.inc(1);
+        self.bar.set_message(format!(
+            "ok {} rejected {} retries {}",
+            c.ok, c.rejected, c.retries
+        ));
+    }
+    fn note(&mut self, message: &str) {
+        self.bar.println(message);
+    }
+}
+
+/// Log lines for a log file or CI: at most one every 10 s, and the last.
+struct LineProgress {
+    started: Instant,
+    last: Instant,
+    done: u64,
+    total: u64,
+}
+
+impl Progress for LineProgress {
+    fn sample_done(&mut self, index: u64, c: &Counters) {
+        self.done += 1;
+        let now = Instant::now();
+        if now.duration_since(self.last).as_secs() >= 10 || self.done == self.total {
+            self.last = now;
+            let secs = now.duration_since(self.started).as_secs_f64().max(1e-9);
+            let rate = self.done as f64 / secs;
+            let eta = (self.total - self.done) as f64 / rate.max(1e-9);
+            eprintln!(
+                "sample {index}: {}/{} done ({:.1}/s, ETA {:.0} s), ok {} rejected {} retries {}",
+                self.done, self.total, rate, eta, c.ok, c.rejected, c.retries
+            );
+        }
+    }
+    fn note(&mut self, message: &str) {
+        eprintln!("{message}");
+    }
+}
+
+/// A planning error as a CLI failure: the exit code says whose fault it is.
+fn plan_failure(e: PlanError) -> Failure {
+    match e {
+        // Unwrapped so the message and class are what these errors give everywhere.
+        PlanError::Store(e) => e.into(),
+        PlanError::Config(e) => e.into(),
+        e if e.is_bad_input() => Failure::BadInput(e.into()),
+        e => Failure::Runtime(e.into()),
+    }
+}
+
+/// A bar on a terminal, log lines otherwise.
+fn progress_reporter(total: u64) -> Box<dyn Progress> {
+    if std::io::stderr().is_terminal() {
+        let bar = indicatif::ProgressBar::new(total);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{elapsed_precise} [{bar:40}] {pos}/{len} samples {per_sec} ETA {eta} {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        Box::new(BarProgress { bar })
+    } else {
+        let now = Instant::now();
+        Box::new(LineProgress {
+            started: now,
+            last: now,
+            done: 0,
+            total,
+        })
+    }
+}
+
+pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    if args.resume.is_some() && !db.exists() {
+        // A mistyped --db would otherwise become a new, empty database.
+        return Err(Failure::BadInput(anyhow!(
+            "--resume: no database at {} (check --db; only a new run creates one)",
+            db.display()
+        )));
+    }
+    let store = SyncStore::open(db)?;
+    let plan = if let Some(run_id) = args.resume {
+        match CollectPlan::resume_with_rig(&store, run_id, args.rig.as_deref())
+            .map_err(plan_failure)?
+        {
+            Resumed::AlreadyComplete => {
+                writeln!(out, "run {run_id} is already complete").map_err(io_failure)?;
+                return Ok(());
+            }
+            Resumed::Plan(plan) => *plan,
+        }
+    } else {
+        let request = NewRunRequest {
+            rig: args.rig,
+            scene: args.scene,
+            samples: args.samples.unwrap_or(0),
+            seed: args.seed,
+            rods: args.rods,
+            block: args.block,
+            poses_from: args.poses_from,
+        };
+        CollectPlan::new_run(&store, &request).map_err(plan_failure)?
+    };
+
+    let run_id = plan.run_id;
+    // A resumed run's clock continues the run's device time.
+    let (devices, clock) = match build_run_devices(&store, &plan).await {
+        Ok(built) => built,
+        Err(e) => {
+            // No empty `running` run is left behind: the run says why it never started.
+            let reason = abandon(&store, &plan, &format!("cannot set up the rig: {e}"));
+            store.close();
+            return Err(Failure::Runtime(anyhow!("{reason}").context(format!(
+                "run {run_id}: failed before collecting (fix the cause, then --resume {run_id})"
+            ))));
+        }
+    };
+    writeln!(
+        out,
+        "run {run_id}: samples {}..{} of scene `{}` ({}), seed {}",
+        plan.start_index, plan.end_index, plan.scene.name, plan.scene.medium, plan.seed
+    )
+    .map_err(io_failure)?;
+
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
+    let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx));
+    let mut progress = progress_reporter(plan.remaining());
+    let started = Instant::now();
+    let (outcome, counters) =
+        collect(&store, &plan, devices, clock, stop_rx, progress.as_mut()).await;
+    signals.abort();
+    drop(progress);
+    // Through the writer's own runtime: this one's clock may be paused (simulated rig).
+    let paired = match outcome {
+        Outcome::Completed => check_pairing(&store, run_id),
+        _ => Ok(None),
+    };
+    store.close();
+    let wall = started.elapsed().as_secs_f64();
+    let summary = format!(
+        "run {run_id}: {} ok, {} rejected, {} already present, {} retries, {} arm faults, {} frame timeouts in {wall:.1} s wall, {:.1} s on the rig's clock",
+        counters.ok,
+        counters.rejected,
+        counters.already_present,
+        counters.retries,
+        counters.arm_faults,
+        counters.frame_timeouts,
+        softtouch_drivers::Clock::now(&clock).as_secs_f64()
+    );
+    match outcome {
+        Outcome::Completed => {
+            writeln!(out, "{summary}; complete").map_err(io_failure)?;
+            if let Some((source, pairs)) = paired? {
+                writeln!(
+                    out,
+                    "run {run_id} pairs with run {source}: {pairs} samples in both, every rod and pose the same"
+                )
+                .map_err(io_failure)?;
+            }
+            Ok(())
+        }
+        Outcome::Stopped => {
+            writeln!(out, "{summary}; stopped (resume with --resume {run_id})").map_err(io_failure)
+        }
+        Outcome::SafeStop { reason } => Err(Failure::Runtime(anyhow!("{reason}").context(
+            format!("{summary}; safe stop (fix the cause, then --resume {run_id})"),
+        ))),
+    }
+}
+
+/// A run made with `--poses-from` is checked against its source pose by pose once it
+/// is complete (and after a completed resume): `(source, pairs)`, or `None` for a run
+/// with poses of its own.
+fn check_pairing(store: &SyncStore, run_id: i64) -> Result<Option<(i64, u64)>, Failure> {
+    let Some(source) = store.run_record(run_id)?.poses_from else {
+        return Ok(None);
+    };
+    Ok(Some((source, store.check_paired_poses(run_id, source)?)))
+}
+
+pub async fn run_status(db: &Path, run: Option<i64>, out: &mut dyn Write) -> Result<(), Failure> {
+    let store = open_existing(db).await?;
+    let runs = store.runs().await?;
+    let mut text = String::new();
+    let mut any = false;
+    for r in runs.iter().filter(|r| run.is_none_or(|id| id == r.run_id)) {
+        any = true;
+        let hours = r.hours;
+        let done = r.ok + r.rejected;
+        let rate = if hours > 0.0 {
+            format!(
+                "{:.0} samples/h (wall clock, start to last update)",
+                done as f64 / hours
+            )
+        } else {
+            "-".into()
+        };
+        text.push_str(&format!(
+            "run {} [{}] scene {} ({}): {done}/{} samples, {} ok, {} rejected, {} retries, {} faults; {rate}; updated {}\n",
+            r.run_id, r.status, r.scene_name, r.medium, r.samples_planned, r.ok, r.rejected, r.retried, r.faults, r.updated_at
+        ));
+        if run.is_some() {
+            // JSON, so that every name reads back exactly (commas, quotes, blanks). A
+            // damaged schedule is shown as such: the rest of the status still helps.
+            match store.run_record(r.run_id).await {
+                Ok(record) => text.push_str(&format!(
+                    "    rods {}, {} samples each{}\n",
+                    serde_json::to_string(&record.rod_schedule).unwrap_or_default(),
+                    record.rod_block,
+                    record
+                        .poses_from
+                        .map_or_else(String::new, |s| format!("; poses and rods of run {s}"))
+                )),
+                Err(e @ softtouch_store::StoreError::Damaged { .. }) => {
+                    text.push_str(&format!("    rods: {e}\n"));
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+        let limit = if run.is_some() { 20 } else { 3 };
+        for e in store.events(r.run_id, limit).await? {
+            let at = e
+                .sample_index
+                .map(|i| format!(" sample {i}"))
+                .unwrap_or_default();
+            text.push_str(&format!(
+                "    {} {:<5} {}{at}: {}\n",
+                e.created_at, e.level, e.kind, e.message
+            ));
+        }
+    }
+    store.close().await;
+    if let Some(id) = run
+        && !any
+    {
+        return Err(Failure::BadInput(anyhow!(
+            "no run {id} in {}",
+            db.display()
+        )));
+    }
+    if !any {
+        text = format!("no runs in {}\n", db.display());
+    }
+    out.write_all(text.as_bytes()).map_err(io_failure)
+}

@@ -1,0 +1,127 @@
+//! `softtouch eval` and `softtouch models`.
+
+use super::{Failure, io_failure, open_existing, train::load};
+use anyhow::anyhow;
+use clap::Args;
+use softtouch_lab::models;
+use softtouch_trainer::{ModelArtifact, evaluate};
+use std::io::Write;
+use std::path::Path;
+
+/// `softtouch eval`.
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// A stored model's name, or the path of a model file.
+    pub model: String,
+    /// The dataset (default: the one a stored model was trained on).
+    #[arg(long)]
+    pub dataset: Option<String>,
+    /// Which split: test, val, train or all.
+    #[arg(long, default_value = "test")]
+    pub split: String,
+}
+
+pub async fn run_eval(args: EvalArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    let store = open_existing(db).await?;
+    let device = burn_device()?;
+    let (artifact, trained_on) = match models::find(&store, &args.model).await? {
+        Some(info) => {
+            let bytes = models::artifact(&store, &info.name).await?;
+            (
+                ModelArtifact::from_bytes(&bytes, &device)?,
+                Some(info.dataset_name),
+            )
+        }
+        None if Path::new(&args.model).is_file() => {
+            if args.dataset.is_none() {
+                return Err(Failure::BadInput(anyhow!(
+                    "a model file needs --dataset NAME to evaluate on"
+                )));
+            }
+            (ModelArtifact::load(Path::new(&args.model), &device)?, None)
+        }
+        None => {
+            return Err(Failure::BadInput(anyhow!(
+                "`{}` is neither a stored model (see `softtouch models`) nor a model file",
+                args.model
+            )));
+        }
+    };
+    let Some(dataset) = args.dataset.clone().or(trained_on) else {
+        return Err(Failure::BadInput(anyhow!(
+            "a model file needs --dataset NAME to evaluate on"
+        )));
+    };
+    let splits = load(&store, &dataset, &artifact.header.config.preprocess, out).await?;
+    let examples = match args.split.as_str() {
+        "test" => splits.test,
+        "val" => splits.val,
+        "train" => splits.train,
+        "all" => [splits.train, splits.val, splits.test].concat(),
+        other => {
+            return Err(Failure::BadInput(anyhow!(
+                "--split {other}: expected test, val, train or all"
+            )));
+        }
+    };
+    if examples.is_empty() {
+        return Err(Failure::BadInput(anyhow!(
+            "the {} split of {dataset} is empty",
+            args.split
+        )));
+    }
+    let h = &artifact.header;
+    let (metrics, _) = evaluate(&artifact.net, &h.config, &h.norm, &examples, &device);
+    writeln!(
+        out,
+        "model {} ({} width {} latent {} input {}×{}), {dataset} {} split",
+        args.model,
+        h.config.kind,
+        h.config.width,
+        h.config.latent,
+        h.config.preprocess.size_px,
+        h.config.preprocess.size_px,
+        args.split
+    )
+    .map_err(io_failure)?;
+    write!(out, "{}", metrics.render()).map_err(io_failure)?;
+    store.close().await;
+    Ok(())
+}
+
+fn burn_device() -> Result<burn::prelude::Device, Failure> {
+    Ok(softtouch_trainer::backend::device()?)
+}
+
+/// `softtouch models`.
+pub async fn run_models(db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    let store = open_existing(db).await?;
+    let list = models::list(&store).await?;
+    if list.is_empty() {
+        writeln!(out, "no models yet (softtouch train --dataset NAME)").map_err(io_failure)?;
+    } else {
+        writeln!(
+            out,
+            "{:<28} {:<8} {:<20} {:>10} {:>11}  created",
+            "name", "kind", "dataset", "test R²", "image MSE"
+        )
+        .map_err(io_failure)?;
+        for m in list {
+            writeln!(
+                out,
+                "{:<28} {:<8} {:<20} {:>10} {:>11}  {}",
+                m.name,
+                m.kind,
+                m.dataset_name,
+                m.test_r2_mean
+                    .map_or_else(|| "–".into(), |v| format!("{v:.5}")),
+                m.test_image_mse
+                    .map_or_else(|| "–".into(), |v| format!("{v:.3e}")),
+                m.created_at
+            )
+            .map_err(io_failure)?;
+        }
+    }
+    store.close().await;
+    Ok(())
+}

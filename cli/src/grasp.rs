@@ -1,0 +1,359 @@
+//! `softtouch grasp follow|disturb|twist|trials`: the grasp experiments of Figures 4
+//! and 5 on the simulated Hand-E with soft fingers (and `follow` on a real one),
+//! closed by a stored model's estimate. Each verb checks its flags, calls its
+//! experiment in [`softtouch_lab::grasp`], and prints its table; the experiment writes the CSV
+//! and the chart.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::anyhow;
+use clap::{Args, Subcommand};
+use softtouch_grasp::{ControllerConfig, Cycle, GainCheck, GraspError};
+use softtouch_trainer::Predictor;
+
+use super::{Failure, io_failure, open_existing};
+use softtouch_lab::grasp::follow::{
+    FollowSettings, follow_rows, follow_sim, object_for, write_follow_csv, write_follow_png,
+};
+use softtouch_lab::grasp::settings;
+use softtouch_lab::grasp::soft::{GraspRunError, LoopSettings, Setup, grasp_scene, projections};
+
+/// The grasp experiments.
+#[derive(Debug, Subcommand)]
+pub enum GraspCommand {
+    /// Hold each target force in turn on the simulated soft-finger Hand-E, the model's
+    /// estimate closing the loop (Algorithm 1); prints rise time, settling time,
+    /// overshoot, steady-state and RMS error per target; writes a CSV and a PNG.
+    #[command(
+        after_help = "Example:\n  softtouch grasp follow --model land-v1-svae --targets 0.4,1.6,3\n  softtouch grasp follow --model land-v1-svae --scene scenes/grasp.toml --object ball --fingers 2\n  softtouch grasp follow --model land-v1-svae --rig lab.toml --gain 4 --targets 0.4,1.6   # a real Hand-E"
+    )]
+    Follow(FollowArgs),
+    /// Hold 0.4 N on land or 1.6 N in water (the scene's medium) on an oval tube while
+    /// the simulator turns it about its axis by 45°, then 60°, then −90°; prints per
+    /// turn the peak deviation, the recovery time to within δ and the RMS error;
+    /// writes `grasp-disturb.csv` and `grasp-disturb.png`.
+    #[command(
+        after_help = "Example:\n  softtouch grasp disturb --model land-v1-svae\n  softtouch grasp disturb --model water-v1-svae --scene scenes/grasp-water.toml --fingers 2"
+    )]
+    Disturb(super::grasp_turns::DisturbArgs),
+    /// Hold a grip force on a cylinder that the simulator turns about the fingers'
+    /// axis, and hold the torque τz ≈ 0 by turning the wrist on the model's τz
+    /// estimate; runs with and without the wrist loop and prints the τz RMS of both;
+    /// writes `grasp-twist.csv` and `grasp-twist.png`.
+    #[command(
+        after_help = "Example:\n  softtouch grasp twist --model land-v1-svae\n  softtouch grasp twist --model land-v1-svae --turn-deg 30 --wrist-gain 1000"
+    )]
+    Twist(super::grasp_turns::TwistArgs),
+    /// Grasp success-rate trials (Figure 4): per object, mode (open, closed) and medium
+    /// (one scene each; default land and water), `--trials` grasps with the grasp point
+    /// perturbed by N(0, σ²) per axis, lift and hold; the physics decides held, slip,
+    /// crush, miss or timeout. Each trial is stored as it ends; `--resume SESSION`
+    /// continues. Prints success rates with Wilson 95 % intervals beside the paper's;
+    /// writes `grasp-trials.csv`, `grasp-trials-rows.csv` and `grasp-trials.png`.
+    #[command(after_help = "Example:
+  softtouch grasp trials --model land-v1-svae --trials 10 --sigma-mm 5 --modes open,closed
+  softtouch grasp trials --model land-v1-svae --objects cake,ball --scene scenes/grasp.toml
+  softtouch grasp trials --resume 3
+  softtouch grasp trials --model land-v1-svae --sweep-sigma 0,2,5,8,12 --trials 5")]
+    Trials(super::grasp_trials::TrialsArgs),
+}
+
+/// Options every grasp experiment shares.
+#[derive(Debug, Args)]
+pub struct LoopArgs {
+    /// Stored model whose estimate closes the loop.
+    #[arg(long)]
+    pub model: String,
+    /// Scene file (medium, effects, `[[objects]]`); default: the built-in scene
+    /// (`follow`) or `scenes/grasp.toml` (`disturb`, `twist`).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Gain K, N/mm; default: 0.75 × the stiffness Λ_max measured on the simulator.
+    #[arg(long)]
+    pub gain: Option<f64>,
+    /// Tolerance δ, N.
+    #[arg(long, default_value_t = 0.1)]
+    pub tolerance: f64,
+    /// Camera rate, Hz (one control cycle per frame).
+    #[arg(long, default_value_t = 120.0)]
+    pub fps: f64,
+    /// Sensorised fingers the loop reads: 1, or 2 (the second mirrors the first; the
+    /// estimate is the mean of both, or the one left when the other gives none).
+    #[arg(long, default_value_t = 1)]
+    pub fingers: u8,
+    /// Folder for the CSV and the PNG.
+    #[arg(long, default_value = "grasp-out")]
+    pub out_dir: PathBuf,
+    /// Seed of the simulated scene's effects.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+/// Options of `grasp follow`.
+#[derive(Debug, Args)]
+pub struct FollowArgs {
+    /// Target forces, N, held in turn.
+    #[arg(long, value_delimiter = ',', default_value = "0.4,1.6,3")]
+    pub targets: Vec<f64>,
+    /// Object to grasp (a `[[objects]]` name); default: the scene's first object,
+    /// else a cylinder of the scene's first rod.
+    #[arg(long)]
+    pub object: Option<String>,
+    /// How long each target is held, s.
+    #[arg(long, default_value_t = 3.0)]
+    pub hold_s: f64,
+    /// Rig file: when it names a real gripper (`driver = "hand-e"`), the loop runs on
+    /// the real Hand-E and finger cameras (`camera`, and `second_camera` for a second
+    /// finger), after an end calibration with nothing between the fingers; `--gain` is
+    /// then required. A rig with a simulated gripper runs the simulated soft grasp.
+    #[arg(long)]
+    pub rig: Option<PathBuf>,
+    /// Shared loop options.
+    #[command(flatten)]
+    pub common: LoopArgs,
+}
+
+pub(super) fn grasp_failure(e: GraspError) -> Failure {
+    GraspRunError::Grasp(e).into()
+}
+
+pub(super) fn bad(m: String) -> Failure {
+    Failure::BadInput(anyhow!(m))
+}
+
+/// Run a grasp verb.
+pub async fn run(cmd: GraspCommand, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    match cmd {
+        GraspCommand::Follow(args) => follow(args, db, out).await,
+        GraspCommand::Disturb(args) => super::grasp_turns::disturb(args, db, out).await,
+        GraspCommand::Twist(args) => super::grasp_turns::twist(args, db, out).await,
+        GraspCommand::Trials(args) => super::grasp_trials::run(args, db, out).await,
+    }
+}
+
+/// The shared flags, checked: one validation per setting for every verb.
+pub(super) fn loop_settings(c: &LoopArgs) -> Result<LoopSettings, Failure> {
+    settings::FPS_HZ.check("--fps", c.fps)?;
+    settings::TOLERANCE_N.check("--tolerance", c.tolerance)?;
+    let fingers = settings::check_fingers(c.fingers)?;
+    Ok(LoopSettings {
+        gain_n_per_mm: c.gain,
+        tolerance_n: c.tolerance,
+        fps: c.fps,
+        fingers,
+        seed: c.seed,
+    })
+}
+
+pub(super) fn check_duration(flag: &str, v: f64, zero_allowed: bool) -> Result<(), Failure> {
+    settings::duration_s(zero_allowed).check(flag, v)?;
+    Ok(())
+}
+
+/// The scene of `--scene`, else the embedded default (`follow`) or grasp scene.
+pub(super) fn scene_for(
+    c: &LoopArgs,
+    grasp_default: bool,
+) -> Result<softtouch_schemas::SceneSpec, Failure> {
+    if c.scene.is_none() && grasp_default {
+        return Ok(grasp_scene()?);
+    }
+    Ok(softtouch_collector::configs::resolve(None, c.scene.as_deref())?.scene)
+}
+
+/// The stored model's bytes; then tokio's clock is paused, for the simulated gripper
+/// and cameras (the database is read first: its pool's timeouts need real time).
+pub(super) async fn load_model_and_pause(c: &LoopArgs, db: &Path) -> Result<Vec<u8>, Failure> {
+    let store = open_existing(db).await?;
+    let bytes = softtouch_lab::models::force_artifact(&store, &c.model).await?;
+    drop(store);
+    tokio::time::pause();
+    Ok(bytes)
+}
+
+/// What the setup measured and chose, and Method S4's warnings, each said once with
+/// its remedy.
+pub(super) fn print_setup(
+    object: &str,
+    s: &Setup,
+    l: &LoopSettings,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    let w = io_failure;
+    writeln!(
+        out,
+        "object `{object}`: first touch at count {}; measured Λ_max = {:.3} N/mm; K = {:.3} N/mm, δ = {} N, {} Hz, {} finger(s)",
+        s.touch, s.lambda_max, s.gain, l.tolerance_n, l.fps, l.fingers
+    )
+    .map_err(w)?;
+    match s.gain_check {
+        GainCheck::MayNotConverge { amplification } => writeln!(
+            out,
+            "warning: K ≤ Λ_max/2 (Method S4): the loop may oscillate (|1 − Λ/K| = {amplification:.2}); leave --gain out for 0.75 Λ_max"
+        )
+        .map_err(w)?,
+        GainCheck::NoStiffness => {
+            writeln!(out, "warning: Λ = 0: the force does not follow position").map_err(w)?;
+        }
+        GainCheck::Converges { .. } => {}
+    }
+    if !s.tolerance_ok {
+        writeln!(
+            out,
+            "warning: δ = {} N is below half the force of one count ({:.3} N at Λ_max): expect dithering; --tolerance {:.3} or more avoids it",
+            l.tolerance_n,
+            s.one_count_n,
+            (s.one_count_n / 2.0 * 1000.0).ceil() / 1000.0
+        )
+        .map_err(w)?;
+    }
+    Ok(())
+}
+
+pub(super) fn create_out_dir(dir: &Path) -> Result<(), Failure> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| Failure::Runtime(anyhow!("cannot create {}: {e}", dir.display())))
+}
+
+async fn follow(args: FollowArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    let c = &args.common;
+    if args.targets.is_empty() {
+        return Err(bad("--targets: expected at least one force in N".into()));
+    }
+    check_duration("--hold-s", args.hold_s, false)?;
+    let loop_settings = loop_settings(c)?;
+    if let Some(rig_path) = &args.rig {
+        let rig = softtouch_collector::configs::resolve(Some(rig_path), None)?.rig;
+        if softtouch_lab::grasp::devices::has_real_gripper(&rig) {
+            return follow_on_rig(&args, &rig, db, out).await;
+        }
+    }
+    let scene = scene_for(c, false)?;
+    let object = object_for(&scene, args.object.as_deref())?;
+    let model = load_model_and_pause(c, db).await?;
+    let settings = FollowSettings {
+        loop_settings,
+        targets_n: args.targets.clone(),
+        hold_s: args.hold_s,
+    };
+    let name = object.name.clone();
+    let (setup, cycles) = follow_sim(&settings, &model, &scene, object).await?;
+    print_setup(&name, &setup, &loop_settings, out)?;
+    print_follow(&cycles, &args.targets, c.tolerance, &c.out_dir, out)
+}
+
+/// `grasp follow --rig FILE` on a real Hand-E: no simulator, so no measured Λ (the
+/// gain is given) and no truth column; the stroke comes from the end calibration.
+async fn follow_on_rig(
+    args: &FollowArgs,
+    rig: &softtouch_schemas::RigConfig,
+    db: &Path,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    let c = &args.common;
+    let gain = c.gain.ok_or_else(|| {
+        bad("--gain: expected K in N/mm on a real gripper (there is no simulator to measure the stiffness Λ)".into())
+    })?;
+    if c.fingers == 2 && rig.second_camera.is_none() {
+        return Err(bad(
+            "--fingers 2: the rig has no second_camera for the second finger".into(),
+        ));
+    }
+    let store = open_existing(db).await?;
+    let bytes = softtouch_lab::models::force_artifact(&store, &c.model).await?;
+    drop(store);
+    let predictor = Predictor::from_bytes(&bytes)?;
+    let projections = projections().map_err(grasp_failure)?;
+    let mut config = ControllerConfig::new(projections[0]);
+    config.stepper.gain_n_per_mm = gain;
+    config.stepper.tolerance_n = c.tolerance;
+    let hold = Duration::from_secs_f64(args.hold_s);
+    let targets: Vec<(f64, Duration)> = args.targets.iter().map(|t| (*t, hold)).collect();
+    writeln!(
+        out,
+        "real Hand-E: calibrating the ends (nothing may be between the fingers), then K = {gain} N/mm, δ = {} N",
+        c.tolerance
+    )
+    .map_err(io_failure)?;
+    let second = (c.fingers == 2).then_some(projections[1]);
+    let signals = super::signals::SignalWatch::start();
+    let run = softtouch_lab::grasp::devices::follow_on_rig(
+        rig,
+        predictor,
+        config,
+        second,
+        &targets,
+        signals.request(),
+    )
+    .await
+    .map_err(|e| match e {
+        // Its Display already names the device and the cause.
+        softtouch_lab::grasp::devices::RigFollowError::Open(e) => Failure::Runtime(anyhow!("{e}")),
+        softtouch_lab::grasp::devices::RigFollowError::Grasp(e) => grasp_failure(e),
+    })?;
+    let cal = run.calibration;
+    writeln!(
+        out,
+        "calibrated: reached counts {} (open) and {} (closed); stroke {}..={} at {:.4} mm per count",
+        cal.open_reached,
+        cal.closed_reached,
+        cal.stroke.open_count,
+        cal.stroke.closed_count,
+        cal.stroke.mm_per_count
+    )
+    .map_err(io_failure)?;
+    print_follow(&run.cycles, &args.targets, c.tolerance, &c.out_dir, out)
+}
+
+/// `grasp follow`'s table per target, then its CSV and chart.
+fn print_follow(
+    cycles: &[Cycle],
+    targets: &[f64],
+    tolerance_n: f64,
+    out_dir: &Path,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    let opt = |v: Option<f64>| v.map_or_else(|| "never".to_owned(), |s| format!("{s:.3}"));
+    writeln!(
+        out,
+        "{:>8} {:>9} {:>10} {:>11} {:>11} {:>9} {:>13} {:>10}",
+        "target N",
+        "rise s",
+        "settle s",
+        "overshoot N",
+        "ss error N",
+        "RMS N",
+        "true ss err N",
+        "true RMS N"
+    )
+    .map_err(io_failure)?;
+    for row in follow_rows(cycles, targets, tolerance_n) {
+        let target = row.target_n;
+        let tru = row.truth;
+        match row.estimate {
+            Some(m) => writeln!(
+                out,
+                "{:>8.2} {:>9} {:>10} {:>11.3} {:>11.3} {:>9.3} {:>13} {:>10}",
+                target,
+                opt(m.rise_time_s),
+                opt(m.settling_time_s),
+                m.overshoot_n,
+                m.steady_state_error_n,
+                m.rms_error_n,
+                tru.map_or_else(|| "-".into(), |t| format!("{:.3}", t.steady_state_error_n)),
+                tru.map_or_else(|| "-".into(), |t| format!("{:.3}", t.rms_error_n)),
+            ),
+            None => writeln!(out, "{target:>8.2} (no usable estimate)"),
+        }
+        .map_err(io_failure)?;
+    }
+    create_out_dir(out_dir)?;
+    let csv = out_dir.join("grasp-follow.csv");
+    write_follow_csv(&csv, cycles)?;
+    let png = out_dir.join("grasp-follow.png");
+    write_follow_png(&png, cycles)?;
+    writeln!(out, "wrote {} and {}", csv.display(), png.display()).map_err(io_failure)?;
+    Ok(())
+}

@@ -1,0 +1,325 @@
+//! `softtouch grasp trials`: parses the flags, starts or resumes a session of
+//! [`softtouch_lab::grasp::trials`], runs it with a progress line per trial, and prints the
+//! timing table and the success table (Wilson 95 % intervals beside the paper's);
+//! the library writes the CSVs and charts to `--out-dir`.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::Args;
+use softtouch_grasp::Mode;
+use softtouch_schemas::Medium;
+
+use super::{Failure, io_failure, open_existing};
+use softtouch_lab::grasp::trials::table::{Cell, summarise, write_outputs};
+use softtouch_lab::grasp::trials::{
+    TrialPlan, TrialTiming, TrialsError, load_scenes, medium_name, resume_session, run_trials,
+    start_session,
+};
+
+/// Options of `grasp trials`.
+#[derive(Debug, Args)]
+pub struct TrialsArgs {
+    /// Stored model whose estimate closes the loop (and is recorded in open loop).
+    #[arg(long, required_unless_present = "resume")]
+    pub model: Option<String>,
+    /// Scene file, one per medium (repeat the flag); default: the built-in land and
+    /// water scenes (`scenes/grasp.toml`, `scenes/grasp-water.toml`).
+    #[arg(long)]
+    pub scene: Vec<PathBuf>,
+    /// Objects (`[[objects]]` names, comma-separated); default: every object of the
+    /// first scene.
+    #[arg(long, value_delimiter = ',')]
+    pub objects: Vec<String>,
+    /// Trials per object, mode, medium and σ.
+    #[arg(long, default_value_t = 10)]
+    pub trials: u32,
+    /// σ of the grasp point's perturbation per axis, mm.
+    #[arg(long, default_value_t = 5.0)]
+    pub sigma_mm: f64,
+    /// Run the trials at each of these σ, mm (comma-separated), and plot success
+    /// against σ; replaces --sigma-mm.
+    #[arg(long, value_delimiter = ',')]
+    pub sweep_sigma: Vec<f64>,
+    /// Modes, comma-separated: open, closed.
+    #[arg(long, value_delimiter = ',', default_value = "open,closed")]
+    pub modes: Vec<String>,
+    /// Seed of the perturbations and the simulated scenes.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Continue a stored session (its settings are the stored ones, so the settings'
+    /// flags are refused beside it; --out-dir may change).
+    #[arg(
+        long,
+        conflicts_with_all = [
+            "model", "scene", "objects", "trials", "sigma_mm", "sweep_sigma", "modes", "seed",
+            "fps", "target_n", "tolerance", "confirm_s", "close_timeout_s", "lift_mm",
+            "hold_s", "open_width_mm",
+        ]
+    )]
+    pub resume: Option<i64>,
+    /// Camera rate, Hz (one control cycle per frame).
+    #[arg(long, default_value_t = 120.0)]
+    pub fps: f64,
+    /// Closed loop: the grip force F_ref, N.
+    #[arg(long, default_value_t = 1.5)]
+    pub target_n: f64,
+    /// Closed loop: the tolerance δ, N.
+    #[arg(long, default_value_t = 0.1)]
+    pub tolerance: f64,
+    /// Closed loop: how long |F_ref − F_est| ≤ δ must hold before the lift, s.
+    #[arg(long, default_value_t = 0.25)]
+    pub confirm_s: f64,
+    /// Closed loop: how long the loop may take to confirm, s.
+    #[arg(long, default_value_t = 4.0)]
+    pub close_timeout_s: f64,
+    /// How high the object is lifted, mm.
+    #[arg(long, default_value_t = 50.0)]
+    pub lift_mm: f64,
+    /// How long it is held after the lift, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub hold_s: f64,
+    /// Open loop: close every object to this opening, mm, instead of its predefined
+    /// gripping width.
+    #[arg(long)]
+    pub open_width_mm: Option<f64>,
+    /// Folder for `grasp-trials.csv`, `grasp-trials-rows.csv`, `grasp-trials.png` and,
+    /// with --sweep-sigma, `grasp-trials-sigma.png`.
+    #[arg(long, default_value = "grasp-out")]
+    pub out_dir: PathBuf,
+}
+
+impl TrialsArgs {
+    /// The session's settings from the flags (checked when the session starts).
+    fn plan(&self) -> TrialPlan {
+        TrialPlan {
+            objects: self.objects.clone(),
+            modes: self.modes.clone(),
+            trials: self.trials,
+            sigmas_mm: if self.sweep_sigma.is_empty() {
+                vec![self.sigma_mm]
+            } else {
+                self.sweep_sigma.clone()
+            },
+            fps: self.fps,
+            target_n: self.target_n,
+            tolerance_n: self.tolerance,
+            confirm_s: self.confirm_s,
+            close_timeout_s: self.close_timeout_s,
+            lift_mm: self.lift_mm,
+            hold_s: self.hold_s,
+            open_width_mm: self.open_width_mm,
+            ..TrialPlan::default()
+        }
+    }
+}
+
+/// The wall time of the trials this invocation ran, per medium and mode: cycles (one
+/// a frame), ms per cycle, mean and slowest trial and how many took at most 1 s.
+fn print_timings(timings: &[TrialTiming], fps: f64, out: &mut dyn Write) -> Result<(), Failure> {
+    let w = io_failure;
+    writeln!(
+        out,
+        "\nwall time of the trials run now ({fps} Hz on virtual time):\n{:<7}{:<8}{:>7}{:>9}{:>10}{:>8}{:>8}{:>9}",
+        "medium", "mode", "trials", "cycles", "ms/cycle", "mean s", "max s", "≤ 1 s"
+    )
+    .map_err(w)?;
+    let mut groups: Vec<(Medium, Mode)> = Vec::new();
+    for t in timings {
+        if !groups.contains(&(t.medium, t.mode)) {
+            groups.push((t.medium, t.mode));
+        }
+    }
+    for (medium, mode) in groups {
+        let of: Vec<&TrialTiming> = timings
+            .iter()
+            .filter(|t| t.medium == medium && t.mode == mode)
+            .collect();
+        let wall_s: f64 = of.iter().map(|t| t.wall_s).sum();
+        let cycles: usize = of.iter().map(|t| t.cycles).sum();
+        let max_s = of.iter().map(|t| t.wall_s).fold(0.0, f64::max);
+        let within = of.iter().filter(|t| t.wall_s <= 1.0).count();
+        let per_cycle = if cycles == 0 {
+            "–".to_owned()
+        } else {
+            format!("{:.3}", 1e3 * wall_s / cycles as f64)
+        };
+        writeln!(
+            out,
+            "{:<7}{:<8}{:>7}{:>9}{:>10}{:>8.3}{:>8.3}{:>9}",
+            medium_name(medium),
+            mode.as_str(),
+            of.len(),
+            cycles,
+            per_cycle,
+            wall_s / of.len() as f64,
+            max_s,
+            format!("{within}/{}", of.len())
+        )
+        .map_err(w)?;
+    }
+    Ok(())
+}
+
+fn fmt_duration(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    if s >= 60 {
+        format!("{}m{:02}s", s / 60, s % 60)
+    } else {
+        format!("{s}s")
+    }
+}
+
+/// Run `grasp trials`.
+pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    let store = open_existing(db).await?;
+    let session = match args.resume {
+        Some(id) => resume_session(&store, id, args.model.as_deref()).await?,
+        None => {
+            // Settings are checked before the scenes are read or anything is stored.
+            let plan = args.plan().checked()?;
+            let scenes = load_scenes(&args.scene)?;
+            let model = args.model.clone().unwrap_or_default();
+            start_session(&store, &model, args.seed, plan, scenes).await?
+        }
+    };
+    let progress = session.progress(&store).await?;
+    let todo = progress.todo;
+    let w = io_failure;
+    writeln!(
+        out,
+        "grasp session {}: model `{}` (sha256 {}), seed {}, {} trials planned, {} stored, {} to run",
+        session.id,
+        session.model,
+        &session.model_sha256[..12],
+        session.seed,
+        progress.planned.len(),
+        progress.planned.len() - todo.len(),
+        todo.len()
+    )
+    .map_err(w)?;
+
+    let bar = softtouch_collector::progress::progress_bar(todo.len() as u64, true, "trials");
+    let started = Instant::now();
+    let mut timings = Vec::with_capacity(todo.len());
+    let mut on_trial = |t: &softtouch_lab::grasp::trials::TrialDone| -> Result<(), TrialsError> {
+        timings.push(t.timing);
+        let i = timings.len();
+        bar.inc(1);
+        let per = started.elapsed().as_secs_f64() / i as f64;
+        let opt = |v: Option<f64>| v.map_or_else(|| "–".to_owned(), |f| format!("{f:.2}"));
+        let row = &t.row;
+        bar.suspend(|| {
+            writeln!(
+                out,
+                "[{:>4}/{}] σ {} mm {} {} {} #{}: {} (peak est {} N, true {} N) {:.2} s, eta {}",
+                i,
+                todo.len(),
+                session.plan.sigmas_mm[row.key.sigma_index as usize],
+                row.medium,
+                row.key.object,
+                row.key.mode,
+                row.key.trial,
+                row.reason.as_deref().unwrap_or("held"),
+                opt(row.peak_estimate_n),
+                opt(row.peak_true_n),
+                t.timing.wall_s,
+                fmt_duration(per * (todo.len() - i) as f64)
+            )
+        })
+        .map_err(|e| TrialsError::Failed(format!("cannot write output: {e}")))
+    };
+    run_trials(&store, &session, &todo, &mut on_trial).await?;
+    bar.finish_and_clear();
+    if !todo.is_empty() {
+        writeln!(
+            out,
+            "ran {} trials in {:.1} s wall ({:.2} s per trial)",
+            todo.len(),
+            started.elapsed().as_secs_f64(),
+            started.elapsed().as_secs_f64() / todo.len() as f64
+        )
+        .map_err(w)?;
+        print_timings(&timings, session.plan.fps, out)?;
+    }
+
+    let rows = store.grasp_trials(session.id).await?;
+    let table = summarise(&session.plan, &session.scenes, &rows)?;
+    print_table(&table, &session.plan, out)?;
+    let written = write_outputs(&args.out_dir, &table, &rows, &session.plan)?;
+    let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
+    match names.as_slice() {
+        [csv, rows_csv, png, rest @ ..] => {
+            writeln!(out, "wrote {csv}, {rows_csv} and {png}").map_err(w)?;
+            for r in rest {
+                writeln!(out, "wrote {r}").map_err(w)?;
+            }
+        }
+        _ => writeln!(out, "wrote {}", names.join(", ")).map_err(w)?,
+    }
+    Ok(())
+}
+
+fn pct(v: Option<f64>) -> String {
+    v.map_or_else(|| "–".to_owned(), |v| format!("{:.0}%", 100.0 * v))
+}
+
+fn print_table(cells: &[Cell], plan: &TrialPlan, out: &mut dyn Write) -> Result<(), Failure> {
+    let w = io_failure;
+    let mut last = None;
+    for c in cells {
+        if last != Some((c.sigma_index, c.scene_index)) {
+            last = Some((c.sigma_index, c.scene_index));
+            writeln!(
+                out,
+                "\nσ = {} mm, {} (scene {}):\n{:<14} {:<7} {:>7} {:>6} {:>15} {:>7}  failures",
+                plan.sigmas_mm[c.sigma_index as usize],
+                medium_name(c.medium),
+                c.scene_index,
+                "object",
+                "mode",
+                "held/n",
+                "rate",
+                "Wilson 95%",
+                "paper"
+            )
+            .map_err(w)?;
+        }
+        let failures: Vec<String> = c
+            .reasons
+            .iter()
+            .filter(|(_, n)| **n > 0)
+            .map(|(r, n)| format!("{r} {n}"))
+            .collect();
+        writeln!(
+            out,
+            "{:<14} {:<7} {:>7} {:>6} {:>15} {:>7}  {}",
+            c.object.as_deref().unwrap_or("all"),
+            c.mode.as_str(),
+            format!("{}/{}", c.held, c.trials),
+            pct(c.rate()),
+            format!(
+                "[{:.0}%, {:.0}%]",
+                100.0 * c.interval[0],
+                100.0 * c.interval[1]
+            ),
+            pct(c.paper()),
+            failures.join(", ")
+        )
+        .map_err(w)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_read_as_minutes_and_seconds() {
+        assert_eq!(fmt_duration(125.4), "2m05s");
+        assert_eq!(fmt_duration(59.4), "59s");
+        assert_eq!(fmt_duration(-3.0), "0s");
+    }
+}

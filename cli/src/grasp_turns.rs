@@ -1,0 +1,278 @@
+//! `softtouch grasp disturb|twist`: Figure 5's experiments that turn the gripped
+//! object (about its axis, or about the fingers' axis with the wrist loop). Each checks
+//! its flags, calls [`softtouch_lab::grasp::disturb`] or [`softtouch_lab::grasp::twist`] and prints the
+//! table; the experiment writes the CSV and the chart.
+
+use std::io::Write;
+use std::path::Path;
+
+use clap::Args;
+use softtouch_grasp::{ControllerConfig, WristConfig};
+use softtouch_schemas::Medium;
+
+use super::Failure;
+use super::grasp::{
+    LoopArgs, bad, check_duration, create_out_dir, grasp_failure, load_model_and_pause,
+    loop_settings, print_setup, scene_for,
+};
+use super::io_failure;
+use softtouch_lab::grasp::disturb::{
+    DisturbSettings, disturb_rows, disturb_sim, write_disturb_csv, write_disturb_png,
+};
+use softtouch_lab::grasp::soft::{named_object, projections};
+use softtouch_lab::grasp::twist::{
+    TwistSettings, twist_rows, twist_sim, write_twist_csv, write_twist_png,
+};
+
+/// Options of `grasp disturb`.
+#[derive(Debug, Args)]
+pub struct DisturbArgs {
+    /// Force held, N; default: 0.4 on land, 1.6 in water (the scene's medium).
+    #[arg(long)]
+    pub target: Option<f64>,
+    /// Object turned (a `[[objects]]` name).
+    #[arg(long, default_value = "oval-tube")]
+    pub object: String,
+    /// The turns, degrees, one after the other (each relative to the last).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_negative_numbers = true,
+        default_value = "45,60,-90"
+    )]
+    pub turns_deg: Vec<f64>,
+    /// How long the force is held before the first turn, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub settle_s: f64,
+    /// How long each turn takes, s.
+    #[arg(long, default_value_t = 0.5)]
+    pub turn_s: f64,
+    /// Time from one turn's start to the next (each phase), s.
+    #[arg(long, default_value_t = 3.0)]
+    pub phase_s: f64,
+    /// Shared loop options.
+    #[command(flatten)]
+    pub common: LoopArgs,
+}
+
+/// Options of `grasp twist`.
+#[derive(Debug, Args)]
+pub struct TwistArgs {
+    /// Grip force held, N.
+    #[arg(long, default_value_t = 1.0)]
+    pub target: f64,
+    /// Object turned (a `[[objects]]` name).
+    #[arg(long, default_value = "cylinder")]
+    pub object: String,
+    /// How far the simulator turns the object about the fingers' axis, degrees (then
+    /// back).
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
+    pub turn_deg: f64,
+    /// How long the force is held before the turn, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub settle_s: f64,
+    /// How long each turn (out and back) takes, s.
+    #[arg(long, default_value_t = 1.0)]
+    pub turn_s: f64,
+    /// How long the turned object is held before it turns back, and after, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub hold_s: f64,
+    /// Wrist loop gain, rad/s per N·m of τz.
+    #[arg(long, default_value_t = 500.0)]
+    pub wrist_gain: f64,
+    /// Wrist loop dead band, N·mm of τz.
+    #[arg(long, default_value_t = 0.5)]
+    pub wrist_deadband_nmm: f64,
+    /// Shared loop options.
+    #[command(flatten)]
+    pub common: LoopArgs,
+}
+
+pub(super) async fn disturb(
+    args: DisturbArgs,
+    db: &Path,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    let c = &args.common;
+    let loop_settings = loop_settings(c)?;
+    if args.turns_deg.is_empty() || args.turns_deg.len() > 20 {
+        return Err(bad(format!(
+            "--turns-deg: expected 1 to 20 turns in degrees, found {}",
+            args.turns_deg.len()
+        )));
+    }
+    if let Some(t) = args
+        .turns_deg
+        .iter()
+        .find(|t| !(t.is_finite() && t.abs() <= 360.0))
+    {
+        return Err(bad(format!("--turns-deg {t}: expected turns within ±360°")));
+    }
+    check_duration("--settle-s", args.settle_s, true)?;
+    check_duration("--turn-s", args.turn_s, true)?;
+    check_duration("--phase-s", args.phase_s, false)?;
+    if args.phase_s <= args.turn_s {
+        return Err(bad(format!(
+            "--phase-s {}: expected longer than --turn-s {} (a phase holds after its turn)",
+            args.phase_s, args.turn_s
+        )));
+    }
+    let scene = scene_for(c, true)?;
+    let target = args.target.unwrap_or(match scene.medium {
+        Medium::Air => 0.4,
+        Medium::Water => 1.6,
+    });
+    let object = named_object(&scene, &args.object)?;
+    let model = load_model_and_pause(c, db).await?;
+    let settings = DisturbSettings {
+        loop_settings,
+        target_n: target,
+        turns_deg: args.turns_deg.clone(),
+        settle_s: args.settle_s,
+        turn_s: args.turn_s,
+        phase_s: args.phase_s,
+    };
+    let run = disturb_sim(&settings, &model, &scene, object).await?;
+    print_setup(&args.object, &run.setup, &loop_settings, out)?;
+    let w = io_failure;
+    let opt = |v: Option<f64>| v.map_or_else(|| "never".to_owned(), |s| format!("{s:.3}"));
+    writeln!(
+        out,
+        "holding {target} N ({} medium) on `{}`",
+        scene.medium, args.object
+    )
+    .map_err(w)?;
+    writeln!(
+        out,
+        "{:>5} {:>7} {:>6} {:>11} {:>10} {:>9} {:>12} {:>11} {:>10}",
+        "phase",
+        "turn °",
+        "yaw °",
+        "peak dev N",
+        "recover s",
+        "RMS N",
+        "true peak N",
+        "true rec s",
+        "true RMS N"
+    )
+    .map_err(w)?;
+    for (i, row) in disturb_rows(&run, &settings).iter().enumerate() {
+        let (turn, yaw) = (row.phase.turn_deg, row.phase.yaw_deg);
+        let r = row.truth;
+        let Some(e) = row.estimate else {
+            writeln!(
+                out,
+                "{:>5} {turn:>7.1} {yaw:>6.1} (no usable estimate)",
+                i + 1
+            )
+            .map_err(w)?;
+            continue;
+        };
+        writeln!(
+            out,
+            "{:>5} {turn:>7.1} {yaw:>6.1} {:>11.3} {:>10} {:>9.3} {:>12} {:>11} {:>10}",
+            i + 1,
+            e.peak_deviation_n,
+            opt(e.recovery_s),
+            e.rms_error_n,
+            r.map_or_else(|| "-".into(), |r| format!("{:.3}", r.peak_deviation_n)),
+            r.map_or_else(|| "-".into(), |r| opt(r.recovery_s)),
+            r.map_or_else(|| "-".into(), |r| format!("{:.3}", r.rms_error_n)),
+        )
+        .map_err(w)?;
+    }
+    let flagged = run
+        .cycles
+        .iter()
+        .filter(|c| c.single_finger.is_some())
+        .count();
+    if c.fingers == 2 && flagged > 0 {
+        writeln!(
+            out,
+            "{flagged} cycles ran on one finger's estimate (the other gave none)"
+        )
+        .map_err(w)?;
+    }
+    create_out_dir(&c.out_dir)?;
+    let csv = c.out_dir.join("grasp-disturb.csv");
+    write_disturb_csv(&csv, &run)?;
+    let png = c.out_dir.join("grasp-disturb.png");
+    write_disturb_png(&png, &run)?;
+    writeln!(out, "wrote {} and {}", csv.display(), png.display()).map_err(w)?;
+    Ok(())
+}
+
+pub(super) async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    let c = &args.common;
+    let loop_settings = loop_settings(c)?;
+    if !(args.turn_deg.is_finite() && args.turn_deg.abs() <= 90.0) {
+        return Err(bad(format!(
+            "--turn-deg {}: expected a turn within ±90°",
+            args.turn_deg
+        )));
+    }
+    check_duration("--settle-s", args.settle_s, true)?;
+    check_duration("--turn-s", args.turn_s, true)?;
+    check_duration("--hold-s", args.hold_s, false)?;
+    let wrist = WristConfig {
+        gain_rad_per_nm_s: args.wrist_gain,
+        deadband_nm: args.wrist_deadband_nmm / 1000.0,
+        ..WristConfig::default()
+    };
+    wrist
+        .validate()
+        .map_err(|e| bad(format!("--wrist-gain / --wrist-deadband-nmm: {e}")))?;
+    let scene = scene_for(c, true)?;
+    let object = named_object(&scene, &args.object)?;
+    // The same config check as the loop's, before anything is built.
+    ControllerConfig::new(projections().map_err(grasp_failure)?[0])
+        .stepper
+        .check_target(args.target)
+        .map_err(grasp_failure)?;
+    let model = load_model_and_pause(c, db).await?;
+    let settings = TwistSettings {
+        loop_settings,
+        target_n: args.target,
+        turn_deg: args.turn_deg,
+        settle_s: args.settle_s,
+        turn_s: args.turn_s,
+        hold_s: args.hold_s,
+        wrist,
+    };
+    let (setup, runs) = twist_sim(&settings, &model, &scene, &object).await?;
+    // The same grasp twice: its setup and warnings are printed once.
+    print_setup(&args.object, &setup, &loop_settings, out)?;
+    let w = io_failure;
+    writeln!(
+        out,
+        "turning `{}` by {}° and back while holding {} N",
+        args.object, args.turn_deg, args.target
+    )
+    .map_err(w)?;
+    writeln!(
+        out,
+        "{:>14} {:>14} {:>15} {:>16} {:>15} {:>14}",
+        "wrist loop", "τz RMS N·mm", "true τz RMS", "true τz peak", "true F RMS N", "wrist max °"
+    )
+    .map_err(w)?;
+    for row in twist_rows(&runs) {
+        writeln!(
+            out,
+            "{:>14} {:>14.3} {:>15.3} {:>16.3} {:>15.3} {:>14.2}",
+            if row.wrist_loop { "on" } else { "off" },
+            row.tz_rms_nmm,
+            row.true_tz_rms_nmm,
+            row.true_tz_peak_nmm,
+            row.true_force_rms_n,
+            row.wrist_max_deg
+        )
+        .map_err(w)?;
+    }
+    create_out_dir(&c.out_dir)?;
+    let csv = c.out_dir.join("grasp-twist.csv");
+    write_twist_csv(&csv, &runs)?;
+    let png = c.out_dir.join("grasp-twist.png");
+    write_twist_png(&png, &runs)?;
+    writeln!(out, "wrote {} and {}", csv.display(), png.display()).map_err(w)?;
+    Ok(())
+}

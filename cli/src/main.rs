@@ -1,0 +1,143 @@
+//! The `softtouch` binary: parse arguments, set up logging, run, map the outcome to
+//! an exit code (0 ok, 1 runtime failure, 2 bad input).
+//!
+//! Logging: warnings and errors go to stderr. The long jobs (`collect`, `train`,
+//! `sweep`) also append everything from level info up — every run event, the start
+//! and the outcome — to a log file beside the database (`softtouch.db.log` for
+//! `softtouch.db`), written by tracing-appender's worker thread so that a slow disk
+//! never stalls the job. `RUST_LOG` overrides both filters.
+
+use clap::Parser as _;
+use softtouch_cli::{self as cli, Cli, Command};
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use tracing_subscriber::layer::SubscriberExt as _;
+use tracing_subscriber::util::SubscriberInitExt as _;
+use tracing_subscriber::{EnvFilter, Layer as _};
+
+/// sqlx warns of "slow statements" when a streamed query (a dataset's frames, read
+/// while they are preprocessed) stays open for over a second: expected, not a fault,
+/// so its statement log is off unless `RUST_LOG` asks.
+const STDERR_FILTER: &str = "warn,sqlx::query=error,softtouch::event=off";
+const FILE_FILTER: &str = "info,sqlx::query=error";
+
+/// The log file of a database: its path with `.log` appended.
+fn log_path(db: &Path) -> PathBuf {
+    let mut p = OsString::from(db.as_os_str());
+    p.push(".log");
+    PathBuf::from(p)
+}
+
+/// Whether this invocation writes the log file: the long jobs, and only where their
+/// database is or will be (a resume of a missing database leaves no stray log).
+fn wants_log_file(cli: &Cli) -> bool {
+    let parent_exists = cli
+        .db
+        .parent()
+        .is_none_or(|d| d.as_os_str().is_empty() || d.is_dir());
+    match &cli.command {
+        Command::Collect(args) if args.resume.is_some() => cli.db.is_file(),
+        Command::Collect(_) | Command::Train(_) | Command::Sweep(_) => parent_exists,
+        _ => false,
+    }
+}
+
+fn filter(default: &str) -> EnvFilter {
+    EnvFilter::try_from_default_env().unwrap_or_else(|_| default.into())
+}
+
+/// Install the subscribers; the guard flushes the log file when dropped.
+fn init_logging(cli: &Cli) -> Option<tracing_appender::non_blocking::WorkerGuard> {
+    // Colour only for a person at a terminal, never into a file or a pipe.
+    let stderr = tracing_subscriber::fmt::layer()
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_writer(std::io::stderr)
+        .with_filter(filter(STDERR_FILTER));
+    let path = log_path(&cli.db);
+    let file = if wants_log_file(cli) {
+        match std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+        {
+            Ok(f) => Some(f),
+            Err(e) => {
+                eprintln!(
+                    "warning: cannot open the log file {}: {e}; logging to stderr only",
+                    path.display()
+                );
+                None
+            }
+        }
+    } else {
+        None
+    };
+    let (file_layer, guard) = match file {
+        Some(f) => {
+            let (writer, guard) = tracing_appender::non_blocking(f);
+            let layer = tracing_subscriber::fmt::layer()
+                .with_ansi(false)
+                .with_writer(writer)
+                .with_filter(filter(FILE_FILTER));
+            (Some(layer), Some(guard))
+        }
+        None => (None, None),
+    };
+    tracing_subscriber::registry()
+        .with(stderr)
+        .with(file_layer)
+        .init();
+    guard
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse(); // exits 2 on bad arguments, 0 on --help
+    let _log_guard = init_logging(&cli);
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    tracing::info!(
+        version = env!("CARGO_PKG_VERSION"),
+        pid = std::process::id(),
+        "softtouch {} started",
+        args.join(" ")
+    );
+    let runtime = match tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("error: cannot start the async runtime: {e}");
+            tracing::error!("cannot start the async runtime: {e}");
+            return ExitCode::from(cli::EXIT_RUNTIME);
+        }
+    };
+    let mut stdout = std::io::stdout().lock();
+    match runtime.block_on(cli::run(cli, &mut stdout)) {
+        Ok(()) => {
+            tracing::info!("finished");
+            ExitCode::from(cli::EXIT_OK)
+        }
+        Err(failure) => {
+            let message = cli::error_text(failure.error());
+            eprintln!("error: {message}");
+            // Not `error!`: stderr already has it; the file gets it at info.
+            tracing::info!(exit_code = failure.exit_code(), "failed: {message}");
+            ExitCode::from(failure.exit_code())
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_log_sits_beside_the_database() {
+        assert_eq!(
+            log_path(Path::new("runs/softtouch.db")),
+            Path::new("runs/softtouch.db.log")
+        );
+        assert_eq!(log_path(Path::new("lab")), Path::new("lab.log"));
+    }
+}

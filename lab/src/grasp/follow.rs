@@ -1,0 +1,170 @@
+//! Figure 5's force following on the simulated soft grasp: each target held in turn,
+//! with rise and settling time, overshoot, steady-state and RMS error per target, for
+//! the estimate and for the simulator's truth; its CSV and chart.
+
+use std::path::Path;
+use std::time::Duration;
+
+use softtouch_grasp::{Cycle, ExitAction, HoldMetrics, hold_metrics};
+use softtouch_schemas::SceneSpec;
+use softtouch_sim::GraspObject;
+
+use super::soft::{GraspRunError, LoopSettings, Setup, named_object, prepare, t_s, write_text};
+use softtouch_collector::plot::{Series, SeriesStyle, XyChart, xy_chart};
+
+/// What `grasp follow` runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FollowSettings {
+    /// The loop.
+    pub loop_settings: LoopSettings,
+    /// Target forces, N, held in turn.
+    pub targets_n: Vec<f64>,
+    /// How long each is held, s.
+    pub hold_s: f64,
+}
+
+/// The object to follow on: `name` from the scene, else its first object, else a
+/// cylinder of its first rod.
+///
+/// # Errors
+/// An unknown name, or a scene with neither objects nor rods.
+pub fn object_for(scene: &SceneSpec, name: Option<&str>) -> Result<GraspObject, GraspRunError> {
+    match (name, scene.objects.first(), scene.rods.first()) {
+        (Some(name), ..) => named_object(scene, name),
+        (None, Some(o), _) => Ok(GraspObject::from_spec(o)),
+        (None, None, Some(rod)) => Ok(GraspObject {
+            shape: rod.shape,
+            aspect: rod.aspect,
+            ..GraspObject::cylinder(&rod.name, rod.size_m)
+        }),
+        (None, None, None) => Err(GraspRunError::Invalid(
+            "the scene has neither objects nor rods".into(),
+        )),
+    }
+}
+
+/// Runs the targets on the simulated soft grasp of `object` (a paused tokio clock).
+///
+/// # Errors
+/// As [`prepare`], and the loop.
+pub async fn follow_sim(
+    settings: &FollowSettings,
+    model_bytes: &[u8],
+    scene: &SceneSpec,
+    object: GraspObject,
+) -> Result<(Setup, Vec<Cycle>), GraspRunError> {
+    let mut p = prepare(
+        &settings.loop_settings,
+        model_bytes,
+        scene,
+        object,
+        &settings.targets_n,
+        ExitAction::Open,
+    )
+    .await?;
+    let hold = Duration::from_secs_f64(settings.hold_s);
+    let targets: Vec<(f64, Duration)> = settings.targets_n.iter().map(|t| (*t, hold)).collect();
+    let cycles = p.controller.follow(&targets).await?;
+    Ok((p.setup, cycles))
+}
+
+/// One target's numbers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FollowRow {
+    /// The target, N.
+    pub target_n: f64,
+    /// From the estimate (`None`: no usable estimate during the hold).
+    pub estimate: Option<HoldMetrics>,
+    /// From the simulator's truth (`None` on a rig).
+    pub truth: Option<HoldMetrics>,
+}
+
+/// The numbers per target of a run's cycles.
+#[must_use]
+pub fn follow_rows(cycles: &[Cycle], targets_n: &[f64], tolerance_n: f64) -> Vec<FollowRow> {
+    targets_n
+        .iter()
+        .enumerate()
+        .map(|(i, target)| {
+            let hold: Vec<&Cycle> = cycles.iter().filter(|c| c.hold == i).collect();
+            let series = |f: fn(&Cycle) -> Option<f64>| -> Vec<(f64, f64)> {
+                hold.iter()
+                    .filter_map(|c| Some((t_s(c.t), f(c)?)))
+                    .collect()
+            };
+            FollowRow {
+                target_n: *target,
+                estimate: hold_metrics(&series(|c| c.estimate_n), *target, tolerance_n),
+                truth: hold_metrics(&series(|c| c.true_n), *target, tolerance_n),
+            }
+        })
+        .collect()
+}
+
+/// `grasp-follow.csv`: one line per cycle.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_follow_csv(path: &Path, cycles: &[Cycle]) -> Result<(), GraspRunError> {
+    let mut text = String::from(
+        "t_s,frame,target_n,estimate_n,true_n,measured_count,request_count,outcome,gripper_object_status\n",
+    );
+    let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
+    for c in cycles {
+        text.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{:?}\n",
+            t_s(c.t),
+            c.frame_sequence,
+            c.target_n,
+            opt(c.estimate_n),
+            opt(c.true_n),
+            c.measured_position,
+            c.position_request,
+            c.outcome.map_or("awaiting_echo", |o| o.as_str()),
+            c.object
+        ));
+    }
+    write_text(path, &text)
+}
+
+/// `grasp-follow.png`: commanded, estimated and true force over time.
+///
+/// # Errors
+/// The chart cannot be drawn or written.
+pub fn write_follow_png(path: &Path, cycles: &[Cycle]) -> Result<(), GraspRunError> {
+    let t = |c: &Cycle| t_s(c.t);
+    let series = [
+        Series {
+            label: "commanded F_ref".into(),
+            points: cycles.iter().map(|c| (t(c), c.target_n)).collect(),
+            style: SeriesStyle::Line,
+        },
+        Series {
+            label: "estimated F_est".into(),
+            points: cycles
+                .iter()
+                .filter_map(|c| Some((t(c), c.estimate_n?)))
+                .collect(),
+            style: SeriesStyle::Line,
+        },
+        Series {
+            label: "true (simulator)".into(),
+            points: cycles
+                .iter()
+                .filter_map(|c| Some((t(c), c.true_n?)))
+                .collect(),
+            style: SeriesStyle::Line,
+        },
+    ];
+    xy_chart(
+        path,
+        &XyChart {
+            title: "Force following",
+            x_label: "time (s)",
+            y_label: "grip force (N)",
+            series: &series,
+        },
+        (900, 500),
+    )
+    .map_err(|e| GraspRunError::Failed(e.to_string()))
+}

@@ -1,0 +1,603 @@
+//! Grasp success-rate trials (the paper's Figure 4) on the simulated soft-finger
+//! Hand-E, open loop against closed loop, per object and medium, each trial stored as
+//! it ends (one transaction) so a session resumes where it stopped.
+//!
+//! A session's plan ([`TrialPlan`]) is its objects, modes, trial count, σ list and loop
+//! settings, stored as JSON with the session beside its model (name and artifact
+//! sha256), scenes (one per medium) and seed; trial `i` of an object is a pure function
+//! of `(seed, object, i)` and σ, so it replays alone. [`start_session`] or
+//! [`resume_session`], then [`run_trials`]; [`table::summarise`] gives the stored rows
+//! per object, mode, medium and σ with Wilson 95 % intervals, and
+//! [`table::write_outputs`] the CSVs and charts. Nothing here parses arguments or
+//! prints.
+
+mod run;
+pub mod table;
+
+pub use run::{TrialDone, TrialTiming, pack_trace, run_trials};
+
+use serde::{Deserialize, Serialize};
+use softtouch_drivers::gripper::STROKE_MM;
+use softtouch_grasp::{GraspError, LiftPlan, Mode};
+use softtouch_schemas::config::{ConfigSource, parse_toml};
+use softtouch_schemas::{ConfigError, Medium, SceneSpec};
+use softtouch_sim::GraspObject;
+
+use super::settings::{self, Setting, SettingError};
+use crate::models::ModelError;
+use crate::store::{GraspTrialKey, Store, StoreError};
+use softtouch_collector::dataset::export::sha256_hex;
+
+/// The built-in scenes: on land and underwater, five objects each.
+const LAND_TOML: &str = include_str!("../../../../scenes/grasp.toml");
+const WATER_TOML: &str = include_str!("../../../../scenes/grasp-water.toml");
+
+/// The paper's overall success rates (Figure 4): (medium, mode) → rate.
+#[must_use]
+pub fn paper_rate(medium: Medium, mode: Mode) -> f64 {
+    match (medium, mode) {
+        (Medium::Air, Mode::Open) => 0.44,
+        (Medium::Air, Mode::Closed) => 1.0,
+        (Medium::Water, Mode::Open) => 0.30,
+        (Medium::Water, Mode::Closed) => 0.90,
+    }
+}
+
+/// A medium as the tables name it.
+#[must_use]
+pub fn medium_name(m: Medium) -> &'static str {
+    match m {
+        Medium::Air => "land",
+        Medium::Water => "water",
+    }
+}
+
+/// What can go wrong in a trial session.
+#[derive(Debug, thiserror::Error)]
+pub enum TrialsError {
+    /// The request cannot work (an unknown object, a session that is not there, a
+    /// model changed under its name); the message says what is expected.
+    #[error("{0}")]
+    Invalid(String),
+    /// A setting outside its range.
+    #[error(transparent)]
+    Setting(#[from] SettingError),
+    /// A scene file that does not read.
+    #[error(transparent)]
+    Scene(#[from] ConfigError),
+    /// The model could not be found or loaded.
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    /// The database failed (boxed: a store error is several times larger than the
+    /// other variants).
+    #[error(transparent)]
+    Store(Box<StoreError>),
+    /// The loop or the simulated grasp failed.
+    #[error(transparent)]
+    Grasp(#[from] GraspError),
+    /// Something failed while running (a stored session that does not read back, a
+    /// trial's thread, an output file).
+    #[error("{0}")]
+    Failed(String),
+}
+
+impl TrialsError {
+    /// Whether the user's input is at fault (rather than the machine).
+    #[must_use]
+    pub fn is_bad_input(&self) -> bool {
+        match self {
+            Self::Invalid(_) | Self::Setting(_) | Self::Scene(_) => true,
+            Self::Model(e) => e.is_bad_input(),
+            Self::Store(e) if matches!(**e, StoreError::NoSuchRun(_)) => true,
+            Self::Grasp(GraspError::Config(_) | GraspError::UnreachableTarget { .. }) => true,
+            Self::Store(_) | Self::Grasp(_) | Self::Failed(_) => false,
+        }
+    }
+}
+
+impl From<StoreError> for TrialsError {
+    fn from(e: StoreError) -> Self {
+        Self::Store(Box::new(e))
+    }
+}
+
+pub(crate) fn invalid(m: String) -> TrialsError {
+    TrialsError::Invalid(m)
+}
+
+impl From<softtouch_trainer::TrainError> for TrialsError {
+    fn from(e: softtouch_trainer::TrainError) -> Self {
+        Self::Model(e.into())
+    }
+}
+
+/// A session's settings, stored as JSON with it (the field names are that JSON's).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrialPlan {
+    /// Objects (`[[objects]]` names); empty: every object of the first scene.
+    pub objects: Vec<String>,
+    /// Modes: `open`, `closed`.
+    pub modes: Vec<String>,
+    /// Trials per object, mode, medium and σ.
+    pub trials: u32,
+    /// σ of the perturbation per axis, mm; more than one is a sweep.
+    pub sigmas_mm: Vec<f64>,
+    /// Camera rate, Hz (one control cycle per frame).
+    pub fps: f64,
+    /// Closed loop: the grip force F_ref, N.
+    pub target_n: f64,
+    /// Closed loop: the tolerance δ, N.
+    pub tolerance_n: f64,
+    /// K as a multiple of the measured Λ_max.
+    pub gain_over_lambda: f64,
+    /// Closed loop: how long |F_ref − F_est| ≤ δ must hold before the lift, s.
+    pub confirm_s: f64,
+    /// Closed loop: how long the loop may take to confirm, s.
+    pub close_timeout_s: f64,
+    /// How high the object is lifted, mm.
+    pub lift_mm: f64,
+    /// The lift's speed, m/s.
+    pub lift_speed_m_s: f64,
+    /// The lift's acceleration, m/s².
+    pub lift_accel_m_s2: f64,
+    /// How long it is held after the lift, s.
+    pub hold_s: f64,
+    /// Open loop: every object closed to this opening, mm, instead of its own width.
+    pub open_width_mm: Option<f64>,
+    /// The pre-grasp opening: this much wider than the grasp, mm.
+    pub pregrasp_margin_mm: f64,
+}
+
+impl Default for TrialPlan {
+    /// The paper's protocol: 10 trials, σ = 5 mm, both modes, 120 Hz, 1.5 N ± 0.1 N
+    /// confirmed for 0.25 s within 4 s, K = 0.75 Λ_max, a 50 mm lift held 2 s.
+    fn default() -> Self {
+        Self {
+            objects: Vec::new(),
+            modes: vec!["open".into(), "closed".into()],
+            trials: 10,
+            sigmas_mm: vec![5.0],
+            fps: 120.0,
+            target_n: 1.5,
+            tolerance_n: 0.1,
+            gain_over_lambda: 0.75,
+            confirm_s: 0.25,
+            close_timeout_s: 4.0,
+            lift_mm: 50.0,
+            lift_speed_m_s: 0.1,
+            lift_accel_m_s2: 2.0,
+            hold_s: 2.0,
+            open_width_mm: None,
+            pregrasp_margin_mm: 6.0,
+        }
+    }
+}
+
+/// A value in `(0, hi]`, with its kind and unit for the message.
+const fn above_zero(what: &'static str, hi: f64, unit: &'static str) -> Setting {
+    Setting {
+        what,
+        lo: 0.0,
+        lo_inclusive: false,
+        hi,
+        unit,
+    }
+}
+
+impl TrialPlan {
+    /// The plan checked (each setting in its range, named by its flag) and
+    /// normalised: each mode and object once, in the order first given (a repeated
+    /// object would run its trials twice, the second time as already stored).
+    ///
+    /// # Errors
+    /// The first setting out of range.
+    pub fn checked(mut self) -> Result<Self, TrialsError> {
+        settings::FPS_HZ.check("--fps", self.fps)?;
+        above_zero("a value", 50.0, "N").check("--target-n", self.target_n)?;
+        settings::TOLERANCE_N.check("--tolerance", self.tolerance_n)?;
+        above_zero("a value", 60.0, "s").check("--confirm-s", self.confirm_s)?;
+        above_zero("a value", 600.0, "s").check("--close-timeout-s", self.close_timeout_s)?;
+        above_zero("a value", 500.0, "mm").check("--lift-mm", self.lift_mm)?;
+        settings::duration_s(false).check("--hold-s", self.hold_s)?;
+        if self.trials == 0 || self.trials > 10_000 {
+            return Err(invalid(format!(
+                "--trials {}: expected 1 to 10000 trials per object and mode",
+                self.trials
+            )));
+        }
+        for s in &self.sigmas_mm {
+            if !(s.is_finite() && (0.0..=50.0).contains(s)) {
+                return Err(invalid(format!(
+                    "σ {s} mm (--sigma-mm / --sweep-sigma): expected a value in [0, 50] mm"
+                )));
+            }
+        }
+        let mut modes = Vec::new();
+        for m in &self.modes {
+            let mode = Mode::parse(m).map_err(|e| invalid(format!("--modes: {e}")))?;
+            if !modes.contains(&mode.as_str().to_owned()) {
+                modes.push(mode.as_str().to_owned());
+            }
+        }
+        if modes.is_empty() {
+            return Err(invalid("--modes: expected open, closed or both".into()));
+        }
+        self.modes = modes;
+        if let Some(w) = self.open_width_mm {
+            above_zero("a value", STROKE_MM, "mm").check("--open-width-mm", w)?;
+        }
+        let mut objects: Vec<String> = Vec::new();
+        for o in &self.objects {
+            if !objects.contains(o) {
+                objects.push(o.clone());
+            }
+        }
+        self.objects = objects;
+        Ok(self)
+    }
+
+    /// The modes, parsed.
+    ///
+    /// # Errors
+    /// A stored mode that is not one (a damaged session).
+    pub fn parsed_modes(&self) -> Result<Vec<Mode>, TrialsError> {
+        self.modes
+            .iter()
+            .map(|m| Mode::parse(m).map_err(|e| TrialsError::Failed(format!("stored plan: {e}"))))
+            .collect()
+    }
+
+    pub(crate) fn lift(&self) -> LiftPlan {
+        LiftPlan {
+            height_m: self.lift_mm / 1000.0,
+            speed_m_s: self.lift_speed_m_s,
+            accel_m_s2: self.lift_accel_m_s2,
+        }
+    }
+}
+
+/// The scenes of `paths` (one per medium), or the built-in land and water scenes.
+///
+/// # Errors
+/// A scene file that does not read or validate.
+pub fn load_scenes(paths: &[std::path::PathBuf]) -> Result<Vec<SceneSpec>, TrialsError> {
+    if paths.is_empty() {
+        return [
+            ("built-in land scene", LAND_TOML),
+            ("built-in water scene", WATER_TOML),
+        ]
+        .iter()
+        .map(|(name, text)| {
+            parse_toml::<SceneSpec>(text, &ConfigSource::Embedded(name))
+                .map_err(|e| TrialsError::Failed(e.to_string()))
+        })
+        .collect();
+    }
+    paths
+        .iter()
+        .map(|p| Ok(softtouch_collector::configs::resolve(None, Some(p))?.scene))
+        .collect()
+}
+
+/// The objects of the plan in every scene, checked: known, and inside the stroke.
+pub fn objects_of(
+    plan: &TrialPlan,
+    scenes: &[SceneSpec],
+) -> Result<Vec<Vec<GraspObject>>, TrialsError> {
+    scenes
+        .iter()
+        .map(|scene| {
+            let known: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+            if known.is_empty() {
+                return Err(invalid(format!(
+                    "scene `{}` declares no [[objects]]: expected the objects to grasp",
+                    scene.name
+                )));
+            }
+            plan.objects
+                .iter()
+                .map(|name| {
+                    let spec = scene.object(name).ok_or_else(|| {
+                        invalid(format!(
+                            "--objects: scene `{}` declares no object `{name}` (it has: {})",
+                            scene.name,
+                            known.join(", ")
+                        ))
+                    })?;
+                    let object = GraspObject::from_spec(spec);
+                    let widest_mm = object.max_width_m() * 1000.0;
+                    let grasp_mm = plan
+                        .open_width_mm
+                        .unwrap_or(object.grasp_width_m * 1000.0);
+                    if widest_mm >= STROKE_MM || grasp_mm >= STROKE_MM {
+                        return Err(invalid(format!(
+                            "object `{name}` of scene `{}` is {widest_mm:.1} mm at its widest (open-loop width {grasp_mm:.1} mm): outside the Hand-E's {STROKE_MM} mm stroke; objects inside it: {}",
+                            scene.name,
+                            scene
+                                .objects
+                                .iter()
+                                .filter(|o| GraspObject::from_spec(o).max_width_m() * 1000.0 < STROKE_MM)
+                                .map(|o| o.name.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        )));
+                    }
+                    Ok(object)
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// One planned trial.
+#[derive(Debug, Clone)]
+pub struct Planned {
+    /// Its key in the store.
+    pub key: GraspTrialKey,
+    /// Open or closed loop.
+    pub mode: Mode,
+    /// σ of the perturbation per axis, m.
+    pub sigma_m: f64,
+}
+
+/// Every trial of the plan over `scenes` scenes, in the order they run.
+#[must_use]
+pub fn planned(plan: &TrialPlan, scenes: usize, modes: &[Mode]) -> Vec<Planned> {
+    let mut out = Vec::new();
+    for (si, sigma) in plan.sigmas_mm.iter().enumerate() {
+        for scene_index in 0..scenes {
+            for object in &plan.objects {
+                for mode in modes {
+                    for trial in 0..plan.trials {
+                        out.push(Planned {
+                            key: GraspTrialKey {
+                                sigma_index: si as u32,
+                                scene_index: scene_index as u32,
+                                object: object.clone(),
+                                mode: mode.as_str().to_owned(),
+                                trial,
+                            },
+                            mode: *mode,
+                            sigma_m: sigma / 1000.0,
+                        });
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// A session ready to run: its stored identity, settings and model.
+#[derive(Debug)]
+pub struct Session {
+    /// Its id in the store.
+    pub id: i64,
+    /// The model's name.
+    pub model: String,
+    /// The sha256 of the model's artifact.
+    pub model_sha256: String,
+    /// Seed of the perturbations and the simulated scenes.
+    pub seed: u64,
+    /// Its settings.
+    pub plan: TrialPlan,
+    /// One scene per medium.
+    pub scenes: Vec<SceneSpec>,
+    /// The model's artifact.
+    model_bytes: Vec<u8>,
+}
+
+/// A new session of `plan` (checked) with `model` on `scenes`, stored before any
+/// trial runs. With no objects in the plan, every object of the first scene.
+///
+/// # Errors
+/// Bad settings or objects, an unknown model, the store.
+pub async fn start_session(
+    store: &Store,
+    model: &str,
+    seed: u64,
+    plan: TrialPlan,
+    scenes: Vec<SceneSpec>,
+) -> Result<Session, TrialsError> {
+    let mut plan = plan.checked()?;
+    if plan.objects.is_empty() {
+        plan.objects = scenes
+            .first()
+            .map(|s| s.objects.iter().map(|o| o.name.clone()).collect())
+            .unwrap_or_default();
+    }
+    objects_of(&plan, &scenes)?; // checked before anything is stored
+    // The model must exist before a session names it.
+    let model_bytes = crate::models::force_artifact(store, model).await?;
+    let model_sha256 = sha256_hex(&model_bytes);
+    let config_json = serde_json::to_string(&plan)
+        .map_err(|e| TrialsError::Failed(format!("cannot encode the settings: {e}")))?;
+    let scenes_json = serde_json::to_string(&scenes)
+        .map_err(|e| TrialsError::Failed(format!("cannot encode the scenes: {e}")))?;
+    let id = store
+        .create_grasp_session(model, &model_sha256, seed, &scenes_json, &config_json)
+        .await?;
+    Ok(Session {
+        id,
+        model: model.to_owned(),
+        model_sha256,
+        seed,
+        plan,
+        scenes,
+        model_bytes,
+    })
+}
+
+/// Stored session `id`, on its stored settings. `model`, when given, must be the
+/// session's; the model must not have changed under its name since.
+///
+/// # Errors
+/// No such session, another model, a changed model, stored settings that do not
+/// read back, the store.
+pub async fn resume_session(
+    store: &Store,
+    id: i64,
+    model: Option<&str>,
+) -> Result<Session, TrialsError> {
+    let s = store.grasp_session(id).await?.ok_or_else(|| {
+        invalid(format!(
+            "--resume {id}: no grasp session {id} in {}",
+            store.path().display()
+        ))
+    })?;
+    if let Some(m) = model
+        && m != s.model
+    {
+        return Err(invalid(format!(
+            "--model {m}: session {id} runs model `{}` (leave --model out to resume it)",
+            s.model
+        )));
+    }
+    let plan: TrialPlan = serde_json::from_str(&s.config_json).map_err(|e| {
+        TrialsError::Failed(format!(
+            "grasp session {id}: stored settings do not read back: {e}"
+        ))
+    })?;
+    let scenes: Vec<SceneSpec> = serde_json::from_str(&s.scenes_json).map_err(|e| {
+        TrialsError::Failed(format!(
+            "grasp session {id}: stored scenes do not read back: {e}"
+        ))
+    })?;
+    let model_bytes = crate::models::force_artifact(store, &s.model).await?;
+    let now = sha256_hex(&model_bytes);
+    if let Some(then) = &s.model_sha256
+        && *then != now
+    {
+        return Err(invalid(format!(
+            "--resume {id}: model `{}` has changed since the session started (sha256 {} then, {} now); start a new session",
+            s.model,
+            &then[..then.len().min(12)],
+            &now[..12]
+        )));
+    }
+    Ok(Session {
+        id,
+        model: s.model,
+        model_sha256: now,
+        seed: s.seed,
+        plan,
+        scenes,
+        model_bytes,
+    })
+}
+
+/// What is planned and stored of a session.
+#[derive(Debug, Clone)]
+pub struct Progress {
+    /// Every trial of the plan.
+    pub planned: Vec<Planned>,
+    /// Those not stored yet, in the order they run.
+    pub todo: Vec<Planned>,
+}
+
+impl Session {
+    /// The plan's trials and those still to run.
+    ///
+    /// # Errors
+    /// A damaged stored plan, the store.
+    pub async fn progress(&self, store: &Store) -> Result<Progress, TrialsError> {
+        let modes = self.plan.parsed_modes()?;
+        let planned = planned(&self.plan, self.scenes.len(), &modes);
+        let done = store.grasp_trial_keys(self.id).await?;
+        let todo = planned
+            .iter()
+            .filter(|p| !done.contains(&p.key))
+            .cloned()
+            .collect();
+        Ok(Progress { planned, todo })
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::float_cmp)] // exact stored and published values
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_built_in_scenes_load_with_objects_inside_the_stroke() {
+        let scenes = load_scenes(&[]).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(scenes.len(), 2);
+        assert_eq!(scenes[0].medium, Medium::Air);
+        assert_eq!(scenes[1].medium, Medium::Water);
+        let mut plan = TrialPlan {
+            modes: vec!["open".into(), "closed".into(), "open".into()],
+            ..TrialPlan::default()
+        }
+        .checked()
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(plan.modes, ["open", "closed"]);
+        plan.objects = scenes[0].objects.iter().map(|o| o.name.clone()).collect();
+        assert_eq!(plan.objects.len(), 5);
+        let objects = objects_of(&plan, &scenes).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(objects[1].len(), 5);
+        // The full table: 2 σ-free media × 5 objects × 2 modes × 10 trials.
+        assert_eq!(planned(&plan, 2, &[Mode::Open, Mode::Closed]).len(), 200);
+        plan.objects.push("vase".into());
+        let err = objects_of(&plan, &scenes).err().map(|e| e.to_string());
+        assert!(err.is_some_and(|e| e.contains("vase") && e.contains("cylinder")));
+    }
+
+    #[test]
+    fn settings_out_of_range_name_their_flag() {
+        for (plan, flag) in [
+            (
+                TrialPlan {
+                    tolerance_n: 0.0,
+                    ..TrialPlan::default()
+                },
+                "--tolerance 0",
+            ),
+            (
+                TrialPlan {
+                    fps: 0.5,
+                    ..TrialPlan::default()
+                },
+                "--fps 0.5",
+            ),
+            (
+                TrialPlan {
+                    trials: 0,
+                    ..TrialPlan::default()
+                },
+                "--trials 0",
+            ),
+            (
+                TrialPlan {
+                    modes: vec![],
+                    ..TrialPlan::default()
+                },
+                "--modes",
+            ),
+            (
+                TrialPlan {
+                    sigmas_mm: vec![f64::NAN],
+                    ..TrialPlan::default()
+                },
+                "σ NaN",
+            ),
+            (
+                TrialPlan {
+                    hold_s: 1e308,
+                    ..TrialPlan::default()
+                },
+                "--hold-s 1e308",
+            ),
+        ] {
+            let e = plan.checked().expect_err(flag);
+            assert!(e.is_bad_input(), "{e}");
+            assert!(e.to_string().starts_with(flag), "{e}");
+        }
+    }
+
+    #[test]
+    fn the_paper_figures_are_the_published_ones() {
+        assert_eq!(paper_rate(Medium::Air, Mode::Open), 0.44);
+        assert_eq!(paper_rate(Medium::Water, Mode::Closed), 0.90);
+        assert_eq!(table::csv_field("a,b"), "\"a,b\"");
+    }
+}

@@ -1,0 +1,322 @@
+//! A session's table: success per σ, scene, object and mode with Wilson 95 %
+//! intervals and failure reasons, beside the paper's overall rates; its CSVs and
+//! charts (Figure 4f, success against σ).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use softtouch_grasp::{FailReason, Mode, Z_95, wilson_interval};
+use softtouch_schemas::{Medium, SceneSpec};
+
+use super::{TrialPlan, TrialsError, medium_name, paper_rate};
+use crate::store::GraspTrialRow;
+use softtouch_collector::plot::{
+    BarChart, BarSeries, Series, SeriesStyle, XyChart, bar_chart, xy_chart,
+};
+
+/// One cell of the table: an object (or all of them) × mode × medium × σ.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cell {
+    /// Which σ of the plan.
+    pub sigma_index: u32,
+    /// Which scene of the session.
+    pub scene_index: u32,
+    /// The scene's medium.
+    pub medium: Medium,
+    /// `None`: every object together.
+    pub object: Option<String>,
+    /// Open or closed loop.
+    pub mode: Mode,
+    /// Trials stored.
+    pub trials: u64,
+    /// Of which held.
+    pub held: u64,
+    /// Wilson 95 % interval of the success rate.
+    pub interval: [f64; 2],
+    /// Failures per reason.
+    pub reasons: BTreeMap<&'static str, u64>,
+}
+
+impl Cell {
+    /// The success rate, if any trial ran.
+    #[must_use]
+    pub fn rate(&self) -> Option<f64> {
+        (self.trials > 0).then(|| self.held as f64 / self.trials as f64)
+    }
+    /// The paper's overall rate, for the rows of every object together.
+    #[must_use]
+    pub fn paper(&self) -> Option<f64> {
+        self.object
+            .is_none()
+            .then(|| paper_rate(self.medium, self.mode))
+    }
+}
+
+/// The table of `rows`: per σ, scene, object (and all objects) and mode.
+///
+/// # Errors
+/// A damaged stored plan.
+pub fn summarise(
+    plan: &TrialPlan,
+    scenes: &[SceneSpec],
+    rows: &[GraspTrialRow],
+) -> Result<Vec<Cell>, TrialsError> {
+    let modes = plan.parsed_modes()?;
+    let mut cells = Vec::new();
+    for si in 0..plan.sigmas_mm.len() as u32 {
+        for (ci, scene) in scenes.iter().enumerate() {
+            let ci = ci as u32;
+            let objects: Vec<Option<&String>> =
+                plan.objects.iter().map(Some).chain([None]).collect();
+            for object in objects {
+                for mode in &modes {
+                    let mine: Vec<&GraspTrialRow> = rows
+                        .iter()
+                        .filter(|r| {
+                            r.key.sigma_index == si
+                                && r.key.scene_index == ci
+                                && r.key.mode == mode.as_str()
+                                && object.is_none_or(|o| *o == r.key.object)
+                        })
+                        .collect();
+                    let trials = mine.len() as u64;
+                    let held = mine.iter().filter(|r| r.success).count() as u64;
+                    let mut reasons = BTreeMap::new();
+                    for r in &FailReason::ALL {
+                        let n = mine
+                            .iter()
+                            .filter(|row| row.reason.as_deref() == Some(r.as_str()))
+                            .count() as u64;
+                        reasons.insert(r.as_str(), n);
+                    }
+                    cells.push(Cell {
+                        sigma_index: si,
+                        scene_index: ci,
+                        medium: scene.medium,
+                        object: object.cloned(),
+                        mode: *mode,
+                        trials,
+                        held,
+                        interval: wilson_interval(held, trials, Z_95)?,
+                        reasons,
+                    });
+                }
+            }
+        }
+    }
+    Ok(cells)
+}
+
+/// Writes the session's files into `dir` (created if need be): the summary and rows
+/// CSVs, Figure 4f and, for a σ sweep, success against σ. Returns their paths.
+///
+/// # Errors
+/// The folder or a file cannot be written.
+pub fn write_outputs(
+    dir: &Path,
+    cells: &[Cell],
+    rows: &[GraspTrialRow],
+    plan: &TrialPlan,
+) -> Result<Vec<PathBuf>, TrialsError> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| TrialsError::Failed(format!("cannot create {}: {e}", dir.display())))?;
+    let csv = dir.join("grasp-trials.csv");
+    write_summary_csv(&csv, cells)?;
+    let rows_csv = dir.join("grasp-trials-rows.csv");
+    write_rows_csv(&rows_csv, rows)?;
+    let png = dir.join("grasp-trials.png");
+    write_bars(&png, cells, plan)?;
+    let mut written = vec![csv, rows_csv, png];
+    if plan.sigmas_mm.len() > 1 {
+        let sweep = dir.join("grasp-trials-sigma.png");
+        write_sweep(&sweep, cells, plan)?;
+        written.push(sweep);
+    }
+    Ok(written)
+}
+
+fn write_file(path: &Path, text: &str) -> Result<(), TrialsError> {
+    std::fs::write(path, text)
+        .map_err(|e| TrialsError::Failed(format!("cannot write {}: {e}", path.display())))
+}
+
+/// A CSV field, quoted where it must be.
+#[must_use]
+pub fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_owned()
+    }
+}
+
+/// `grasp-trials.csv`: one line per cell.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_summary_csv(path: &Path, cells: &[Cell]) -> Result<(), TrialsError> {
+    let mut text = String::from(
+        "sigma_index,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,paper_rate,slip,crush,miss,timeout,device_fault\n",
+    );
+    let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
+    for c in cells {
+        let r = |k: &str| c.reasons.get(k).copied().unwrap_or(0);
+        text.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            c.sigma_index,
+            medium_name(c.medium),
+            csv_field(c.object.as_deref().unwrap_or("all")),
+            c.mode.as_str(),
+            c.trials,
+            c.held,
+            opt(c.rate()),
+            c.interval[0],
+            c.interval[1],
+            opt(c.paper()),
+            r("slip"),
+            r("crush"),
+            r("miss"),
+            r("timeout"),
+            r("device_fault"),
+        ));
+    }
+    write_file(path, &text)
+}
+
+/// `grasp-trials-rows.csv`: one line per trial.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_rows_csv(path: &Path, rows: &[GraspTrialRow]) -> Result<(), TrialsError> {
+    let mut text = String::from(
+        "sigma_m,medium,object,mode,trial,dx_m,dy_m,dz_m,commanded_width_m,final_width_m,peak_estimate_n,peak_true_n,success,reason,confirmed_after_s,wall_s\n",
+    );
+    let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
+    for r in rows {
+        text.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            r.sigma_m,
+            r.medium,
+            csv_field(&r.key.object),
+            r.key.mode,
+            r.key.trial,
+            r.offset_m[0],
+            r.offset_m[1],
+            r.offset_m[2],
+            r.commanded_width_m,
+            r.final_width_m,
+            opt(r.peak_estimate_n),
+            opt(r.peak_true_n),
+            u8::from(r.success),
+            r.reason.as_deref().unwrap_or(""),
+            opt(r.confirmed_after_s),
+            r.wall_s
+        ));
+    }
+    write_file(path, &text)
+}
+
+/// Figure 4f: the first σ's success rates with their intervals, per medium and object.
+///
+/// # Errors
+/// The chart cannot be drawn or written.
+pub fn write_bars(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), TrialsError> {
+    let first: Vec<&Cell> = cells.iter().filter(|c| c.sigma_index == 0).collect();
+    let mut groups: Vec<(u32, Option<String>)> = Vec::new();
+    for c in &first {
+        let g = (c.scene_index, c.object.clone());
+        if !groups.contains(&g) {
+            groups.push(g);
+        }
+    }
+    let mut modes: Vec<Mode> = Vec::new();
+    for c in &first {
+        if !modes.contains(&c.mode) {
+            modes.push(c.mode);
+        }
+    }
+    let names: Vec<String> = groups
+        .iter()
+        .map(|(si, o)| {
+            let medium = first
+                .iter()
+                .find(|c| c.scene_index == *si)
+                .map_or("?", |c| medium_name(c.medium));
+            format!("{medium}/{}", o.as_deref().unwrap_or("all"))
+        })
+        .collect();
+    let series: Vec<BarSeries> = modes
+        .iter()
+        .map(|m| {
+            let cell = |g: &(u32, Option<String>)| {
+                first
+                    .iter()
+                    .find(|c| c.mode == *m && c.scene_index == g.0 && c.object == g.1)
+            };
+            BarSeries {
+                label: format!("{} loop (paper: black tick)", m.as_str()),
+                bars: groups
+                    .iter()
+                    .map(|g| cell(g).and_then(|c| Some((c.rate()?, c.interval[0], c.interval[1]))))
+                    .collect(),
+                reference: groups
+                    .iter()
+                    .map(|g| cell(g).and_then(|c| c.paper()))
+                    .collect(),
+            }
+        })
+        .collect();
+    let title = format!(
+        "Grasp success, σ = {} mm (Wilson 95 % intervals)",
+        plan.sigmas_mm.first().copied().unwrap_or(0.0)
+    );
+    bar_chart(
+        path,
+        &BarChart {
+            title: &title,
+            y_label: "success rate",
+            groups: &names,
+            series: &series,
+            // Headroom above 100 % for the legend.
+            y_range: (0.0, 1.3),
+        },
+        ((180 * names.len() as u32).clamp(640, 2400), 520),
+    )
+    .map_err(|e| TrialsError::Failed(e.to_string()))
+}
+
+/// Success of all objects against σ, per medium and mode.
+///
+/// # Errors
+/// The chart cannot be drawn or written.
+pub fn write_sweep(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), TrialsError> {
+    let mut keys: Vec<(u32, Medium, Mode)> = Vec::new();
+    for c in cells.iter().filter(|c| c.object.is_none()) {
+        if !keys.contains(&(c.scene_index, c.medium, c.mode)) {
+            keys.push((c.scene_index, c.medium, c.mode));
+        }
+    }
+    let series: Vec<Series> = keys
+        .iter()
+        .map(|(si, medium, mode)| Series {
+            label: format!("{} {} loop", medium_name(*medium), mode.as_str()),
+            points: cells
+                .iter()
+                .filter(|c| c.object.is_none() && c.scene_index == *si && c.mode == *mode)
+                .filter_map(|c| Some((plan.sigmas_mm[c.sigma_index as usize], c.rate()?)))
+                .collect(),
+            style: SeriesStyle::LinePoints,
+        })
+        .collect();
+    xy_chart(
+        path,
+        &XyChart {
+            title: "Grasp success against the grasp point's perturbation",
+            x_label: "σ per axis (mm)",
+            y_label: "success rate (all objects)",
+            series: &series,
+        },
+        (900, 520),
+    )
+    .map_err(|e| TrialsError::Failed(e.to_string()))
+}

@@ -1,0 +1,387 @@
+//! The report's figures as inline SVG strings, through plotters' SVG backend.
+//!
+//! plotters escapes every text it writes (titles, legends, ticks), so names from the
+//! database can go into a figure as they are. Axis labels always carry the unit.
+
+use super::ReportError;
+use plotters::prelude::*;
+use softtouch_collector::plot::{
+    FONT_FAMILY, PALETTE, Series, XyChart, XyLook, draw_xy, finite_bounds, format_tick_in, pad,
+    register_font,
+};
+
+/// Width and height of a figure, px.
+pub(crate) type Size = (u32, u32);
+
+fn draw_err(what: &str) -> impl Fn(String) -> ReportError + '_ {
+    move |why| ReportError::Plot {
+        what: what.to_owned(),
+        why,
+    }
+}
+
+/// An x–y figure.
+#[derive(Debug, Clone)]
+pub(crate) struct Xy<'a> {
+    pub title: &'a str,
+    /// With the unit.
+    pub x_label: &'a str,
+    /// With the unit.
+    pub y_label: &'a str,
+    pub series: &'a [Series],
+    /// Draw y = x across the range (predicted against true).
+    pub diagonal: bool,
+    /// Fixed y range (e.g. R² in [0, 1]); otherwise the data's.
+    pub y_range: Option<(f64, f64)>,
+    /// Marker radius of point series, px.
+    pub marker_px: u32,
+}
+
+/// Draws an x–y figure. Non-finite points are left out; `None` when no point is finite.
+/// The drawing is the PNG charts' ([`softtouch_collector::plot::draw_xy`]), in the page's look.
+pub(crate) fn xy(fig: &Xy<'_>, size: Size) -> Result<Option<String>, ReportError> {
+    register_font().map_err(|e| draw_err(fig.title)(e.to_string()))?;
+    let Some((x0, x1, y0, y1)) = finite_bounds(fig.series) else {
+        return Ok(None);
+    };
+    let (x0, x1, y0, y1) = if fig.diagonal {
+        let (lo, hi) = (x0.min(y0), x1.max(y1));
+        (lo, hi, lo, hi)
+    } else {
+        (x0, x1, y0, y1)
+    };
+    let (x0, x1) = pad(x0, x1);
+    let (y0, y1) = fig.y_range.unwrap_or_else(|| pad(y0, y1));
+    let chart = XyChart {
+        title: fig.title,
+        x_label: fig.x_label,
+        y_label: fig.y_label,
+        series: fig.series,
+    };
+    let look = XyLook {
+        marker_px: fig.marker_px,
+        ..XyLook::PAGE
+    };
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+        draw_xy(&root, &chart, &look, (x0, x1, y0, y1), fig.diagonal)
+            .map_err(draw_err(fig.title))?;
+        root.present()
+            .map_err(|e| draw_err(fig.title)(e.to_string()))?;
+    }
+    Ok(Some(svg))
+}
+
+/// One histogram panel: `(low, high, count)` bins and the axis label with its unit.
+#[derive(Debug, Clone)]
+pub(crate) struct Panel {
+    pub x_label: String,
+    pub bins: Vec<(f64, f64, u64)>,
+}
+
+/// Histogram panels in a grid of `columns`.
+pub(crate) fn histograms(
+    title: &str,
+    panels: &[Panel],
+    columns: usize,
+    size: Size,
+) -> Result<String, ReportError> {
+    register_font().map_err(|e| draw_err(title)(e.to_string()))?;
+    let columns = columns.max(1);
+    let rows = panels.len().div_ceil(columns).max(1);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+        let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+        let draw = || -> Result<(), String> {
+            root.fill(&WHITE).map_err(e)?;
+            let body = root.titled(title, (FONT_FAMILY, 17)).map_err(e)?;
+            for (i, (area, panel)) in body
+                .split_evenly((rows, columns))
+                .iter()
+                .zip(panels)
+                .enumerate()
+            {
+                let colour = PALETTE[i % PALETTE.len()];
+                let (Some(first), Some(last)) = (panel.bins.first(), panel.bins.last()) else {
+                    continue;
+                };
+                let (x0, x1) = (first.0, last.1);
+                let top = panel.bins.iter().map(|b| b.2).max().unwrap_or(1).max(1) as f64 * 1.08;
+                let mut ctx = ChartBuilder::on(area)
+                    .margin(8)
+                    .x_label_area_size(36)
+                    .y_label_area_size(48)
+                    .build_cartesian_2d(x0..x1, 0.0..top)
+                    .map_err(e)?;
+                ctx.configure_mesh()
+                    .x_desc(panel.x_label.as_str())
+                    .y_desc("samples")
+                    .x_labels(5)
+                    .y_labels(4)
+                    .x_label_formatter(&|v| format_tick_in(*v, x1 - x0))
+                    .y_label_formatter(&|v| format!("{v:.0}"))
+                    .label_style((FONT_FAMILY, 11))
+                    .axis_desc_style((FONT_FAMILY, 12))
+                    .light_line_style(WHITE)
+                    .draw()
+                    .map_err(e)?;
+                ctx.draw_series(panel.bins.iter().map(|&(lo, hi, n)| {
+                    Rectangle::new([(lo, 0.0), (hi, n as f64)], colour.mix(0.8).filled())
+                }))
+                .map_err(e)?;
+            }
+            root.present().map_err(|e| e.to_string())
+        };
+        draw().map_err(draw_err(title))?;
+    }
+    Ok(svg)
+}
+
+/// Grouped bars: one group per category, one bar per series (`(label, values)`, a
+/// value per category; non-finite values leave a gap).
+pub(crate) fn bars(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    categories: &[String],
+    series: &[(String, Vec<f64>)],
+    size: Size,
+) -> Result<String, ReportError> {
+    register_font().map_err(|e| draw_err(title)(e.to_string()))?;
+    let top = series
+        .iter()
+        .flat_map(|(_, v)| v.iter().copied())
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, f64::max);
+    let top = if top > 0.0 { top * 1.15 } else { 1.0 };
+    let n = categories.len().max(1);
+    let k = series.len().max(1) as f64;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+        let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+        let draw = || -> Result<(), String> {
+            root.fill(&WHITE).map_err(e)?;
+            let mut ctx = ChartBuilder::on(&root)
+                .caption(title, (FONT_FAMILY, 17))
+                .margin(10)
+                .x_label_area_size(40)
+                .y_label_area_size(58)
+                .build_cartesian_2d(0.0..n as f64, 0.0..top)
+                .map_err(e)?;
+            ctx.configure_mesh()
+                .x_desc(x_label)
+                .y_desc(y_label)
+                .x_labels(n * 2 + 1)
+                .x_label_formatter(&|v| {
+                    // Category names at the group centres only.
+                    let i = v.floor();
+                    if (v - i - 0.5).abs() < 1e-6 {
+                        categories.get(i as usize).cloned().unwrap_or_default()
+                    } else {
+                        String::new()
+                    }
+                })
+                .y_label_formatter(&|v| format_tick_in(*v, top))
+                .disable_x_mesh()
+                .label_style((FONT_FAMILY, 12))
+                .axis_desc_style((FONT_FAMILY, 13))
+                .light_line_style(WHITE)
+                .draw()
+                .map_err(e)?;
+            for (j, (label, values)) in series.iter().enumerate() {
+                let colour = PALETTE[j % PALETTE.len()];
+                let w = 0.8 / k;
+                ctx.draw_series(
+                    values
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, v)| v.is_finite())
+                        .map(|(i, &v)| {
+                            let x = i as f64 + 0.1 + w * j as f64;
+                            Rectangle::new([(x, 0.0), (x + w * 0.92, v)], colour.filled())
+                        }),
+                )
+                .map_err(e)?
+                .label(label.as_str())
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 4), (x + 12, y + 4)], colour.filled())
+                });
+            }
+            ctx.configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK.mix(0.3))
+                .label_font((FONT_FAMILY, 12))
+                .position(SeriesLabelPosition::UpperLeft)
+                .draw()
+                .map_err(e)?;
+            root.present().map_err(|e| e.to_string())
+        };
+        draw().map_err(draw_err(title))?;
+    }
+    Ok(svg)
+}
+
+/// Events on the run clock: one row per kind, a mark per event coloured by level
+/// (`info`, `warn`, `error`). `events` are `(t_h, kind index, level)`.
+pub(crate) fn timeline(
+    title: &str,
+    kinds: &[String],
+    events: &[(f64, usize, String)],
+    span_h: (f64, f64),
+    size: Size,
+) -> Result<String, ReportError> {
+    register_font().map_err(|e| draw_err(title)(e.to_string()))?;
+    let (x0, x1) = pad(span_h.0, span_h.1);
+    let rows = kinds.len().max(1) as f64;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+        let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+        let draw = || -> Result<(), String> {
+            root.fill(&WHITE).map_err(e)?;
+            let mut ctx = ChartBuilder::on(&root)
+                .caption(title, (FONT_FAMILY, 17))
+                .margin(10)
+                .x_label_area_size(40)
+                .y_label_area_size(150)
+                .build_cartesian_2d(x0..x1, -0.5..rows - 0.5)
+                .map_err(e)?;
+            ctx.configure_mesh()
+                .x_desc("run clock, h")
+                .x_labels(6)
+                .y_labels(kinds.len() * 2 + 1)
+                .x_label_formatter(&|v| format_tick_in(*v, x1 - x0))
+                .y_label_formatter(&|v| {
+                    let i = v.round();
+                    if (v - i).abs() < 1e-6 && i >= 0.0 {
+                        kinds.get(i as usize).cloned().unwrap_or_default()
+                    } else {
+                        String::new()
+                    }
+                })
+                .disable_y_mesh()
+                .label_style((FONT_FAMILY, 12))
+                .axis_desc_style((FONT_FAMILY, 13))
+                .light_line_style(WHITE)
+                .draw()
+                .map_err(e)?;
+            for (level, colour) in [
+                ("info", PALETTE[0]),
+                ("warn", PALETTE[1]),
+                ("error", PALETTE[5]),
+            ] {
+                ctx.draw_series(
+                    events
+                        .iter()
+                        .filter(|ev| ev.2 == level && ev.0.is_finite())
+                        .map(|ev| {
+                            let y = ev.1 as f64;
+                            PathElement::new(
+                                vec![(ev.0, y - 0.3), (ev.0, y + 0.3)],
+                                colour.stroke_width(2),
+                            )
+                        }),
+                )
+                .map_err(e)?
+                .label(level)
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 4), (x + 12, y + 4)], colour.filled())
+                });
+            }
+            ctx.configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK.mix(0.3))
+                .label_font((FONT_FAMILY, 12))
+                .position(SeriesLabelPosition::UpperRight)
+                .draw()
+                .map_err(e)?;
+            root.present().map_err(|e| e.to_string())
+        };
+        draw().map_err(draw_err(title))?;
+    }
+    Ok(svg)
+}
+
+/// Evenly spaced picks of at most `max` out of `n` (all when `n ≤ max`), in order.
+#[must_use]
+pub(crate) fn downsample_indices(n: usize, max: usize) -> Vec<usize> {
+    if n <= max {
+        return (0..n).collect();
+    }
+    if max == 0 {
+        return Vec::new();
+    }
+    (0..max).map(|i| i * n / max).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use softtouch_collector::plot::SeriesStyle;
+
+    #[test]
+    fn downsampling_keeps_order_bounds_and_the_first_point() {
+        assert_eq!(downsample_indices(3, 10), vec![0, 1, 2]);
+        let picks = downsample_indices(30_000, 300);
+        assert_eq!(picks.len(), 300);
+        assert_eq!(picks[0], 0);
+        assert!(picks.windows(2).all(|w| w[0] < w[1]));
+        assert!(*picks.last().unwrap_or(&usize::MAX) < 30_000);
+        assert!(downsample_indices(5, 0).is_empty());
+    }
+
+    #[test]
+    fn an_xy_figure_is_svg_with_escaped_text_and_none_without_points() {
+        let series = [
+            Series {
+                label: "a<b & \"c\"".into(),
+                points: vec![(0.0, 1.0), (1.0, f64::NAN), (2.0, 3.0)],
+                style: SeriesStyle::LinePoints,
+            },
+            Series {
+                label: "other".into(),
+                points: vec![(0.5, 2.0)],
+                style: SeriesStyle::Points,
+            },
+        ];
+        let fig = Xy {
+            title: "t",
+            x_label: "x, s",
+            y_label: "y, N",
+            series: &series,
+            diagonal: false,
+            y_range: None,
+            marker_px: 2,
+        };
+        let svg = xy(&fig, (300, 200)).expect("draws").expect("has points");
+        assert!(svg.starts_with("<svg"), "{}", &svg[..40.min(svg.len())]);
+        assert!(svg.contains("a&lt;b &amp;"), "legend escaped");
+        assert!(!svg.contains("a<b"));
+        let empty = [Series {
+            label: String::new(),
+            points: vec![(f64::NAN, 1.0)],
+            style: SeriesStyle::Points,
+        }];
+        let none = xy(
+            &Xy {
+                series: &empty,
+                ..fig
+            },
+            (300, 200),
+        )
+        .expect("no error");
+        assert!(none.is_none());
+    }
+
+    #[test]
+    fn the_page_and_the_png_label_ticks_alike() {
+        // One formatter (`plot::format_tick_in`) for both; these were the page's own.
+        assert_eq!(format_tick_in(0.5, 1.0), "0.5");
+        assert_eq!(format_tick_in(-0.0, 1.0), "0");
+        assert_eq!(format_tick_in(1234.0, 2000.0), "1234");
+        assert_eq!(format_tick_in(0.0001, 0.001), "1.0e-4");
+    }
+}
