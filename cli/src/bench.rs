@@ -6,18 +6,16 @@ use anyhow::anyhow;
 use clap::Args;
 use clap::Subcommand;
 use softtouch_collector::collect::bench::{Breakdown, SweepPoint, sweep_point};
+use softtouch_collector::collect::bench_out::{
+    db_size_line, sweep_table, time_ingest, write_sweep_files,
+};
 use softtouch_collector::configs;
-use softtouch_collector::plot::{Series, SeriesStyle, XyChart, xy_chart};
 use softtouch_collector::progress::TrainProgress;
-use softtouch_collector::synthetic::SampleBuilder;
-use softtouch_drivers::Frame;
 use softtouch_lab::experiments::{self, fmt_opt};
-use softtouch_schemas::{ContactPose, FrameFormat, FrameMeta, Medium, TimestampNs};
-use softtouch_store::{OwnedNewRun, SyncStore};
+use softtouch_store::SyncStore;
 use softtouch_trainer::Splits;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {
@@ -160,86 +158,13 @@ pub async fn run(cmd: BenchCommand, db: &Path, out: &mut dyn Write) -> Result<()
         BenchCommand::Ingest { samples, out: dir } => {
             let db = scratch_db(&dir)?;
             let store = SyncStore::open(&db)?;
-            let raw = ingest_frames()?;
-            let mut text =
-                String::from("case                      samples   seconds   samples/s\n");
-            for (case, encoded) in [("raw RGB → PNG → SQLite", false), ("PNG → SQLite", true)]
-            {
-                let run = store.create_run(OwnedNewRun {
-                    seed: 0,
-                    samples_planned: samples,
-                    rod_schedule: vec!["circle-10".into()],
-                    rod_block: samples.max(1),
-                    scene_name: format!("bench ingest: {case}"),
-                    medium: Medium::Air,
-                    rig_toml: String::new(),
-                    scene_toml: String::new(),
-                    poses_from: None,
-                })?;
-                let frames: Vec<Frame> = if encoded {
-                    raw.iter()
-                        .map(|f| {
-                            softtouch_store::encode_for_store(f)
-                                .map(|(meta, data)| Frame { meta, data })
-                        })
-                        .collect::<Result<_, _>>()?
-                } else {
-                    raw.clone()
-                };
-                let started = Instant::now();
-                for i in 0..samples {
-                    let frame = frames[usize::try_from(i).unwrap_or(0) % frames.len()].clone();
-                    let sample = SampleBuilder::new(i);
-                    let window = sample.window();
-                    store.submit_sample(run, sample.build(), Some(frame), window)?;
-                }
-                store.flush()?;
-                let secs = started.elapsed().as_secs_f64();
-                text.push_str(&format!(
-                    "{case:<24}  {samples:>7}  {secs:>8.2}  {:>10.0}\n",
-                    samples as f64 / secs
-                ));
-            }
+            let timed = time_ingest(&store, samples);
             store.close();
-            let size = std::fs::metadata(&db).map(|m| m.len()).unwrap_or(0)
-                + std::fs::metadata(format!("{}-wal", db.display()))
-                    .map(|m| m.len())
-                    .unwrap_or(0);
-            text.push_str(&format!(
-                "database size: {:.1} MB ({})\n",
-                size as f64 / 1e6,
-                db.display()
-            ));
+            let mut text = timed.map_err(|e| Failure::Runtime(e.into()))?;
+            text.push_str(&db_size_line(&db));
             out.write_all(text.as_bytes()).map_err(io_failure)
         }
     }
-}
-
-/// A few real rendered frames of the default scene (raw RGB, 640×480).
-fn ingest_frames() -> Result<Vec<Frame>, Failure> {
-    let scene = softtouch_schemas::defaults::scene();
-    (0..4)
-        .map(|k| {
-            let pose = ContactPose {
-                x_m: 0.01 * f64::from(k),
-                z_m: 0.01,
-                theta_rad: f64::from(k),
-            };
-            let r = softtouch_sim::render_contact(&scene, "circle-10", &pose, 0)
-                .map_err(|e| Failure::Runtime(e.into()))?;
-            let (w, h) = r.image.dimensions();
-            Ok(Frame {
-                meta: FrameMeta {
-                    t: TimestampNs(0),
-                    sequence: u64::try_from(k).unwrap_or(0),
-                    width: w,
-                    height: h,
-                    format: FrameFormat::Rgb8,
-                },
-                data: r.image.into_raw(),
-            })
-        })
-        .collect()
 }
 
 fn report_collection(
@@ -249,92 +174,8 @@ fn report_collection(
     default_point: (f64, f64),
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
-    let mut table = format!(
-        "Where a sample's time goes (rig defaults: settle {} s, window {} s; {} samples):\n\
-         \x20 job thread, median per sample: {:.2} ms wall = {:.2} ms in device code (simulation) + {:.3} ms orchestration (p95 {:.3} ms)\n\
-         \x20 writer thread (second core), mean per sample: {:.2} ms PNG encode + {:.2} ms SQLite\n\n",
-        default_point.0,
-        default_point.1,
-        b.samples,
-        b.wall_ms,
-        b.device_ms,
-        b.orchestration_ms,
-        b.orchestration_p95_ms,
-        b.encode_ms,
-        b.write_ms
-    );
-    table.push_str(
-        "settle_s  window_s  accepted  force_rmse_N  torque_rmse_Nmm  samples_per_hour\n",
-    );
-    let mut csv = String::from(
-        "settle_s,window_s,samples,accepted,force_rmse_n,torque_rmse_nmm,samples_per_hour,wall_s\n",
-    );
-    for p in points {
-        table.push_str(&format!(
-            "{:>8}  {:>8}  {:>4}/{:<3}  {:>12.5}  {:>15.3}  {:>16.0}\n",
-            p.settle_s,
-            p.window_s,
-            p.accepted,
-            p.samples,
-            p.force_rmse_n,
-            p.torque_rmse_nmm,
-            p.samples_per_hour
-        ));
-        csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{}\n",
-            p.settle_s,
-            p.window_s,
-            p.samples,
-            p.accepted,
-            p.force_rmse_n,
-            p.torque_rmse_nmm,
-            p.samples_per_hour,
-            p.wall_s
-        ));
-    }
-    let csv_path = dir.join("collection-sweep.csv");
-    std::fs::write(&csv_path, csv)
-        .map_err(|e| Failure::Runtime(anyhow!("cannot write {}: {e}", csv_path.display())))?;
-    let mut windows: Vec<f64> = points.iter().map(|p| p.window_s).collect();
-    windows.sort_by(f64::total_cmp);
-    windows.dedup();
-    let mut written = vec![csv_path];
-    for (name, unit, pick) in [
-        (
-            "force",
-            "N",
-            (|p: &SweepPoint| p.force_rmse_n) as fn(&SweepPoint) -> f64,
-        ),
-        ("torque", "N·mm", |p: &SweepPoint| p.torque_rmse_nmm),
-    ] {
-        let series: Vec<Series> = windows
-            .iter()
-            .map(|w| Series {
-                label: format!("window {w} s"),
-                points: points
-                    .iter()
-                    .filter(|p| p.window_s.total_cmp(w).is_eq())
-                    .map(|p| (p.samples_per_hour, pick(p)))
-                    .collect(),
-                style: SeriesStyle::LinePoints,
-            })
-            .collect();
-        let path = dir.join(format!("collection-sweep-{name}.png"));
-        let title = format!("{name} label error vs throughput (points: settle times)");
-        let y = format!("{name} RMS error [{unit}]");
-        xy_chart(
-            &path,
-            &XyChart {
-                title: &title,
-                x_label: "samples per hour (rig clock)",
-                y_label: &y,
-                series: &series,
-            },
-            (900, 600),
-        )
-        .map_err(|e| Failure::Runtime(e.into()))?;
-        written.push(path);
-    }
+    let mut table = sweep_table(points, b, default_point);
+    let written = write_sweep_files(dir, points).map_err(|e| Failure::Runtime(e.into()))?;
     for p in written {
         table.push_str(&format!("wrote {}\n", p.display()));
     }

@@ -11,7 +11,7 @@ use softtouch_grasp::{ControllerConfig, WristConfig};
 use softtouch_schemas::Medium;
 
 use super::Failure;
-use super::grasp::{
+use super::grasp_loop::{
     LoopArgs, bad, check_duration, create_out_dir, grasp_failure, load_model_and_pause,
     loop_settings, print_setup, scene_for,
 };

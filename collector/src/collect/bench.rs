@@ -200,6 +200,9 @@ pub enum BenchError {
     /// The simulator refused the rig or scene.
     #[error("simulator: {0}")]
     Sim(String),
+    /// A result file could not be written or drawn (the message names it).
+    #[error("{0}")]
+    Output(String),
 }
 
 struct NoRods;

@@ -37,6 +37,7 @@
 //! - [`bench`](mod@bench): what collection costs, and where its time goes.
 
 pub mod bench;
+pub mod bench_out;
 pub mod devices;
 mod finish;
 pub mod plan;

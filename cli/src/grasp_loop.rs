@@ -1,0 +1,136 @@
+//! What `grasp follow`, `disturb` and `twist` share: the loop's flags, their one
+//! check, the scene and model they load, the setup they print, and their failures.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::anyhow;
+use clap::Args;
+use softtouch_grasp::{GainCheck, GraspError};
+
+use super::{Failure, io_failure, open_existing};
+use softtouch_lab::grasp::settings;
+use softtouch_lab::grasp::soft::{GraspRunError, LoopSettings, Setup, grasp_scene};
+
+/// Options every grasp experiment shares.
+#[derive(Debug, Args)]
+pub struct LoopArgs {
+    /// Stored model whose estimate closes the loop.
+    #[arg(long)]
+    pub model: String,
+    /// Scene file (medium, effects, `[[objects]]`); default: the built-in scene
+    /// (`follow`) or `scenes/grasp.toml` (`disturb`, `twist`).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Gain K, N/mm; default: 0.75 × the stiffness Λ_max measured on the simulator.
+    #[arg(long)]
+    pub gain: Option<f64>,
+    /// Tolerance δ, N.
+    #[arg(long, default_value_t = 0.1)]
+    pub tolerance: f64,
+    /// Camera rate, Hz (one control cycle per frame).
+    #[arg(long, default_value_t = 120.0)]
+    pub fps: f64,
+    /// Sensorised fingers the loop reads: 1, or 2 (the second mirrors the first; the
+    /// estimate is the mean of both, or the one left when the other gives none).
+    #[arg(long, default_value_t = 1)]
+    pub fingers: u8,
+    /// Folder for the CSV and the PNG.
+    #[arg(long, default_value = "grasp-out")]
+    pub out_dir: PathBuf,
+    /// Seed of the simulated scene's effects.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+pub(super) fn grasp_failure(e: GraspError) -> Failure {
+    GraspRunError::Grasp(e).into()
+}
+
+pub(super) fn bad(m: String) -> Failure {
+    Failure::BadInput(anyhow!(m))
+}
+
+/// The shared flags, checked: one validation per setting for every verb.
+pub(super) fn loop_settings(c: &LoopArgs) -> Result<LoopSettings, Failure> {
+    settings::FPS_HZ.check("--fps", c.fps)?;
+    settings::TOLERANCE_N.check("--tolerance", c.tolerance)?;
+    let fingers = settings::check_fingers(c.fingers)?;
+    Ok(LoopSettings {
+        gain_n_per_mm: c.gain,
+        tolerance_n: c.tolerance,
+        fps: c.fps,
+        fingers,
+        seed: c.seed,
+    })
+}
+
+pub(super) fn check_duration(flag: &str, v: f64, zero_allowed: bool) -> Result<(), Failure> {
+    settings::duration_s(zero_allowed).check(flag, v)?;
+    Ok(())
+}
+
+/// The scene of `--scene`, else the embedded default (`follow`) or grasp scene.
+pub(super) fn scene_for(
+    c: &LoopArgs,
+    grasp_default: bool,
+) -> Result<softtouch_schemas::SceneSpec, Failure> {
+    if c.scene.is_none() && grasp_default {
+        return Ok(grasp_scene()?);
+    }
+    Ok(softtouch_collector::configs::resolve(None, c.scene.as_deref())?.scene)
+}
+
+/// The stored model's bytes; then tokio's clock is paused, for the simulated gripper
+/// and cameras (the database is read first: its pool's timeouts need real time).
+pub(super) async fn load_model_and_pause(c: &LoopArgs, db: &Path) -> Result<Vec<u8>, Failure> {
+    let store = open_existing(db).await?;
+    let bytes = softtouch_lab::models::force_artifact(&store, &c.model).await?;
+    drop(store);
+    tokio::time::pause();
+    Ok(bytes)
+}
+
+/// What the setup measured and chose, and Method S4's warnings, each said once with
+/// its remedy.
+pub(super) fn print_setup(
+    object: &str,
+    s: &Setup,
+    l: &LoopSettings,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    let w = io_failure;
+    writeln!(
+        out,
+        "object `{object}`: first touch at count {}; measured Λ_max = {:.3} N/mm; K = {:.3} N/mm, δ = {} N, {} Hz, {} finger(s)",
+        s.touch, s.lambda_max, s.gain, l.tolerance_n, l.fps, l.fingers
+    )
+    .map_err(w)?;
+    match s.gain_check {
+        GainCheck::MayNotConverge { amplification } => writeln!(
+            out,
+            "warning: K ≤ Λ_max/2 (Method S4): the loop may oscillate (|1 − Λ/K| = {amplification:.2}); leave --gain out for 0.75 Λ_max"
+        )
+        .map_err(w)?,
+        GainCheck::NoStiffness => {
+            writeln!(out, "warning: Λ = 0: the force does not follow position").map_err(w)?;
+        }
+        GainCheck::Converges { .. } => {}
+    }
+    if !s.tolerance_ok {
+        writeln!(
+            out,
+            "warning: δ = {} N is below half the force of one count ({:.3} N at Λ_max): expect dithering; --tolerance {:.3} or more avoids it",
+            l.tolerance_n,
+            s.one_count_n,
+            (s.one_count_n / 2.0 * 1000.0).ceil() / 1000.0
+        )
+        .map_err(w)?;
+    }
+    Ok(())
+}
+
+pub(super) fn create_out_dir(dir: &Path) -> Result<(), Failure> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| Failure::Runtime(anyhow!("cannot create {}: {e}", dir.display())))
+}
