@@ -6,8 +6,8 @@
 use super::ReportError;
 use plotters::prelude::*;
 use softtouch_collector::plot::{
-    FONT_FAMILY, PALETTE, Series, XyChart, XyLook, draw_xy, finite_bounds, format_tick_in, pad,
-    register_font,
+    BarChart, BarLook, BarSeries, BinnedPanel, FONT_FAMILY, HistLook, PALETTE, Series, XyChart,
+    XyLook, draw_bars, draw_histograms, draw_xy, finite_bounds, format_tick_in, pad, register_font,
 };
 
 /// Width and height of a figure, px.
@@ -80,7 +80,8 @@ pub(crate) struct Panel {
     pub bins: Vec<(f64, f64, u64)>,
 }
 
-/// Histogram panels in a grid of `columns`.
+/// Histogram panels in a grid of `columns`: the PNG grids' drawing
+/// ([`softtouch_collector::plot::draw_histograms`]) in the page's look.
 pub(crate) fn histograms(
     title: &str,
     panels: &[Panel],
@@ -88,59 +89,27 @@ pub(crate) fn histograms(
     size: Size,
 ) -> Result<String, ReportError> {
     register_font().map_err(|e| draw_err(title)(e.to_string()))?;
-    let columns = columns.max(1);
-    let rows = panels.len().div_ceil(columns).max(1);
+    let binned: Vec<BinnedPanel<'_>> = panels
+        .iter()
+        .map(|p| BinnedPanel {
+            title: "",
+            x_label: &p.x_label,
+            bins: &p.bins,
+        })
+        .collect();
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
-        let e = |e: DrawingAreaErrorKind<_>| e.to_string();
-        let draw = || -> Result<(), String> {
-            root.fill(&WHITE).map_err(e)?;
-            let body = root.titled(title, (FONT_FAMILY, 17)).map_err(e)?;
-            for (i, (area, panel)) in body
-                .split_evenly((rows, columns))
-                .iter()
-                .zip(panels)
-                .enumerate()
-            {
-                let colour = PALETTE[i % PALETTE.len()];
-                let (Some(first), Some(last)) = (panel.bins.first(), panel.bins.last()) else {
-                    continue;
-                };
-                let (x0, x1) = (first.0, last.1);
-                let top = panel.bins.iter().map(|b| b.2).max().unwrap_or(1).max(1) as f64 * 1.08;
-                let mut ctx = ChartBuilder::on(area)
-                    .margin(8)
-                    .x_label_area_size(36)
-                    .y_label_area_size(48)
-                    .build_cartesian_2d(x0..x1, 0.0..top)
-                    .map_err(e)?;
-                ctx.configure_mesh()
-                    .x_desc(panel.x_label.as_str())
-                    .y_desc("samples")
-                    .x_labels(5)
-                    .y_labels(4)
-                    .x_label_formatter(&|v| format_tick_in(*v, x1 - x0))
-                    .y_label_formatter(&|v| format!("{v:.0}"))
-                    .label_style((FONT_FAMILY, 11))
-                    .axis_desc_style((FONT_FAMILY, 12))
-                    .light_line_style(WHITE)
-                    .draw()
-                    .map_err(e)?;
-                ctx.draw_series(panel.bins.iter().map(|&(lo, hi, n)| {
-                    Rectangle::new([(lo, 0.0), (hi, n as f64)], colour.mix(0.8).filled())
-                }))
-                .map_err(e)?;
-            }
-            root.present().map_err(|e| e.to_string())
-        };
-        draw().map_err(draw_err(title))?;
+        draw_histograms(&root, Some(title), &binned, columns, &HistLook::PAGE)
+            .map_err(draw_err(title))?;
     }
     Ok(svg)
 }
 
 /// Grouped bars: one group per category, one bar per series (`(label, values)`, a
-/// value per category; non-finite values leave a gap).
+/// value per category; non-finite values leave a gap), from zero to a little above
+/// the highest value: the PNG charts' drawing
+/// ([`softtouch_collector::plot::draw_bars`]) in the page's look.
 pub(crate) fn bars(
     title: &str,
     x_label: &str,
@@ -156,70 +125,29 @@ pub(crate) fn bars(
         .filter(|v| v.is_finite())
         .fold(0.0f64, f64::max);
     let top = if top > 0.0 { top * 1.15 } else { 1.0 };
-    let n = categories.len().max(1);
-    let k = series.len().max(1) as f64;
+    let series: Vec<BarSeries> = series
+        .iter()
+        .map(|(label, values)| BarSeries {
+            label: label.clone(),
+            bars: values
+                .iter()
+                .map(|&v| Some((v, f64::NAN, f64::NAN)))
+                .collect(),
+            reference: Vec::new(),
+        })
+        .collect();
+    let chart = BarChart {
+        title,
+        x_label: Some(x_label),
+        y_label,
+        groups: categories,
+        series: &series,
+        y_range: (0.0, top),
+    };
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
-        let e = |e: DrawingAreaErrorKind<_>| e.to_string();
-        let draw = || -> Result<(), String> {
-            root.fill(&WHITE).map_err(e)?;
-            let mut ctx = ChartBuilder::on(&root)
-                .caption(title, (FONT_FAMILY, 17))
-                .margin(10)
-                .x_label_area_size(40)
-                .y_label_area_size(58)
-                .build_cartesian_2d(0.0..n as f64, 0.0..top)
-                .map_err(e)?;
-            ctx.configure_mesh()
-                .x_desc(x_label)
-                .y_desc(y_label)
-                .x_labels(n * 2 + 1)
-                .x_label_formatter(&|v| {
-                    // Category names at the group centres only.
-                    let i = v.floor();
-                    if (v - i - 0.5).abs() < 1e-6 {
-                        categories.get(i as usize).cloned().unwrap_or_default()
-                    } else {
-                        String::new()
-                    }
-                })
-                .y_label_formatter(&|v| format_tick_in(*v, top))
-                .disable_x_mesh()
-                .label_style((FONT_FAMILY, 12))
-                .axis_desc_style((FONT_FAMILY, 13))
-                .light_line_style(WHITE)
-                .draw()
-                .map_err(e)?;
-            for (j, (label, values)) in series.iter().enumerate() {
-                let colour = PALETTE[j % PALETTE.len()];
-                let w = 0.8 / k;
-                ctx.draw_series(
-                    values
-                        .iter()
-                        .enumerate()
-                        .filter(|(_, v)| v.is_finite())
-                        .map(|(i, &v)| {
-                            let x = i as f64 + 0.1 + w * j as f64;
-                            Rectangle::new([(x, 0.0), (x + w * 0.92, v)], colour.filled())
-                        }),
-                )
-                .map_err(e)?
-                .label(label.as_str())
-                .legend(move |(x, y)| {
-                    Rectangle::new([(x, y - 4), (x + 12, y + 4)], colour.filled())
-                });
-            }
-            ctx.configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK.mix(0.3))
-                .label_font((FONT_FAMILY, 12))
-                .position(SeriesLabelPosition::UpperLeft)
-                .draw()
-                .map_err(e)?;
-            root.present().map_err(|e| e.to_string())
-        };
-        draw().map_err(draw_err(title))?;
+        draw_bars(&root, &chart, &BarLook::PAGE).map_err(draw_err(title))?;
     }
     Ok(svg)
 }

@@ -274,6 +274,7 @@ pub fn write_bars(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), T
         path,
         &BarChart {
             title: &title,
+            x_label: None,
             y_label: "success rate",
             groups: &names,
             series: &series,
