@@ -1,4 +1,4 @@
-//! Grasp trials on the simulated soft grasp: the protocol of `trials.rs` run end to
+//! Grasp trials on the simulated soft grasp: the protocol of `trials/` run end to
 //! end, the physics deciding through [`physics_verdict`].
 #![allow(clippy::float_cmp)]
 

@@ -33,6 +33,11 @@ use crate::loss::{combine, kl_mean, mse};
 use crate::metrics::Metrics;
 use crate::model::{ModelConfig, Net};
 
+mod checkpoint;
+pub use checkpoint::*;
+mod eval;
+pub use eval::*;
+
 /// One preprocessed image and its label.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Example {
@@ -180,29 +185,6 @@ impl InitFrom {
     }
 }
 
-/// The committed state of a checkpoint folder (`checkpoint.json`).
-#[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct CheckpointState {
-    config: ModelConfig,
-    train: TrainConfig,
-    data_fingerprint: String,
-    norm: LabelNorm,
-    completed_epochs: usize,
-    best_epoch: usize,
-    best_score: f64,
-    model_file: String,
-    optimizer_file: String,
-    best_file: String,
-    history: Vec<EpochReport>,
-    seconds: f64,
-    /// [`InitFrom::label`] of a fine-tuning (absent in older checkpoints: none).
-    #[serde(default)]
-    init_from: Option<String>,
-}
-
-const CHECKPOINT: &str = "checkpoint.json";
-
 /// Burn keeps one random generator per backend (process-wide), not per module, and
 /// draws a parameter's initial values lazily, on its first use. Seeding, building
 /// and materialising a net therefore happen under this lock, and every other
@@ -233,50 +215,6 @@ impl burn::module::ModuleVisitor for Materialise {
     fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
         let _ = param.val();
     }
-}
-
-/// A short fingerprint of the training data (sizes and every label), so a resume on
-/// different data is refused rather than silently mixed.
-/// FNV-1a over byte slices, as 16 hex digits: stable across runs and platforms.
-fn fnv(parts: &[&[u8]]) -> String {
-    let mut h = Fnv::default();
-    for p in parts {
-        h.feed(p);
-    }
-    format!("{:016x}", h.0)
-}
-
-struct Fnv(u64);
-
-impl Default for Fnv {
-    fn default() -> Self {
-        Self(0xcbf2_9ce4_8422_2325)
-    }
-}
-
-impl Fnv {
-    fn feed(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.0 ^= u64::from(*b);
-            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
-        }
-    }
-}
-
-fn fingerprint(splits: &Splits) -> String {
-    // Over sizes and label bits.
-    let mut h = Fnv::default();
-    let mut feed = |bytes: &[u8]| h.feed(bytes);
-    for split in [&splits.train, &splits.val, &splits.test] {
-        feed(&(split.len() as u64).to_le_bytes());
-        for e in split {
-            for v in e.label {
-                feed(&v.to_bits().to_le_bytes());
-            }
-            feed(&(e.image.len() as u64).to_le_bytes());
-        }
-    }
-    format!("{:016x}", h.0)
 }
 
 fn check_inputs(
@@ -349,71 +287,6 @@ fn to_vec(t: Tensor<2>) -> Vec<f32> {
     data.as_slice::<f32>()
         .map(<[f32]>::to_vec)
         .unwrap_or_default()
-}
-
-/// Runs a model (in evaluation mode) over `examples`: wrench predictions in label
-/// units (if it predicts any) and the image MSE (if it reconstructs).
-pub fn evaluate(
-    net: &Net,
-    config: &ModelConfig,
-    norm: &LabelNorm,
-    examples: &[Example],
-    device: &Device,
-) -> (Metrics, Option<Vec<WrenchLabel>>) {
-    let net = net.valid();
-    let mut predictions = config.kind.predicts_wrench().then(Vec::new);
-    let mut sq_err_sum = 0.0f64;
-    let indices: Vec<usize> = (0..examples.len()).collect();
-    for chunk in indices.chunks(64) {
-        let (images, _) = batch_tensors(examples, chunk, config, norm, device);
-        // Without a decoder there is nothing to reconstruct: the cheaper pass.
-        let wrench = if config.kind.has_decoder() {
-            let out = net.forward(images.clone(), None);
-            if let Some(image) = out.image {
-                let per_batch = mse(image, images).into_scalar::<f32>();
-                sq_err_sum += f64::from(per_batch) * chunk.len() as f64;
-            }
-            out.wrench
-        } else {
-            net.forward_wrench(images).1
-        };
-        if let (Some(p), Some(w)) = (predictions.as_mut(), wrench) {
-            p.extend(to_vec(w).chunks_exact(6).map(|z| norm.denormalise(z)));
-        }
-    }
-    let targets: Vec<WrenchLabel> = examples.iter().map(|e| e.label).collect();
-    let image_mse = config
-        .kind
-        .has_decoder()
-        .then(|| sq_err_sum / examples.len().max(1) as f64);
-    let metrics = Metrics::compute(predictions.as_deref(), &targets, image_mse);
-    (metrics, predictions)
-}
-
-/// The latent mean μ of every example (evaluation mode, batches of 64), one row per
-/// example, as f64: the touch representation that the land-to-water comparison reads.
-pub fn latent_means(
-    net: &Net,
-    config: &ModelConfig,
-    norm: &LabelNorm,
-    examples: &[Example],
-    device: &Device,
-) -> Vec<Vec<f64>> {
-    let net = net.valid();
-    let indices: Vec<usize> = (0..examples.len()).collect();
-    let mut out = Vec::with_capacity(examples.len());
-    for chunk in indices.chunks(64) {
-        let (images, _) = batch_tensors(examples, chunk, config, norm, device);
-        let (mean, _) = net.forward_wrench(images);
-        let values = to_vec(mean);
-        let per = values.len() / chunk.len().max(1);
-        out.extend(
-            values
-                .chunks_exact(per.max(1))
-                .map(|row| row.iter().map(|v| f64::from(*v)).collect()),
-        );
-    }
-    out
 }
 
 fn score(config: &ModelConfig, m: &Metrics) -> f64 {
@@ -737,134 +610,5 @@ fn mix(seed: u64, a: u64, b: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-fn read_checkpoint(dir: &Path) -> Result<Option<CheckpointState>, TrainError> {
-    let path = dir.join(CHECKPOINT);
-    let text = match std::fs::read_to_string(&path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(TrainError::io("read", &path, e)),
-    };
-    serde_json::from_str(&text)
-        .map(Some)
-        .map_err(|e| TrainError::Checkpoint(format!("{}: {e}", path.display())))
-}
-
-fn write_checkpoint(
-    dir: &Path,
-    net: &Net,
-    optimizer: &ModuleOptimizer,
-    best: Option<&[u8]>,
-    state: CheckpointState,
-) -> Result<(), TrainError> {
-    crate::write_atomic(&dir.join(&state.model_file), &record_bytes(net)?)?;
-    let optim = optimizer
-        .into_bytes()
-        .map_err(|e| TrainError::Checkpoint(format!("encoding the optimiser state: {e}")))?;
-    crate::write_atomic(&dir.join(&state.optimizer_file), &optim)?;
-    let best_path = dir.join(&state.best_file);
-    if !best_path.exists() {
-        let bytes = match best {
-            Some(b) => b.to_vec(),
-            None => record_bytes(net)?,
-        };
-        crate::write_atomic(&best_path, &bytes)?;
-    }
-    let json = serde_json::to_vec_pretty(&state)
-        .map_err(|e| TrainError::Checkpoint(format!("encoding the state: {e}")))?;
-    crate::write_atomic(&dir.join(CHECKPOINT), &json)?;
-    // Committed: files of other epochs are garbage now.
-    let keep = [&state.model_file, &state.optimizer_file, &state.best_file];
-    if let Ok(entries) = std::fs::read_dir(dir) {
-        for entry in entries.flatten() {
-            let name = entry.file_name().to_string_lossy().into_owned();
-            let ours = name.starts_with("epoch-") || name.starts_with("best-");
-            if ours && !keep.iter().any(|k| **k == name) {
-                let _ = std::fs::remove_file(entry.path());
-            }
-        }
-    }
-    Ok(())
-}
-
-/// Removes a checkpoint folder's files (for a deliberate restart).
-pub fn discard_checkpoint(dir: &Path) -> Result<(), TrainError> {
-    match std::fs::remove_dir_all(dir) {
-        Ok(()) => Ok(()),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(TrainError::io("remove", dir, e)),
-    }
-}
-
-/// Where checkpoints of a named training go under a root folder.
-pub fn checkpoint_dir(root: &Path, name: &str) -> PathBuf {
-    root.join(name)
-}
-
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::model::ModelKind;
-    use crate::preprocess::Preprocess;
-
-    /// Nets built from one seed in concurrent threads get the same weights: burn's
-    /// generator is process-wide and parameters draw lazily, so without the lock and
-    /// the materialisation under it one thread's draws land in another's net.
-    #[test]
-    fn the_same_seed_gives_the_same_weights_under_concurrency() {
-        let config = ModelConfig {
-            kind: ModelKind::Svae,
-            width: 4,
-            latent: 6,
-            preprocess: Preprocess {
-                size_px: 16,
-                ..Preprocess::default()
-            },
-            ..ModelConfig::default()
-        };
-        let device = Device::flex();
-        let weights: Vec<Vec<f32>> = std::thread::scope(|s| {
-            let handles: Vec<_> = (0..4)
-                .map(|i| {
-                    let device = device.clone();
-                    s.spawn(move || {
-                        let mut last = Vec::new();
-                        for _ in 0..100 {
-                            // Every other thread builds another seed's net in between.
-                            let seed = if i % 2 == 0 { 7 } else { 8 };
-                            let net = init_net(&config, seed, &device);
-                            let mut values = Values(Vec::new());
-                            net.visit(&mut values);
-                            last = values.0;
-                        }
-                        last
-                    })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| h.join().expect("thread"))
-                .collect()
-        });
-        // Bit-exact, compared without printing thousands of values.
-        let same = |a: &[f32], b: &[f32]| {
-            a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
-        };
-        assert!(same(&weights[0], &weights[2]), "seed 7 gave two nets");
-        assert!(same(&weights[1], &weights[3]), "seed 8 gave two nets");
-        assert!(
-            !same(&weights[0], &weights[1]),
-            "seeds 7 and 8 gave one net"
-        );
-    }
-
-    /// Every float parameter's values, in module order.
-    struct Values(Vec<f32>);
-
-    impl burn::module::ModuleVisitor for Values {
-        fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
-            let data = param.val().into_data();
-            self.0
-                .extend_from_slice(data.as_slice::<f32>().expect("f32 parameters"));
-        }
-    }
-}
+mod tests;

@@ -1,0 +1,526 @@
+//! The hold's physics state, stepped on the injected clock: the fingers, the object, its lift and turns, the flow.
+
+use super::*;
+
+/// A trapezoidal lift of the gripper.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Lift {
+    pub(super) t0: TimestampNs,
+    pub(super) height_m: f64,
+    pub(super) speed_m_s: f64,
+    pub(super) accel_m_s2: f64,
+}
+
+impl Lift {
+    /// Velocity (up) and acceleration (up) `tau_s` after the start.
+    pub(super) fn motion(&self, tau_s: f64) -> (f64, f64) {
+        if tau_s < 0.0 {
+            return (0.0, 0.0);
+        }
+        let a = self.accel_m_s2;
+        // Triangle when the height is too short to reach the speed.
+        let v_peak = self.speed_m_s.min((a * self.height_m).sqrt());
+        let t_acc = v_peak / a;
+        let cruise_m = self.height_m - v_peak * t_acc;
+        let t_cruise = (cruise_m / v_peak).max(0.0);
+        if tau_s < t_acc {
+            (a * tau_s, a)
+        } else if tau_s < t_acc + t_cruise {
+            (v_peak, 0.0)
+        } else if tau_s < 2.0 * t_acc + t_cruise {
+            (v_peak - a * (tau_s - t_acc - t_cruise), -a)
+        } else {
+            (0.0, 0.0)
+        }
+    }
+}
+
+/// A scheduled turn of the object about z.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct YawMove {
+    pub(super) t0: TimestampNs,
+    pub(super) t1: TimestampNs,
+    pub(super) to_rad: f64,
+}
+
+/// The current's speed over time: mean plus three seeded sines.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct FlowSeries {
+    pub(super) flow: Flow,
+    /// (angular frequency rad/s, phase rad, weight).
+    pub(super) waves: [(f64, f64, f64); 3],
+}
+
+impl FlowSeries {
+    pub(super) fn new(flow: Flow, seed: u64) -> Self {
+        let mut rng = crate::rng::stream(seed, "object-flow");
+        let mut waves = [(0.0, 0.0, 0.0); 3];
+        for w in &mut waves {
+            let period = flow.period_s * rng.random_range(0.5..2.0);
+            *w = (
+                std::f64::consts::TAU / period,
+                rng.random_range(0.0..std::f64::consts::TAU),
+                rng.random_range(0.5..1.0),
+            );
+        }
+        let total: f64 = waves.iter().map(|w| w.2).sum();
+        for w in &mut waves {
+            w.2 /= total;
+        }
+        Self { flow, waves }
+    }
+
+    /// Speed along G's +x at `t_s`, m/s.
+    pub(super) fn speed_m_s(&self, t_s: f64) -> f64 {
+        let gust: f64 = self
+            .waves
+            .iter()
+            .map(|(omega, phase, weight)| weight * (omega * t_s + phase).sin())
+            .sum();
+        self.flow.mean_m_s + self.flow.gust_m_s * gust
+    }
+}
+
+/// A finger's contact and the grip and shear it was worked out for.
+#[derive(Debug, Clone)]
+pub(super) struct ContactMemo {
+    pub(super) grip: Grip,
+    pub(super) shear_n: [f64; 2],
+    /// Shared, not copied: the balance asks for it tens of times a frame.
+    pub(super) contact: Arc<FingerContact>,
+}
+
+/// The shared state of the soft grasp.
+#[derive(Debug)]
+pub(super) struct State {
+    /// One scene per finger: the same model, each its own seeded renderer. Finger
+    /// 1's is made when its camera is first asked for (its renderer's tables cost
+    /// tens of milliseconds, and most grasps watch one finger).
+    pub(super) scenes: [Option<Scene>; 2],
+    /// The scene finger 1's is made from, and its seed.
+    pub(super) second_spec: (SceneSpec, u64),
+    pub(super) model: Arc<Model>,
+    pub(super) effects: Effects,
+    pub(super) finger: FingerGeometry,
+    pub(super) contact: ContactParams,
+    pub(super) clock: TokioClock,
+    pub(super) period_ns: f64,
+    /// The object's template.
+    pub(super) template: GraspObject,
+    /// The object between the fingers, if still there.
+    pub(super) object: Option<GraspObject>,
+    pub(super) hold: HoldState,
+    pub(super) activated: bool,
+    pub(super) cmd: GripperCommand,
+    pub(super) opening_mm: f64,
+    pub(super) last_t: TimestampNs,
+    pub(super) status: ObjectStatus,
+    pub(super) lift: Option<Lift>,
+    pub(super) yaw_moves: Vec<YawMove>,
+    pub(super) flow: Option<FlowSeries>,
+    /// The wrist's turn about z and where it is going, rad.
+    pub(super) wrist_rad: f64,
+    pub(super) wrist_target_rad: f64,
+    /// The object's shift towards finger 0, m.
+    pub(super) shift_m: f64,
+    /// The object's turn against the fingers at the last step, rad.
+    pub(super) rel_yaw_rad: f64,
+    /// Each finger's stuck tangential displacement along its y, m.
+    pub(super) stick_m: [f64; 2],
+    /// Each finger's shear (y, z in its frame), N.
+    pub(super) shear_n: [[f64; 2]; 2],
+    /// Each finger's last contact and the grip and shear it was worked out for: the
+    /// physics steps, the status and the camera ask for the same one many times while
+    /// nothing moves (a steady hold).
+    pub(super) last_contact: RefCell<[Option<ContactMemo>; 2]>,
+    /// Each finger's strips against the object at its last turn: the same for every
+    /// contact until the object turns.
+    pub(super) strips: RefCell<[Option<Arc<Strips>>; 2]>,
+    /// Each camera's last solved lattice and the contact it was solved for.
+    pub(super) last_deformed: [Option<(Contact, Deformed)>; 2],
+}
+
+impl State {
+    /// Finger `k`'s scene (0 or 1), made on first use.
+    pub(super) fn scene(&mut self, k: usize) -> &Scene {
+        let (spec, seed) = &self.second_spec;
+        let model = &self.model;
+        self.scenes[k.min(1)].get_or_insert_with(|| Scene::new(spec, *seed, Arc::clone(model)))
+    }
+
+    pub(super) fn object_yaw_at(&self, t: TimestampNs) -> f64 {
+        let mut yaw = 0.0;
+        for m in &self.yaw_moves {
+            if t <= m.t0 {
+                break;
+            }
+            if t >= m.t1 || m.t1 <= m.t0 {
+                yaw = m.to_rad;
+            } else {
+                let s = (t.0 - m.t0.0) as f64 / (m.t1.0 - m.t0.0) as f64;
+                // Smoothstep: the turn starts and ends at rest.
+                let s = s * s * (3.0 - 2.0 * s);
+                yaw += (m.to_rad - yaw) * s;
+                break;
+            }
+        }
+        yaw
+    }
+
+    pub(super) fn grip(&self, opening_mm: f64) -> Grip {
+        Grip {
+            opening_m: opening_mm / 1000.0,
+            shift_m: self.shift_m,
+            yaw_rad: self.rel_yaw_rad,
+        }
+    }
+
+    /// Finger `k`'s contact at `opening_mm` with the present shift, turn and shear
+    /// (`None`: no object).
+    pub(super) fn finger_at(
+        &self,
+        k: usize,
+        opening_mm: f64,
+    ) -> Result<Option<Arc<FingerContact>>, SimError> {
+        let Some(obj) = &self.object else {
+            return Ok(None);
+        };
+        let grip = self.grip(opening_mm);
+        let shear = self.shear_n[k];
+        // The same inputs bit for bit: the same contact.
+        if let Some(m) = &self.last_contact.borrow()[k]
+            && m.grip == grip
+            && m.shear_n.map(f64::to_bits) == shear.map(f64::to_bits)
+        {
+            return Ok(Some(Arc::clone(&m.contact)));
+        }
+        let contact = Arc::new(contact_on(
+            &self.strips_of(k, obj),
+            &self.finger,
+            &self.contact,
+            obj,
+            &grip,
+            shear,
+        )?);
+        self.last_contact.borrow_mut()[k] = Some(ContactMemo {
+            grip,
+            shear_n: shear,
+            contact: Arc::clone(&contact),
+        });
+        Ok(Some(contact))
+    }
+
+    /// Finger `k`'s strips against `obj` (the object) at its present turn.
+    pub(super) fn strips_of(&self, k: usize, obj: &GraspObject) -> Arc<Strips> {
+        if let Some(s) = &self.strips.borrow()[k]
+            && s.are_for(k, self.rel_yaw_rad)
+        {
+            return Arc::clone(s);
+        }
+        let s = Arc::new(Strips::new(
+            &self.finger,
+            &self.contact,
+            obj,
+            k,
+            self.rel_yaw_rad,
+        ));
+        self.strips.borrow_mut()[k] = Some(Arc::clone(&s));
+        s
+    }
+
+    /// The larger squeeze of the two fingers at an opening, N.
+    pub(super) fn squeeze_at(&self, opening_mm: f64) -> Result<f64, SimError> {
+        let mut most = 0.0_f64;
+        for k in 0..2 {
+            if let Some(c) = self.finger_at(k, opening_mm)? {
+                most = most.max(c.squeeze_n());
+            }
+        }
+        Ok(most)
+    }
+
+    /// The true wrench on finger `k` (its sensor frame) now.
+    pub(super) fn wrench(&self, k: usize) -> Result<Wrench, SimError> {
+        Ok(self
+            .finger_at(k, self.opening_mm)?
+            .map_or(Wrench::ZERO, |c| c.contact.wrench))
+    }
+
+    /// Advances fingers and physics to `now` in steps of at most [`STEP_NS`].
+    pub(super) fn advance(&mut self, now: TimestampNs) -> Result<(), SimError> {
+        while self.last_t < now {
+            let t = TimestampNs(now.0.min(self.last_t.0.saturating_add(STEP_NS)));
+            let dt_s = (t.0 - self.last_t.0) as f64 * 1e-9;
+            self.last_t = t;
+            self.move_fingers(dt_s)?;
+            self.physics(t, dt_s)?;
+        }
+        Ok(())
+    }
+
+    /// Moves the fingers for `dt_s` at the commanded speed; stops on a squeeze that
+    /// exceeds the grip-force cap.
+    pub(super) fn move_fingers(&mut self, dt_s: f64) -> Result<(), SimError> {
+        if !self.activated {
+            return Ok(());
+        }
+        let target = opening_mm(self.cmd.position);
+        let speed =
+            SPEED_MM_S[0] + (SPEED_MM_S[1] - SPEED_MM_S[0]) * f64::from(self.cmd.speed) / 255.0;
+        let step = speed * dt_s;
+        let closing = target < self.opening_mm;
+        let next = if closing {
+            (self.opening_mm - step).max(target)
+        } else {
+            (self.opening_mm + step).min(target)
+        };
+        let cap_n = grip_force_n(self.cmd.force);
+        if closing && self.squeeze_at(next)? > cap_n {
+            // Find where the cap is reached (force grows with closing) and stop there.
+            let (mut lo, mut hi) = (next, self.opening_mm);
+            for _ in 0..30 {
+                let mid = 0.5 * (lo + hi);
+                if self.squeeze_at(mid)? > cap_n {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            self.opening_mm = hi;
+            self.status = ObjectStatus::ContactClosing;
+        } else {
+            self.opening_mm = next;
+            self.status = if (self.opening_mm - target).abs() < 1e-9 {
+                ObjectStatus::AtPosition
+            } else {
+                ObjectStatus::Moving
+            };
+        }
+        Ok(())
+    }
+
+    /// The object's shift that balances a push along G's +x, m: the squeeze on finger
+    /// 0 less that on finger 1 equals −push.
+    pub(super) fn balance_shift(&mut self, push_n: f64) -> Result<f64, SimError> {
+        let last_m = self.shift_m;
+        self.shift_m = 0.0;
+        let Some(obj) = &self.object else {
+            return Ok(0.0);
+        };
+        // Only the shift changes in here: each finger's squeeze is worked out along it
+        // (the same bits as its whole contact, at a fraction of the cost).
+        let squeezes = [0, 1].map(|k| {
+            SqueezeAlongShift::new(
+                self.strips_of(k, obj),
+                &self.contact,
+                obj,
+                &self.grip(self.opening_mm),
+                self.shear_n[k],
+            )
+        });
+        let [Ok(along_0), Ok(along_1)] = squeezes else {
+            // The whole contact says what is not finite.
+            self.finger_at(0, self.opening_mm)?;
+            self.finger_at(1, self.opening_mm)?;
+            return Ok(0.0);
+        };
+        // The normal force and squeeze of finger `k` at `shift`: where they are not
+        // finite, the whole contact's error.
+        let at = |s: &mut Self, k: usize, shift: f64| -> Result<(f64, f64), SimError> {
+            let along = if k == 0 { &along_0 } else { &along_1 };
+            match along.at(shift) {
+                Some(v) => Ok(v),
+                None => {
+                    s.shift_m = shift;
+                    Ok(s.finger_at(k, s.opening_mm)?
+                        .map_or((0.0, 0.0), |c| (c.normal_n, c.squeeze_n())))
+                }
+            }
+        };
+        // Not gripped by both fingers: the support keeps it where it is.
+        for k in 0..2 {
+            if at(self, k, 0.0)?.0 <= 0.0 {
+                self.shift_m = 0.0;
+                return Ok(0.0);
+            }
+        }
+        // Squeeze on finger 0 less that on finger 1 plus the push: grows with the shift.
+        let imbalance = |s: &mut Self, shift: f64| -> Result<f64, SimError> {
+            let a = at(s, 0, shift)?.1;
+            let b = at(s, 1, shift)?.1;
+            Ok(a - b + push_n)
+        };
+        let reach = 0.25 * self.object.as_ref().map_or(0.0, GraspObject::max_width_m);
+        // Bracket the balance around the last step's shift first (a step changes the
+        // push and the grip a little), widening to the whole reach: about half the
+        // contacts of bracketing the whole reach every step.
+        let mut half_m = if last_m.is_finite() && last_m.abs() < reach {
+            WARM_BRACKET_M
+        } else {
+            2.0 * reach
+        };
+        let (mut lo, mut hi, mut f_lo, mut f_hi);
+        let mut tries = 0;
+        loop {
+            tries += 1;
+            lo = (last_m - half_m).max(-reach);
+            hi = (last_m + half_m).min(reach);
+            if !lo.is_finite() || !hi.is_finite() || lo >= hi {
+                (lo, hi) = (-reach, reach);
+            }
+            (f_lo, f_hi) = (imbalance(self, lo)?, imbalance(self, hi)?);
+            let whole = lo <= -reach && hi >= reach;
+            // The push beats the squeeze anywhere within reach: the object sits at
+            // the end.
+            if lo <= -reach && f_lo >= 0.0 {
+                return Ok(lo);
+            }
+            if hi >= reach && f_hi <= 0.0 {
+                return Ok(hi);
+            }
+            // (A reach that is not a number never becomes whole: the tries end it.)
+            if (f_lo < 0.0 && f_hi > 0.0) || whole || tries >= 16 {
+                break;
+            }
+            half_m *= 8.0;
+        }
+        // Illinois false position: the imbalance grows smoothly with the shift, so a
+        // few steps reach 0.1 µN (30 bisections cost 60 contacts a step).
+        let mut last_side = 0;
+        let mut x = 0.0;
+        for _ in 0..60 {
+            x = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
+            if !x.is_finite() {
+                x = 0.5 * (lo + hi);
+            }
+            let f = imbalance(self, x)?;
+            if f.abs() <= 1e-7 || hi - lo <= 1e-12 {
+                break;
+            }
+            if f > 0.0 {
+                (hi, f_hi) = (x, f);
+                if last_side == 1 {
+                    f_lo *= 0.5;
+                }
+                last_side = 1;
+            } else {
+                (lo, f_lo) = (x, f);
+                if last_side == -1 {
+                    f_hi *= 0.5;
+                }
+                last_side = -1;
+            }
+        }
+        Ok(x)
+    }
+
+    /// One step of the hold's physics at `t`.
+    pub(super) fn physics(&mut self, t: TimestampNs, dt_s: f64) -> Result<(), SimError> {
+        // The wrist turns towards its target at its top speed.
+        let turn = (self.wrist_target_rad - self.wrist_rad)
+            .clamp(-WRIST_MAX_RAD_S * dt_s, WRIST_MAX_RAD_S * dt_s);
+        self.wrist_rad += turn;
+        let rel_yaw = self.object_yaw_at(t) - self.wrist_rad;
+        let d_yaw = rel_yaw - self.rel_yaw_rad;
+        self.rel_yaw_rad = rel_yaw;
+        let Some(obj) = self.object.clone() else {
+            self.shear_n = [[0.0; 2]; 2];
+            self.stick_m = [0.0; 2];
+            self.shift_m = 0.0;
+            return Ok(());
+        };
+        let t_s = t.0 as f64 * 1e-9;
+        if let Some(series) = &self.flow {
+            let u = series.speed_m_s(t_s);
+            let push_n = 0.5
+                * series.flow.density_kg_m3
+                * obj.drag_coefficient
+                * obj.drag_area_m2
+                * u
+                * u.abs();
+            self.shift_m = self.balance_shift(push_n)?;
+        }
+        let mut contacts = Vec::with_capacity(2);
+        for k in 0..2 {
+            contacts.push(self.finger_at(k, self.opening_mm)?);
+        }
+        let normal = |k: usize| contacts[k].as_ref().map_or(0.0, |c| c.normal_n);
+        let squeeze = |k: usize| contacts[k].as_ref().map_or(0.0, |c| c.squeeze_n());
+        if let Some(limit) = obj.crush_force_n
+            && squeeze(0).max(squeeze(1)) > limit
+        {
+            return self.lose(HoldState::Crushed { t });
+        }
+        let total_n = normal(0) + normal(1);
+        let capacity_n = obj.friction * total_n;
+        let mut load_n = [0.0; 2];
+        if let Some(lift) = self.lift
+            && t >= lift.t0
+        {
+            let (v, a) = lift.motion((t.0 - lift.t0.0) as f64 * 1e-9);
+            let buoyancy_n = self
+                .effects
+                .object_buoyancy_kg_m3
+                .map_or(0.0, |rho| rho * G_M_S2 * obj.volume_m3);
+            // Drag opposes the motion: a rising object is pulled down.
+            let drag_n = self.effects.object_drag_kg_m3.map_or(0.0, |rho| {
+                0.5 * rho * obj.drag_coefficient * obj.drag_area_m2 * v * v.abs()
+            });
+            let load = obj.mass_kg * (G_M_S2 + a) - buoyancy_n + drag_n;
+            if load.is_nan() || load.abs() > capacity_n {
+                return self.lose(HoldState::Slipped { t });
+            }
+            self.hold = HoldState::Held;
+            for k in 0..2 {
+                load_n[k] = load * normal(k) / total_n.max(f64::MIN_POSITIVE);
+            }
+        }
+        // The twist: an elastic stick up to the friction the load leaves, then sliding.
+        for k in 0..2 {
+            let n = normal(k);
+            let radius = contacts[k].as_ref().map_or(0.0, |c| c.radius_m);
+            if n <= 0.0 {
+                self.stick_m[k] = 0.0;
+                self.shear_n[k] = [0.0; 2];
+                continue;
+            }
+            let stiffness = SHEAR_STIFFNESS_N_PER_M * n.cbrt();
+            let room_n = ((obj.friction * n).powi(2) - load_n[k].powi(2))
+                .max(0.0)
+                .sqrt();
+            let limit_m = room_n / stiffness;
+            self.stick_m[k] = (self.stick_m[k] + radius * d_yaw).clamp(-limit_m, limit_m);
+            // The object's surface drags each finger along its own −y for a positive turn.
+            self.shear_n[k] = [-stiffness * self.stick_m[k], load_n[k]];
+        }
+        Ok(())
+    }
+
+    /// The object is gone (slipped or crushed): it pushes back no more.
+    pub(super) fn lose(&mut self, how: HoldState) -> Result<(), SimError> {
+        self.object = None;
+        self.last_contact = RefCell::default();
+        self.strips = RefCell::default();
+        self.hold = how;
+        self.shear_n = [[0.0; 2]; 2];
+        self.stick_m = [0.0; 2];
+        self.shift_m = 0.0;
+        Ok(())
+    }
+}
+
+pub(super) fn lock_state(state: &Mutex<State>) -> Result<MutexGuard<'_, State>, DeviceError> {
+    state.lock().map_err(|_| DeviceError::Fault {
+        device: "sim".into(),
+        code: None,
+        message: "simulation state poisoned by an earlier panic".into(),
+    })
+}
+
+pub(super) fn device_fault(device: &str, e: &SimError) -> DeviceError {
+    DeviceError::Fault {
+        device: device.into(),
+        code: None,
+        message: e.to_string(),
+    }
+}
