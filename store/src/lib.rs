@@ -10,7 +10,7 @@
 //! `DATABASE_URL` needed to compile).
 //!
 //! Each table's INSERT is in `rows.rs`, shared with the dataset import; runs are in
-//! `runs.rs`, the writer thread in `sync.rs`.
+//! `runs.rs`, the writer thread in `sync/`.
 
 pub mod datasets;
 mod event;

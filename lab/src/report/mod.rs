@@ -1,12 +1,14 @@
 //! `softtouch report`: one self-contained HTML page of what a database holds, for a
 //! lab notebook or a paper draft.
 //!
-//! - `data.rs`: the queries, on a read-only connection (the report never writes).
+//! - `data.rs`: the content, read through the store's read-only rows (`store::report`:
+//!   the report never writes).
 //! - `predict.rs`: predicted against true on a downsampled test split (Figure 2b).
 //! - `csv.rs`: sweep and benchmark results the database does not hold, from the CSV
 //!   files the verbs write.
 //! - `svg.rs`: the figures, inline SVG through plotters.
-//! - `page.rs`: the page, a maud template (type-checked, escapes every value).
+//! - `page/`: the page, maud templates (type-checked, escaping every value): the frame
+//!   and its style in `mod.rs`, a file per section (runs, datasets, models, sweeps).
 //!
 //! Sections: Runs, Datasets, Models, Sweeps, Land to water, Grasping; each gives its
 //! provenance (seeds, config hashes, software versions) and, when it has nothing to

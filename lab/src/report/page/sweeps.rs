@@ -1,0 +1,158 @@
+//! The page's sweeps (Table 1, the latent sweep, the model benchmark) beside the paper's figures.
+
+use super::*;
+
+pub(super) fn sweeps_section(c: &Content) -> Result<Markup, ReportError> {
+    let mut parts = Vec::new();
+    for s in &c.sweeps {
+        parts.push(sweep_part(s)?);
+    }
+    let has = |k: SweepKind| c.sweeps.iter().any(|s| s.kind == k);
+    Ok(html! {
+        section #sweeps {
+            h2 { "Sweeps" }
+            p.note { "Sweep rows are not stored in the database: the sweep verbs write CSV files, which the report reads when given with --sweep." }
+            @for p in parts { (p) }
+            @if !has(SweepKind::Alpha) {
+                (todo("No Table 1 (α sweep) given. Run it on a dataset, then pass its CSV:",
+                      &["softtouch sweep alpha --dataset land-v1 --out sweep-out",
+                        "softtouch report --out report.html --sweep sweep-out/sweep-alpha.csv"]))
+            }
+            @if !has(SweepKind::Latent) {
+                (todo("No latent-size sweep (Method S2) given. Run it, then pass its CSV:",
+                      &["softtouch sweep latent --dataset land-v1 --out sweep-out",
+                        "softtouch report --out report.html --sweep sweep-out/sweep-latent.csv"]))
+            }
+        }
+    })
+}
+
+pub(super) fn paper_row(row: &crate::report::csv::SweepRow) -> Option<(Option<f64>, Option<f64>)> {
+    let name = match row.model.as_str() {
+        "convnet" => "ConvNet",
+        "vae" => "VAE",
+        _ => "SVAE",
+    };
+    PAPER_TABLE1
+        .iter()
+        .find(|(n, a, _, _)| {
+            *n == name
+                && (name != "SVAE" || a.is_some_and(|a| (a - row.alpha).abs() <= 1e-9 * a.max(1.0)))
+        })
+        .map(|(_, _, mse, r2)| (*mse, *r2))
+}
+
+pub(super) fn sweep_part(s: &SweepFile) -> Result<Markup, ReportError> {
+    let source = html! {
+        p.prov { "From " code { (s.path.display().to_string()) } " (sha256 " code { (s.hash) } "), " (s.rows.len()) " rows (the sweep verbs train every row on one dataset's split)." }
+    };
+    Ok(match s.kind {
+        SweepKind::Alpha => {
+            let ours = [
+                Series {
+                    label: "this sweep".into(),
+                    points: s
+                        .rows
+                        .iter()
+                        .filter(|r| r.model == "svae")
+                        .map(|r| {
+                            (
+                                r.alpha.max(1e-9).log10(),
+                                r.r2_mean.map_or(f64::NAN, |v| v * 100.0),
+                            )
+                        })
+                        .collect(),
+                    style: SeriesStyle::LinePoints,
+                },
+                Series {
+                    label: "paper".into(),
+                    points: PAPER_TABLE1
+                        .iter()
+                        .filter_map(|(_, a, _, r2)| Some((a.as_ref()?.log10(), (*r2)?)))
+                        .collect(),
+                    style: SeriesStyle::LinePoints,
+                },
+            ];
+            let svg = svg::xy(
+                &Xy {
+                    title: "SVAE: test R² against α",
+                    x_label: "log10 α",
+                    y_label: "test R², mean of 6 axes, %",
+                    series: &ours,
+                    diagonal: false,
+                    y_range: None,
+                    marker_px: 3,
+                },
+                (560, 330),
+            )?;
+            html! {
+                h3 { "Table 1: α sweep" }
+                (source)
+                table {
+                    tr { th.l { "row" } th { "epochs" } th { "image MSE" } th { "paper image MSE" } th { "R², mean, %" } th { "paper R², %" } }
+                    @for (i, r) in s.rows.iter().enumerate() {
+                        @let paper = paper_row(r);
+                        tr {
+                            td.l { (r.label) } td { (r.epochs) }
+                            td data-k=(format!("sweep-alpha-{i}-mse")) { (sci(r.image_mse)) }
+                            td { (sci(paper.and_then(|p| p.0))) }
+                            td data-k=(format!("sweep-alpha-{i}-r2")) { (opt(r.r2_mean.map(|v| v * 100.0), 2)) }
+                            td { (opt(paper.and_then(|p| p.1), 2)) }
+                        }
+                    }
+                }
+                div.figs { (figure(svg)) }
+            }
+        }
+        SweepKind::Latent => {
+            let series = [Series {
+                label: "this sweep".into(),
+                points: s
+                    .rows
+                    .iter()
+                    .map(|r| (r.latent.max(1.0).log2(), r.r2_mean.unwrap_or(f64::NAN)))
+                    .collect(),
+                style: SeriesStyle::LinePoints,
+            }];
+            let svg = svg::xy(
+                &Xy {
+                    title: "SVAE: test R² against latent size",
+                    x_label: "log2 latent dimensions",
+                    y_label: "test R², mean of 6 axes",
+                    series: &series,
+                    diagonal: false,
+                    y_range: None,
+                    marker_px: 3,
+                },
+                (560, 330),
+            )?;
+            html! {
+                h3 { "Latent-size sweep (Method S2)" }
+                (source)
+                p.note { "The paper compares 6, 16, 32, 64, 128 and 256 latent dimensions and chooses 32; it publishes no numbers for the others." }
+                table {
+                    tr { th { "latent" } th { "epochs" } th { "image MSE" } th { "R², mean" } @for a in AXES { th { "R² " (a) } } }
+                    @for (i, r) in s.rows.iter().enumerate() {
+                        tr {
+                            td { (r.latent) } td { (r.epochs) } td { (sci(r.image_mse)) }
+                            td data-k=(format!("sweep-latent-{i}-r2")) { (opt(r.r2_mean, 4)) }
+                            @for v in r.r2 { td { (opt(v, 4)) } }
+                        }
+                    }
+                }
+                div.figs { (figure(svg)) }
+            }
+        }
+        SweepKind::Model => html! {
+            h3 { "Model benchmark" }
+            (source)
+            table {
+                tr { th.l { "row" } th { "input, px" } th { "width" } th { "latent" } th { "epochs" } th { "latency, ms" } th { "image MSE" } th { "R², mean" } }
+                @for r in &s.rows {
+                    tr { td.l { (r.label) } td { (r.size_px) } td { (r.width) } td { (r.latent) } td { (r.epochs) }
+                         td { (opt(r.latency_ms, 3)) } td { (sci(r.image_mse)) } td { (opt(r.r2_mean, 4)) } }
+                }
+            }
+        },
+    })
+}
