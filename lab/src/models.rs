@@ -181,10 +181,7 @@ pub(crate) fn preprocess_parallel(
         };
         let (w, h, rgb) = decode(row).map_err(frame_err)?;
         let image = table.apply(w, h, &rgb)?;
-        let label = label_from_si(
-            [row.fx_n, row.fy_n, row.fz_n],
-            [row.tx_nm, row.ty_nm, row.tz_nm],
-        );
+        let label = label_from_si(row.wrench.force_n(), row.wrench.torque_nm());
         if label.iter().any(|v| !v.is_finite()) {
             return Err(frame_err(format!("its label is not finite: {label:?}")));
         }

@@ -2,6 +2,7 @@
 //! also used by the import inside its transaction) and the reads of a dataset's
 //! members that selection, statistics and export stream.
 
+use crate::WrenchColumns;
 use crate::{Store, StoreError, now_sql, query_err, rows::seed_to_sql};
 use futures_util::TryStreamExt as _;
 use futures_util::stream::BoxStream;
@@ -15,12 +16,9 @@ pub struct Candidate {
     pub rod: String,
     pub medium: String,
     pub status: String,
-    pub fx_n: f64,
-    pub fy_n: f64,
-    pub fz_n: f64,
-    pub tx_nm: f64,
-    pub ty_nm: f64,
-    pub tz_nm: f64,
+    /// The label: mean force and torque over the window, sensor frame.
+    #[sqlx(flatten)]
+    pub wrench: WrenchColumns,
     pub sync_skew_ns: i64,
     pub reading_count: i64,
 }
@@ -56,12 +54,9 @@ pub struct ExportSample {
     pub cmd_x_m: f64,
     pub cmd_z_m: f64,
     pub cmd_theta_rad: f64,
-    pub fx_n: f64,
-    pub fy_n: f64,
-    pub fz_n: f64,
-    pub tx_nm: f64,
-    pub ty_nm: f64,
-    pub tz_nm: f64,
+    /// The label: mean force and torque over the window, sensor frame.
+    #[sqlx(flatten)]
+    pub wrench: WrenchColumns,
     pub format: String,
     pub width: i64,
     pub height: i64,
@@ -74,12 +69,9 @@ pub struct LabelRow {
     pub split: String,
     pub rod: String,
     pub medium: String,
-    pub fx_n: f64,
-    pub fy_n: f64,
-    pub fz_n: f64,
-    pub tx_nm: f64,
-    pub ty_nm: f64,
-    pub tz_nm: f64,
+    /// The label: mean force and torque over the window, sensor frame.
+    #[sqlx(flatten)]
+    pub wrench: WrenchColumns,
 }
 
 /// A dataset as stored, with its split counts.

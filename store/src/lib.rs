@@ -35,16 +35,10 @@ pub use sync::{LabelRow, OwnedNewRun, SyncStore, WriterStats, encode_for_store};
 pub use models::{Members, ModelInfo, NewModel, PairKey};
 pub use window::{WINDOW_ENCODING, decode_window, encode_window};
 
-/// A dataset member (or any sample) with its label and its frame, as the trainer's
-/// readers take it: split, identity, the label (N, N·m) and the stored frame.
-#[derive(Debug, Clone, FromRow)]
-pub struct MemberRow {
-    /// `train`, `val` or `test`.
-    pub split: String,
-    /// Its run.
-    pub run_id: i64,
-    /// Its index in the run.
-    pub sample_index: i64,
+/// A sample's label as its six stored columns (force in N, torque in N·m, in the
+/// sensor's frame), flattened into every row type that carries one.
+#[derive(Debug, Clone, Copy, PartialEq, FromRow)]
+pub struct WrenchColumns {
     /// Force x, N.
     pub fx_n: f64,
     /// Force y, N.
@@ -57,6 +51,34 @@ pub struct MemberRow {
     pub ty_nm: f64,
     /// Torque z, N·m.
     pub tz_nm: f64,
+}
+
+impl WrenchColumns {
+    /// Force, N.
+    #[must_use]
+    pub fn force_n(&self) -> [f64; 3] {
+        [self.fx_n, self.fy_n, self.fz_n]
+    }
+    /// Torque, N·m.
+    #[must_use]
+    pub fn torque_nm(&self) -> [f64; 3] {
+        [self.tx_nm, self.ty_nm, self.tz_nm]
+    }
+}
+
+/// A dataset member (or any sample) with its label and its frame, as the trainer's
+/// readers take it: split, identity, the label (N, N·m) and the stored frame.
+#[derive(Debug, Clone, FromRow)]
+pub struct MemberRow {
+    /// `train`, `val` or `test`.
+    pub split: String,
+    /// Its run.
+    pub run_id: i64,
+    /// Its index in the run.
+    pub sample_index: i64,
+    /// The label: mean force and torque over the window, sensor frame.
+    #[sqlx(flatten)]
+    pub wrench: WrenchColumns,
     /// The frame's format as stored.
     pub format: String,
     /// Width, px.

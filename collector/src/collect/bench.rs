@@ -313,7 +313,12 @@ pub async fn sweep_point(
             .wrench(&row.rod, &pose)
             .map_err(|e| BenchError::Sim(e.to_string()))?;
         let got = [
-            row.fx_n, row.fy_n, row.fz_n, row.tx_nm, row.ty_nm, row.tz_nm,
+            row.wrench.fx_n,
+            row.wrench.fy_n,
+            row.wrench.fz_n,
+            row.wrench.tx_nm,
+            row.wrench.ty_nm,
+            row.wrench.tz_nm,
         ];
         let want = w.to_array();
         for i in 0..3 {

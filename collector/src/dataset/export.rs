@@ -245,11 +245,11 @@ async fn write_into(
         let split: Split = r.split.parse().map_err(DatasetError::Invalid)?;
         let mut line = String::with_capacity(200);
         csv::push_field(&mut line, &image);
-        for v in [r.fx_n, r.fy_n, r.fz_n] {
+        for v in r.wrench.force_n() {
             line.push(',');
             line.push_str(&csv::number(v));
         }
-        for v in [r.tx_nm, r.ty_nm, r.tz_nm] {
+        for v in r.wrench.torque_nm() {
             line.push(',');
             line.push_str(&csv::nm_to_nmm_text(v));
         }

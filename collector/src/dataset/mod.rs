@@ -197,8 +197,8 @@ impl Filters {
     }
 
     fn accepts(&self, s: &Candidate) -> bool {
-        let force = [s.fx_n, s.fy_n, s.fz_n];
-        let torque_nmm = [s.tx_nm, s.ty_nm, s.tz_nm].map(|t| t * 1000.0);
+        let force = s.wrench.force_n();
+        let torque_nmm = s.wrench.torque_nm().map(|t| t * 1000.0);
         (self.include_rejected || s.status == "ok")
             && self.medium.is_none_or(|m| s.medium == m.as_str())
             && (self.rods.is_empty() || self.rods.contains(&s.rod))

@@ -65,12 +65,12 @@ pub async fn compute(store: &Store, name: &str) -> Result<Stats, DatasetError> {
         per_rod.entry(r.rod).or_default()[k] += 1;
         per_medium.entry(r.medium).or_default()[k] += 1;
         let row = [
-            r.fx_n,
-            r.fy_n,
-            r.fz_n,
-            r.tx_nm * 1000.0,
-            r.ty_nm * 1000.0,
-            r.tz_nm * 1000.0,
+            r.wrench.fx_n,
+            r.wrench.fy_n,
+            r.wrench.fz_n,
+            r.wrench.tx_nm * 1000.0,
+            r.wrench.ty_nm * 1000.0,
+            r.wrench.tz_nm * 1000.0,
         ];
         for (v, x) in values.iter_mut().zip(row) {
             v.push(x);

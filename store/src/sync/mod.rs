@@ -19,6 +19,7 @@ use super::{
     Appended, EventLevel, FrameRecord, LeaseHolder, LeaseTaken, NewRun, RunId, RunRecord,
     RunStatus, Store, StoreError,
 };
+use crate::WrenchColumns;
 use softtouch_drivers::Frame;
 use softtouch_schemas::{FrameFormat, FrameMeta, FtReading, Medium, Sample, TimestampNs};
 use std::path::Path;
@@ -122,18 +123,9 @@ pub struct LabelRow {
     pub cmd_z_m: f64,
     /// Commanded pose.
     pub cmd_theta_rad: f64,
-    /// Mean force, N.
-    pub fx_n: f64,
-    /// Mean force, N.
-    pub fy_n: f64,
-    /// Mean force, N.
-    pub fz_n: f64,
-    /// Mean torque, N·m.
-    pub tx_nm: f64,
-    /// Mean torque, N·m.
-    pub ty_nm: f64,
-    /// Mean torque, N·m.
-    pub tz_nm: f64,
+    /// The label: mean force and torque over the window, sensor frame.
+    #[sqlx(flatten)]
+    pub wrench: WrenchColumns,
 }
 
 /// [`NewRun`] with owned fields, to cross threads.
