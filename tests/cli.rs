@@ -254,3 +254,84 @@ fn sim_netft_serves_the_simulated_sensor_to_a_real_net_ft_client() {
             .all(|w| w[1].rdt_sequence == w[0].rdt_sequence.wrapping_add(1))
     );
 }
+
+#[test]
+fn a_file_that_is_not_a_database_is_named_as_such_and_left_as_it_was() {
+    let dir = tempdir();
+    let d = dir.path();
+    let db = d.join("softtouch.db");
+    std::fs::write(&db, "lab notes, not a database\n").unwrap_or_else(|e| panic!("{e}"));
+    for args in [
+        &["runs"][..],
+        &["status"],
+        &["report", "--out", "r.html"],
+        &["db", "init"],
+        &["collect", "--samples", "2"],
+        &["dataset", "list"],
+    ] {
+        let out = softtouch(d, args);
+        common::fails_with(&out, 2, "softtouch.db is not a SQLite database");
+        assert!(
+            text(&out.stderr).contains("it starts with \"lab notes, not a"),
+            "{args:?}: {}",
+            text(&out.stderr)
+        );
+    }
+    assert_eq!(
+        std::fs::read_to_string(&db).unwrap_or_default(),
+        "lab notes, not a database\n"
+    );
+    assert!(!d.join("r.html").exists());
+}
+
+#[test]
+fn an_empty_file_is_refused_by_readers_and_set_up_by_db_init_saying_so() {
+    let dir = tempdir();
+    let d = dir.path();
+    let db = d.join("softtouch.db");
+    std::fs::write(&db, "").unwrap_or_else(|e| panic!("{e}"));
+    for args in [&["runs"][..], &["report", "--out", "r.html"], &["models"]] {
+        common::fails_with(
+            &softtouch(d, args),
+            2,
+            "softtouch.db is an empty file, not a database: `softtouch --db softtouch.db db init` sets it up",
+        );
+    }
+    assert_eq!(std::fs::metadata(&db).map(|m| m.len()).unwrap_or(1), 0);
+    let out = softtouch(d, &["db", "init"]);
+    assert!(common::ok(&out).contains("ready"));
+    assert!(
+        text(&out.stderr)
+            .contains("softtouch.db is an empty file: setting it up as a new database"),
+        "{}",
+        text(&out.stderr)
+    );
+    assert!(common::ok(&softtouch(d, &["runs"])).contains("no runs"));
+}
+
+#[test]
+fn collect_says_the_disk_it_needs_status_the_size_per_sample_and_the_db_file_alone_is_complete() {
+    let dir = tempdir();
+    let d = dir.path();
+    let db = d.join("softtouch.db");
+    let out = common::ok(&softtouch(d, &["collect", "--samples", "3", "--seed", "1"]));
+    // No samples yet: the figure is assumed, and said to be.
+    assert!(
+        out.contains("disk: about 660 kB for 3 samples (220 kB a sample, assumed until this database holds samples);"),
+        "{out}"
+    );
+    let status = common::ok(&softtouch(d, &["status"]));
+    let first = status.lines().next().unwrap_or_default();
+    assert!(first.starts_with("database softtouch.db: "), "{status}");
+    assert!(first.contains(", 3 samples, "), "{status}");
+    assert!(first.ends_with(" a sample"), "{status}");
+    // A second run measures on the database itself.
+    let out = common::ok(&softtouch(d, &["collect", "--samples", "2", "--seed", "2"]));
+    assert!(out.contains("measured over the 3 samples stored"), "{out}");
+    // The `.db` file alone holds every commit once the binary has exited.
+    assert_eq!(softtouch_collector::store::file::db_size(&db).wal_bytes, 0);
+    let backup = d.join("backup.db");
+    std::fs::copy(&db, &backup).unwrap_or_else(|e| panic!("{e}"));
+    let status = common::ok(&softtouch(d, &["--db", "backup.db", "status"]));
+    assert!(status.contains(", 5 samples, "), "{status}");
+}

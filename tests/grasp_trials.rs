@@ -114,6 +114,13 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
     let out = ok(&trials(d, &base));
     assert!(out.contains("grasp session 1"), "{out}");
     assert!(out.contains("Wilson 95%"), "{out}");
+    // Once the binary has exited, the `.db` file alone holds the session: a backup
+    // that copies it alone misses nothing (the log was left holding it before).
+    let wal = softtouch_collector::store::file::db_size(&db).wal_bytes;
+    assert_eq!(wal, 0, "the write-ahead log still holds {wal} bytes");
+    let backup = d.join("backup.db");
+    std::fs::copy(&db, &backup).unwrap_or_else(|e| panic!("copy: {e}"));
+    assert_eq!(rt.block_on(session_rows(&backup, 1)).len(), 16);
     // The wall time of the 16 trials, one row per medium and mode with 4 trials each.
     let timing = out
         .split("wall time of the trials run now")

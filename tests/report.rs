@@ -353,12 +353,12 @@ fn bad_input_exits_2_naming_what_is_wrong() {
         "is the database itself",
     );
     assert!(!d.join("r.html").exists(), "nothing written on bad input");
-    // Not a softtouch database (or one older than this build): refused, not migrated.
+    // An empty file is no database: named as such, and left empty.
     std::fs::write(d.join("other.db"), b"").unwrap_or_else(|e| panic!("{e}"));
     fails_with(
         &softtouch(d, &["--db", "other.db", "report", "--out", "r.html"]),
         2,
-        "is at schema 0",
+        "other.db is an empty file, not a database",
     );
     assert_eq!(
         std::fs::metadata(d.join("other.db"))
@@ -366,4 +366,27 @@ fn bad_input_exits_2_naming_what_is_wrong() {
             .unwrap_or(1),
         0
     );
+    // A SQLite database that is not a softtouch one (or older than this build):
+    // refused, not migrated.
+    let foreign = d.join("foreign.db");
+    runtime().block_on(async {
+        let options = sqlx::sqlite::SqliteConnectOptions::new()
+            .filename(&foreign)
+            .create_if_missing(true);
+        let mut conn = sqlx::ConnectOptions::connect(&options)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        sqlx::query("CREATE TABLE notes (text TEXT)")
+            .execute(&mut conn)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        sqlx::Connection::close(conn).await.ok();
+    });
+    let before = std::fs::read(&foreign).unwrap_or_default();
+    fails_with(
+        &softtouch(d, &["--db", "foreign.db", "report", "--out", "r.html"]),
+        2,
+        "is at schema 0",
+    );
+    assert_eq!(std::fs::read(&foreign).unwrap_or_default(), before);
 }

@@ -150,6 +150,11 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
             db.display()
         )));
     }
+    // The disk a run takes is said, and checked, before anything is written.
+    let stored = stored_samples(db).await?;
+    if args.resume.is_none() && args.samples.unwrap_or(0) > 0 {
+        check_disk(db, stored, args.samples.unwrap_or(0), out)?;
+    }
     let store = SyncStore::open(db)?;
     let plan = if let Some(run_id) = args.resume {
         match CollectPlan::resume_with_rig(&store, run_id, args.rig.as_deref())
@@ -175,6 +180,12 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
     };
 
     let run_id = plan.run_id;
+    if args.resume.is_some()
+        && let Err(e) = check_disk(db, stored, plan.remaining(), out)
+    {
+        store.close();
+        return Err(e);
+    }
     // A resumed run's clock continues the run's device time.
     let (devices, clock) = match build_run_devices(&store, &plan).await {
         Ok(built) => built,
@@ -240,6 +251,30 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
     }
 }
 
+/// Samples the database at `db` holds (0 when there is no database yet).
+async fn stored_samples(db: &Path) -> Result<u64, Failure> {
+    if softtouch_store::file::inspect(db)? != softtouch_store::file::DbFile::Sqlite {
+        return Ok(0);
+    }
+    let store = softtouch_store::Store::open_existing(db).await?;
+    let n = store.stored_samples().await;
+    store.close().await;
+    Ok(n?)
+}
+
+/// Says what the run will take on disk and refuses one that would not fit.
+fn check_disk(db: &Path, stored: u64, samples: u64, out: &mut dyn Write) -> Result<(), Failure> {
+    let disk = softtouch_collector::collect::disk::plan(db, stored, samples)?;
+    if !disk.fits() {
+        return Err(Failure::Runtime(anyhow!(
+            "not enough disk for {samples} samples beside {}: {}; free some space, collect fewer (--samples) or use a database elsewhere (--db)",
+            db.display(),
+            disk.describe()
+        )));
+    }
+    writeln!(out, "disk: {}", disk.describe()).map_err(io_failure)
+}
+
 /// A run made with `--poses-from` is checked against its source pose by pose once it
 /// is complete (and after a completed resume): `(source, pairs)`, or `None` for a run
 /// with poses of its own.
@@ -253,7 +288,21 @@ fn check_pairing(store: &SyncStore, run_id: i64) -> Result<Option<(i64, u64)>, F
 pub async fn run_status(db: &Path, run: Option<i64>, out: &mut dyn Write) -> Result<(), Failure> {
     let store = open_existing(db).await?;
     let runs = store.runs().await?;
-    let mut text = String::new();
+    let stored = store.stored_samples().await?;
+    let size = softtouch_store::file::db_size(db);
+    let human = softtouch_collector::collect::disk::human_bytes;
+    let mut text = format!(
+        "database {}: {} ({} file + {} write-ahead log), {stored} samples{}\n",
+        db.display(),
+        human(size.total()),
+        human(size.file_bytes),
+        human(size.wal_bytes),
+        if stored > 0 {
+            format!(", {} a sample", human(size.total().div_ceil(stored)))
+        } else {
+            String::new()
+        }
+    );
     let mut any = false;
     for r in runs.iter().filter(|r| run.is_none_or(|id| id == r.run_id)) {
         any = true;

@@ -245,9 +245,10 @@ impl From<softtouch_schemas::ConfigError> for Failure {
 
 impl From<softtouch_store::StoreError> for Failure {
     fn from(e: softtouch_store::StoreError) -> Self {
-        match e {
-            softtouch_store::StoreError::NoSuchRun(_) => Self::BadInput(e.into()),
-            other => Self::Runtime(other.into()),
+        if e.is_bad_input() {
+            Self::BadInput(e.into())
+        } else {
+            Self::Runtime(e.into())
         }
     }
 }
@@ -306,17 +307,11 @@ pub async fn run(cli: Cli, out: &mut dyn std::io::Write) -> Result<(), Failure> 
 }
 
 /// Open an existing database (never creates one: a typo in `--db` should not leave an
-/// empty database behind).
+/// empty database behind; an empty file or one that is not a database is refused).
 pub(crate) async fn open_existing(
     path: &std::path::Path,
 ) -> Result<softtouch_store::Store, Failure> {
-    if !path.exists() {
-        return Err(Failure::BadInput(anyhow::anyhow!(
-            "no database at {}: create it with `softtouch db init` (or pass --db PATH)",
-            path.display()
-        )));
-    }
-    Ok(softtouch_store::Store::open(path).await?)
+    Ok(softtouch_store::Store::open_existing(path).await?)
 }
 
 /// Write to the output, treating a closed pipe (`softtouch runs | head`) as a runtime failure.

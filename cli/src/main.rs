@@ -112,8 +112,13 @@ fn main() -> ExitCode {
             return ExitCode::from(cli::EXIT_RUNTIME);
         }
     };
+    let db = cli.db.clone();
     let mut stdout = std::io::stdout().lock();
-    match runtime.block_on(cli::run(cli, &mut stdout)) {
+    let result = runtime.block_on(cli::run(cli, &mut stdout));
+    // Every connection the verb left is gone with its runtime.
+    drop(runtime);
+    fold_write_ahead_log(&db);
+    match result {
         Ok(()) => {
             tracing::info!("finished");
             ExitCode::from(cli::EXIT_OK)
@@ -125,6 +130,31 @@ fn main() -> ExitCode {
             tracing::info!(exit_code = failure.exit_code(), "failed: {message}");
             ExitCode::from(failure.exit_code())
         }
+    }
+}
+
+/// However the verb ended, the `.db` file alone holds every commit once the binary
+/// exits, so a backup may copy it alone: the write-ahead log is folded into it (on a
+/// fresh runtime: the verb's clock may have been paused). Another process with the
+/// database open (a live collection) keeps its log; it is folded when that one closes.
+fn fold_write_ahead_log(db: &Path) {
+    if softtouch_store::file::db_size(db).wal_bytes == 0 {
+        return;
+    }
+    let Ok(rt) = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    else {
+        return;
+    };
+    let wait = std::time::Duration::from_millis(200);
+    match rt.block_on(softtouch_store::file::checkpoint(db, wait)) {
+        Ok(c) if !c.complete => tracing::info!(
+            "{}: another process has the database open; its write-ahead log stays until that one closes",
+            db.display()
+        ),
+        Ok(_) => {}
+        Err(e) => tracing::debug!("checkpoint of {} at exit: {e}", db.display()),
     }
 }
 

@@ -14,6 +14,7 @@
 
 pub mod datasets;
 mod event;
+pub mod file;
 mod grasp;
 mod models;
 pub mod report;
@@ -104,6 +105,34 @@ pub type RunId = i64;
 /// The store failed.
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
+    /// The path holds something other than a SQLite database.
+    #[error(
+        "{} is not a SQLite database (it starts with \"{starts_with}\", not \"SQLite format 3\"): pass --db with the database's path, or move this file away",
+        path.display()
+    )]
+    NotADatabase {
+        /// The file.
+        path: PathBuf,
+        /// Its first bytes, escaped.
+        starts_with: String,
+    },
+    /// The path is an empty file where a database was expected.
+    #[error(
+        "{} is an empty file, not a database: `softtouch --db {} db init` sets it up as a new one",
+        path.display(), path.display()
+    )]
+    EmptyFile {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The file (not the database in it) cannot be read or asked about.
+    #[error("{}: {why}", path.display())]
+    File {
+        /// The file or folder.
+        path: PathBuf,
+        /// Why.
+        why: String,
+    },
     /// Opening or migrating the database failed.
     #[error("cannot open database {path}: {source}")]
     Open {
@@ -148,6 +177,9 @@ pub enum StoreError {
         /// Where, and what was found instead of what was expected.
         why: String,
     },
+    /// No database where one must be.
+    #[error("no database at {}: create it with `softtouch db init` (or pass --db PATH)", .0.display())]
+    NoDatabase(PathBuf),
     /// No such run.
     #[error("no run {0} in this database")]
     NoSuchRun(RunId),
@@ -181,6 +213,21 @@ pub enum StoreError {
         /// The first difference.
         why: String,
     },
+}
+
+impl StoreError {
+    /// Whether the user's input is at fault (a path or run that is not there, a file
+    /// that is not a database) rather than the machine.
+    #[must_use]
+    pub const fn is_bad_input(&self) -> bool {
+        matches!(
+            self,
+            Self::NoSuchRun(_)
+                | Self::NoDatabase(_)
+                | Self::EmptyFile { .. }
+                | Self::NotADatabase { .. }
+        )
+    }
 }
 
 /// Maps a query's error to [`StoreError::Query`], saying what was being done.
@@ -265,8 +312,44 @@ fn to_i64(what: &'static str, v: u64) -> Result<i64, StoreError> {
 }
 
 impl Store {
-    /// Open (creating if missing) and migrate the database at `path`.
+    /// Open (creating if missing) and migrate the database at `path`. An empty file
+    /// is set up as a new database, with a warning saying so; a file that is not a
+    /// database is refused.
+    ///
+    /// # Errors
+    /// [`StoreError::NotADatabase`], or SQLite's refusal to open or migrate it.
     pub async fn open(path: &Path) -> Result<Self, StoreError> {
+        match file::inspect(path)? {
+            file::DbFile::NotSqlite { starts_with } => {
+                return Err(file::not_a_database(path, starts_with));
+            }
+            file::DbFile::Empty => tracing::warn!(
+                "{} is an empty file: setting it up as a new database",
+                path.display()
+            ),
+            file::DbFile::Missing | file::DbFile::Sqlite => {}
+        }
+        Self::connect(path).await
+    }
+
+    /// Open and migrate the database that must already be at `path`: a missing or empty
+    /// file is an error (a mistyped `--db` leaves no new database behind).
+    ///
+    /// # Errors
+    /// [`StoreError::NoDatabase`], [`StoreError::EmptyFile`],
+    /// [`StoreError::NotADatabase`], or SQLite's refusal.
+    pub async fn open_existing(path: &Path) -> Result<Self, StoreError> {
+        match file::inspect(path)? {
+            file::DbFile::Sqlite => Self::connect(path).await,
+            file::DbFile::Missing => Err(StoreError::NoDatabase(path.to_owned())),
+            file::DbFile::Empty => Err(StoreError::EmptyFile {
+                path: path.to_owned(),
+            }),
+            file::DbFile::NotSqlite { starts_with } => Err(file::not_a_database(path, starts_with)),
+        }
+    }
+
+    async fn connect(path: &Path) -> Result<Self, StoreError> {
         let options = SqliteConnectOptions::new()
             .filename(path)
             .create_if_missing(true)
@@ -331,9 +414,26 @@ impl Store {
         &self.pool
     }
 
-    /// Close the pool, flushing the WAL.
+    /// Close the pool after folding the write-ahead log into the database file, so
+    /// that the `.db` file alone holds everything committed (when another process has
+    /// the database open the log stays, and is folded in by whoever closes last).
     pub async fn close(self) {
+        if let Err(e) = file::checkpoint_on(&self.pool).await {
+            tracing::debug!("checkpoint on close of {}: {e}", self.path.display());
+        }
         self.pool.close().await;
+    }
+
+    /// How many samples the database holds, over every run.
+    ///
+    /// # Errors
+    /// The query fails.
+    pub async fn stored_samples(&self) -> Result<u64, StoreError> {
+        let n: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM samples")
+            .fetch_one(&self.pool)
+            .await
+            .map_err(query_err("counting samples"))?;
+        Ok(u64::try_from(n).unwrap_or(0))
     }
 
     /// Append a sample with its frame and raw window, in one transaction.

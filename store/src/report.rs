@@ -5,7 +5,7 @@
 //! even a bug here cannot change it. No migration runs either; a database older
 //! than this build is refused with the command that migrates it.
 
-use crate::{MemberRow, RunSummary, Store, run_counts_columns, run_counts_from};
+use crate::{MemberRow, RunSummary, Store, StoreError, run_counts_columns, run_counts_from};
 use sqlx::sqlite::{SqliteConnectOptions, SqlitePool, SqlitePoolOptions};
 use sqlx::{FromRow, Row as _};
 use std::collections::BTreeMap;
@@ -18,6 +18,9 @@ pub enum ReadError {
     /// No database file.
     #[error("no database at {}: collect with `softtouch collect` (or pass --db PATH)", .0.display())]
     NoDatabase(PathBuf),
+    /// The path holds something else, or an empty file (the store's message).
+    #[error(transparent)]
+    NotADatabase(Box<StoreError>),
     /// The database cannot be opened.
     #[error("cannot open database {} read-only: {source}", path.display())]
     Open {
@@ -63,7 +66,11 @@ impl ReadError {
     pub const fn is_bad_input(&self) -> bool {
         matches!(
             self,
-            Self::NoDatabase(_) | Self::Schema { .. } | Self::NoSuchRun(_) | Self::NoSuchModel(_)
+            Self::NoDatabase(_)
+                | Self::NotADatabase(_)
+                | Self::Schema { .. }
+                | Self::NoSuchRun(_)
+                | Self::NoSuchModel(_)
         )
     }
 }
@@ -90,8 +97,19 @@ impl ReadOnly {
 /// # Errors
 /// No file, a file that does not open, an older schema.
 pub async fn open_read_only(path: &Path) -> Result<ReadOnly, ReadError> {
-    if !path.is_file() {
-        return Err(ReadError::NoDatabase(path.to_owned()));
+    match crate::file::inspect(path).map_err(|e| ReadError::NotADatabase(Box::new(e)))? {
+        crate::file::DbFile::Sqlite => {}
+        crate::file::DbFile::Missing => return Err(ReadError::NoDatabase(path.to_owned())),
+        crate::file::DbFile::Empty => {
+            return Err(ReadError::NotADatabase(Box::new(StoreError::EmptyFile {
+                path: path.to_owned(),
+            })));
+        }
+        crate::file::DbFile::NotSqlite { starts_with } => {
+            return Err(ReadError::NotADatabase(Box::new(
+                crate::file::not_a_database(path, starts_with),
+            )));
+        }
     }
     let options = SqliteConnectOptions::new()
         .filename(path)

@@ -39,6 +39,7 @@
 pub mod bench;
 pub mod bench_out;
 pub mod devices;
+pub mod disk;
 mod finish;
 pub mod plan;
 mod procedure;
