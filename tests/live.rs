@@ -20,6 +20,8 @@ fn rig_check_passes_every_device_of_the_simulated_rig() {
     assert!(!out.contains("FAIL"), "{out}");
     // The stream's measured rate is printed against the configured 1000 Hz.
     assert!(out.contains("of 1000 Hz configured"), "{out}");
+    // The arm has moved, not only answered.
+    assert!(out.contains("moved 1 mm up and back"), "{out}");
 }
 
 #[test]

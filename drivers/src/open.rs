@@ -115,15 +115,13 @@ pub async fn real_arm(
 ) -> Result<Option<Box<dyn Arm>>, DeviceError> {
     Ok(match d {
         ArmDevice::Sim { .. } => None,
-        ArmDevice::Franka {
-            address,
-            reflex_force_n,
-        } => {
-            let config = crate::franka::FrankaConfig {
-                address: address.clone(),
-                reflex_force_n: *reflex_force_n,
-                limits: crate::franka::MotionLimits::default(),
-            };
+        d @ ArmDevice::Franka { .. } => {
+            let config = crate::franka::FrankaConfig::from_rig(d).ok_or_else(|| {
+                DeviceError::InvalidCommand {
+                    device: "franka".into(),
+                    message: "not a franka table".into(),
+                }
+            })?;
             Some(Box::new(
                 crate::franka::FrankaArm::connect(config, clock).await?,
             ))

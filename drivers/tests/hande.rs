@@ -106,6 +106,69 @@ async fn a_major_fault_needs_a_new_activation_edge() {
     g.command(CLOSE).await.expect("moves again");
 }
 
+#[tokio::test(start_paused = true)]
+async fn activation_waits_out_a_slow_reset_and_the_stale_fault_before_it() {
+    // A gripper that takes 80 ms to act on an rACT edge: right after rACT 0 it still
+    // reads active, and right after rACT 1 it still shows the old major fault.
+    let service = sim_service().with_edge_latency(Duration::from_millis(80));
+    let (mut g, _clock) = pipe_pair(service.clone());
+    g.activate().await.expect("first activation");
+    service.inject_fault(0x0E);
+    assert_eq!(g.status().await.expect("status").fault, 0x0E);
+    g.activate()
+        .await
+        .expect("re-activation waits for the reset, then the edge");
+    let s = g.status().await.expect("status");
+    assert!(s.activated && s.fault == 0, "{s:?}");
+    g.command(CLOSE).await.expect("moves again");
+    assert_eq!(wait_until_still(&mut g).await.position, 255);
+}
+
+#[tokio::test(start_paused = true)]
+async fn activating_an_active_gripper_only_reads_its_status() {
+    let service = sim_service();
+    let (mut g, _clock) = pipe_pair(service.clone());
+    g.activate().await.expect("activate");
+    g.command(CLOSE).await.expect("close");
+    let held = wait_until_still(&mut g).await;
+    let before = service.requests();
+    g.activate().await.expect("again");
+    assert_eq!(service.requests(), before + 1, "one status read, no reset");
+    let s = g.status().await.expect("status");
+    assert_eq!((s.position, s.requested_position), (held.position, 255));
+}
+
+#[tokio::test(start_paused = true)]
+async fn an_activation_that_never_completes_names_the_fault_it_ends_on() {
+    // Edges that are never acted on within the limit: the gripper keeps its fault.
+    let service = sim_service().with_edge_latency(Duration::from_secs(3600));
+    let (a, b) = tokio::io::duplex(1024);
+    tokio::spawn(hande::serve_rtu(service.clone(), b, std::future::pending()));
+    let config = HandEConfig {
+        activation_timeout: Duration::from_secs(2),
+        ..HandEConfig::default()
+    };
+    let mut g = HandE::new(a, config, Arc::new(TokioClock::new()));
+    service.inject_fault(0x0D);
+    let e = g.activate().await.expect_err("never activates");
+    assert!(
+        matches!(
+            e,
+            DeviceError::Fault {
+                code: Some(0x0D),
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let text = e.to_string();
+    assert!(
+        text.contains("activation did not complete within 2000 ms"),
+        "{text}"
+    );
+    assert!(text.contains("activation fault"), "{text}");
+}
+
 #[tokio::test]
 async fn works_over_a_pty_pair_with_the_tokio_modbus_rtu_server() {
     let Some(pair) = common::pty_pair() else {

@@ -27,7 +27,9 @@ pub mod wrench;
 
 pub use config::{ConfigError, ConfigSource};
 pub use geometry::{ArmPose, ContactPose, Range};
-pub use rig::{ArmDevice, CameraDevice, ForceSensorDevice, GripperDevice, RigConfig};
+pub use rig::{
+    ArmDevice, CameraDevice, ForceSensorDevice, GripperDevice, Payload, Realtime, RigConfig,
+};
 pub use sample::{FrameFormat, FrameMeta, Sample, SampleStatus};
 pub use scene::{Effect, Medium, RodShape, RodSpec, SceneSpec};
 pub use time::{DurationNs, TimestampNs};

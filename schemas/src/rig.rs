@@ -40,15 +40,65 @@ pub enum ArmDevice {
         /// Contact force above which the simulated arm raises a reflex, N.
         reflex_force_n: f64,
     },
-    /// A Franka Emika Panda over FCI (franka-rs).
+    /// A Franka Emika Panda (FCI v5) or Franka Research 3 (FCI v10) over FCI
+    /// (franka-rs): the version is the one the robot answers with.
     Franka {
         /// The robot's address, e.g. `172.16.0.2`.
         address: String,
         /// Upper force threshold of the collision behaviour, N: above it the robot
         /// reflex-stops. The library's defaults are below what pressing reaches.
         reflex_force_n: f64,
+        /// Upper Cartesian torque threshold of the collision behaviour, N·m. Absent:
+        /// 0.1 m × `reflex_force_n` (a force at the end effector makes no torque about
+        /// it; set `end_effector` so that the contact is there).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        reflex_torque_nm: Option<f64>,
+        /// The control thread's scheduling: `enforce` (default: a PREEMPT_RT kernel and
+        /// SCHED_FIFO priority, or the connection is refused) or `ignore` (any kernel;
+        /// the 1 kHz loop misses cycles under load and the robot ends in
+        /// `communication_constraints_violation`: for a first look, never for a night).
+        #[serde(default)]
+        realtime: Realtime,
+        /// The finger's contact frame in the frame of the end effector Desk is set to
+        /// (`NE_T_EE`, applied with `set_ee` at connect). Absent: Desk's end effector
+        /// is used as it is, and must then be the finger.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        end_effector: Option<Box<ArmPose>>,
+        /// What hangs on the flange beyond Desk's end effector (the finger, its mount,
+        /// the F/T sensor), applied with `set_load` at connect so that it does not bias
+        /// the external-force estimate. Absent: none.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        payload: Option<Box<Payload>>,
     },
 }
+
+/// How the Franka's control thread is scheduled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Realtime {
+    /// A real-time kernel and SCHED_FIFO priority are required.
+    #[default]
+    Enforce,
+    /// Run on any kernel, warned about at every connect.
+    Ignore,
+}
+
+/// A load on the flange (libfranka's `setLoad`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Payload {
+    /// Mass, kg (a Panda carries at most 3).
+    pub mass_kg: f64,
+    /// Centre of mass in the flange frame, m.
+    pub com_in_flange_m: [f64; 3],
+    /// Inertia about the centre of mass, kg·m², a symmetric 3×3 (row- and column-major
+    /// alike). Absent: a point mass.
+    #[serde(default)]
+    pub inertia_kg_m2: [f64; 9],
+}
+
+/// The most a Panda's flange carries, kg.
+pub const FRANKA_MAX_PAYLOAD_KG: f64 = 3.0;
 
 /// The force/torque sensor's driver.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -351,9 +401,52 @@ impl Validate for RigConfig {
             ArmDevice::Franka {
                 address,
                 reflex_force_n,
+                reflex_torque_nm,
+                realtime: _,
+                end_effector,
+                payload,
             } => {
                 non_empty(c, "arm.address", address);
                 c.positive("arm.reflex_force_n", *reflex_force_n, "N");
+                if let Some(t) = reflex_torque_nm {
+                    c.positive("arm.reflex_torque_nm", *t, "N·m");
+                }
+                if let Some(ee) = end_effector {
+                    let far = ee.translation_m.iter().any(|v| v.abs() > 0.5);
+                    if !ee.is_valid() || far {
+                        c.fail(
+                            "arm.end_effector",
+                            format!(
+                                "expected finite translation_m within 0.5 m per axis and a finite, non-zero rotation_wxyz (normalised on use), found {:?} m, {:?}",
+                                ee.translation_m, ee.rotation_wxyz
+                            ),
+                        );
+                    }
+                }
+                if let Some(p) = payload {
+                    c.within(
+                        "arm.payload.mass_kg",
+                        p.mass_kg,
+                        0.0,
+                        FRANKA_MAX_PAYLOAD_KG,
+                        "kg",
+                    );
+                    for (i, v) in p.com_in_flange_m.iter().enumerate() {
+                        c.within(
+                            &format!("arm.payload.com_in_flange_m[{i}]"),
+                            *v,
+                            -0.5,
+                            0.5,
+                            "m",
+                        );
+                    }
+                    if p.inertia_kg_m2.iter().any(|v| !v.is_finite()) {
+                        c.fail(
+                            "arm.payload.inertia_kg_m2",
+                            "expected 9 finite values, kg·m²",
+                        );
+                    }
+                }
             }
         }
         match &self.force_sensor {
@@ -553,21 +646,51 @@ impl Validate for RigConfig {
             );
         }
         // A window of length w on a grid of period 1/rate holds at most rate·w + 1
-        // readings: more can never be met, and every sample would be rejected.
+        // readings: more can never be met, and every sample would be rejected. The
+        // rate is the slowest a working sensor streams (an ATI serial box's baud rate
+        // caps it far below what the box can do).
         let rate_hz = self.force_sensor.rate_hz();
-        if rate_hz.is_finite() && p.ft_window_s.is_finite() && rate_hz > 0.0 {
-            let most = (rate_hz * p.ft_window_s).floor() + 1.0;
+        let least_hz = self.force_sensor.least_rate_hz();
+        let why = if least_hz < rate_hz {
+            format!(
+                "the slowest rate of force_sensor: {least_hz:.1} Hz, what its baud rate carries"
+            )
+        } else {
+            format!("force_sensor rate {least_hz} Hz")
+        };
+        if least_hz.is_finite() && p.ft_window_s.is_finite() && least_hz > 0.0 {
+            let most = (least_hz * p.ft_window_s).floor() + 1.0;
             if f64::from(p.min_window_readings) > most {
+                let window_s = (f64::from(p.min_window_readings) - 1.0) / least_hz;
                 c.fail(
                     "procedure.min_window_readings",
                     format!(
-                        "expected at most {most} readings (force_sensor rate {rate_hz} Hz × procedure.ft_window_s {} s, + 1), found {}",
-                        p.ft_window_s, p.min_window_readings
+                        "expected at most {most} readings ({why} × procedure.ft_window_s {} s, + 1), found {}: lower it, or lengthen procedure.ft_window_s to {} s",
+                        p.ft_window_s,
+                        p.min_window_readings,
+                        (window_s * 1000.0).ceil() / 1000.0
                     ),
                 );
             }
         }
         c.within("procedure.ft_stale_s", p.ft_stale_s, 1e-3, 10.0, "s");
+        // The approach guard calls the stream stale after ft_stale_s without a reading:
+        // under three periods of the slowest rate, a healthy stream trips it.
+        let stale_floor_s = 3.0 / least_hz;
+        if least_hz.is_finite()
+            && least_hz > 0.0
+            && p.ft_stale_s.is_finite()
+            && p.ft_stale_s < stale_floor_s
+        {
+            c.fail(
+                "procedure.ft_stale_s",
+                format!(
+                    "expected at least three sensor periods ({why}: {} s), found {}: a healthy stream would stop every approach as stale",
+                    (stale_floor_s * 1000.0).ceil() / 1000.0,
+                    p.ft_stale_s
+                ),
+            );
+        }
         if let Some(skew_s) = p.max_skew_s {
             let problems = c.problems().len();
             c.within(
@@ -580,15 +703,15 @@ impl Validate for RigConfig {
             // Readings 1/rate apart cover a frame between them within half a period
             // at best: a smaller limit would reject most frames.
             if c.problems().len() == problems
-                && rate_hz.is_finite()
-                && rate_hz > 0.0
-                && skew_s * rate_hz < 0.5
+                && least_hz.is_finite()
+                && least_hz > 0.0
+                && skew_s * least_hz < 0.5
             {
                 c.fail(
                     "procedure.max_skew_s",
                     format!(
-                        "expected at least half a sensor period (0.5 / force_sensor rate {rate_hz} Hz = {} s), found {skew_s}",
-                        0.5 / rate_hz
+                        "expected at least half a sensor period (0.5 / {why} = {} s), found {skew_s}",
+                        0.5 / least_hz
                     ),
                 );
             }
@@ -652,5 +775,108 @@ mod tests {
             ..p
         };
         assert!((set.max_skew_s_for(slow.least_rate_hz()) - 0.002).abs() < 1e-12);
+    }
+
+    /// The fields a rig's check refuses, in order.
+    fn refused(rig: &RigConfig) -> Vec<String> {
+        let mut c = crate::config::Check::default();
+        rig.validate(&mut c);
+        c.problems().iter().map(|p| p.field.clone()).collect()
+    }
+
+    #[test]
+    fn a_serial_sensor_is_checked_against_what_its_baud_rate_carries() {
+        // The defaults (25 readings in 50 ms, stale after 0.1 s) suit a 1 kHz stream,
+        // not the 15 readings a second an ATI serial box sends at 9600 baud.
+        let mut rig = crate::defaults::rig();
+        assert!(refused(&rig).is_empty());
+        rig.force_sensor = ati(9600);
+        assert_eq!(
+            refused(&rig),
+            ["procedure.min_window_readings", "procedure.ft_stale_s"]
+        );
+        // What the messages suggest works: a 2 s window of 20 readings, 0.2 s stale.
+        rig.procedure.ft_window_s = 2.0;
+        rig.procedure.min_window_readings = 20;
+        rig.procedure.ft_stale_s = 0.2;
+        assert!(refused(&rig).is_empty(), "{:?}", refused(&rig));
+        // Just under three periods is refused; a skew limit under half a period too.
+        rig.procedure.ft_stale_s = 0.199;
+        rig.procedure.max_skew_s = Some(0.03);
+        assert_eq!(
+            refused(&rig),
+            ["procedure.ft_stale_s", "procedure.max_skew_s"]
+        );
+        // A faster link carries more, but 180 lines a second still not 25 in 50 ms.
+        let mut fast = crate::defaults::rig();
+        fast.force_sensor = ati(115_200);
+        assert_eq!(refused(&fast), ["procedure.min_window_readings"]);
+    }
+
+    #[test]
+    fn a_franka_table_carries_its_end_effector_payload_and_real_time_setting() {
+        let toml = r#"
+driver = "franka"
+address = "172.16.0.2"
+reflex_force_n = 30.0
+realtime = "ignore"
+[end_effector]
+translation_m = [0.0, 0.0, 0.12]
+rotation_wxyz = [1.0, 0.0, 0.0, 0.0]
+[payload]
+mass_kg = 0.35
+com_in_flange_m = [0.0, 0.0, 0.06]
+"#;
+        let arm: ArmDevice = toml::from_str(toml).unwrap_or_else(|e| panic!("{e}"));
+        let ArmDevice::Franka {
+            realtime,
+            end_effector,
+            payload,
+            reflex_torque_nm,
+            ..
+        } = &arm
+        else {
+            panic!("not franka: {arm:?}");
+        };
+        assert_eq!(*realtime, Realtime::Ignore);
+        assert_eq!(
+            end_effector.as_deref().map(|p| p.translation_m[2]),
+            Some(0.12)
+        );
+        assert_eq!(payload.as_deref().map(|p| p.inertia_kg_m2), Some([0.0; 9]));
+        assert!(reflex_torque_nm.is_none());
+        // Left out, real time is enforced.
+        let plain: ArmDevice =
+            toml::from_str("driver = \"franka\"\naddress = \"a\"\nreflex_force_n = 30.0\n")
+                .unwrap_or_else(|e| panic!("{e}"));
+        assert!(matches!(
+            plain,
+            ArmDevice::Franka {
+                realtime: Realtime::Enforce,
+                ..
+            }
+        ));
+        let mut rig = crate::defaults::rig();
+        rig.arm = arm;
+        assert!(refused(&rig).is_empty(), "{:?}", refused(&rig));
+        // A translation beyond reach of any finger, a zero rotation, NaN inertia.
+        if let ArmDevice::Franka {
+            end_effector,
+            payload,
+            ..
+        } = &mut rig.arm
+        {
+            *end_effector = Some(Box::new(ArmPose {
+                translation_m: [0.0, 0.0, 2.0],
+                rotation_wxyz: [0.0; 4],
+            }));
+            if let Some(p) = payload.as_deref_mut() {
+                p.inertia_kg_m2[4] = f64::NAN;
+            }
+        }
+        assert_eq!(
+            refused(&rig),
+            ["arm.end_effector", "arm.payload.inertia_kg_m2"]
+        );
     }
 }

@@ -1,4 +1,6 @@
-//! The Franka Emika Panda (FER, FCI v5) through franka-rs (library `franka`).
+//! The Franka Emika Panda (FER, FCI v5) and Franka Research 3 (FCI v10) through
+//! franka-rs (library `franka`), which connects as v10 and falls back to v5 when the
+//! robot answers so; any other version is refused with both versions named.
 //!
 //! franka-rs is synchronous and runs a 1 kHz loop, so the robot lives on its own
 //! thread; [`FrankaArm`] talks to it over channels. A move is a straight line in
@@ -10,8 +12,15 @@
 //! cancelled task) or [`Arm::stop`] aborts the motion: it brakes to rest within the
 //! acceleration and jerk limits ([`Brake`]), then ends.
 //!
-//! The finger's pose is the robot's end-effector frame `O_T_EE`: configure the
-//! finger as the end effector in Desk (or with `set_ee`) so the two agree.
+//! The finger's pose is the robot's end-effector frame `O_T_EE`: the rig's
+//! `end_effector` is applied with `set_ee` at connect (else Desk's end effector must be
+//! the finger), and its `payload` with `set_load`, so that the unmodelled finger, mount
+//! and sensor do not bias the robot's external-force estimate.
+//!
+//! Real time: by default the control thread must get SCHED_FIFO on a PREEMPT_RT
+//! kernel (franka-rs's `RealtimeConfig::Enforce`), or the connection is refused with
+//! the reason; a rig may relax this (`realtime = "ignore"`), warned about at every
+//! connect.
 
 use crate::arm::{Arm, ArmState};
 use crate::clock::Clock;
@@ -60,11 +69,49 @@ pub const MAX_SPEED_M_S: f64 = 1.7;
 pub struct FrankaConfig {
     /// The robot's address (`172.16.0.2`, optionally `:port`).
     pub address: String,
-    /// Upper force threshold of the collision behaviour, N (and 0.1 × that in N·m for
-    /// the Cartesian torques; joint torque thresholds 100 N·m).
+    /// Upper force threshold of the collision behaviour, N (half of it the lower one;
+    /// joint torque thresholds 100 N·m).
     pub reflex_force_n: f64,
+    /// Upper Cartesian torque threshold, N·m (half of it the lower one).
+    pub reflex_torque_nm: f64,
+    /// Whether real-time scheduling is required.
+    pub realtime: softtouch_schemas::Realtime,
+    /// `NE_T_EE` for `set_ee`, column-major; `None` leaves Desk's end effector.
+    pub ne_t_ee: Option<[f64; 16]>,
+    /// The payload for `set_load`: mass (kg), centre of mass in the flange frame (m),
+    /// inertia (kg·m²); `None` sets none.
+    pub payload: Option<(f64, [f64; 3], [f64; 9])>,
     /// Move limits.
     pub limits: MotionLimits,
+}
+
+impl FrankaConfig {
+    /// The settings a rig's `franka` table gives.
+    #[must_use]
+    pub fn from_rig(d: &softtouch_schemas::ArmDevice) -> Option<Self> {
+        let softtouch_schemas::ArmDevice::Franka {
+            address,
+            reflex_force_n,
+            reflex_torque_nm,
+            realtime,
+            end_effector,
+            payload,
+        } = d
+        else {
+            return None;
+        };
+        Some(Self {
+            address: address.clone(),
+            reflex_force_n: *reflex_force_n,
+            reflex_torque_nm: reflex_torque_nm.unwrap_or(0.1 * reflex_force_n),
+            realtime: *realtime,
+            ne_t_ee: end_effector.as_deref().map(|p| p.normalised().to_matrix()),
+            payload: payload
+                .as_deref()
+                .map(|p| (p.mass_kg, p.com_in_flange_m, p.inertia_kg_m2)),
+            limits: MotionLimits::default(),
+        })
+    }
 }
 
 type Reply<T> = oneshot::Sender<Result<T, DeviceError>>;
@@ -387,9 +434,27 @@ impl Drop for AbortOnDrop<'_> {
     }
 }
 
+/// What connect sets before any motion: the end effector, the payload, the collision
+/// thresholds (in that order: the thresholds act on the estimate the other two shape).
+fn configure(robot: &franka::Robot, config: &FrankaConfig) -> Result<(), DeviceError> {
+    if let Some(ne_t_ee) = config.ne_t_ee {
+        robot.set_ee(ne_t_ee).map_err(err)?;
+    }
+    if let Some((mass, com, inertia)) = config.payload {
+        robot.set_load(mass, com, inertia).map_err(err)?;
+    }
+    let (f, t) = (config.reflex_force_n, config.reflex_torque_nm);
+    let lower_f = [f * 0.5, f * 0.5, f * 0.5, t * 0.5, t * 0.5, t * 0.5];
+    let upper_f = [f, f, f, t, t, t];
+    robot
+        .set_collision_behavior_simple([50.0; 7], [100.0; 7], lower_f, upper_f)
+        .map_err(err)
+}
+
 impl FrankaArm {
-    /// Connect (FCI v5, realtime priority not enforced), set the collision behaviour
-    /// from `reflex_force_n`, and start the robot thread.
+    /// Connect (the FCI version the robot answers with; real time as the config says),
+    /// set the end effector, payload and collision behaviour, and start the robot
+    /// thread.
     pub async fn connect(config: FrankaConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
         if !(config.reflex_force_n.is_finite() && config.reflex_force_n > 0.0) {
             return Err(DeviceError::InvalidCommand {
@@ -404,8 +469,18 @@ impl FrankaArm {
         std::thread::Builder::new()
             .name("franka".into())
             .spawn(move || {
-                let options = franka::RobotOptions::new(franka::RealtimeConfig::Ignore)
-                    .with_version(franka::VersionPolicy::Exact(franka::FciVersion::V5));
+                let realtime = match config.realtime {
+                    softtouch_schemas::Realtime::Enforce => franka::RealtimeConfig::Enforce,
+                    softtouch_schemas::Realtime::Ignore => {
+                        tracing::warn!(
+                            "franka: real time is not enforced (rig `realtime = \"ignore\"`): the 1 kHz loop will miss cycles under load and may end in communication_constraints_violation"
+                        );
+                        franka::RealtimeConfig::Ignore
+                    }
+                };
+                // FCI v10 (FR3) first, then v5 (Panda) when the robot answers so.
+                let options = franka::RobotOptions::new(realtime)
+                    .with_version(franka::VersionPolicy::Auto);
                 let robot = match franka::Robot::with_options(&config.address, options) {
                     Ok(r) => r,
                     Err(e) => {
@@ -413,12 +488,7 @@ impl FrankaArm {
                         return;
                     }
                 };
-                let f = config.reflex_force_n;
-                let lower_f = [f * 0.5, f * 0.5, f * 0.5, f * 0.05, f * 0.05, f * 0.05];
-                let upper_f = [f, f, f, f * 0.1, f * 0.1, f * 0.1];
-                let set = robot
-                    .set_collision_behavior_simple([50.0; 7], [100.0; 7], lower_f, upper_f)
-                    .map_err(err);
+                let set = configure(&robot, &config);
                 let ok = set.is_ok();
                 let _ = ready_tx.send(set);
                 if ok {
@@ -491,6 +561,46 @@ impl Arm for FrankaArm {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_rigs_franka_table_becomes_the_connect_settings() {
+        use softtouch_schemas::{ArmDevice, Payload, Realtime};
+        let d = ArmDevice::Franka {
+            address: "172.16.0.2".into(),
+            reflex_force_n: 30.0,
+            reflex_torque_nm: None,
+            realtime: Realtime::Enforce,
+            end_effector: Some(Box::new(ArmPose {
+                translation_m: [0.0, 0.0, 0.1034],
+                // Not normalised: scaled on use.
+                rotation_wxyz: [2.0, 0.0, 0.0, 0.0],
+            })),
+            payload: Some(Box::new(Payload {
+                mass_kg: 0.4,
+                com_in_flange_m: [0.0, 0.01, 0.05],
+                inertia_kg_m2: [0.0; 9],
+            })),
+        };
+        let c = FrankaConfig::from_rig(&d).expect("a franka table");
+        assert!((c.reflex_torque_nm - 3.0).abs() < 1e-12, "0.1 m x 30 N");
+        let m = c.ne_t_ee.expect("an end effector");
+        // Column-major: identity rotation, translation in the last column.
+        for (i, v) in [
+            1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.1034, 1.0,
+        ]
+        .iter()
+        .enumerate()
+        {
+            assert!((m[i] - v).abs() < 1e-12, "element {i}: {m:?}");
+        }
+        assert_eq!(c.payload.map(|p| p.0), Some(0.4));
+        assert!(
+            FrankaConfig::from_rig(&ArmDevice::Sim {
+                reflex_force_n: 30.0
+            })
+            .is_none()
+        );
+    }
 
     #[test]
     fn path_limits_keep_translation_and_rotation_within_theirs() {
@@ -574,6 +684,10 @@ mod tests {
         let config = FrankaConfig {
             address,
             reflex_force_n: 30.0,
+            reflex_torque_nm: 3.0,
+            realtime: softtouch_schemas::Realtime::Enforce,
+            ne_t_ee: None,
+            payload: None,
             limits: MotionLimits::default(),
         };
         let mut arm = FrankaArm::connect(config, Arc::new(crate::TokioClock::new()))

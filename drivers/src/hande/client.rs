@@ -88,10 +88,7 @@ fn exception(e: ExceptionCode) -> DeviceError {
 }
 
 fn fault(code: u8) -> DeviceError {
-    let hint = if matches!(
-        regs::fault_class(code),
-        FaultClass::Major | FaultClass::Unknown
-    ) {
+    let hint = if major(code) {
         "; activate again (rACT 0 then 1) to clear it"
     } else {
         ""
@@ -103,7 +100,41 @@ fn fault(code: u8) -> DeviceError {
     }
 }
 
+/// A fault that only a new activation edge clears (or one the manual does not list).
+fn major(code: u8) -> bool {
+    matches!(
+        regs::fault_class(code),
+        FaultClass::Major | FaultClass::Unknown
+    )
+}
+
 impl HandE {
+    /// An error once activation has taken longer than its limit: the last fault by
+    /// name when there is one, else a timeout.
+    fn check_activation_time(&self, start: TimestampNs, s: &RawStatus) -> Result<(), DeviceError> {
+        let limit = u64::try_from(self.config.activation_timeout.as_nanos()).unwrap_or(u64::MAX);
+        if self.clock.now().0.saturating_sub(start.0) <= limit {
+            return Ok(());
+        }
+        let timeout_ms =
+            u64::try_from(self.config.activation_timeout.as_millis()).unwrap_or(u64::MAX);
+        if s.g_flt != 0 {
+            return Err(DeviceError::Fault {
+                device: DEVICE.into(),
+                code: Some(u32::from(s.g_flt)),
+                message: format!(
+                    "activation did not complete within {timeout_ms} ms (gSTA {}): {}",
+                    s.g_sta,
+                    regs::fault_text(s.g_flt)
+                ),
+            });
+        }
+        Err(DeviceError::Timeout {
+            device: DEVICE.into(),
+            timeout_ms,
+        })
+    }
+
     /// Talk Modbus RTU over `transport` (a serial port from [`super::open_port`], a pty,
     /// an in-memory pipe).
     pub fn new<T>(transport: T, config: HandEConfig, clock: Arc<dyn Clock>) -> Self
@@ -202,36 +233,46 @@ impl HandE {
 
 #[async_trait]
 impl Gripper for HandE {
-    /// Write zeros (rACT 0), then rACT 1 — a rising edge, which also clears a major
-    /// fault — and poll until gSTA = 3. A fault while activating is returned.
+    /// Activation, idempotent and patient with a real gripper's timing:
+    /// - already active without a major fault: nothing is written (a reset would open
+    ///   the fingers and drop what they hold);
+    /// - else rACT 0, a wait until the gripper shows the reset (gSTA 0), then rACT 1 (a
+    ///   rising edge, which also clears a major fault) and a poll until gSTA = 3;
+    /// - a major fault read before the gripper shows the activation under way (gSTA 1
+    ///   or 3) is the old one, not cleared yet, and is waited out; one read after is
+    ///   returned, by name. A timeout names the last status's fault.
     async fn activate(&mut self) -> Result<(), DeviceError> {
+        let first = self.read_raw_status().await?;
+        if first.active() && !major(first.g_flt) {
+            return Ok(());
+        }
         let zero = GripperCommand {
             position: 0,
             speed: 0,
             force: 0,
         };
-        self.write_output(0, zero).await?;
-        self.write_output(regs::R_ACT, zero).await?;
         let start = self.clock.now();
-        let limit = u64::try_from(self.config.activation_timeout.as_nanos()).unwrap_or(u64::MAX);
+        self.write_output(0, zero).await?;
         loop {
             let s = self.read_raw_status().await?;
+            if s.g_sta == 0 {
+                break;
+            }
+            self.check_activation_time(start, &s)?;
+            tokio::time::sleep(self.config.poll_interval).await;
+        }
+        self.write_output(regs::R_ACT, zero).await?;
+        let mut under_way = false;
+        loop {
+            let s = self.read_raw_status().await?;
+            under_way |= s.g_sta != 0;
+            if under_way && major(s.g_flt) {
+                return Err(fault(s.g_flt));
+            }
             if s.active() {
                 return Ok(());
             }
-            if matches!(
-                regs::fault_class(s.g_flt),
-                FaultClass::Major | FaultClass::Unknown
-            ) {
-                return Err(fault(s.g_flt));
-            }
-            if self.clock.now().0.saturating_sub(start.0) > limit {
-                return Err(DeviceError::Timeout {
-                    device: DEVICE.into(),
-                    timeout_ms: u64::try_from(self.config.activation_timeout.as_millis())
-                        .unwrap_or(u64::MAX),
-                });
-            }
+            self.check_activation_time(start, &s)?;
             tokio::time::sleep(self.config.poll_interval).await;
         }
     }
@@ -240,10 +281,7 @@ impl Gripper for HandE {
     /// showed a major fault or no activation.
     async fn command(&mut self, cmd: GripperCommand) -> Result<(), DeviceError> {
         if let Some(s) = self.last_status {
-            if matches!(
-                regs::fault_class(s.g_flt),
-                FaultClass::Major | FaultClass::Unknown
-            ) {
+            if major(s.g_flt) {
                 return Err(fault(s.g_flt));
             }
             if !s.active() {

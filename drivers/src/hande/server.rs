@@ -38,6 +38,9 @@ struct State {
     watchdog: Option<std::time::Duration>,
     last_write: Option<tokio::time::Instant>,
     watchdog_faults: u64,
+    /// How long the gripper takes to act on an rACT edge (a reset, or the start of an
+    /// activation that clears a major fault); until then it reads as before the edge.
+    edge_latency: Option<std::time::Duration>,
 }
 
 /// The register-level Hand-E over a [`Gripper`].
@@ -78,6 +81,7 @@ impl<G: Gripper + 'static> HandEService<G> {
                 watchdog: None,
                 last_write: None,
                 watchdog_faults: 0,
+                edge_latency: None,
             })),
             slave_id,
         }
@@ -103,6 +107,16 @@ impl<G: Gripper + 'static> HandEService<G> {
         self
     }
 
+    /// Makes rACT edges take `after` to act on, as a real gripper's do: until then
+    /// the status still shows the state (and the fault) from before the edge.
+    #[must_use]
+    pub fn with_edge_latency(self, after: std::time::Duration) -> Self {
+        if let Ok(mut s) = self.state.lock() {
+            s.edge_latency = Some(after);
+        }
+        self
+    }
+
     /// How often the watchdog raised 0x09.
     #[must_use]
     pub fn watchdog_faults(&self) -> u64 {
@@ -118,7 +132,7 @@ impl<G: Gripper + 'static> HandEService<G> {
     async fn write(self, words: Vec<u16>) -> Result<(), ExceptionCode> {
         let (action, cmd) =
             regs::decode_output(&words).map_err(|_| ExceptionCode::IllegalDataValue)?;
-        let (rising, go) = {
+        let (edge, latency) = {
             let mut s = self
                 .state
                 .lock()
@@ -128,6 +142,43 @@ impl<G: Gripper + 'static> HandEService<G> {
             let now = action & regs::R_ACT != 0;
             s.action = action;
             s.command = cmd;
+            (
+                match (was, now) {
+                    (true, false) => Some(false),
+                    (false, true) => Some(true),
+                    _ => None,
+                },
+                s.edge_latency,
+            )
+        };
+        match (edge, latency) {
+            (Some(rising), Some(after)) => {
+                // Acted on later; a command beside the edge is judged then too.
+                let service = self.clone();
+                tokio::spawn(async move {
+                    tokio::time::sleep(after).await;
+                    let _ = service.act(action, cmd, Some(rising)).await;
+                });
+                Ok(())
+            }
+            (edge, _) => self.act(action, cmd, edge).await,
+        }
+    }
+
+    /// The gripper acting on an output write: `edge` is `Some(true)` for a rising rACT
+    /// edge, `Some(false)` for a falling one.
+    async fn act(
+        self,
+        action: u8,
+        cmd: GripperCommand,
+        edge: Option<bool>,
+    ) -> Result<(), ExceptionCode> {
+        let (rising, go) = {
+            let mut s = self
+                .state
+                .lock()
+                .map_err(|_| ExceptionCode::ServerDeviceFailure)?;
+            let now = action & regs::R_ACT != 0;
             if !now {
                 s.activation = Activation::Reset;
                 // The falling edge arms the clearing of a major fault.
@@ -135,7 +186,7 @@ impl<G: Gripper + 'static> HandEService<G> {
                     s.fault = 0;
                 }
             }
-            let rising = now && !was;
+            let rising = edge == Some(true);
             if rising {
                 s.fault = 0;
                 s.activation = Activation::Activating;

@@ -2,7 +2,16 @@
 
 use super::*;
 
-pub(super) async fn check_arm(mut arm: Box<dyn Arm>) -> Result<ArmCheck, String> {
+/// How far the arm check moves the finger, m (up, along the base's z), and how slowly.
+const ARM_CHECK_STEP_M: f64 = 0.001;
+const ARM_CHECK_SPEED_M_S: f64 = 0.005;
+/// How far from a target a move may end and still count as reached, m.
+const ARM_CHECK_TOLERANCE_M: f64 = 0.0005;
+
+pub(super) async fn check_arm(
+    mut arm: Box<dyn Arm>,
+    workspace: &softtouch_schemas::rig::WorkspaceBounds,
+) -> Result<ArmCheck, String> {
     let s = arm
         .state()
         .await
@@ -19,9 +28,55 @@ pub(super) async fn check_arm(mut arm: Box<dyn Arm>) -> Result<ArmCheck, String>
             p.translation_m
         ));
     }
+    // A state read passes an arm that cannot move (stopped by the user, braked, FCI
+    // not granted): a millimetre up and back shows that it can.
+    let mut up = p;
+    up.translation_m[2] += ARM_CHECK_STEP_M;
+    if !workspace.contains_arm(&up) {
+        return Err(format!(
+            "expected room to move {} mm up inside workspace.reach_in_base_m from {:?} m; move the arm into the workspace first",
+            ARM_CHECK_STEP_M * 1000.0,
+            p.translation_m
+        ));
+    }
+    let mut worst_m: f64 = 0.0;
+    for (what, target) in [("up", up), ("back", p)] {
+        let reached = arm.move_to(&target, ARM_CHECK_SPEED_M_S).await.map_err(|e| {
+            format!(
+                "expected the arm to move {} mm {what} (is it in a mode that can move: FCI granted, not stopped by the user?): {e}",
+                ARM_CHECK_STEP_M * 1000.0
+            )
+        });
+        let reached = match reached {
+            Ok(r) => r,
+            Err(e) => {
+                let _ = arm.stop().await;
+                return Err(e);
+            }
+        };
+        let off_m = distance_m(&reached.base_from_finger, &target);
+        // NaN (a pose that does not read) fails too.
+        if off_m.is_nan() || off_m > ARM_CHECK_TOLERANCE_M {
+            return Err(format!(
+                "expected the move {what} to end within {} mm of its target, ended {:.3} mm away",
+                ARM_CHECK_TOLERANCE_M * 1000.0,
+                off_m * 1000.0
+            ));
+        }
+        worst_m = worst_m.max(off_m);
+    }
     Ok(ArmCheck {
         translation_m: p.translation_m,
+        moved_mm: ARM_CHECK_STEP_M * 1000.0,
+        worst_arrival_mm: worst_m * 1000.0,
     })
+}
+
+fn distance_m(a: &softtouch_schemas::ArmPose, b: &softtouch_schemas::ArmPose) -> f64 {
+    (0..3)
+        .map(|i| (a.translation_m[i] - b.translation_m[i]).powi(2))
+        .sum::<f64>()
+        .sqrt()
 }
 
 pub(super) async fn check_force_sensor(
@@ -237,4 +292,104 @@ pub(super) async fn check_gripper(
         object: back.object,
         current_ma: back.current_ma,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use softtouch_drivers::ArmState;
+    use softtouch_schemas::{ArmPose, TimestampNs};
+
+    /// An arm that reads fine and moves as told: `off_m` from each target, or not at
+    /// all (`refuse`, as one stopped by the user).
+    struct Stub {
+        at: ArmPose,
+        off_m: f64,
+        refuse: bool,
+    }
+
+    fn state(p: ArmPose) -> ArmState {
+        ArmState {
+            t: TimestampNs(0),
+            base_from_finger: p,
+            external_wrench: None,
+            faulted: false,
+        }
+    }
+
+    #[async_trait::async_trait]
+    impl Arm for Stub {
+        async fn move_to(&mut self, target: &ArmPose, _: f64) -> Result<ArmState, DeviceError> {
+            if self.refuse {
+                return Err(DeviceError::Fault {
+                    device: "arm".into(),
+                    code: None,
+                    message: "user stopped".into(),
+                });
+            }
+            self.at = *target;
+            self.at.translation_m[0] += self.off_m;
+            Ok(state(self.at))
+        }
+        async fn state(&mut self) -> Result<ArmState, DeviceError> {
+            Ok(state(self.at))
+        }
+        async fn recover(&mut self) -> Result<(), DeviceError> {
+            Ok(())
+        }
+        async fn stop(&mut self) -> Result<(), DeviceError> {
+            Ok(())
+        }
+    }
+
+    fn run(stub: Stub) -> Result<ArmCheck, String> {
+        let rig = softtouch_schemas::defaults::rig();
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .expect("runtime");
+        rt.block_on(check_arm(Box::new(stub), &rig.workspace))
+    }
+
+    fn home() -> ArmPose {
+        let w = softtouch_schemas::defaults::rig().workspace;
+        ArmPose::from_contact(&w.base_from_rod, &w.home)
+    }
+
+    #[test]
+    fn an_arm_passes_only_when_it_moves_a_millimetre_and_back() {
+        let ok = run(Stub {
+            at: home(),
+            off_m: 0.0001,
+            refuse: false,
+        })
+        .expect("moves");
+        assert!((ok.moved_mm - 1.0).abs() < 1e-12);
+        assert!((ok.worst_arrival_mm - 0.1).abs() < 1e-9);
+        let e = run(Stub {
+            at: home(),
+            off_m: 0.0,
+            refuse: true,
+        })
+        .expect_err("a user-stopped arm fails");
+        assert!(
+            e.contains("in a mode that can move") && e.contains("user stopped"),
+            "{e}"
+        );
+        let e = run(Stub {
+            at: home(),
+            off_m: 0.002,
+            refuse: false,
+        })
+        .expect_err("an arm that ends 2 mm off fails");
+        assert!(e.contains("ended 2.000 mm away"), "{e}");
+        let mut outside = home();
+        outside.translation_m[2] = 10.0;
+        let e = run(Stub {
+            at: outside,
+            off_m: 0.0,
+            refuse: false,
+        })
+        .expect_err("no room to move");
+        assert!(e.contains("expected room to move 1 mm up"), "{e}");
+    }
 }

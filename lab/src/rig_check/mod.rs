@@ -77,6 +77,10 @@ pub enum Measured {
 pub struct ArmCheck {
     /// The finger's position in the base frame, m.
     pub translation_m: [f64; 3],
+    /// How far the check moved it up and back, mm.
+    pub moved_mm: f64,
+    /// The larger distance from target at which the two moves ended, mm.
+    pub worst_arrival_mm: f64,
 }
 
 /// The force/torque stream over the window.
@@ -174,7 +178,8 @@ impl fmt::Display for Measured {
                 let [x, y, z] = a.translation_m;
                 write!(
                     f,
-                    "pose ({x:.3}, {y:.3}, {z:.3}) m in the base frame, no fault"
+                    "pose ({x:.3}, {y:.3}, {z:.3}) m in the base frame, no fault; moved {} mm up and back, within {:.3} mm",
+                    a.moved_mm, a.worst_arrival_mm
                 )
             }
             Self::ForceSensor(s) => s.fmt(f),
@@ -349,7 +354,7 @@ pub async fn check_rig(
                 Some(a) => a,
                 None => Box::new(sim_arm.take().ok_or_else(no_sim)?),
             };
-            check_arm(arm).await
+            check_arm(arm, &rig.workspace).await
         })
         .await,
     );
