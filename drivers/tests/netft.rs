@@ -321,6 +321,74 @@ async fn a_sensor_that_stops_answering_mid_stream_times_out() {
 }
 
 #[tokio::test]
+async fn a_stream_that_stops_is_asked_for_again_and_goes_on() {
+    // A sensor that reboots (or is stopped by another client) mid-run streams again
+    // only on a new start command; its sequence then starts over.
+    let (peer, mut c) = peer_and_client(200, 1).await;
+    let fake = tokio::spawn(async move {
+        let to = accept_start(&peer, 41).await;
+        peer.send_to(&rec(42, 0), to).await.expect("send");
+        // Silent now; the client's second start command gets a fresh stream.
+        let restarted_from = accept_start(&peer, 1).await;
+        assert_eq!(restarted_from, to);
+        peer.send_to(&rec(2, 0), to).await.expect("send");
+        peer
+    });
+    let mut batch = Vec::new();
+    c.start().await.expect("start");
+    // read_timeout 200 ms, the restart after 100 ms of silence.
+    let mut seen = Vec::new();
+    while seen.len() < 4 {
+        batch.clear();
+        c.read(&mut batch)
+            .await
+            .unwrap_or_else(|e| panic!("read after {} readings: {e}", seen.len()));
+        seen.extend(batch.iter().map(|r| r.rdt_sequence));
+    }
+    assert_eq!(seen, [41, 42, 1, 2]);
+    let stats = c.stats();
+    assert_eq!(stats.restarts, 1, "{stats:?}");
+    assert_eq!(
+        (stats.lost, stats.out_of_order),
+        (0, 0),
+        "a new stream, not a gap"
+    );
+    drop(fake.await);
+}
+
+#[tokio::test]
+async fn datagrams_read_together_are_stamped_a_period_apart() {
+    // A host busy for 30 ms reads five queued datagrams at once; they were sampled
+    // 1 ms apart (1000 Hz), and their stamps say so.
+    let (peer, mut c) = peer_and_client(200, 1).await;
+    let fake = tokio::spawn(async move {
+        let to = accept_start(&peer, 1).await;
+        for seq in 2..=6 {
+            peer.send_to(&rec(seq, 0), to).await.expect("send");
+        }
+        peer
+    });
+    c.start().await.expect("start");
+    let _peer = fake.await.expect("peer");
+    tokio::time::sleep(Duration::from_millis(30)).await;
+    let mut out = Vec::new();
+    while out.len() < 6 {
+        c.read(&mut out).await.expect("read");
+    }
+    let seqs: Vec<u32> = out.iter().map(|r| r.rdt_sequence).collect();
+    assert_eq!(seqs, [1, 2, 3, 4, 5, 6]);
+    for w in out.windows(2) {
+        let dt = w[1].t.0 - w[0].t.0;
+        assert!(
+            dt.abs_diff(1_000_000) <= 1,
+            "{dt} ns between {} and {}",
+            w[0].rdt_sequence,
+            w[1].rdt_sequence
+        );
+    }
+}
+
+#[tokio::test]
 async fn sequence_gaps_wraps_and_backward_steps_are_counted() {
     let (peer, mut c) = peer_and_client(200, 1).await;
     let fake = tokio::spawn(async move {

@@ -58,6 +58,10 @@ pub struct NetFtConfig {
     pub reply_timeout: Duration,
     /// How long [`ForceSensor::read`] waits for a datagram before a timeout error.
     pub read_timeout: Duration,
+    /// Silence after which a read sends the start command again (a sensor that
+    /// rebooted, or that another client stopped, streams only when asked anew), and
+    /// again after each further silence this long, until `read_timeout`.
+    pub restart_after: Duration,
     /// Fixed delay from a record's sample instant to the datagram's arrival (the
     /// sensor's filter and the network): subtracted from every stamp, so readings
     /// share the frames' time base.
@@ -67,7 +71,8 @@ pub struct NetFtConfig {
 impl NetFtConfig {
     /// Defaults for a sensor at `rdt_addr`, calibration read over TCP at port 49151 of
     /// the same host: real-time mode, 10 start attempts, 100 ms reply timeout, 1 s read
-    /// timeout, no latency correction.
+    /// timeout, a restart after 100 ms of silence (or 10 periods, if longer), no latency
+    /// correction.
     #[must_use]
     pub fn new(rdt_addr: SocketAddr, rate_hz: f64) -> Self {
         let cal = SocketAddr::new(rdt_addr.ip(), codec::CALIBRATION_PORT);
@@ -79,9 +84,20 @@ impl NetFtConfig {
             start_attempts: 10,
             reply_timeout: Duration::from_millis(100),
             read_timeout: Duration::from_secs(1),
+            restart_after: restart_after(rate_hz),
             latency: Duration::ZERO,
         }
     }
+}
+
+/// 100 ms, or ten periods of a slow stream.
+fn restart_after(rate_hz: f64) -> Duration {
+    let periods = if rate_hz.is_finite() && rate_hz > 0.0 {
+        10.0 / rate_hz
+    } else {
+        0.0
+    };
+    Duration::from_secs_f64(periods.clamp(0.1, 10.0))
 }
 
 /// Counters of what the link did.
@@ -101,6 +117,8 @@ pub struct NetFtStats {
     pub warnings: u64,
     /// Start commands sent (more than one when a start was lost).
     pub start_commands: u64,
+    /// Streams restarted after a silence (a start command sent again mid-stream).
+    pub restarts: u64,
 }
 
 /// A Net F/T over RDT. Implements [`ForceSensor`].
@@ -113,6 +131,7 @@ pub struct NetFtClient {
     counts_per_torque: f64,
     streaming: bool,
     last_sequence: Option<u32>,
+    stamps: super::stamp::SequenceStamps,
     latched_status: FtStatus,
     stats: NetFtStats,
     buf: Vec<u8>,
@@ -231,6 +250,7 @@ impl NetFtClient {
         let socket = UdpSocket::bind(local).await.map_err(link)?;
         // Connected: the kernel drops datagrams from anyone but the sensor.
         socket.connect(config.rdt_addr).await.map_err(link)?;
+        let stamps = super::stamp::SequenceStamps::new(config.rate_hz);
         Ok(Self {
             socket,
             config,
@@ -239,6 +259,7 @@ impl NetFtClient {
             counts_per_torque,
             streaming: false,
             last_sequence: None,
+            stamps,
             latched_status: FtStatus::OK,
             stats: NetFtStats::default(),
             buf: vec![0u8; 65_536],
@@ -295,29 +316,23 @@ impl NetFtClient {
         while self.socket.try_recv(&mut self.buf).is_ok() {}
     }
 
-    /// Turn one datagram's records into readings appended to `out`.
+    /// Turn one datagram's records into readings appended to `out`, each stamped
+    /// from its sequence ([`super::stamp`]) given the datagram's arrival at `t`.
     fn accept_datagram(
         &mut self,
         len: usize,
         t: TimestampNs,
         out: &mut Vec<FtReading>,
     ) -> Result<usize, DeviceError> {
-        let t = TimestampNs(
-            t.0.saturating_sub(u64::try_from(self.config.latency.as_nanos()).unwrap_or(u64::MAX)),
-        );
+        let latency_ns = u64::try_from(self.config.latency.as_nanos()).unwrap_or(u64::MAX);
         self.records.clear();
         let bytes = self.buf.get(..len).unwrap_or(&[]);
         if let Err(e) = codec::decode_records(bytes, &mut self.records) {
             self.stats.bad_datagrams += 1;
             return Err(protocol(e));
         }
-        let n = self.records.len();
-        let period_ns = if self.config.rate_hz > 0.0 {
-            1e9 / self.config.rate_hz
-        } else {
-            0.0
-        };
-        let mut appended = 0;
+        // The records that follow the stream, with their unwrapped sequence.
+        let mut accepted: Vec<(usize, u64)> = Vec::with_capacity(self.records.len());
         for (i, r) in self.records.iter().enumerate() {
             if let Some(last) = self.last_sequence {
                 let ahead = r.rdt_sequence.wrapping_sub(last);
@@ -328,6 +343,13 @@ impl NetFtClient {
                 self.stats.lost += u64::from(ahead - 1);
             }
             self.last_sequence = Some(r.rdt_sequence);
+            accepted.push((i, self.stamps.unwrap(r.rdt_sequence)));
+        }
+        if let Some(&(_, newest)) = accepted.last() {
+            self.stamps.arrived(t.0, newest);
+        }
+        for &(i, u) in &accepted {
+            let r = self.records[i];
             let status = FtStatus(r.status);
             if status.is_fault() {
                 self.stats.faulted += 1;
@@ -337,10 +359,10 @@ impl NetFtClient {
             if !status.is_ok() && self.latched_status.is_ok() {
                 self.latched_status = status;
             }
-            let back = ((n - 1 - i) as f64 * period_ns).round() as u64;
+            let sampled = self.stamps.stamp(u, t.0);
             let c = r.counts;
             out.push(FtReading {
-                t: TimestampNs(t.0.saturating_sub(back)),
+                t: TimestampNs(sampled.saturating_sub(latency_ns)),
                 rdt_sequence: r.rdt_sequence,
                 ft_sequence: r.ft_sequence,
                 status,
@@ -351,10 +373,9 @@ impl NetFtClient {
                     }),
                 },
             });
-            appended += 1;
         }
-        self.stats.received += appended as u64;
-        Ok(appended)
+        self.stats.received += accepted.len() as u64;
+        Ok(accepted.len())
     }
 
     async fn recv_within(&mut self, wait: Duration) -> Result<Option<usize>, DeviceError> {
@@ -383,6 +404,7 @@ impl ForceSensor for NetFtClient {
         }
         self.drain();
         self.last_sequence = None;
+        self.stamps.reset();
         let command = self.start_command();
         let attempts = self.config.start_attempts.max(1);
         for _ in 0..attempts {
@@ -448,9 +470,24 @@ impl ForceSensor for NetFtClient {
         let deadline = tokio::time::Instant::now() + self.config.read_timeout;
         while appended == 0 {
             let left = deadline.saturating_duration_since(tokio::time::Instant::now());
-            match self.recv_within(left).await? {
-                None => {
+            if left.is_zero() {
+                return Err(malformed.unwrap_or_else(|| timeout(self.config.read_timeout)));
+            }
+            match self
+                .recv_within(left.min(self.config.restart_after))
+                .await?
+            {
+                None if left <= self.config.restart_after => {
                     return Err(malformed.unwrap_or_else(|| timeout(self.config.read_timeout)));
+                }
+                None => {
+                    // Silence: ask for the stream anew. Its records start a new
+                    // sequence, so the old one is no baseline for gaps.
+                    self.send_command(self.start_command(), 0).await?;
+                    self.stats.start_commands += 1;
+                    self.stats.restarts += 1;
+                    self.last_sequence = None;
+                    self.stamps.reset();
                 }
                 Some(len) => {
                     let t = self.clock.now();
