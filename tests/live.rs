@@ -10,7 +10,7 @@ use common::{fails_with, ok, softtouch, tempdir, text, tiny_model};
 fn rig_check_passes_every_device_of_the_simulated_rig() {
     let dir = tempdir();
     let out = ok(&softtouch(dir.path(), &["rig", "check"]));
-    for device in ["arm", "force_sensor", "camera", "gripper"] {
+    for device in ["host", "arm", "force_sensor", "camera", "gripper"] {
         let line = out
             .lines()
             .find(|l| l.starts_with(&format!("{device} ")))
@@ -42,7 +42,7 @@ fn rig_check_fails_a_net_ft_sensor_that_never_answers() {
         dir.path(),
         &["rig", "check", "--rig", "rig.toml", "--timeout-s", "3"],
     );
-    fails_with(&out, 1, "1 of 4 devices failed");
+    fails_with(&out, 1, "1 of 5 checks failed");
     let stdout = text(&out.stdout);
     let row = stdout
         .lines()
@@ -168,4 +168,42 @@ fn live_presses_on_the_simulated_rig_and_bench_grasp_writes_its_table() {
     let mut with_gain = follow.to_vec();
     with_gain.extend(["--gain", "4"]);
     fails_with(&softtouch(d, &with_gain), 1, "camera");
+}
+
+#[test]
+fn rig_check_holds_a_real_arm_to_a_real_time_host() {
+    let dir = tempdir();
+    // A Panda that enforces real time (the default), at an address where nothing
+    // listens: the arm row fails either way; the host row fails unless this machine
+    // runs a PREEMPT_RT kernel with real-time priority allowed.
+    let rig = softtouch_schemas::defaults::RIG_TOML.replace(
+        "[arm]\ndriver = \"sim\"",
+        "[arm]\ndriver = \"franka\"\naddress = \"127.0.0.1\"",
+    );
+    assert!(rig.contains("franka"), "the default rig's layout changed");
+    std::fs::write(dir.path().join("rig.toml"), rig).expect("write");
+    let out = softtouch(
+        dir.path(),
+        &["rig", "check", "--rig", "rig.toml", "--timeout-s", "3"],
+    );
+    let stdout = text(&out.stdout);
+    let host = stdout
+        .lines()
+        .find(|l| l.starts_with("host "))
+        .unwrap_or_else(|| panic!("no host row: {stdout}"));
+    let here = softtouch_drivers::realtime::host_realtime();
+    if here.problems().is_empty() {
+        assert!(
+            host.contains(" pass ") && host.contains("PREEMPT_RT"),
+            "{host}"
+        );
+    } else {
+        assert!(host.contains("FAIL"), "{host}");
+        assert!(host.contains("expected a real-time host"), "{host}");
+        assert!(
+            host.contains("realtime = \"ignore\""),
+            "the way out is named: {host}"
+        );
+    }
+    assert_eq!(out.status.code(), Some(1), "{stdout}");
 }

@@ -82,7 +82,7 @@ async fn check_verb(args: CheckArgs, out: &mut dyn Write) -> Result<(), Failure>
         Ok(())
     } else {
         Err(Failure::Runtime(anyhow!(
-            "rig check: {failed} of {} devices failed",
+            "rig check: {failed} of {} checks failed (the host and each device)",
             rows.len()
         )))
     }

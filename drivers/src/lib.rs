@@ -17,6 +17,8 @@
 //! - [`guard`]: [`ForceGuard`], the one force/torque check of every reading wherever an
 //!   actuator moves under load.
 //! - [`open`]: the real driver of a rig entry (`None` for a simulated one).
+//! - [`realtime`]: what the host offers a 1 kHz control loop (PREEMPT_RT, the
+//!   priority and locked memory its user may take) and pinning a thread to a core.
 //!
 //! Traits are async (tokio) and object-safe, so the collector can build a rig of boxed
 //! devices from the rig config, real and simulated alike. This crate must not depend
@@ -35,6 +37,7 @@ pub mod guard;
 pub mod hande;
 pub mod netft;
 pub mod open;
+pub mod realtime;
 #[cfg(feature = "v4l")]
 pub mod v4l_camera;
 

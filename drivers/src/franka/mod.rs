@@ -469,6 +469,12 @@ impl FrankaArm {
         std::thread::Builder::new()
             .name("franka".into())
             .spawn(move || {
+                // One core for the 1 kHz loop: it does not migrate while the other
+                // core decodes frames and encodes PNGs.
+                match crate::realtime::pin_to_last_core() {
+                    Ok(core) => tracing::info!("franka: control thread pinned to core {core}"),
+                    Err(e) => tracing::warn!("franka: control thread not pinned: {e}"),
+                }
                 let realtime = match config.realtime {
                     softtouch_schemas::Realtime::Enforce => franka::RealtimeConfig::Enforce,
                     softtouch_schemas::Realtime::Ignore => {

@@ -70,6 +70,23 @@ pub enum Measured {
     Camera(FrameCheck),
     /// The gripper.
     Gripper(GripperCheck),
+    /// The host's real-time facts, and whether the rig needs them.
+    Host(HostCheck),
+}
+
+/// The host, for a real arm's 1 kHz loop.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct HostCheck {
+    /// What the host offers.
+    pub realtime: softtouch_drivers::realtime::HostRealtime,
+    /// Why it is not required (no real arm, or `realtime = "ignore"`); `None`: required.
+    pub not_required: Option<&'static str>,
+}
+
+impl From<HostCheck> for Measured {
+    fn from(c: HostCheck) -> Self {
+        Self::Host(c)
+    }
 }
 
 /// The arm's state: a valid pose and no fault.
@@ -180,6 +197,29 @@ impl fmt::Display for Measured {
                     f,
                     "pose ({x:.3}, {y:.3}, {z:.3}) m in the base frame, no fault; moved {} mm up and back, within {:.3} mm",
                     a.moved_mm, a.worst_arrival_mm
+                )
+            }
+            Self::Host(h) => {
+                let r = &h.realtime;
+                let limit = |v: Option<u64>, unit: &str| {
+                    v.map_or_else(|| "unlimited".to_owned(), |n| format!("{n}{unit}"))
+                };
+                write!(
+                    f,
+                    "kernel {} ({}), real-time priority up to {} (ulimit -r), memlock {} (ulimit -l){}",
+                    r.kernel_release,
+                    if r.preempt_rt {
+                        "PREEMPT_RT"
+                    } else {
+                        "not PREEMPT_RT"
+                    },
+                    limit(r.rtprio_limit, ""),
+                    r.memlock_limit_bytes.map_or_else(
+                        || "unlimited".to_owned(),
+                        softtouch_collector::collect::disk::human_bytes
+                    ),
+                    h.not_required
+                        .map_or_else(String::new, |why| format!("; not required: {why}"))
                 )
             }
             Self::ForceSensor(s) => s.fmt(f),
@@ -346,6 +386,31 @@ pub async fn check_rig(
     };
     let no_sim = || "the simulator is not available (see the simulator row)".to_owned();
 
+    rows.push(
+        row("host", "linux", timeout, async {
+            let realtime = softtouch_drivers::realtime::host_realtime();
+            let not_required = match &rig.arm {
+                ArmDevice::Sim { .. } => Some("no real arm"),
+                ArmDevice::Franka {
+                    realtime: softtouch_schemas::Realtime::Ignore,
+                    ..
+                } => Some("the franka table says realtime = \"ignore\""),
+                ArmDevice::Franka { .. } => None,
+            };
+            let problems = realtime.problems();
+            if not_required.is_none() && !problems.is_empty() {
+                return Err(format!(
+                    "expected a real-time host for the Panda's 1 kHz loop: {} (docs/RIG.md; realtime = \"ignore\" runs anyway, for a first look only)",
+                    problems.join("; ")
+                ));
+            }
+            Ok(HostCheck {
+                realtime,
+                not_required,
+            })
+        })
+        .await,
+    );
     rows.push(
         row("arm", driver_of_arm(&rig.arm), timeout, async {
             let arm: Box<dyn Arm> = match real_arm(&rig.arm, shared.clone()).await.map_err(|e| {
