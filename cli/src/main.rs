@@ -134,9 +134,10 @@ fn main() -> ExitCode {
 }
 
 /// However the verb ended, the `.db` file alone holds every commit once the binary
-/// exits, so a backup may copy it alone: the write-ahead log is folded into it (on a
-/// fresh runtime: the verb's clock may have been paused). Another process with the
-/// database open (a live collection) keeps its log; it is folded when that one closes.
+/// exits, so a backup may copy it alone: the write-ahead log is copied into it and,
+/// when no other process has the database open, removed (on a fresh runtime: the
+/// verb's clock may have been paused). A live collection's log stays; it is folded in
+/// when that one closes.
 fn fold_write_ahead_log(db: &Path) {
     if softtouch_store::file::db_size(db).wal_bytes == 0 {
         return;
@@ -150,7 +151,7 @@ fn fold_write_ahead_log(db: &Path) {
     let wait = std::time::Duration::from_millis(200);
     match rt.block_on(softtouch_store::file::checkpoint(db, wait)) {
         Ok(c) if !c.complete => tracing::info!(
-            "{}: another process has the database open; its write-ahead log stays until that one closes",
+            "{}: another process is writing the database; its write-ahead log stays until that one closes",
             db.display()
         ),
         Ok(_) => {}

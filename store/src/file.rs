@@ -6,7 +6,10 @@
 //! into `NAME`. A process that ends without the last connection closing cleanly leaves
 //! them there: committed and safe, but a backup that copies `NAME` alone misses them.
 //! [`checkpoint`] (called when a store closes and once more when the `softtouch`
-//! binary exits) folds the log into the file and empties it.
+//! binary exits) copies the log into the file; the log itself goes when the last
+//! connection closes. The checkpoint is SQLite's PASSIVE one: it never waits for, nor
+//! blocks, another process's writer (a `status` beside a live collection must not stall
+//! it); what that process is still writing stays in the log until it closes.
 
 use crate::StoreError;
 use sqlx::ConnectOptions as _;
@@ -89,10 +92,11 @@ pub fn wal_path(db: &Path) -> PathBuf {
     PathBuf::from(p)
 }
 
-/// Folds the write-ahead log of the SQLite database at `path` into the file and
-/// empties it (`PRAGMA wal_checkpoint(TRUNCATE)`), through one connection of its own.
-/// Another process with the database open (a live collection) can keep it from
-/// completing: that is reported, not waited for beyond `wait`.
+/// Copies the write-ahead log of the SQLite database at `path` into the file
+/// (`PRAGMA wal_checkpoint(PASSIVE)`) through one connection of its own, whose close
+/// then removes the log when no other connection is open. Another process writing the
+/// database (a live collection) can keep it from completing: that is reported, not
+/// waited for (`wait` bounds only the lock needed to open the connection).
 ///
 /// # Errors
 /// The file is not a database, or SQLite refuses.
@@ -131,7 +135,7 @@ where
     E: sqlx::Executor<'c, Database = sqlx::Sqlite>,
 {
     let (busy, log, checkpointed): (i64, i64, i64) =
-        sqlx::query_as("PRAGMA wal_checkpoint(TRUNCATE)")
+        sqlx::query_as("PRAGMA wal_checkpoint(PASSIVE)")
             .fetch_one(conn)
             .await
             .map_err(crate::query_err("checkpointing the write-ahead log"))?;

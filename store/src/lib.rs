@@ -414,9 +414,9 @@ impl Store {
         &self.pool
     }
 
-    /// Close the pool after folding the write-ahead log into the database file, so
-    /// that the `.db` file alone holds everything committed (when another process has
-    /// the database open the log stays, and is folded in by whoever closes last).
+    /// Close the pool after copying the write-ahead log into the database file
+    /// ([`file::checkpoint`]), so that the `.db` file alone holds everything committed
+    /// (what another process is still writing stays in the log until it closes).
     pub async fn close(self) {
         if let Err(e) = file::checkpoint_on(&self.pool).await {
             tracing::debug!("checkpoint on close of {}: {e}", self.path.display());
