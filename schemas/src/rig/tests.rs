@@ -1,0 +1,136 @@
+use super::*;
+
+fn ati(baud: u32) -> ForceSensorDevice {
+    ForceSensorDevice::AtiSerial {
+        port: "/dev/ttyUSB0".into(),
+        baud,
+        counts_per_force: 1.0,
+        counts_per_torque: 1.0,
+        latency_s: None,
+    }
+}
+
+#[test]
+fn the_default_skew_limit_follows_the_slowest_the_sensor_streams() {
+    let p = crate::defaults::rig().procedure;
+    assert!(p.max_skew_s.is_none());
+    // A 1 kHz stream: the 5 ms floor.
+    let sim = ForceSensorDevice::Sim { rate_hz: 1000.0 };
+    assert!((p.max_skew_s_for(sim.least_rate_hz()) - DEFAULT_MAX_SKEW_S).abs() < 1e-12);
+    // A serial box at 9600 baud carries 15 lines/s: two periods, 133 ms.
+    let slow = ati(9600);
+    assert!((slow.least_rate_hz() - 15.0).abs() < 1e-9);
+    assert!((p.max_skew_s_for(slow.least_rate_hz()) - 2.0 / 15.0).abs() < 1e-9);
+    // Faster links: never above the 7000 Hz the box can stream at most.
+    assert!((ati(115_200).least_rate_hz() - 180.0).abs() < 1e-9);
+    assert!(ati(u32::MAX).least_rate_hz() <= 7000.0);
+    // A configured limit wins.
+    let set = Procedure {
+        max_skew_s: Some(0.002),
+        ..p
+    };
+    assert!((set.max_skew_s_for(slow.least_rate_hz()) - 0.002).abs() < 1e-12);
+}
+
+/// The fields a rig's check refuses, in order.
+fn refused(rig: &RigConfig) -> Vec<String> {
+    let mut c = crate::config::Check::default();
+    rig.validate(&mut c);
+    c.problems().iter().map(|p| p.field.clone()).collect()
+}
+
+#[test]
+fn a_serial_sensor_is_checked_against_what_its_baud_rate_carries() {
+    // The defaults (25 readings in 50 ms, stale after 0.1 s) suit a 1 kHz stream,
+    // not the 15 readings a second an ATI serial box sends at 9600 baud.
+    let mut rig = crate::defaults::rig();
+    assert!(refused(&rig).is_empty());
+    rig.force_sensor = ati(9600);
+    assert_eq!(
+        refused(&rig),
+        ["procedure.min_window_readings", "procedure.ft_stale_s"]
+    );
+    // What the messages suggest works: a 2 s window of 20 readings, 0.2 s stale.
+    rig.procedure.ft_window_s = 2.0;
+    rig.procedure.min_window_readings = 20;
+    rig.procedure.ft_stale_s = 0.2;
+    assert!(refused(&rig).is_empty(), "{:?}", refused(&rig));
+    // Just under three periods is refused; a skew limit under half a period too.
+    rig.procedure.ft_stale_s = 0.199;
+    rig.procedure.max_skew_s = Some(0.03);
+    assert_eq!(
+        refused(&rig),
+        ["procedure.ft_stale_s", "procedure.max_skew_s"]
+    );
+    // A faster link carries more, but 180 lines a second still not 25 in 50 ms.
+    let mut fast = crate::defaults::rig();
+    fast.force_sensor = ati(115_200);
+    assert_eq!(refused(&fast), ["procedure.min_window_readings"]);
+}
+
+#[test]
+fn a_franka_table_carries_its_end_effector_payload_and_real_time_setting() {
+    let toml = r#"
+driver = "franka"
+address = "172.16.0.2"
+reflex_force_n = 30.0
+realtime = "ignore"
+[end_effector]
+translation_m = [0.0, 0.0, 0.12]
+rotation_wxyz = [1.0, 0.0, 0.0, 0.0]
+[payload]
+mass_kg = 0.35
+com_in_flange_m = [0.0, 0.0, 0.06]
+"#;
+    let arm: ArmDevice = toml::from_str(toml).unwrap_or_else(|e| panic!("{e}"));
+    let ArmDevice::Franka {
+        realtime,
+        end_effector,
+        payload,
+        reflex_torque_nm,
+        ..
+    } = &arm
+    else {
+        panic!("not franka: {arm:?}");
+    };
+    assert_eq!(*realtime, Realtime::Ignore);
+    assert_eq!(
+        end_effector.as_deref().map(|p| p.translation_m[2]),
+        Some(0.12)
+    );
+    assert_eq!(payload.as_deref().map(|p| p.inertia_kg_m2), Some([0.0; 9]));
+    assert!(reflex_torque_nm.is_none());
+    // Left out, real time is enforced.
+    let plain: ArmDevice =
+        toml::from_str("driver = \"franka\"\naddress = \"a\"\nreflex_force_n = 30.0\n")
+            .unwrap_or_else(|e| panic!("{e}"));
+    assert!(matches!(
+        plain,
+        ArmDevice::Franka {
+            realtime: Realtime::Enforce,
+            ..
+        }
+    ));
+    let mut rig = crate::defaults::rig();
+    rig.arm = arm;
+    assert!(refused(&rig).is_empty(), "{:?}", refused(&rig));
+    // A translation beyond reach of any finger, a zero rotation, NaN inertia.
+    if let ArmDevice::Franka {
+        end_effector,
+        payload,
+        ..
+    } = &mut rig.arm
+    {
+        *end_effector = Some(Box::new(ArmPose {
+            translation_m: [0.0, 0.0, 2.0],
+            rotation_wxyz: [0.0; 4],
+        }));
+        if let Some(p) = payload.as_deref_mut() {
+            p.inertia_kg_m2[4] = f64::NAN;
+        }
+    }
+    assert_eq!(
+        refused(&rig),
+        ["arm.end_effector", "arm.payload.inertia_kg_m2"]
+    );
+}
