@@ -297,11 +297,8 @@ pub async fn run_status(db: &Path, run: Option<i64>, out: &mut dyn Write) -> Res
         human(size.total()),
         human(size.file_bytes),
         human(size.wal_bytes),
-        if stored > 0 {
-            format!(", {} a sample", human(size.total().div_ceil(stored)))
-        } else {
-            String::new()
-        }
+        softtouch_collector::collect::disk::bytes_per_sample(size.total(), stored)
+            .map_or_else(String::new, |b| format!(", {} a sample", human(b)))
     );
     let mut any = false;
     for r in runs.iter().filter(|r| run.is_none_or(|id| id == r.run_id)) {

@@ -292,6 +292,15 @@ impl ArmPose {
         }
     }
 
+    /// The straight-line distance between this position and `other`'s, m.
+    #[must_use]
+    pub fn distance_to(&self, other: &ArmPose) -> f64 {
+        (0..3)
+            .map(|i| (other.translation_m[i] - self.translation_m[i]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
+
     /// The angle of the rotation taking this orientation to `other`'s, rad in
     /// `[0, π]` (`q` and `−q` are the same orientation).
     #[must_use]
@@ -378,6 +387,15 @@ mod tests {
 
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() < 1e-9
+    }
+
+    #[test]
+    fn distance_is_the_translation_apart_whatever_the_rotation() {
+        let a = ArmPose::from_translation_yaw([1.0, 2.0, 3.0], 0.3);
+        let b = ArmPose::from_translation_yaw([4.0, 6.0, 3.0], -1.0);
+        assert!((a.distance_to(&b) - 5.0).abs() < 1e-12);
+        assert!((b.distance_to(&a) - 5.0).abs() < 1e-12);
+        assert_eq!(a.distance_to(&a).to_bits(), 0.0f64.to_bits());
     }
 
     #[test]

@@ -172,13 +172,7 @@ impl Arm for SimArm {
         let (t_end, fault_at) = {
             let mut w = lock(&self.world)?;
             let from = w.pose_at(now);
-            let d = from
-                .translation_m
-                .iter()
-                .zip(&target.translation_m)
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum::<f64>()
-                .sqrt();
+            let d = from.distance_to(&target);
             let secs = duration(d, speed_m_s.min(MAX_SPEED_M_S), MAX_ACCEL_M_S2).max(duration(
                 from.angle_to(&target),
                 MAX_ROT_SPEED_RAD_S,

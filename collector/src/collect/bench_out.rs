@@ -192,10 +192,7 @@ pub fn time_ingest(store: &SyncStore, samples: u64) -> Result<String, BenchError
 /// (measure after the store is closed, when the log has been folded in).
 #[must_use]
 pub fn db_size_line(db: &Path) -> String {
-    let size = std::fs::metadata(db).map(|m| m.len()).unwrap_or(0)
-        + std::fs::metadata(format!("{}-wal", db.display()))
-            .map(|m| m.len())
-            .unwrap_or(0);
+    let size = crate::store::file::db_size(db).total();
     format!(
         "database size: {:.1} MB ({})\n",
         size as f64 / 1e6,

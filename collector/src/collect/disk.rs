@@ -62,11 +62,9 @@ impl DiskPlan {
 /// # Errors
 /// The free space cannot be read.
 pub fn plan(db: &Path, stored: u64, samples: u64) -> Result<DiskPlan, StoreError> {
-    let size = db_size(db).total();
-    let (per_sample_bytes, measured_over) = if stored > 0 && size > 0 {
-        (size.div_ceil(stored), stored)
-    } else {
-        (ASSUMED_BYTES_PER_SAMPLE, 0)
+    let (per_sample_bytes, measured_over) = match bytes_per_sample(db_size(db).total(), stored) {
+        Some(b) => (b, stored),
+        None => (ASSUMED_BYTES_PER_SAMPLE, 0),
     };
     Ok(DiskPlan {
         samples,
@@ -75,6 +73,13 @@ pub fn plan(db: &Path, stored: u64, samples: u64) -> Result<DiskPlan, StoreError
         needed_bytes: per_sample_bytes.saturating_mul(samples),
         free_bytes: free_bytes(db)?,
     })
+}
+
+/// Bytes a sample takes in a database of `total_bytes` holding `stored` samples
+/// (rounded up); `None` when either is 0 and there is nothing to measure.
+#[must_use]
+pub fn bytes_per_sample(total_bytes: u64, stored: u64) -> Option<u64> {
+    (stored > 0 && total_bytes > 0).then(|| total_bytes.div_ceil(stored))
 }
 
 /// `330 MB`, `12.3 GB`, `220 kB`: decimal units, three significant figures at most.

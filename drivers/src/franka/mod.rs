@@ -339,10 +339,7 @@ fn run_move(
 ) -> Result<(), DeviceError> {
     let start = robot.read_once().map_err(err)?;
     let from = ArmPose::from_matrix(&start.O_T_EE_c);
-    let dist = (0..3)
-        .map(|i| (target.translation_m[i] - from.translation_m[i]).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let dist = from.distance_to(target);
     let angle = from.angle_to(target);
     let path = path_limits(dist, angle, speed, limits);
     let mut otg = franka::Otg::new(0.0, path).map_err(err)?;

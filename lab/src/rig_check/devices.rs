@@ -54,7 +54,7 @@ pub(super) async fn check_arm(
                 return Err(e);
             }
         };
-        let off_m = distance_m(&reached.base_from_finger, &target);
+        let off_m = reached.base_from_finger.distance_to(&target);
         // NaN (a pose that does not read) fails too.
         if off_m.is_nan() || off_m > ARM_CHECK_TOLERANCE_M {
             return Err(format!(
@@ -70,13 +70,6 @@ pub(super) async fn check_arm(
         moved_mm: ARM_CHECK_STEP_M * 1000.0,
         worst_arrival_mm: worst_m * 1000.0,
     })
-}
-
-fn distance_m(a: &softtouch_schemas::ArmPose, b: &softtouch_schemas::ArmPose) -> f64 {
-    (0..3)
-        .map(|i| (a.translation_m[i] - b.translation_m[i]).powi(2))
-        .sum::<f64>()
-        .sqrt()
 }
 
 pub(super) async fn check_force_sensor(
