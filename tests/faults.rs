@@ -988,6 +988,12 @@ fn count_samples(db: &Path, run: i64) -> i64 {
     })
 }
 
+/// Samples planned for a run that is stopped long before it ends: far more than the
+/// test waits for (a simulated sample takes a few milliseconds), yet few enough that
+/// the disk `collect` checks for before it starts (220 kB a sample: 1.1 GB) is free on
+/// any test machine.
+const LONG_RUN: &str = "5000";
+
 /// Start `softtouch collect ARGS` in `dir` and wait until `run` has `at_least` samples.
 fn collect_until(dir: &Path, args: &[&str], at_least: i64) -> std::process::Child {
     let mut child = Command::new(env!("CARGO_BIN_EXE_softtouch"))
@@ -1021,7 +1027,7 @@ fn sigterm_finishes_the_sample_retreats_and_stops_the_run() {
     let dir = tempdir();
     let child = collect_until(
         dir.path(),
-        &["collect", "--samples", "100000", "--seed", "8"],
+        &["collect", "--samples", LONG_RUN, "--seed", "8"],
         3,
     );
     signal(&child, "TERM");
@@ -1060,7 +1066,7 @@ fn a_second_process_is_refused_a_leased_run_and_takes_it_over_once_the_holder_is
     let dir = tempdir();
     let mut child = collect_until(
         dir.path(),
-        &["collect", "--samples", "100000", "--seed", "9"],
+        &["collect", "--samples", LONG_RUN, "--seed", "9"],
         2,
     );
     let holder = child.id();
@@ -1189,7 +1195,7 @@ fn sighup_then_a_second_signal_stops_the_binary_at_once() {
     let dir = tempdir();
     let child = collect_until(
         dir.path(),
-        &["collect", "--samples", "100000", "--seed", "10"],
+        &["collect", "--samples", LONG_RUN, "--seed", "10"],
         2,
     );
     // Both signals are queued while the child is stopped, and arrive together when it
