@@ -57,7 +57,8 @@ pub struct GripperStatus {
     pub activated: bool,
     /// Object detection.
     pub object: ObjectStatus,
-    /// Fault code (gFLT; 0 = none).
+    /// The fault byte: gFLT in the low nibble, the controller's kFLT in the high one
+    /// (0 = none; [`crate::hande::regs::describe_fault`] names it).
     pub fault: u8,
     /// Requested position echo (gPR).
     pub requested_position: u8,
@@ -78,6 +79,18 @@ pub trait Gripper: Send {
 
     /// Read the status.
     async fn status(&mut self) -> Result<GripperStatus, DeviceError>;
+
+    /// Send a move and read the status back, in one exchange where the link has one
+    /// (the Hand-E's function 23). The status is read after the write: it echoes the
+    /// request (gPR) but the fingers have not moved on it yet. Default: [`Self::command`]
+    /// then [`Self::status`].
+    async fn command_and_status(
+        &mut self,
+        cmd: GripperCommand,
+    ) -> Result<GripperStatus, DeviceError> {
+        self.command(cmd).await?;
+        self.status().await
+    }
 }
 
 #[async_trait]
@@ -90,6 +103,12 @@ impl<T: Gripper + ?Sized> Gripper for Box<T> {
     }
     async fn status(&mut self) -> Result<GripperStatus, DeviceError> {
         (**self).status().await
+    }
+    async fn command_and_status(
+        &mut self,
+        cmd: GripperCommand,
+    ) -> Result<GripperStatus, DeviceError> {
+        (**self).command_and_status(cmd).await
     }
 }
 

@@ -52,7 +52,7 @@ proptest! {
         match regs::decode_status(&words) {
             Ok(s) => {
                 prop_assert_eq!(words.len(), 3);
-                let _ = (s.object(), s.active(), regs::fault_class(s.g_flt), regs::fault_text(s.g_flt));
+                let _ = (s.object(), s.active(), regs::fault_class(s.g_flt), regs::fault_text(s.g_flt), regs::describe_fault(s.fault_byte()));
             }
             Err(_) => prop_assert_ne!(words.len(), 3),
         }

@@ -125,6 +125,80 @@ async fn activation_waits_out_a_slow_reset_and_the_stale_fault_before_it() {
 }
 
 #[tokio::test(start_paused = true)]
+async fn a_late_reply_is_flushed_and_never_taken_for_the_next_requests() {
+    // The gripper answers the first status read 300 ms late (the client waits 200 ms),
+    // then on time. Without the flush the late status reply would be read as the
+    // write's reply (a function-code mismatch) and every later reply would be one
+    // request behind.
+    let service = sim_service();
+    let (mut g, _clock) = pipe_pair(service.clone());
+    g.activate().await.expect("activate");
+    service.delay_next_reply(Duration::from_millis(300));
+    let e = g.status().await.expect_err("the late reply times out");
+    assert!(matches!(e, DeviceError::Timeout { .. }), "{e}");
+    g.command(GripperCommand {
+        position: 120,
+        ..CLOSE
+    })
+    .await
+    .expect("the next request gets its own reply");
+    let s = wait_until_still(&mut g).await;
+    assert_eq!((s.requested_position, s.position, s.fault), (120, 120, 0));
+    let stats = g.stats();
+    assert_eq!((stats.timeouts, stats.flushes), (1, 1), "{stats:?}");
+    // The dropped bytes are the late reply: 3 registers read, 11 bytes on the wire.
+    assert_eq!(stats.flushed_bytes, 11, "{stats:?}");
+    for _ in 0..5 {
+        assert_eq!(g.status().await.expect("on time").requested_position, 120);
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_move_and_its_status_go_in_one_function_23_transaction() {
+    let service = sim_service();
+    let (mut g, _clock) = pipe_pair(service.clone());
+    g.activate().await.expect("activate");
+    let before = (service.requests(), g.stats().transactions);
+    let s = g
+        .command_and_status(GripperCommand {
+            position: 90,
+            ..CLOSE
+        })
+        .await
+        .expect("exchange");
+    assert_eq!(
+        (service.requests(), g.stats().transactions),
+        (before.0 + 1, before.1 + 1),
+        "one request on the wire"
+    );
+    // Read after the write: the request is echoed, the fingers have not moved yet.
+    assert_eq!((s.requested_position, s.fault), (90, 0));
+    assert!(s.activated);
+    assert_eq!(wait_until_still(&mut g).await.position, 90);
+    // Refused, without sending, as a plain command is, on a major fault.
+    service.inject_fault(0x0E);
+    g.status().await.expect("status");
+    let n = service.requests();
+    let e = g.command_and_status(CLOSE).await.expect_err("refused");
+    assert!(e.to_string().contains("overcurrent"), "{e}");
+    assert_eq!(service.requests(), n);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_gripper_in_fault_0x05_at_start_activates() {
+    // A command sent before activation (or one left from before an emergency stop)
+    // leaves gFLT 0x05; the activation sequence clears it.
+    let service = sim_service();
+    service.inject_fault(0x05);
+    let (mut g, _clock) = pipe_pair(service.clone());
+    assert_eq!(g.status().await.expect("status").fault, 0x05);
+    g.activate().await.expect("activates through 0x05");
+    let s = g.status().await.expect("status");
+    assert!(s.activated && s.fault == 0, "{s:?}");
+    g.command(CLOSE).await.expect("moves");
+}
+
+#[tokio::test(start_paused = true)]
 async fn activating_an_active_gripper_only_reads_its_status() {
     let service = sim_service();
     let (mut g, _clock) = pipe_pair(service.clone());

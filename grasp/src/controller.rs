@@ -48,7 +48,10 @@ fn check_fault(status: &GripperStatus) -> Result<(), GraspError> {
     Err(GraspError::Device(softtouch_drivers::DeviceError::Fault {
         device: "gripper".into(),
         code: Some(u32::from(status.fault)),
-        message: "the gripper reported a fault during the force loop".into(),
+        message: format!(
+            "the gripper reported a fault during the force loop: {}",
+            softtouch_drivers::hande::regs::describe_fault(status.fault)
+        ),
     }))
 }
 

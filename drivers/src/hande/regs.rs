@@ -57,8 +57,10 @@ pub struct RawStatus {
     pub g_sta: u8,
     /// gOBJ: 0 moving, 1 contact opening, 2 contact closing, 3 at position.
     pub g_obj: u8,
-    /// gFLT fault code.
+    /// gFLT, the gripper's fault code (low nibble of the fault byte).
     pub g_flt: u8,
+    /// kFLT, the controller's fault code (high nibble of the fault byte).
+    pub k_flt: u8,
     /// gPR requested position echo.
     pub g_pr: u8,
     /// gPO actual position.
@@ -77,12 +79,18 @@ impl RawStatus {
             | ((self.g_obj & 3) << 6)
     }
 
+    /// The FAULT byte (byte 2): kFLT in the high nibble, gFLT in the low one.
+    #[must_use]
+    pub const fn fault_byte(&self) -> u8 {
+        ((self.k_flt & 0x0F) << 4) | (self.g_flt & 0x0F)
+    }
+
     /// Encode to the three input registers.
     #[must_use]
     pub fn encode(&self) -> [u16; 3] {
         [
             u16::from(self.status_byte()) << 8,
-            (u16::from(self.g_flt) << 8) | u16::from(self.g_pr),
+            (u16::from(self.fault_byte()) << 8) | u16::from(self.g_pr),
             (u16::from(self.g_po) << 8) | u16::from(self.g_cu),
         ]
     }
@@ -116,7 +124,8 @@ pub fn decode_status(regs: &[u16]) -> Result<RawStatus, String> {
         g_gto: s & 0x08 != 0,
         g_sta: (s >> 4) & 0x03,
         g_obj: (s >> 6) & 0x03,
-        g_flt: (r1 >> 8) as u8,
+        g_flt: ((r1 >> 8) as u8) & 0x0F,
+        k_flt: ((r1 >> 8) as u8) >> 4,
         g_pr: (r1 & 0xFF) as u8,
         g_po: (r2 >> 8) as u8,
         g_cu: (r2 & 0xFF) as u8,
@@ -138,9 +147,14 @@ pub enum FaultClass {
     Unknown,
 }
 
-/// The class of a gFLT code.
+/// The class of a fault byte (kFLT << 4 | gFLT). Any controller fault (kFLT ≠ 0)
+/// is [`FaultClass::Unknown`]: the Hand-E manual leaves its codes to the controller's
+/// manual, so the gripper is treated as needing a new activation.
 #[must_use]
 pub const fn fault_class(code: u8) -> FaultClass {
+    if code >> 4 != 0 {
+        return FaultClass::Unknown;
+    }
     match code {
         0 => FaultClass::None,
         0x05 | 0x07 => FaultClass::Priority,
@@ -150,10 +164,11 @@ pub const fn fault_class(code: u8) -> FaultClass {
     }
 }
 
-/// What a fault code means.
+/// What a gFLT code (the low nibble of the fault byte) means, by the Hand-E manual's
+/// names.
 #[must_use]
 pub const fn fault_text(code: u8) -> &'static str {
-    match code {
+    match code & 0x0F {
         0 => "no fault",
         0x05 => "action delayed: activation must complete first",
         0x07 => "the activation bit must be set first",
@@ -166,6 +181,21 @@ pub const fn fault_text(code: u8) -> &'static str {
         0x0E => "overcurrent",
         0x0F => "automatic release completed",
         _ => "unknown fault",
+    }
+}
+
+/// A fault byte in words for errors and events: the gFLT by name and code, and the
+/// kFLT by code when the controller reports one.
+#[must_use]
+pub fn describe_fault(byte: u8) -> String {
+    let (k, g) = (byte >> 4, byte & 0x0F);
+    let gripper = format!("gFLT 0x{g:02X} ({})", fault_text(g));
+    if k == 0 {
+        gripper
+    } else {
+        format!(
+            "{gripper}, controller fault kFLT 0x{k:X} (a code of the Robotiq controller, listed in its own manual)"
+        )
     }
 }
 
@@ -220,6 +250,26 @@ mod tests {
     }
 
     #[test]
+    fn the_fault_byte_splits_into_gflt_and_kflt_and_both_are_named() {
+        // 0x5E: controller fault 5, gripper overcurrent.
+        let s = decode_status(&[0x3100, 0x5E00, 0]).expect("3 regs");
+        assert_eq!((s.g_flt, s.k_flt, s.fault_byte()), (0x0E, 0x05, 0x5E));
+        assert_eq!(fault_class(s.fault_byte()), FaultClass::Unknown);
+        assert_eq!(fault_class(0x0E), FaultClass::Major);
+        let text = describe_fault(0x5E);
+        assert!(
+            text.contains("gFLT 0x0E (overcurrent)") && text.contains("kFLT 0x5"),
+            "{text}"
+        );
+        assert_eq!(
+            describe_fault(0x05),
+            "gFLT 0x05 (action delayed: activation must complete first)"
+        );
+        assert_eq!(describe_fault(0x03), "gFLT 0x03 (unknown fault)");
+        assert_eq!(fault_class(0x03), FaultClass::Unknown);
+    }
+
+    #[test]
     fn status_round_trips() {
         let s = RawStatus {
             g_act: true,
@@ -227,6 +277,7 @@ mod tests {
             g_sta: 3,
             g_obj: 2,
             g_flt: 0x0E,
+            k_flt: 0x3,
             g_pr: 200,
             g_po: 180,
             g_cu: 40,

@@ -41,6 +41,8 @@ struct State {
     /// How long the gripper takes to act on an rACT edge (a reset, or the start of an
     /// activation that clears a major fault); until then it reads as before the edge.
     edge_latency: Option<std::time::Duration>,
+    /// Hold the next reply back this long (a gripper answering late once).
+    next_reply_delay: Option<std::time::Duration>,
 }
 
 /// The register-level Hand-E over a [`Gripper`].
@@ -82,6 +84,7 @@ impl<G: Gripper + 'static> HandEService<G> {
                 last_write: None,
                 watchdog_faults: 0,
                 edge_latency: None,
+                next_reply_delay: None,
             })),
             slave_id,
         }
@@ -115,6 +118,15 @@ impl<G: Gripper + 'static> HandEService<G> {
             s.edge_latency = Some(after);
         }
         self
+    }
+
+    /// Holds the reply to the next request back by `after` (the request is acted on
+    /// at once), as a gripper does that answers late once: a client that timed out
+    /// meanwhile finds the reply waiting when it sends its next request.
+    pub fn delay_next_reply(&self, after: std::time::Duration) {
+        if let Ok(mut s) = self.state.lock() {
+            s.next_reply_delay = Some(after);
+        }
     }
 
     /// How often the watchdog raised 0x09.
@@ -249,7 +261,8 @@ impl<G: Gripper + 'static> HandEService<G> {
             g_gto: action & regs::R_GTO != 0,
             g_sta: 0,
             g_obj: 0,
-            g_flt: fault,
+            g_flt: fault & 0x0F,
+            k_flt: fault >> 4,
             g_pr: cmd.position,
             g_po: 0,
             g_cu: 0,
@@ -295,6 +308,19 @@ impl<G: Gripper + 'static> HandEService<G> {
         if req.slave != self.slave_id {
             return Ok(None);
         }
+        let delay = self
+            .state
+            .lock()
+            .ok()
+            .and_then(|mut s| s.next_reply_delay.take());
+        let reply = self.clone().answer(req).await;
+        if let Some(after) = delay {
+            tokio::time::sleep(after).await;
+        }
+        reply
+    }
+
+    async fn answer(self, req: SlaveRequest<'static>) -> Reply {
         if let Ok(mut s) = self.state.lock() {
             s.requests += 1;
             let silent = match (s.watchdog, s.last_write) {

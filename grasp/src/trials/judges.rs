@@ -50,7 +50,9 @@ pub fn physics_verdict(state: ObjectState, seen: &Observation) -> Verdict {
 /// A real rig's judge: the object is held when, after the lift, the fingers stopped
 /// short of the closed end and either the estimate still shows at least
 /// `min_force_n` or the gripper reports contact while closing (gOBJ = 2: stopped by
-/// an object). The position is checked whatever gOBJ says: the manual warns that it
+/// an object) and the finger agrees that it touches something (an estimate of at
+/// least [`GOBJ_CONFIRM_FRACTION`] of `min_force_n`): a gOBJ left over from an earlier
+/// move, or stuck (users of other Hand-E drivers report both), is not a grip. The position is checked whatever gOBJ says: the manual warns that it
 /// is precise only to a few mm and that thin objects may never set it, and soft
 /// fingers stepped by position reach their request (gOBJ = 3) while they hold. A
 /// grasp that never saw `min_force_n` is a miss, one that lost it a slip. A crush
@@ -65,13 +67,27 @@ pub struct RigJudge {
     pub closed_margin: u8,
 }
 
+/// The share of [`RigJudge::min_force_n`] the finger's estimate must show before the
+/// judge believes gOBJ's contact report.
+pub const GOBJ_CONFIRM_FRACTION: f64 = 0.25;
+
+impl RigJudge {
+    /// Whether gOBJ's report of a contact while closing is confirmed by the finger.
+    #[must_use]
+    pub fn contact_confirmed(&self, object: ObjectStatus, estimate_n: Option<f64>) -> bool {
+        object == ObjectStatus::ContactClosing
+            && estimate_n
+                .is_some_and(|f| f.is_finite() && f >= GOBJ_CONFIRM_FRACTION * self.min_force_n)
+    }
+}
+
 impl Judge for RigJudge {
     async fn judge(&mut self, seen: &Observation) -> Result<Verdict, GraspError> {
         let at_closed_end =
             seen.last_status.position >= self.closed_count.saturating_sub(self.closed_margin);
         let ever = seen.peak_estimate_n.is_some_and(|f| f >= self.min_force_n);
         let now = seen.last_estimate_n.is_some_and(|f| f >= self.min_force_n)
-            || seen.last_status.object == ObjectStatus::ContactClosing;
+            || self.contact_confirmed(seen.last_status.object, seen.last_estimate_n);
         Ok(if !ever {
             Verdict::Failed(FailReason::Miss)
         } else if !seen.lifted {
@@ -207,6 +223,20 @@ mod tests {
         closed.last_status.object = ObjectStatus::ContactClosing;
         assert_eq!(
             j.judge(&closed).await.ok(),
+            Some(Verdict::Failed(FailReason::Slip))
+        );
+        // gOBJ = 2 while the finger feels nothing (0.05 N, under a quarter of 0.3 N): a
+        // stale or stuck report, not a grip.
+        let mut stuck = seen(true, 150, Some(0.05), Some(1.2));
+        stuck.last_status.object = ObjectStatus::ContactClosing;
+        assert_eq!(
+            j.judge(&stuck).await.ok(),
+            Some(Verdict::Failed(FailReason::Slip))
+        );
+        let mut nan = seen(true, 150, Some(f64::NAN), Some(1.2));
+        nan.last_status.object = ObjectStatus::ContactClosing;
+        assert_eq!(
+            j.judge(&nan).await.ok(),
             Some(Verdict::Failed(FailReason::Slip))
         );
         // A contact report never makes a grasp that never felt the force a hold.

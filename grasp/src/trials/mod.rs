@@ -18,7 +18,9 @@
 //! compares like with like.
 
 mod judges;
-pub use judges::{ObjectState, OperatorJudge, RigJudge, TOUCH_N, physics_verdict};
+pub use judges::{
+    GOBJ_CONFIRM_FRACTION, ObjectState, OperatorJudge, RigJudge, TOUCH_N, physics_verdict,
+};
 
 use std::future::Future;
 use std::sync::Arc;

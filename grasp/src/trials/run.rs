@@ -197,8 +197,6 @@ impl Run {
             speed: config.speed,
             force: config.force,
         };
-        let keep_alive_ns = config.keep_alive.as_nanos() as u64;
-        let mut sent = self.clock.now();
         let mut next = self.clock.now();
         // The first cycle watches the closed fingers before the lift, so a grasp that
         // slips at lift-off (where the load is largest) is seen to have touched.
@@ -214,19 +212,19 @@ impl Run {
                     None => None,
                 };
                 let true_n = truth.true_force_n(frame.meta.t);
-                let status = gripper.status().await?;
+                // One exchange a frame: the unchanged request (the keep-alive the
+                // Hand-E needs at least every second) and the status read back.
+                let status = gripper.command_and_status(command).await?;
                 self.last_status = Some(status);
                 if status.fault != 0 {
                     return Err(GraspError::Device(DeviceError::Fault {
                         device: "gripper".into(),
                         code: Some(u32::from(status.fault)),
-                        message: "the gripper reported a fault while holding".into(),
+                        message: format!(
+                            "the gripper reported a fault while holding: {}",
+                            softtouch_drivers::hande::regs::describe_fault(status.fault)
+                        ),
                     }));
-                }
-                // Keep-alive: the Hand-E faults after about 1 s without a command.
-                if elapsed_ns(self.clock.as_ref(), sent) >= keep_alive_ns {
-                    gripper.command(command).await?;
-                    sent = self.clock.now();
                 }
                 self.trace.push(TraceRow {
                     t: frame.meta.t,

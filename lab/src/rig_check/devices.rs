@@ -220,8 +220,8 @@ pub(super) async fn move_gripper(
         let s = gripper.status().await.map_err(fail)?;
         if s.fault != 0 {
             return Err(format!(
-                "expected no fault while moving to count {position}: gFLT 0x{:02X}",
-                s.fault
+                "expected no fault while moving to count {position}: {}",
+                softtouch_drivers::hande::regs::describe_fault(s.fault)
             ));
         }
         if s.requested_position == position && s.object != ObjectStatus::Moving {
@@ -244,6 +244,7 @@ pub(super) async fn move_gripper(
 pub(super) async fn check_gripper(
     mut gripper: Box<dyn Gripper>,
     clock: &dyn Clock,
+    latency_timer_ms: Option<u32>,
 ) -> Result<GripperCheck, String> {
     gripper
         .activate()
@@ -258,8 +259,8 @@ pub(super) async fn check_gripper(
     }
     if before.fault != 0 {
         return Err(format!(
-            "expected no fault after activation: gFLT 0x{:02X}",
-            before.fault
+            "expected no fault after activation: {}",
+            softtouch_drivers::hande::regs::describe_fault(before.fault)
         ));
     }
     // A small move towards the middle of the scale and back.
@@ -278,13 +279,53 @@ pub(super) async fn check_gripper(
             there.position, there.object
         ));
     }
+    let exchanges_hz = time_exchanges(gripper.as_mut(), clock, back.position).await?;
+    if let Some(ms) = latency_timer_ms.filter(|&ms| ms > MAX_LATENCY_TIMER_MS) {
+        return Err(format!(
+            "expected the USB-serial adapter's latency timer at {MAX_LATENCY_TIMER_MS} ms, it is {ms} ms: every reply waits that long{}. Set it to 1 ms (docs/RIG.md, \"The FTDI latency timer\")",
+            exchanges_hz.map_or_else(String::new, |hz| format!(
+                " (measured: {hz:.0} exchanges/s)"
+            ))
+        ));
+    }
     Ok(GripperCheck {
         start,
         reached: there.position,
         back: back.position,
         object: back.object,
         current_ma: back.current_ma,
+        exchanges_hz,
+        latency_timer_ms,
     })
+}
+
+/// Times [`LINK_TEST_EXCHANGES`] move-and-status exchanges that hold the fingers at
+/// `position`: the rate a loop of one exchange a cycle could reach on this link.
+async fn time_exchanges(
+    gripper: &mut dyn Gripper,
+    clock: &dyn Clock,
+    position: u8,
+) -> Result<Option<f64>, String> {
+    let hold = GripperCommand {
+        position,
+        speed: 128,
+        force: 20,
+    };
+    let start = clock.now();
+    for _ in 0..LINK_TEST_EXCHANGES {
+        let s = gripper
+            .command_and_status(hold)
+            .await
+            .map_err(|e| format!("expected move-and-status exchanges: {e}"))?;
+        if s.fault != 0 {
+            return Err(format!(
+                "expected no fault while holding: {}",
+                softtouch_drivers::hande::regs::describe_fault(s.fault)
+            ));
+        }
+    }
+    let elapsed_s = clock.now().0.saturating_sub(start.0) as f64 * 1e-9;
+    Ok((elapsed_s > 0.0).then(|| f64::from(LINK_TEST_EXCHANGES) / elapsed_s))
 }
 
 #[cfg(test)]
@@ -384,5 +425,50 @@ mod tests {
         })
         .expect_err("no room to move");
         assert!(e.contains("expected room to move 1 mm up"), "{e}");
+    }
+
+    /// The simulator's Hand-E behind its Modbus register map, over an in-memory pipe:
+    /// the exchanges are real function-23 transactions.
+    async fn gripper_check(latency_timer_ms: Option<u32>) -> Result<GripperCheck, String> {
+        let clock = TokioClock::new();
+        let rig = SimRig::new(
+            &softtouch_schemas::defaults::rig(),
+            &softtouch_schemas::defaults::scene(),
+            3,
+            clock,
+        )
+        .expect("sim rig");
+        let service = softtouch_drivers::hande::HandEService::new(rig.gripper, 9);
+        let (a, b) = tokio::io::duplex(1024);
+        tokio::spawn(softtouch_drivers::hande::serve_rtu(
+            service,
+            b,
+            std::future::pending(),
+        ));
+        let hand_e = softtouch_drivers::hande::HandE::new(
+            a,
+            softtouch_drivers::hande::HandEConfig::default(),
+            Arc::new(clock),
+        );
+        check_gripper(Box::new(hand_e), &clock, latency_timer_ms).await
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_gripper_check_times_the_link_and_refuses_a_slow_adapter() {
+        let ok = gripper_check(Some(1)).await.expect("passes at 1 ms");
+        // Paced at the Hand-E's 200 transactions a second, on the paused clock.
+        let hz = ok.exchanges_hz.expect("time passed");
+        assert!((150.0..=200.0).contains(&hz), "{hz}");
+        assert_eq!(ok.latency_timer_ms, Some(1));
+        assert!(Measured::Gripper(ok).to_string().contains("exchanges/s"));
+        let e = gripper_check(Some(16)).await.expect_err("16 ms fails");
+        assert!(
+            e.contains("latency timer at 1 ms, it is 16 ms") && e.contains("docs/RIG.md"),
+            "{e}"
+        );
+        assert!(
+            gripper_check(None).await.is_ok(),
+            "no adapter: nothing to check"
+        );
     }
 }

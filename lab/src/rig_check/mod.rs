@@ -149,6 +149,12 @@ pub struct GripperCheck {
     pub object: ObjectStatus,
     /// Motor current at the end, mA.
     pub current_ma: u32,
+    /// Move-and-status exchanges a second, measured over [`LINK_TEST_EXCHANGES`]
+    /// exchanges holding the fingers where they are (`None` when no time passed, as
+    /// on the simulator's paused clock).
+    pub exchanges_hz: Option<f64>,
+    /// The USB-serial adapter's latency timer, ms (`None`: not such an adapter).
+    pub latency_timer_ms: Option<u32>,
 }
 
 impl From<ArmCheck> for Measured {
@@ -228,11 +234,20 @@ impl fmt::Display for Measured {
                 "frame {} {}×{} {:?}, {} bytes, {} dropped",
                 c.sequence, c.width, c.height, c.format, c.bytes, c.dropped
             ),
-            Self::Gripper(g) => write!(
-                f,
-                "activated; moved {} → {} → {} counts, gOBJ {:?}, current {} mA, no fault",
-                g.start, g.reached, g.back, g.object, g.current_ma
-            ),
+            Self::Gripper(g) => {
+                write!(
+                    f,
+                    "activated; moved {} → {} → {} counts, gOBJ {:?}, current {} mA, no fault",
+                    g.start, g.reached, g.back, g.object, g.current_ma
+                )?;
+                if let Some(hz) = g.exchanges_hz {
+                    write!(f, "; link {hz:.0} exchanges/s")?;
+                }
+                if let Some(ms) = g.latency_timer_ms {
+                    write!(f, ", adapter latency timer {ms} ms")?;
+                }
+                Ok(())
+            }
         }
     }
 }
@@ -241,6 +256,10 @@ impl fmt::Display for Measured {
 const MIN_RATE_FRACTION: f64 = 0.8;
 /// Counts of the gripper's test move.
 const GRIPPER_TEST_COUNTS: u8 = 20;
+/// Exchanges timed to measure the gripper link's rate.
+pub const LINK_TEST_EXCHANGES: u32 = 20;
+/// Highest USB-serial latency timer the gripper check accepts, ms.
+pub const MAX_LATENCY_TIMER_MS: u32 = 1;
 
 fn all_simulated(rig: &RigConfig) -> bool {
     matches!(rig.arm, ArmDevice::Sim { .. })
@@ -489,7 +508,12 @@ pub async fn check_rig(
                 Some(g) => g,
                 None => Box::new(sim_gripper.take().ok_or_else(no_sim)?),
             };
-            check_gripper(gripper, &*shared).await
+            let port = match &rig.gripper {
+                GripperDevice::HandE { port, .. } => Some(port.as_str()),
+                GripperDevice::Sim {} => None,
+            };
+            let latency_timer_ms = port.and_then(softtouch_drivers::hande::latency_timer_ms);
+            check_gripper(gripper, &*shared, latency_timer_ms).await
         })
         .await,
     );
