@@ -219,6 +219,7 @@ mod tests {
         rig.camera = CameraDevice::V4l {
             device: "/dev/does-not-exist".into(),
             latency_s: None,
+            image: None,
         };
         let e = build(&rig, &defaults::scene(), 1, TokioClock::new())
             .await

@@ -13,7 +13,8 @@
 //!   (ATI serial F/T controller, ASCII, with a simulated controller), [`hande`]
 //!   (Robotiq Hand-E, Modbus RTU through tokio-modbus, with a simulated Hand-E),
 //!   [`franka`] (Panda through franka-rs on its own thread), `v4l_camera` (V4L2,
-//!   behind feature `v4l`, which needs libclang to build).
+//!   behind feature `v4l`, which needs libclang to build); [`v4l_controls`], the image
+//!   settings it locks, as a plan and a read-back check that build without it.
 //! - [`guard`]: [`ForceGuard`], the one force/torque check of every reading wherever an
 //!   actuator moves under load.
 //! - [`open`]: the real driver of a rig entry (`None` for a simulated one).
@@ -40,6 +41,7 @@ pub mod open;
 pub mod realtime;
 #[cfg(feature = "v4l")]
 pub mod v4l_camera;
+pub mod v4l_controls;
 
 pub use arm::{Arm, ArmState};
 pub use camera::{Camera, Frame};

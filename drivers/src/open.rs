@@ -137,9 +137,16 @@ pub async fn real_camera(
     match d {
         CameraDevice::Sim { .. } => Ok(None),
         #[cfg(feature = "v4l")]
-        CameraDevice::V4l { device, latency_s } => Ok(Some(Box::new(
-            crate::v4l_camera::V4lCamera::open_with_latency(device, clock, latency(*latency_s))?,
-        ))),
+        CameraDevice::V4l {
+            device,
+            latency_s,
+            image,
+        } => Ok(Some(Box::new(crate::v4l_camera::V4lCamera::open_with(
+            device,
+            clock,
+            latency(*latency_s),
+            image.as_ref(),
+        )?))),
         #[cfg(not(feature = "v4l"))]
         CameraDevice::V4l { device, .. } => {
             let _ = clock;

@@ -447,9 +447,11 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
 
     /// One cycle: frame → estimate → projection → step → request.
     pub async fn cycle(&mut self, target_n: f64) -> Result<Cycle, GraspError> {
+        // The newest frame, never a queued older one: the loop acts on what the
+        // finger feels now, even when it runs slower than the camera.
         let frame = self
             .camera
-            .frame_after(self.next_frame_t, self.config.frame_timeout_ms)
+            .latest_frame_after(self.next_frame_t, self.config.frame_timeout_ms)
             .await?;
         self.next_frame_t = TimestampNs(frame.meta.t.0 + 1);
         let saturation_n = self.config.stepper.saturation_n;

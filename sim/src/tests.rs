@@ -1010,6 +1010,7 @@ fn a_real_driver_in_the_rig_config_is_refused() {
     rig.camera = softtouch_schemas::rig::CameraDevice::V4l {
         device: "/dev/video0".into(),
         latency_s: None,
+        image: None,
     };
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_time()

@@ -2,6 +2,12 @@
 //! MJPEG or YUYV, captured on its own thread through memory-mapped buffers, each
 //! frame stamped from its driver timestamp (CLOCK_MONOTONIC) mapped onto the injected
 //! clock, and decoded with `image` (MJPEG) or converted (YUYV) to RGB8.
+//!
+//! At open the negotiated format and the frame rate the camera set are checked (a
+//! camera that silently falls back is refused), and a rig's `[camera.image]` is locked
+//! and read back ([`crate::v4l_controls`]). Frames go to a queue (for collection's
+//! [`Camera::frame_after`]) and to a one-frame slot holding the newest (for a control
+//! loop's [`Camera::latest_frame_after`]).
 
 use crate::camera::{Camera, Frame};
 use crate::clock::Clock;
@@ -11,7 +17,7 @@ use softtouch_schemas::{FrameFormat, FrameMeta, TimestampNs};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 use v4l::FourCC;
 use v4l::buffer::Type;
 use v4l::frameinterval::FrameIntervalEnum;
@@ -105,10 +111,51 @@ fn best_mode(dev: &Device) -> Result<Mode, String> {
 #[derive(Debug)]
 pub struct V4lCamera {
     rx: mpsc::Receiver<Result<Frame, DeviceError>>,
+    latest: watch::Receiver<Option<Arc<Frame>>>,
     dropped: Arc<AtomicU64>,
     stop: Arc<AtomicBool>,
     mode: Mode,
     device: String,
+    /// The image settings as read back, for `rig check`.
+    held: String,
+}
+
+type Queue = mpsc::Sender<Result<Frame, DeviceError>>;
+
+/// Writes each planned control and reads them all back.
+fn lock_image(
+    dev: &Device,
+    path: &str,
+    image: &softtouch_schemas::rig::ImageSettings,
+) -> Result<String, DeviceError> {
+    use crate::v4l_controls::{check_held, plan};
+    use v4l::control::{Control, Value};
+    let refuse = |message: String| DeviceError::InvalidCommand {
+        device: path.into(),
+        message,
+    };
+    let writes = plan(image);
+    for w in &writes {
+        dev.set_control(Control {
+            id: w.id,
+            value: Value::Integer(w.value),
+        })
+        .map_err(|e| refuse(format!("cannot set {} = {}: {e}", w.name, w.value)))?;
+    }
+    let held: Vec<Option<i64>> = writes
+        .iter()
+        .map(|w| match dev.control(w.id).ok()?.value {
+            Value::Integer(v) => Some(v),
+            Value::Boolean(b) => Some(i64::from(b)),
+            _ => None,
+        })
+        .collect();
+    check_held(&writes, &held).map_err(refuse)?;
+    Ok(writes
+        .iter()
+        .map(|w| format!("{} {}", w.name, w.value))
+        .collect::<Vec<_>>()
+        .join(", "))
 }
 
 impl Drop for V4lCamera {
@@ -120,50 +167,76 @@ impl Drop for V4lCamera {
 impl V4lCamera {
     /// Open `path`, pick the mode, and start capturing.
     pub fn open(path: &str, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
-        Self::open_with_latency(path, clock, Duration::ZERO)
+        Self::open_with(path, clock, Duration::ZERO, None)
     }
 
     /// [`V4lCamera::open`], stamping every frame `latency` earlier than the driver's
     /// timestamp (the rig's `camera.latency_s`): frames and force/torque readings then
-    /// share one time base.
-    pub fn open_with_latency(
+    /// share one time base; `image` (the rig's `[camera.image]`) locked and read back.
+    pub fn open_with(
         path: &str,
         clock: Arc<dyn Clock>,
         latency: Duration,
+        image: Option<&softtouch_schemas::rig::ImageSettings>,
     ) -> Result<Self, DeviceError> {
-        let dev = Device::with_path(path).map_err(|e| link(path, e))?;
-        let mode = best_mode(&dev).map_err(|m| DeviceError::InvalidCommand {
+        let refuse = |message: String| DeviceError::InvalidCommand {
             device: path.into(),
-            message: m,
-        })?;
+            message,
+        };
+        let dev = Device::with_path(path).map_err(|e| link(path, e))?;
+        let mode = best_mode(&dev).map_err(refuse)?;
         let fmt = v4l::Format::new(WIDTH, HEIGHT, FourCC::new(&mode.fourcc));
         let got = dev.set_format(&fmt).map_err(|e| link(path, e))?;
-        if got.width != WIDTH || got.height != HEIGHT {
-            return Err(DeviceError::InvalidCommand {
-                device: path.into(),
-                message: format!(
-                    "asked {WIDTH}x{HEIGHT}, the device set {}x{}",
-                    got.width, got.height
-                ),
-            });
+        if got.width != WIDTH || got.height != HEIGHT || got.fourcc != FourCC::new(&mode.fourcc) {
+            return Err(refuse(format!(
+                "asked {WIDTH}x{HEIGHT} {}, the device set {}x{} {}",
+                String::from_utf8_lossy(&mode.fourcc),
+                got.width,
+                got.height,
+                got.fourcc
+            )));
         }
-        let _ = dev.set_params(&v4l::video::capture::Parameters::with_fps(
-            mode.fps.round() as u32
-        ));
+        let params = dev
+            .set_params(&v4l::video::capture::Parameters::with_fps(
+                mode.fps.round() as u32
+            ))
+            .map_err(|e| refuse(format!("cannot set {:.1} frames/s: {e}", mode.fps)))?;
+        let fps = crate::v4l_controls::check_rate(
+            mode.fps,
+            params.interval.numerator,
+            params.interval.denominator,
+        )
+        .map_err(refuse)?;
+        let mode = Mode { fps, ..mode };
+        if let Some(us) = image.and_then(|i| i.exposure_us)
+            && f64::from(us) > 1e6 / fps
+        {
+            return Err(refuse(format!(
+                "camera.image.exposure_us = {us} is longer than a frame at {fps:.1} frames/s ({:.0} µs): the camera would slow down",
+                1e6 / fps
+            )));
+        }
+        let held = match image {
+            Some(i) => lock_image(&dev, path, i)?,
+            None => "automatic exposure, white balance and gain".to_owned(),
+        };
         let (tx, rx) = mpsc::channel(8);
+        let (latest_tx, latest) = watch::channel(None);
         let dropped = Arc::new(AtomicU64::new(0));
         let stop = Arc::new(AtomicBool::new(false));
         let (d2, s2, name) = (dropped.clone(), stop.clone(), path.to_string());
         std::thread::Builder::new()
             .name("v4l".into())
-            .spawn(move || capture(dev, mode, clock, latency, tx, d2, s2, name))
+            .spawn(move || capture(dev, mode, clock, latency, (tx, latest_tx), d2, s2, name))
             .map_err(|e| link(path, e))?;
         Ok(Self {
             rx,
+            latest,
             dropped,
             stop,
             mode,
             device: path.into(),
+            held,
         })
     }
 
@@ -211,7 +284,7 @@ fn capture(
     mode: Mode,
     clock: Arc<dyn Clock>,
     latency: Duration,
-    tx: mpsc::Sender<Result<Frame, DeviceError>>,
+    (tx, latest): (Queue, watch::Sender<Option<Arc<Frame>>>),
     dropped: Arc<AtomicU64>,
     stop: Arc<AtomicBool>,
     name: String,
@@ -260,6 +333,8 @@ fn capture(
             },
             data,
         };
+        // The newest frame replaces the last in the control loop's slot.
+        latest.send_replace(Some(Arc::new(frame.clone())));
         match tx.try_send(Ok(frame)) {
             // Full: nobody asked for a frame since the queue filled (between samples).
             // The camera delivered it; it is not a drop, and `frame_after` wants only
@@ -290,8 +365,49 @@ impl Camera for V4lCamera {
         }
     }
 
+    /// The slot's newest frame when it is at or after `t`, else the next one to
+    /// arrive there: frames in between are skipped.
+    async fn latest_frame_after(
+        &mut self,
+        t: TimestampNs,
+        timeout_ms: u64,
+    ) -> Result<Frame, DeviceError> {
+        let deadline = tokio::time::Instant::now() + Duration::from_millis(timeout_ms);
+        loop {
+            let newest = self.latest.borrow_and_update().clone();
+            if let Some(f) = newest.filter(|f| f.meta.t >= t) {
+                return Ok(Arc::unwrap_or_clone(f));
+            }
+            match tokio::time::timeout_at(deadline, self.latest.changed()).await {
+                Err(_) => {
+                    return Err(DeviceError::Timeout {
+                        device: self.device.clone(),
+                        timeout_ms,
+                    });
+                }
+                // The capture thread ended; its reason waits in the queue.
+                Ok(Err(_)) => {
+                    return Err(match self.rx.try_recv() {
+                        Ok(Err(e)) => e,
+                        _ => link(&self.device, "the capture thread stopped"),
+                    });
+                }
+                Ok(Ok(())) => {}
+            }
+        }
+    }
+
     fn dropped_frames(&self) -> u64 {
         self.dropped.load(Ordering::Relaxed)
+    }
+
+    fn settings(&self) -> Option<String> {
+        Some(format!(
+            "{} {:.1} frames/s, {}",
+            String::from_utf8_lossy(&self.mode.fourcc),
+            self.mode.fps,
+            self.held
+        ))
     }
 }
 

@@ -203,7 +203,9 @@ impl Run {
         let mut end: Option<u64> = None;
         let watched: Result<(), GraspError> = async {
             while end.is_none_or(|end| self.clock.now().0 < end) {
-                let frame = camera.frame_after(next, config.frame_timeout_ms).await?;
+                let frame = camera
+                    .latest_frame_after(next, config.frame_timeout_ms)
+                    .await?;
                 next = TimestampNs(frame.meta.t.0 + 1);
                 let sat = config.stepper.saturation_n;
                 let estimate_n = match estimator.estimate(&frame)? {

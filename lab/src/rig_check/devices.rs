@@ -196,6 +196,7 @@ pub(super) async fn check_camera(
         format: m.format,
         bytes: frame.data.len(),
         dropped: camera.dropped_frames(),
+        settings: camera.settings(),
     })
 }
 

@@ -120,7 +120,7 @@ pub struct StreamCheck {
 }
 
 /// One frame of a camera.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct FrameCheck {
     /// Its sequence number.
     pub sequence: u64,
@@ -134,6 +134,8 @@ pub struct FrameCheck {
     pub bytes: usize,
     /// Frames the camera reports dropped.
     pub dropped: u64,
+    /// The mode and image settings the device holds (a real camera's).
+    pub settings: Option<String>,
 }
 
 /// The gripper's small move and back.
@@ -229,11 +231,17 @@ impl fmt::Display for Measured {
                 )
             }
             Self::ForceSensor(s) => s.fmt(f),
-            Self::Camera(c) => write!(
-                f,
-                "frame {} {}×{} {:?}, {} bytes, {} dropped",
-                c.sequence, c.width, c.height, c.format, c.bytes, c.dropped
-            ),
+            Self::Camera(c) => {
+                write!(
+                    f,
+                    "frame {} {}×{} {:?}, {} bytes, {} dropped",
+                    c.sequence, c.width, c.height, c.format, c.bytes, c.dropped
+                )?;
+                if let Some(held) = &c.settings {
+                    write!(f, "; {held}")?;
+                }
+                Ok(())
+            }
             Self::Gripper(g) => {
                 write!(
                     f,

@@ -169,7 +169,29 @@ pub enum CameraDevice {
         /// sensor's `latency_s` is from its readings. Absent: 0.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         latency_s: Option<f64>,
+        /// Image settings locked at open and read back (`[camera.image]`). Absent:
+        /// the camera's own automatic exposure, white balance and gain, which drift
+        /// with the light and change the images a model was trained on.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        image: Option<ImageSettings>,
     },
+}
+
+/// A V4L2 camera's image settings, each turning its automatic control off. Values the
+/// camera does not hold as asked (read back after setting) refuse the camera.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImageSettings {
+    /// Exposure time, µs (V4L2 `exposure_time_absolute`, in 100 µs steps; manual
+    /// exposure). At most the frame period, or the camera slows down.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure_us: Option<u32>,
+    /// White balance temperature, K (automatic white balance off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub white_balance_k: Option<u32>,
+    /// Gain, in the camera's own units (automatic gain off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gain: Option<u32>,
 }
 
 /// The gripper's driver.

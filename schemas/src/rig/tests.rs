@@ -134,3 +134,65 @@ com_in_flange_m = [0.0, 0.0, 0.06]
         ["arm.end_effector", "arm.payload.inertia_kg_m2"]
     );
 }
+
+#[test]
+fn a_v4l_camera_locks_its_image_settings_from_the_camera_image_table() {
+    let toml = r#"
+driver = "v4l"
+device = "/dev/video0"
+[image]
+exposure_us = 5000
+white_balance_k = 4600
+gain = 12
+"#;
+    let camera: CameraDevice = toml::from_str(toml).unwrap_or_else(|e| panic!("{e}"));
+    let CameraDevice::V4l { image, .. } = &camera else {
+        panic!("not v4l: {camera:?}");
+    };
+    assert_eq!(
+        *image,
+        Some(ImageSettings {
+            exposure_us: Some(5000),
+            white_balance_k: Some(4600),
+            gain: Some(12),
+        })
+    );
+    let mut rig = crate::defaults::rig();
+    rig.camera = camera.clone();
+    assert!(refused(&rig).is_empty(), "{:?}", refused(&rig));
+    // Below one V4L2 step, an impossible colour temperature; the second camera too.
+    rig.camera = CameraDevice::V4l {
+        device: "/dev/video0".into(),
+        latency_s: None,
+        image: Some(ImageSettings {
+            exposure_us: Some(50),
+            white_balance_k: Some(100_000),
+            gain: None,
+        }),
+    };
+    rig.second_camera = Some(CameraDevice::V4l {
+        device: "/dev/video2".into(),
+        latency_s: None,
+        image: Some(ImageSettings {
+            exposure_us: Some(2_000_000),
+            white_balance_k: None,
+            gain: None,
+        }),
+    });
+    assert_eq!(
+        refused(&rig),
+        [
+            "camera.image.exposure_us",
+            "camera.image.white_balance_k",
+            "second_camera.image.exposure_us"
+        ]
+    );
+    // A misspelt or negative setting does not parse.
+    for bad in ["exposure = 5000", "gain = -1", "exposure_us = \"fast\""] {
+        let text = format!("driver = \"v4l\"\ndevice = \"/dev/video0\"\n[image]\n{bad}\n");
+        assert!(
+            toml::from_str::<CameraDevice>(&text).is_err(),
+            "{bad} parsed"
+        );
+    }
+}

@@ -110,9 +110,14 @@ impl Validate for RigConfig {
         }
         match &self.camera {
             CameraDevice::Sim { fps } => c.within("camera.fps", *fps, 1.0, 1000.0, "frames/s"),
-            CameraDevice::V4l { device, latency_s } => {
+            CameraDevice::V4l {
+                device,
+                latency_s,
+                image,
+            } => {
                 non_empty(c, "camera.device", device);
                 latency(c, "camera.latency_s", *latency_s);
+                image_settings(c, "camera.image", image.as_ref());
             }
         }
         match (&self.camera, &self.second_camera) {
@@ -122,10 +127,15 @@ impl Validate for RigConfig {
             }
             (
                 CameraDevice::V4l { device: first, .. },
-                Some(CameraDevice::V4l { device, latency_s }),
+                Some(CameraDevice::V4l {
+                    device,
+                    latency_s,
+                    image,
+                }),
             ) => {
                 non_empty(c, "second_camera.device", device);
                 latency(c, "second_camera.latency_s", *latency_s);
+                image_settings(c, "second_camera.image", image.as_ref());
                 if device == first {
                     c.fail(
                         "second_camera.device",
@@ -343,6 +353,30 @@ pub const MAX_SENSOR_LATENCY_S: f64 = 1.0;
 pub(super) fn latency(c: &mut Check, field: &str, v: Option<f64>) {
     if let Some(v) = v {
         c.within(field, v, 0.0, MAX_SENSOR_LATENCY_S, "s");
+    }
+}
+
+/// Exposure within 100 µs (one V4L2 step) and 1 s, white balance within the 1000 to
+/// 15 000 K cameras offer.
+fn image_settings(c: &mut Check, field: &str, image: Option<&super::ImageSettings>) {
+    let Some(image) = image else { return };
+    if let Some(us) = image.exposure_us {
+        c.within(
+            &format!("{field}.exposure_us"),
+            f64::from(us),
+            100.0,
+            1e6,
+            "µs",
+        );
+    }
+    if let Some(k) = image.white_balance_k {
+        c.within(
+            &format!("{field}.white_balance_k"),
+            f64::from(k),
+            1000.0,
+            15000.0,
+            "K",
+        );
     }
 }
 

@@ -57,6 +57,42 @@ impl Gripper for SoftGripper {
 impl Camera for SoftFingerCamera {
     async fn frame_after(&mut self, t: TimestampNs, timeout_ms: u64) -> Result<Frame, DeviceError> {
         let k = (t.0 as f64 / self.period_ns).ceil() as u64;
+        self.frame_k(k, t, timeout_ms).await
+    }
+
+    /// The frame exposed last before now when it is not older than `t` (a loop that
+    /// fell behind skips to it), else the first at or after `t`.
+    async fn latest_frame_after(
+        &mut self,
+        t: TimestampNs,
+        timeout_ms: u64,
+    ) -> Result<Frame, DeviceError> {
+        let first = (t.0 as f64 / self.period_ns).ceil() as u64;
+        let mut newest = (self.clock.now().0 as f64 / self.period_ns).floor() as u64;
+        // Rounding of the frame times: the newest is the last one at or before now.
+        while newest > 0 && self.frame_time(newest) > self.clock.now() {
+            newest -= 1;
+        }
+        self.frame_k(first.max(newest), t, timeout_ms).await
+    }
+
+    fn dropped_frames(&self) -> u64 {
+        0
+    }
+}
+
+impl SoftFingerCamera {
+    fn frame_time(&self, k: u64) -> TimestampNs {
+        TimestampNs((k as f64 * self.period_ns).round() as u64)
+    }
+
+    /// Frame `k`, waited for; a timeout when it comes more than `timeout_ms` after `t`.
+    async fn frame_k(
+        &mut self,
+        k: u64,
+        t: TimestampNs,
+        timeout_ms: u64,
+    ) -> Result<Frame, DeviceError> {
         let exposed = TimestampNs((k as f64 * self.period_ns).round() as u64);
         if exposed.0.saturating_sub(t.0) > timeout_ms.saturating_mul(1_000_000) {
             tokio::time::sleep_until(self.clock.instant_at(TimestampNs(
@@ -95,9 +131,5 @@ impl Camera for SoftFingerCamera {
             },
             data,
         })
-    }
-
-    fn dropped_frames(&self) -> u64 {
-        0
     }
 }

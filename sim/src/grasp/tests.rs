@@ -663,3 +663,35 @@ fn the_shipped_scenes_declare_five_graspable_objects() {
         }
     }
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_loop_slower_than_the_camera_gets_the_newest_frame_not_the_next_queued_one() {
+    let clock = TokioClock::new();
+    let (_, mut cam, _) =
+        soft_grasp(&land(), cylinder_standing(), 120.0, 0, clock).expect("builds");
+    let first = cam
+        .latest_frame_after(TimestampNs::ZERO, 100)
+        .await
+        .expect("frame");
+    assert_eq!(first.meta.sequence, 0);
+    // The loop took 50 ms (six frames at 120 Hz) to act on it.
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    let after = TimestampNs(first.meta.t.0 + 1);
+    let newest = cam.latest_frame_after(after, 100).await.expect("frame");
+    assert_eq!(
+        newest.meta.sequence, 6,
+        "exposed at 50 ms, the last before now"
+    );
+    assert!(newest.meta.t <= clock.now());
+    let queued = cam.frame_after(after, 100).await.expect("frame");
+    assert_eq!(
+        queued.meta.sequence, 1,
+        "what frame_after (collection) still gives"
+    );
+    // Keeping up: the next frame, waited for, as before.
+    let next = cam
+        .latest_frame_after(TimestampNs(newest.meta.t.0 + 1), 100)
+        .await
+        .expect("frame");
+    assert_eq!(next.meta.sequence, 7);
+}
