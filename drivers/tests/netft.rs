@@ -83,6 +83,58 @@ fn close(a: f64, b: f64) -> bool {
 }
 
 #[tokio::test]
+async fn a_bias_is_confirmed_by_the_readings_going_to_zero_and_none_are_lost() {
+    let sensor = PatternSensor::new(2000.0);
+    let biases = sensor.biases.clone();
+    let srv = spawn_server(sensor, 1).await;
+    let mut c = NetFtClient::connect(client_config(srv.rdt, srv.cal, 2000.0), clock())
+        .await
+        .expect("connect");
+    c.start().await.expect("start");
+    let before = read_at_least(&mut c, 50).await;
+    assert!((before[10].wrench_in_sensor.force_n[2] - 1.5).abs() < 1e-6);
+    c.bias().await.expect("confirmed");
+    assert_eq!(biases.load(Ordering::SeqCst), 1);
+    assert_eq!(c.stats().bias_commands, 1);
+    // The readings the confirmation read come next, in sequence, and end near zero.
+    let after = read_at_least(&mut c, 20).await;
+    let last_before = before.last().expect("some").rdt_sequence;
+    assert!(after[0].rdt_sequence > last_before);
+    assert_eq!(
+        c.lost_readings(),
+        0,
+        "no gap: the held readings were handed out"
+    );
+    let newest = after.last().expect("some").wrench_in_sensor;
+    assert!(newest.force_n[2].abs() < 1e-6, "{newest:?}");
+    let _ = srv.stop.send(());
+}
+
+#[tokio::test]
+async fn a_bias_the_sensor_never_applies_is_an_error_naming_the_offset() {
+    let mut sensor = PatternSensor::new(2000.0);
+    sensor.ignore_bias = true;
+    let biases = sensor.biases.clone();
+    let srv = spawn_server(sensor, 1).await;
+    let mut cfg = client_config(srv.rdt, srv.cal, 2000.0);
+    cfg.reply_timeout = Duration::from_millis(50);
+    let mut c = NetFtClient::connect(cfg, clock()).await.expect("connect");
+    c.start().await.expect("start");
+    let _ = read_at_least(&mut c, 20).await;
+    let e = c.bias().await.expect_err("not confirmed");
+    assert!(e.is_fault(), "{e}");
+    let text = e.to_string();
+    assert!(
+        text.contains("bias not confirmed after 3 command(s)") && text.contains("1.5"),
+        "{text}"
+    );
+    assert_eq!(biases.load(Ordering::SeqCst), 3, "sent three times");
+    // The stream goes on: a later read still delivers.
+    assert!(!read_at_least(&mut c, 5).await.is_empty());
+    let _ = srv.stop.send(());
+}
+
+#[tokio::test]
 async fn client_streams_from_the_simulated_server_end_to_end() {
     let sensor = PatternSensor::new(2000.0);
     let biases = sensor.biases.clone();

@@ -66,7 +66,17 @@ pub struct NetFtConfig {
     /// sensor's filter and the network): subtracted from every stamp, so readings
     /// share the frames' time base.
     pub latency: Duration,
+    /// A bias is confirmed when the mean of [`BIAS_CONFIRM_READINGS`] consecutive
+    /// readings after it lies within this force (N) and torque (N·m) of zero. RDT
+    /// acknowledges nothing: a lost bias datagram would otherwise leave the old offset
+    /// in every label.
+    pub bias_tolerance: (f64, f64),
+    /// Bias commands sent before giving up (each waits `reply_timeout` for zero).
+    pub bias_attempts: u32,
 }
+
+/// Readings averaged to confirm a bias.
+pub const BIAS_CONFIRM_READINGS: usize = 5;
 
 impl NetFtConfig {
     /// Defaults for a sensor at `rdt_addr`, calibration read over TCP at port 49151 of
@@ -86,6 +96,8 @@ impl NetFtConfig {
             read_timeout: Duration::from_secs(1),
             restart_after: restart_after(rate_hz),
             latency: Duration::ZERO,
+            bias_tolerance: (0.1, 0.002),
+            bias_attempts: 3,
         }
     }
 }
@@ -119,6 +131,8 @@ pub struct NetFtStats {
     pub start_commands: u64,
     /// Streams restarted after a silence (a start command sent again mid-stream).
     pub restarts: u64,
+    /// Bias commands sent (more than one per bias when the readings did not go to zero).
+    pub bias_commands: u64,
 }
 
 /// A Net F/T over RDT. Implements [`ForceSensor`].
@@ -139,6 +153,8 @@ pub struct NetFtClient {
     /// Length of the confirming datagram `start` left in `buf`, and when it came.
     pending: Option<usize>,
     pending_t: TimestampNs,
+    /// Readings a bias's confirmation read, handed out by the next `read`.
+    held: Vec<FtReading>,
 }
 
 fn link(e: impl std::fmt::Display) -> DeviceError {
@@ -159,6 +175,17 @@ fn timeout(d: Duration) -> DeviceError {
     DeviceError::Timeout {
         device: DEVICE.into(),
         timeout_ms: u64::try_from(d.as_millis()).unwrap_or(u64::MAX),
+    }
+}
+
+fn mean_wrench(readings: &[FtReading]) -> Wrench {
+    let n = readings.len().max(1) as f64;
+    let sum = |f: &dyn Fn(&Wrench) -> f64| {
+        readings.iter().map(|r| f(&r.wrench_in_sensor)).sum::<f64>() / n
+    };
+    Wrench {
+        force_n: std::array::from_fn(|k| sum(&|w| w.force_n[k])),
+        torque_nm: std::array::from_fn(|k| sum(&|w| w.torque_nm[k])),
     }
 }
 
@@ -266,6 +293,7 @@ impl NetFtClient {
             records: Vec::new(),
             pending: None,
             pending_t: TimestampNs(0),
+            held: Vec::new(),
         })
     }
 
@@ -386,6 +414,45 @@ impl NetFtClient {
         }
     }
 
+    /// Sends the bias up to `bias_attempts` times until the readings after it come
+    /// to zero; every reading read is appended to `kept`. `Ok(Ok(()))`: confirmed;
+    /// `Ok(Err(mean))`: not, with the last offset seen (`None`: too few readings).
+    async fn confirm_bias(
+        &mut self,
+        tol_n: f64,
+        tol_nm: f64,
+        kept: &mut Vec<FtReading>,
+    ) -> Result<Result<(), Option<Wrench>>, DeviceError> {
+        let mut last_mean = None;
+        for _ in 0..self.config.bias_attempts.max(1) {
+            self.send_command(Command::Bias, 0).await?;
+            self.stats.bias_commands += 1;
+            let mut since: Vec<FtReading> = Vec::new();
+            let deadline = tokio::time::Instant::now() + self.config.reply_timeout;
+            loop {
+                let mut got = Vec::new();
+                match tokio::time::timeout_at(deadline, ForceSensor::read(self, &mut got)).await {
+                    Err(_) => break,
+                    Ok(r) => {
+                        r?;
+                    }
+                }
+                since.extend_from_slice(&got);
+                kept.append(&mut got);
+                let Some(tail) = since.len().checked_sub(BIAS_CONFIRM_READINGS) else {
+                    continue;
+                };
+                let mean = mean_wrench(since.get(tail..).unwrap_or(&[]));
+                if mean.force_norm_n() <= tol_n && mean.torque_nm.iter().all(|t| t.abs() <= tol_nm)
+                {
+                    return Ok(Ok(()));
+                }
+                last_mean = Some(mean);
+            }
+        }
+        Ok(Err(last_mean))
+    }
+
     fn start_command(&self) -> Command {
         match self.config.mode {
             StreamMode::RealTime => Command::RealTime,
@@ -458,7 +525,8 @@ impl ForceSensor for NetFtClient {
         // A malformed datagram is counted (`bad_datagrams`) and skipped: it must not
         // discard the good readings of the same read. Only a read that brings nothing
         // but malformed datagrams until its timeout reports the protocol error.
-        let mut appended = 0;
+        let mut appended = self.held.len();
+        out.append(&mut self.held);
         let mut malformed = None;
         if let Some(len) = self.pending.take() {
             let t = self.pending_t;
@@ -517,14 +585,50 @@ impl ForceSensor for NetFtClient {
         Ok(appended)
     }
 
+    /// Sends the bias and, while streaming, confirms it: the readings must come to
+    /// zero (the mean of [`BIAS_CONFIRM_READINGS`] in a row within
+    /// `bias_tolerance`) within `reply_timeout`, or the bias is sent again, up to
+    /// `bias_attempts` times; then an error names the offset that stayed. The
+    /// readings read meanwhile are handed out by the next `read`. Not streaming,
+    /// there is nothing to confirm it against: it is sent once.
     async fn bias(&mut self) -> Result<(), DeviceError> {
-        self.send_command(Command::Bias, 0).await
+        if !self.streaming {
+            self.stats.bias_commands += 1;
+            return self.send_command(Command::Bias, 0).await;
+        }
+        let (tol_n, tol_nm) = self.config.bias_tolerance;
+        // Kept aside while confirming, so that `read` below returns only new ones.
+        let mut kept = std::mem::take(&mut self.held);
+        let confirmed = self.confirm_bias(tol_n, tol_nm, &mut kept).await;
+        kept.append(&mut self.held);
+        self.held = kept;
+        let last_mean = match confirmed {
+            Ok(Ok(())) => return Ok(()),
+            Ok(Err(mean)) => mean,
+            Err(DeviceError::Timeout { .. }) => None,
+            Err(e) => return Err(e),
+        };
+        Err(DeviceError::Fault {
+            device: DEVICE.into(),
+            code: None,
+            message: format!(
+                "bias not confirmed after {} command(s): {}",
+                self.config.bias_attempts.max(1),
+                last_mean.map_or_else(
+                    || "no readings arrived".to_owned(),
+                    |m| format!(
+                        "the readings stayed at {m} (expected within {tol_n} N and {tol_nm} N·m of zero; is the sensor being touched, or the bias datagram dropped?)"
+                    )
+                )
+            ),
+        })
     }
 
     async fn stop(&mut self) -> Result<(), DeviceError> {
         self.send_command(Command::Stop, 0).await?;
         self.streaming = false;
         self.pending = None;
+        self.held.clear();
         self.drain();
         Ok(())
     }

@@ -18,7 +18,14 @@ pub fn pattern(k: u64) -> Wrench {
     }
 }
 
-/// A sensor that produces [`pattern`] at `rate_hz` on tokio's clock.
+fn minus(a: Wrench, b: Wrench) -> Wrench {
+    Wrench {
+        force_n: std::array::from_fn(|k| a.force_n[k] - b.force_n[k]),
+        torque_nm: std::array::from_fn(|k| a.torque_nm[k] - b.torque_nm[k]),
+    }
+}
+
+/// A sensor that produces [`pattern`] (less the reading at its last bias) at `rate_hz` on tokio's clock.
 #[derive(Debug)]
 pub struct PatternSensor {
     rate_hz: f64,
@@ -31,6 +38,11 @@ pub struct PatternSensor {
     lost: u64,
     /// Bias commands seen.
     pub biases: Arc<AtomicU32>,
+    /// Ignore bias commands (count them, change nothing), as a sensor whose bias
+    /// datagram was lost would.
+    pub ignore_bias: bool,
+    /// The reading a bias subtracts from every later one.
+    offset: Wrench,
 }
 
 impl PatternSensor {
@@ -43,6 +55,8 @@ impl PatternSensor {
             lose_every: None,
             lost: 0,
             biases: Arc::new(AtomicU32::new(0)),
+            ignore_bias: false,
+            offset: Wrench::ZERO,
         }
     }
 }
@@ -83,7 +97,7 @@ impl ForceSensor for PatternSensor {
                 rdt_sequence: k as u32,
                 ft_sequence: k as u32,
                 status,
-                wrench_in_sensor: pattern(k),
+                wrench_in_sensor: minus(pattern(k), self.offset),
             });
             n += 1;
         }
@@ -93,6 +107,9 @@ impl ForceSensor for PatternSensor {
 
     async fn bias(&mut self) -> Result<(), DeviceError> {
         self.biases.fetch_add(1, Ordering::SeqCst);
+        if !self.ignore_bias {
+            self.offset = pattern(self.next_k);
+        }
         Ok(())
     }
 
