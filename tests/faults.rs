@@ -34,7 +34,7 @@ use tokio::sync::watch;
 struct ProbeState {
     /// An approach move is under way.
     approaching: bool,
-    /// Approach moves started.
+    /// Approaches started (each one or two moves from home).
     approaches: u32,
     /// The camera was asked for a frame since the last approach (recording).
     recording: bool,
@@ -85,18 +85,22 @@ impl Drop for Approaching {
 impl Arm for ProbeArm {
     async fn move_to(&mut self, target: &ArmPose, speed_m_s: f64) -> Result<ArmState, DeviceError> {
         let approach = !same_pose(target, &self.home);
-        let n = {
+        let (n, starts) = {
             let mut p = probe(&self.probe);
+            // An approach is one or two moves (its slow end); it starts from home.
+            let starts = approach && p.moves.last().is_none_or(|m| same_pose(m, &self.home));
             p.moves.push(*target);
             if approach {
-                p.approaches += 1;
                 p.approaching = true;
                 p.recording = false;
             }
-            p.approaches
+            if starts {
+                p.approaches += 1;
+            }
+            (p.approaches, starts)
         };
         let _clear = Approaching(Arc::clone(&self.probe));
-        if approach
+        if starts
             && let Some((at, tx)) = &self.stop_on_approach
             && *at == n
         {

@@ -15,6 +15,10 @@ pub struct ArmState {
     pub external_wrench: Option<Wrench>,
     /// In a reflex (or other error) state: needs [`Arm::recover`] before moving.
     pub faulted: bool,
+    /// Share of the last 100 commands of the real-time loop that reached the robot
+    /// (libfranka's `control_command_success_rate`), where the arm has one. Below
+    /// about 0.95 the host is missing cycles; 20 lost in a row abort the motion.
+    pub command_success_rate: Option<f64>,
 }
 
 /// A robot arm moving the finger through Cartesian poses.

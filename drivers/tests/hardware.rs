@@ -208,3 +208,97 @@ async fn hardware_hande_activates_and_moves_a_little() {
     let back = settle(&mut gripper).await;
     assert_eq!(back.requested_position, before.position, "{back:?}");
 }
+
+#[tokio::test]
+#[ignore = "hardware: needs a Net F/T at SOFTTOUCH_NETFT_ADDRESS; run with --ignored"]
+async fn hardware_netft_confirms_its_bias_and_restarts_a_stream_another_client_stopped() {
+    let address = required("SOFTTOUCH_NETFT_ADDRESS");
+    let rate_hz: f64 = optional("SOFTTOUCH_NETFT_RATE_HZ", 1000.0);
+    let config = open::netft_config(&address, rate_hz, None, None)
+        .await
+        .expect("resolve the address");
+    let rdt = config.rdt_addr;
+    let mut sensor = NetFtClient::connect(config, wall_clock())
+        .await
+        .expect("connect");
+    sensor.start().await.expect("start streaming");
+    // Untouched sensor: the bias takes, and the readings go to zero.
+    sensor.bias().await.expect("bias confirmed");
+    let mut readings = Vec::new();
+    while readings.len() < 100 {
+        sensor.read(&mut readings).await.expect("read");
+    }
+    let tail = readings.get(readings.len() - 50..).expect("50");
+    let mean_fz = tail
+        .iter()
+        .map(|r| r.wrench_in_sensor.force_n[2])
+        .sum::<f64>()
+        / 50.0;
+    assert!(mean_fz.abs() < 0.1, "Fz after the bias: {mean_fz} N");
+    // Another client stops the stream (as a second program, or a sensor reboot, does).
+    let other = tokio::net::UdpSocket::bind("0.0.0.0:0")
+        .await
+        .expect("bind");
+    other
+        .send_to(
+            &netft::codec::encode_request(netft::codec::Command::Stop, 0),
+            rdt,
+        )
+        .await
+        .expect("send stop");
+    let started = Instant::now();
+    let mut more = Vec::new();
+    while started.elapsed() < Duration::from_secs(1) {
+        sensor.read(&mut more).await.expect("the stream comes back");
+    }
+    let stats = sensor.stats();
+    eprintln!("{stats:?}");
+    assert!(stats.restarts >= 1, "no restart: {stats:?}");
+    assert!(!more.is_empty());
+    sensor.stop().await.expect("stop streaming");
+}
+
+#[tokio::test]
+#[ignore = "hardware: needs a Hand-E at SOFTTOUCH_HANDE_PORT; run with --ignored"]
+async fn hardware_hande_exchanges_at_loop_rate_and_reactivates_without_moving() {
+    let port = required("SOFTTOUCH_HANDE_PORT");
+    let slave_id: u8 = optional("SOFTTOUCH_HANDE_SLAVE", hande::regs::DEFAULT_SLAVE);
+    if let Some(ms) = hande::latency_timer_ms(&port) {
+        assert!(
+            ms <= 1,
+            "the adapter's latency timer is {ms} ms: set it to 1 (docs/RIG.md)"
+        );
+    }
+    let io = hande::open_port(&port).expect("open the port");
+    let config = HandEConfig {
+        slave_id,
+        ..HandEConfig::default()
+    };
+    let mut gripper = HandE::new(io, config, wall_clock());
+    gripper.activate().await.expect("activate");
+    let before = settle(&mut gripper).await;
+    // Activating an active gripper changes nothing (no reset, no opening).
+    gripper.activate().await.expect("activate again");
+    let again = settle(&mut gripper).await;
+    assert!(
+        again.position.abs_diff(before.position) <= 2,
+        "re-activation moved the fingers: {before:?} -> {again:?}"
+    );
+    let hold = GripperCommand {
+        position: again.position,
+        speed: 32,
+        force: 0,
+    };
+    let started = Instant::now();
+    for _ in 0..100 {
+        let s = gripper.command_and_status(hold).await.expect("exchange");
+        assert_eq!(s.fault, 0, "{}", hande::regs::describe_fault(s.fault));
+    }
+    let hz = 100.0 / started.elapsed().as_secs_f64();
+    eprintln!("{hz:.0} exchanges/s, {:?}", gripper.stats());
+    assert!(
+        hz >= 100.0,
+        "{hz:.0} exchanges/s: the loop needs 100 or more"
+    );
+    assert_eq!(gripper.stats().timeouts, 0, "{:?}", gripper.stats());
+}

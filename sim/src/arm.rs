@@ -145,6 +145,7 @@ impl SimArm {
             base_from_finger: pose,
             external_wrench: Some(wrench),
             faulted: self.faulted,
+            command_success_rate: None,
         })
     }
 }

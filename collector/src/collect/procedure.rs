@@ -334,6 +334,9 @@ impl Job<'_> {
     }
 
     /// One try: approach, settle, record. Leaves the arm wherever it ended.
+    ///
+    /// The approach runs along the straight line to the target, its last
+    /// `procedure.slow_approach_m` at `slow_approach_speed_m_s`.
     async fn attempt(&mut self, pose: ContactPose) -> Result<Taken, AttemptError> {
         let w = &self.plan.rig.workspace;
         let p = &self.plan.rig.procedure;
@@ -362,9 +365,27 @@ impl Job<'_> {
             max_torque_nm: l.max_torque_nm,
             stale: Duration::from_secs_f64(p.ft_stale_s),
         };
+        // The last stretch slowly: a contact there trips the guard at low speed.
+        let from = match self.arm.state().await {
+            Ok(s) => s.base_from_finger,
+            Err(e) if e.is_fault() => return Err(AttemptError::ArmFault(e)),
+            Err(e) => return Err(AttemptError::ArmLink(e)),
+        };
+        let legs = approach_legs(&from, &target, p);
+        let arm = &mut self.arm;
         let guard = self.ft.guard(&limits);
+        let approach = async {
+            let mut reached = None;
+            for (pose, speed_m_s) in legs {
+                reached = Some(arm.move_to(&pose, speed_m_s).await?);
+            }
+            reached.ok_or_else(|| DeviceError::InvalidCommand {
+                device: "arm".into(),
+                message: "an approach with no move".into(),
+            })
+        };
         let moved = tokio::select! {
-            moved = self.arm.move_to(&target, p.approach_speed_m_s) => moved,
+            moved = approach => moved,
             trip = guard => {
                 // Stop first; the caller logs what happened.
                 let stop_failed = self.arm.stop().await.err();
@@ -440,5 +461,73 @@ impl Job<'_> {
             start,
             end,
         })
+    }
+}
+
+/// The moves of an approach from `from` to `target`: the straight line, its last
+/// `slow_approach_m` at the slow speed (one slow move when the whole path is shorter;
+/// one move at the approach speed when the slow end is off).
+fn approach_legs(
+    from: &ArmPose,
+    target: &ArmPose,
+    p: &softtouch_schemas::rig::Procedure,
+) -> Vec<(ArmPose, f64)> {
+    let dist_m = from.distance_to(target);
+    if p.slow_approach_m.is_nan() || p.slow_approach_m <= 0.0 {
+        return vec![(*target, p.approach_speed_m_s)];
+    }
+    let mut legs = Vec::with_capacity(2);
+    if dist_m.is_finite() && dist_m > p.slow_approach_m {
+        legs.push((
+            from.slerp(target, 1.0 - p.slow_approach_m / dist_m),
+            p.approach_speed_m_s,
+        ));
+    }
+    legs.push((*target, p.slow_approach_speed_m_s));
+    legs
+}
+
+#[cfg(test)]
+mod approach_tests {
+    use super::*;
+
+    #[test]
+    #[allow(clippy::float_cmp)] // the speeds are copied, not computed
+    fn the_last_millimetres_of_an_approach_are_slow() {
+        let mut p = softtouch_schemas::defaults::rig().procedure;
+        let from = ArmPose {
+            translation_m: [0.4, 0.0, 0.3],
+            rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
+        };
+        let mut target = from;
+        target.translation_m[0] += 0.03;
+        let legs = approach_legs(&from, &target, &p);
+        assert_eq!(legs.len(), 2);
+        // 27 mm fast, then the last 3 mm slow.
+        assert!(
+            (legs[0].0.translation_m[0] - 0.427).abs() < 1e-12,
+            "{legs:?}"
+        );
+        assert_eq!(legs[0].1, p.approach_speed_m_s);
+        assert_eq!(legs[1], (target, p.slow_approach_speed_m_s));
+        // A short path is all slow; a zero slow end is one move at full speed.
+        let mut near = from;
+        near.translation_m[0] += 0.002;
+        assert_eq!(
+            approach_legs(&from, &near, &p),
+            vec![(near, p.slow_approach_speed_m_s)]
+        );
+        assert_eq!(approach_legs(&from, &from, &p).len(), 1);
+        p.slow_approach_m = 0.0;
+        assert_eq!(
+            approach_legs(&from, &target, &p),
+            vec![(target, p.approach_speed_m_s)]
+        );
+        // A NaN setting (refused by the rig's check anyway) never yields a NaN pose.
+        p.slow_approach_m = f64::NAN;
+        assert_eq!(
+            approach_legs(&from, &target, &p),
+            vec![(target, p.approach_speed_m_s)]
+        );
     }
 }

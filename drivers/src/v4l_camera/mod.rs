@@ -475,4 +475,38 @@ mod tests {
         );
         eprintln!("mode {:?}, dropped {}", cam.mode(), cam.dropped_frames());
     }
+
+    #[tokio::test]
+    // Hardware tier (TESTING.md): the image settings locked and read back, and a loop
+    // that sleeps 200 ms still gets a frame from the last two periods.
+    #[ignore = "hardware: needs a camera at SOFTTOUCH_V4L_DEVICE; run with --ignored"]
+    async fn hardware_locks_the_image_and_serves_the_newest_frame() {
+        let path = std::env::var("SOFTTOUCH_V4L_DEVICE").unwrap_or_else(|_| {
+            panic!("SOFTTOUCH_V4L_DEVICE is not set (see TESTING.md, hardware tier)")
+        });
+        let exposure_us: u32 = std::env::var("SOFTTOUCH_V4L_EXPOSURE_US")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(5000);
+        let image = softtouch_schemas::rig::ImageSettings {
+            exposure_us: Some(exposure_us),
+            white_balance_k: None,
+            gain: None,
+        };
+        let clock: Arc<dyn Clock> = Arc::new(crate::TokioClock::new());
+        let mut cam = V4lCamera::open_with(&path, clock.clone(), Duration::ZERO, Some(&image))
+            .expect("open with the image locked");
+        let held = cam.settings().expect("settings");
+        assert!(held.contains("exposure_time_absolute"), "{held}");
+        let first = cam
+            .latest_frame_after(clock.now(), 2000)
+            .await
+            .expect("frame");
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        let next = TimestampNs(first.meta.t.0 + 1);
+        let newest = cam.latest_frame_after(next, 2000).await.expect("frame");
+        let age_s = clock.now().0.saturating_sub(newest.meta.t.0) as f64 * 1e-9;
+        eprintln!("{held}; newest frame {age_s:.4} s old");
+        assert!(age_s <= 2.0 / cam.mode().fps + 0.01, "{age_s} s old");
+    }
 }

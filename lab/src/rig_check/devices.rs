@@ -5,6 +5,8 @@ use super::*;
 /// How far the arm check moves the finger, m (up, along the base's z), and how slowly.
 const ARM_CHECK_STEP_M: f64 = 0.001;
 const ARM_CHECK_SPEED_M_S: f64 = 0.005;
+/// Least share of real-time commands that must reach the robot during the check move.
+const MIN_COMMAND_SUCCESS_RATE: f64 = 0.95;
 /// How far from a target a move may end and still count as reached, m.
 const ARM_CHECK_TOLERANCE_M: f64 = 0.0005;
 
@@ -65,10 +67,27 @@ pub(super) async fn check_arm(
         }
         worst_m = worst_m.max(off_m);
     }
+    // The real-time link's health over the move (libfranka keeps the last 100
+    // commands): a host that misses cycles fails here before it fails a night.
+    let command_success_rate = arm
+        .state()
+        .await
+        .map_err(|e| format!("expected a state read after the move: {e}"))?
+        .command_success_rate;
+    if let Some(rate) = command_success_rate
+        && (rate.is_nan() || rate < MIN_COMMAND_SUCCESS_RATE)
+    {
+        return Err(format!(
+            "expected at least {:.0} % of the real-time commands to reach the robot during the move, {:.1} % did: the host misses cycles (real-time kernel and priority, docs/RIG.md; a direct cable to the control box)",
+            MIN_COMMAND_SUCCESS_RATE * 100.0,
+            rate * 100.0
+        ));
+    }
     Ok(ArmCheck {
         translation_m: p.translation_m,
         moved_mm: ARM_CHECK_STEP_M * 1000.0,
         worst_arrival_mm: worst_m * 1000.0,
+        command_success_rate,
     })
 }
 
@@ -341,6 +360,8 @@ mod tests {
         at: ArmPose,
         off_m: f64,
         refuse: bool,
+        /// The command success rate it reports.
+        rate: Option<f64>,
     }
 
     fn state(p: ArmPose) -> ArmState {
@@ -349,6 +370,7 @@ mod tests {
             base_from_finger: p,
             external_wrench: None,
             faulted: false,
+            command_success_rate: None,
         }
     }
 
@@ -367,7 +389,10 @@ mod tests {
             Ok(state(self.at))
         }
         async fn state(&mut self) -> Result<ArmState, DeviceError> {
-            Ok(state(self.at))
+            Ok(ArmState {
+                command_success_rate: self.rate,
+                ..state(self.at)
+            })
         }
         async fn recover(&mut self) -> Result<(), DeviceError> {
             Ok(())
@@ -396,6 +421,7 @@ mod tests {
             at: home(),
             off_m: 0.0001,
             refuse: false,
+            rate: None,
         })
         .expect("moves");
         assert!((ok.moved_mm - 1.0).abs() < 1e-12);
@@ -404,6 +430,7 @@ mod tests {
             at: home(),
             off_m: 0.0,
             refuse: true,
+            rate: None,
         })
         .expect_err("a user-stopped arm fails");
         assert!(
@@ -414,6 +441,7 @@ mod tests {
             at: home(),
             off_m: 0.002,
             refuse: false,
+            rate: None,
         })
         .expect_err("an arm that ends 2 mm off fails");
         assert!(e.contains("ended 2.000 mm away"), "{e}");
@@ -423,9 +451,33 @@ mod tests {
             at: outside,
             off_m: 0.0,
             refuse: false,
+            rate: None,
         })
         .expect_err("no room to move");
         assert!(e.contains("expected room to move 1 mm up"), "{e}");
+        // A Panda whose host missed cycles during the move.
+        let ok = run(Stub {
+            at: home(),
+            off_m: 0.0,
+            refuse: false,
+            rate: Some(0.99),
+        })
+        .expect("99 % arrived");
+        assert!(
+            Measured::Arm(ok)
+                .to_string()
+                .contains("99.0 % of real-time commands")
+        );
+        for bad in [0.9, f64::NAN] {
+            let e = run(Stub {
+                at: home(),
+                off_m: 0.0,
+                refuse: false,
+                rate: Some(bad),
+            })
+            .expect_err("missed cycles");
+            assert!(e.contains("the host misses cycles"), "{e}");
+        }
     }
 
     /// The simulator's Hand-E behind its Modbus register map, over an in-memory pipe:

@@ -98,6 +98,8 @@ pub struct ArmCheck {
     pub moved_mm: f64,
     /// The larger distance from target at which the two moves ended, mm.
     pub worst_arrival_mm: f64,
+    /// Share of the real-time commands that reached the robot (a Franka's).
+    pub command_success_rate: Option<f64>,
 }
 
 /// The force/torque stream over the window.
@@ -205,7 +207,11 @@ impl fmt::Display for Measured {
                     f,
                     "pose ({x:.3}, {y:.3}, {z:.3}) m in the base frame, no fault; moved {} mm up and back, within {:.3} mm",
                     a.moved_mm, a.worst_arrival_mm
-                )
+                )?;
+                if let Some(rate) = a.command_success_rate {
+                    write!(f, "; {:.1} % of real-time commands arrived", rate * 100.0)?;
+                }
+                Ok(())
             }
             Self::Host(h) => {
                 let r = &h.realtime;

@@ -236,6 +236,20 @@ impl Validate for RigConfig {
             "m/s",
         );
         c.within(
+            "procedure.slow_approach_m",
+            p.slow_approach_m,
+            0.0,
+            0.05,
+            "m",
+        );
+        c.within(
+            "procedure.slow_approach_speed_m_s",
+            p.slow_approach_speed_m_s,
+            1e-4,
+            p.approach_speed_m_s.max(1e-4),
+            "m/s (at most procedure.approach_speed_m_s)",
+        );
+        c.within(
             "procedure.retreat_speed_m_s",
             p.retreat_speed_m_s,
             1e-4,
