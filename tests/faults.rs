@@ -1242,14 +1242,21 @@ fn sighup_then_a_second_signal_stops_the_binary_at_once() {
 fn a_frame_not_covered_by_readings_within_the_skew_limit_is_rejected_as_clock_skew() {
     let dir = tempdir();
     let db = dir.path().join("t.db");
-    // 120 fps frames against 1 kHz readings: with a 1 µs limit (below what the rig's
-    // validation accepts, set on the plan) almost no frame has a reading that close on
-    // both sides, as when camera and sensor stamps drift apart.
+    // 119 fps frames against 1 kHz readings: with a 1 µs limit (below what the rig's
+    // validation accepts, set on the plan) a frame has a reading that close on both
+    // sides only once in 119 frames, as when camera and sensor stamps drift apart.
+    // (At 120 fps every third frame falls on a reading, and where it falls depends on
+    // how long each approach takes.)
     let e = faulty_run(
         &db,
         4,
         Faults {
-            edit_plan: |p| p.rig.procedure.max_skew_s = Some(1e-6),
+            edit_plan: |p| {
+                p.rig.procedure.max_skew_s = Some(1e-6);
+                if let softtouch_schemas::rig::CameraDevice::Sim { fps } = &mut p.rig.camera {
+                    *fps = 119.0;
+                }
+            },
             ..Faults::default()
         },
     );
