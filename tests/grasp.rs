@@ -27,7 +27,11 @@ fn grasp_follow_prints_a_row_per_target_and_writes_csv_and_png() {
             "g",
         ],
     ));
-    assert!(out.contains("measured Λ_max"), "{out}");
+    assert!(
+        out.contains("calibration #1 (made now)") && out.contains("Λ_max = "),
+        "{out}"
+    );
+    assert!(out.contains("the simulator's true Λ_max"), "{out}");
     assert!(out.contains("target N"), "{out}");
     for row in ["    0.40 ", "    1.60 "] {
         assert!(
@@ -201,5 +205,76 @@ fn disturb_and_twist(d: &std::path::Path) {
         ),
         2,
         "--turn-deg 200",
+    );
+}
+
+#[test]
+fn grasp_calibrate_stores_a_calibration_the_loop_then_reuses_and_refuses_a_blind_model() {
+    let dir = tempdir();
+    let d = dir.path();
+    tiny_model(d);
+    let out = ok(&softtouch(
+        d,
+        &["grasp", "calibrate", "--model", "air-svae", "--fps", "30"],
+    ));
+    assert!(out.contains("calibration #1: `circle-10`"), "{out}");
+    assert!(out.contains("first touch at count"), "{out}");
+    assert!(out.contains("the simulator's true Λ_max"), "{out}");
+    assert!(out.contains("Λ(P) N/mm by count: "), "{out}");
+    // The same setup, model and object: follow takes it rather than making another.
+    let out = ok(&softtouch(
+        d,
+        &[
+            "grasp",
+            "follow",
+            "--model",
+            "air-svae",
+            "--targets",
+            "0.4",
+            "--fps",
+            "30",
+            "--hold-s",
+            "0.5",
+            "--out-dir",
+            "g",
+        ],
+    ));
+    assert!(out.contains("calibration #1 (stored)"), "{out}");
+    // Another rate is another setup: a new calibration.
+    let out = ok(&softtouch(
+        d,
+        &[
+            "grasp",
+            "follow",
+            "--model",
+            "air-svae",
+            "--targets",
+            "0.4",
+            "--fps",
+            "60",
+            "--hold-s",
+            "0.5",
+            "--out-dir",
+            "g",
+        ],
+    ));
+    assert!(out.contains("calibration #2 (made now)"), "{out}");
+    // A model whose estimate does not rise with the contact (2 epochs: flat) is not
+    // calibrated into a gain: it is refused, naming why.
+    let mut args = vec!["train", "--dataset", "air", "--name", "blind"];
+    args.extend(common::TINY);
+    ok(&softtouch(d, &args));
+    fails_with(
+        &softtouch(d, &["grasp", "calibrate", "--model", "blind"]),
+        2,
+        "no touch",
+    );
+    fails_with(
+        &softtouch(
+            d,
+            &["grasp", "calibrate", "--model", "air-svae", "--target", "0"],
+        ),
+        2,
+        "--target 0",
     );
 }

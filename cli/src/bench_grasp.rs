@@ -108,9 +108,28 @@ pub async fn run(args: BenchGraspArgs, db: &Path, out: &mut dyn Write) -> Result
     for name in &args.model {
         let bytes = softtouch_lab::models::force_artifact(&store, name).await?;
         let predictor = softtouch_trainer::Predictor::from_bytes(&bytes)?;
-        models.push((name.clone(), bytes, predictor.header().config));
+        // Each model's own Λ_max on the object (at 120 Hz; the stiffness is the
+        // contact's, not the camera's): the latest stored, else made now.
+        let cal = softtouch_lab::grasp::calibration::calibration_for(
+            &store,
+            name,
+            &bytes,
+            &scene,
+            &object,
+            120.0,
+            args.seed,
+            softtouch_lab::grasp::calibration::top_for(args.target),
+        )
+        .await?;
+        models.push((
+            name.clone(),
+            bytes,
+            predictor.header().config,
+            (cal.touch(), cal.lambda_max()),
+            cal,
+        ));
     }
-    drop(store);
+    store.close().await;
     std::fs::create_dir_all(&args.out)
         .map_err(|e| Failure::Runtime(anyhow!("cannot create {}: {e}", args.out.display())))?;
     let setup = Setup {
@@ -131,6 +150,20 @@ pub async fn run(args: BenchGraspArgs, db: &Path, out: &mut dyn Write) -> Result
         points.len()
     )
     .map_err(w)?;
+    for (name, _, _, _, cal) in &models {
+        writeln!(
+            out,
+            "model `{name}`: calibration #{} ({}): first touch at count {}, Λ_max = {:.3} N/mm from its estimate{}",
+            cal.row.calibration_id,
+            if cal.fresh { "made now" } else { "stored" },
+            cal.touch(),
+            cal.lambda_max(),
+            cal.row.true_lambda_max_n_per_mm.map_or_else(String::new, |t| format!(
+                " (the simulator's true Λ_max: {t:.3} N/mm, a check only)"
+            ))
+        )
+        .map_err(w)?;
+    }
     writeln!(
         out,
         "{:<14} {:<12} {:<9} {:>6} {:>6} {:>5} {:>7} {:>9} {:>9} {:>10} {:>10} {:>12} {:>12}",
@@ -152,11 +185,11 @@ pub async fn run(args: BenchGraspArgs, db: &Path, out: &mut dyn Write) -> Result
     let mut csv = format!("{CSV_HEADER}\n");
     let mut gain_traces: Vec<Series> = Vec::new();
     tokio::time::pause(); // virtual time for the simulated grasp
-    for (i, (name, bytes, config)) in models.iter().enumerate() {
+    for (i, (name, bytes, config, calibrated, _)) in models.iter().enumerate() {
         let shape = (config.preprocess.size_px, config.width, config.latent);
         for point in &points {
             let predictor = softtouch_trainer::Predictor::from_bytes(bytes)?;
-            let o = run_point(&setup, predictor, *point)
+            let o = run_point(&setup, predictor, *point, *calibrated)
                 .await
                 .map_err(grasp_failure)?;
             print_row(out, name, shape, &o)?;
@@ -173,7 +206,7 @@ pub async fn run(args: BenchGraspArgs, db: &Path, out: &mut dyn Write) -> Result
     }
     if args.wall_clock {
         tokio::time::resume();
-        let (name, bytes, config) = &models[0];
+        let (name, bytes, config, calibrated, _) = &models[0];
         let shape = (config.preprocess.size_px, config.width, config.latent);
         let point = Point {
             varied: "wall-clock",
@@ -182,7 +215,7 @@ pub async fn run(args: BenchGraspArgs, db: &Path, out: &mut dyn Write) -> Result
             fps: 120.0,
         };
         let predictor = softtouch_trainer::Predictor::from_bytes(bytes)?;
-        let o = run_point(&setup, predictor, point)
+        let o = run_point(&setup, predictor, point, *calibrated)
             .await
             .map_err(grasp_failure)?;
         print_row(out, name, shape, &o)?;

@@ -14,7 +14,7 @@ use softtouch_grasp::{ControllerConfig, Cycle};
 use softtouch_trainer::Predictor;
 
 use super::grasp_loop::{
-    LoopArgs, bad, check_duration, create_out_dir, grasp_failure, load_model_and_pause,
+    LoopArgs, bad, check_duration, create_out_dir, grasp_failure, load_model_calibrate_and_pause,
     loop_settings, print_setup, scene_for,
 };
 use super::{Failure, io_failure, open_existing};
@@ -61,6 +61,16 @@ pub enum GraspCommand {
   softtouch grasp trials --resume 3
   softtouch grasp trials --model land-v1-svae --sweep-sigma 0,2,5,8,12 --trials 5")]
     Trials(super::grasp_trials::TrialsArgs),
+    /// Calibrate an object's stiffness from the model's own estimate: close on it one
+    /// count at a time, fit Λ(P) = ΔF_est/ΔP (Theil–Sen over 7-count windows), report
+    /// the first touch and Λ_max with its spread, and store it. `follow`, `disturb`,
+    /// `twist`, `trials` and `bench grasp` take K = 0.75 Λ_max and the pre-grasp
+    /// opening from the latest matching calibration (making one when none matches);
+    /// on the simulator the true Λ_max is printed beside it as a check.
+    #[command(after_help = "Example:
+  softtouch grasp calibrate --model land-v1-svae --scene scenes/grasp.toml --object bottle
+  softtouch grasp calibrate --model land-v1-svae --rig lab.toml --object bottle   # a real Hand-E")]
+    Calibrate(super::grasp_calibrate::CalibrateArgs),
 }
 
 /// Options of `grasp follow`.
@@ -94,6 +104,7 @@ pub async fn run(cmd: GraspCommand, db: &Path, out: &mut dyn Write) -> Result<()
         GraspCommand::Disturb(args) => super::grasp_turns::disturb(args, db, out).await,
         GraspCommand::Twist(args) => super::grasp_turns::twist(args, db, out).await,
         GraspCommand::Trials(args) => super::grasp_trials::run(args, db, out).await,
+        GraspCommand::Calibrate(args) => super::grasp_calibrate::run(args, db, out).await,
     }
 }
 
@@ -112,14 +123,16 @@ async fn follow(args: FollowArgs, db: &Path, out: &mut dyn Write) -> Result<(), 
     }
     let scene = scene_for(c, false)?;
     let object = object_for(&scene, args.object.as_deref())?;
-    let model = load_model_and_pause(c, db).await?;
+    let largest = args.targets.iter().copied().fold(0.0, f64::max);
+    let (model, calibrated) =
+        load_model_calibrate_and_pause(c, db, &scene, &object, largest).await?;
     let settings = FollowSettings {
         loop_settings,
         targets_n: args.targets.clone(),
         hold_s: args.hold_s,
     };
     let name = object.name.clone();
-    let (setup, cycles) = follow_sim(&settings, &model, &scene, object).await?;
+    let (setup, cycles) = follow_sim(&settings, &model, &scene, object, &calibrated).await?;
     print_setup(&name, &setup, &loop_settings, out)?;
     print_follow(&cycles, &args.targets, c.tolerance, &c.out_dir, out)
 }

@@ -22,7 +22,9 @@ pub struct LoopArgs {
     /// (`follow`) or `scenes/grasp.toml` (`disturb`, `twist`).
     #[arg(long)]
     pub scene: Option<PathBuf>,
-    /// Gain K, N/mm; default: 0.75 × the stiffness Λ_max measured on the simulator.
+    /// Gain K, N/mm; default: 0.75 × Λ_max from the latest stiffness calibration of
+    /// this model on this object and setup (`softtouch grasp calibrate`; made and
+    /// stored first when there is none).
     #[arg(long)]
     pub gain: Option<f64>,
     /// Tolerance δ, N.
@@ -81,14 +83,33 @@ pub(super) fn scene_for(
     Ok(softtouch_collector::configs::resolve(None, c.scene.as_deref())?.scene)
 }
 
-/// The stored model's bytes; then tokio's clock is paused, for the simulated gripper
-/// and cameras (the database is read first: its pool's timeouts need real time).
-pub(super) async fn load_model_and_pause(c: &LoopArgs, db: &Path) -> Result<Vec<u8>, Failure> {
+/// The stored model's bytes and the calibration of `object` it runs with (the latest
+/// stored, else one made now on the simulator and stored); then tokio's clock is
+/// paused, for the simulated gripper and cameras (the database is used first: its
+/// pool's timeouts need real time).
+pub(super) async fn load_model_calibrate_and_pause(
+    c: &LoopArgs,
+    db: &Path,
+    scene: &softtouch_schemas::SceneSpec,
+    object: &softtouch_sim::GraspObject,
+    largest_target_n: f64,
+) -> Result<(Vec<u8>, softtouch_lab::grasp::calibration::Calibrated), Failure> {
     let store = open_existing(db).await?;
     let bytes = softtouch_lab::models::force_artifact(&store, &c.model).await?;
-    drop(store);
+    let calibrated = softtouch_lab::grasp::calibration::calibration_for(
+        &store,
+        &c.model,
+        &bytes,
+        scene,
+        object,
+        c.fps,
+        c.seed,
+        softtouch_lab::grasp::calibration::top_for(largest_target_n),
+    )
+    .await?;
+    store.close().await;
     tokio::time::pause();
-    Ok(bytes)
+    Ok((bytes, calibrated))
 }
 
 /// What the setup measured and chose, and Method S4's warnings, each said once with
@@ -100,10 +121,20 @@ pub(super) fn print_setup(
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
     let w = io_failure;
+    let (id, fresh) = s.calibration;
     writeln!(
         out,
-        "object `{object}`: first touch at count {}; measured Λ_max = {:.3} N/mm; K = {:.3} N/mm, δ = {} N, {} Hz, {} finger(s)",
-        s.touch, s.lambda_max, s.gain, l.tolerance_n, l.fps, l.fingers
+        "object `{object}`: calibration #{id} ({}): first touch at count {}, Λ_max = {:.3} N/mm from the model's estimate{}; K = {:.3} N/mm, δ = {} N, {} Hz, {} finger(s)",
+        if fresh { "made now" } else { "stored" },
+        s.touch,
+        s.lambda_max,
+        s.true_lambda_max.map_or_else(String::new, |t| format!(
+            " (the simulator's true Λ_max: {t:.3} N/mm, a check only)"
+        )),
+        s.gain,
+        l.tolerance_n,
+        l.fps,
+        l.fingers
     )
     .map_err(w)?;
     match s.gain_check {

@@ -199,6 +199,9 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
         todo.len()
     )
     .map_err(w)?;
+    for line in session.setup_lines() {
+        writeln!(out, "{line}").map_err(w)?;
+    }
 
     let bar = softtouch_collector::progress::progress_bar(todo.len() as u64, true, "trials");
     let started = Instant::now();

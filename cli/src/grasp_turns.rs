@@ -12,7 +12,7 @@ use softtouch_schemas::Medium;
 
 use super::Failure;
 use super::grasp_loop::{
-    LoopArgs, bad, check_duration, create_out_dir, grasp_failure, load_model_and_pause,
+    LoopArgs, bad, check_duration, create_out_dir, grasp_failure, load_model_calibrate_and_pause,
     loop_settings, print_setup, scene_for,
 };
 use super::io_failure;
@@ -123,7 +123,8 @@ pub(super) async fn disturb(
         Medium::Water => 1.6,
     });
     let object = named_object(&scene, &args.object)?;
-    let model = load_model_and_pause(c, db).await?;
+    let (model, calibrated) =
+        load_model_calibrate_and_pause(c, db, &scene, &object, target).await?;
     let settings = DisturbSettings {
         loop_settings,
         target_n: target,
@@ -132,7 +133,7 @@ pub(super) async fn disturb(
         turn_s: args.turn_s,
         phase_s: args.phase_s,
     };
-    let run = disturb_sim(&settings, &model, &scene, object).await?;
+    let run = disturb_sim(&settings, &model, &scene, object, &calibrated).await?;
     print_setup(&args.object, &run.setup, &loop_settings, out)?;
     let w = io_failure;
     let opt = |v: Option<f64>| v.map_or_else(|| "never".to_owned(), |s| format!("{s:.3}"));
@@ -229,7 +230,8 @@ pub(super) async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Re
         .stepper
         .check_target(args.target)
         .map_err(grasp_failure)?;
-    let model = load_model_and_pause(c, db).await?;
+    let (model, calibrated) =
+        load_model_calibrate_and_pause(c, db, &scene, &object, args.target).await?;
     let settings = TwistSettings {
         loop_settings,
         target_n: args.target,
@@ -239,7 +241,7 @@ pub(super) async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Re
         hold_s: args.hold_s,
         wrist,
     };
-    let (setup, runs) = twist_sim(&settings, &model, &scene, &object).await?;
+    let (setup, runs) = twist_sim(&settings, &model, &scene, &object, &calibrated).await?;
     // The same grasp twice: its setup and warnings are printed once.
     print_setup(&args.object, &setup, &loop_settings, out)?;
     let w = io_failure;

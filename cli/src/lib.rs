@@ -13,6 +13,7 @@ pub mod dataset;
 pub mod db;
 pub mod eval;
 pub mod grasp;
+pub mod grasp_calibrate;
 pub mod grasp_loop;
 pub mod grasp_trials;
 pub mod grasp_turns;

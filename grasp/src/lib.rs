@@ -19,6 +19,8 @@
 //!   cycle; keep-alive, the gPR echo handshake and a safe exit on every path.
 //! - [`calibrate`]: end calibration (close and open fully with a low force, read the
 //!   reached counts, derive the [`Stroke`]).
+//! - [`stiffness`]: Λ(P) and Λ_max from the finger's own estimate while the fingers
+//!   close on a reference object one count at a time (Theil–Sen), for K = 0.75 Λ_max.
 //! - [`wrist`]: the second, narrow loop that holds τz ≈ 0 by turning the wrist
 //!   ([`Wrist`], [`WristLoop`]).
 //! - [`trials`]: the success-rate trials of Figure 4 (perturbed grasp point, open or
@@ -34,6 +36,7 @@ pub mod estimator;
 pub mod metrics;
 pub mod projection;
 pub mod stepper;
+pub mod stiffness;
 pub mod trials;
 pub mod wrist;
 
@@ -49,10 +52,13 @@ pub use stepper::{
     GainCheck, Step, StepOutcome, Stepper, StepperConfig, Stroke, check_gain, check_tolerance,
     one_count_force_n,
 };
+pub use stiffness::{
+    CalibrationEnd, CalibrationPoint, StiffnessCalibration, StiffnessConfig, calibrate_stiffness,
+};
 pub use trials::{
     FailReason, Judge, Lift, LiftPlan, Mode, ObjectState, Observation, OperatorJudge, RigJudge,
-    TOUCH_N, TraceRow, TrialConfig, TrialDevices, TrialResult, Verdict, Z_95, perturbation_m,
-    physics_verdict, run_trial, trial_seed, wilson_interval,
+    TOUCH_N, TraceRow, TrialConfig, TrialDevices, TrialResult, Verdict, Z_95, confirmed,
+    perturbation_m, physics_verdict, run_trial, trial_seed, wilson_interval,
 };
 pub use wrist::{Wrist, WristConfig, WristLoop};
 

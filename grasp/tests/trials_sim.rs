@@ -130,6 +130,7 @@ async fn trial(
         pregrasp_position: touch.saturating_sub(6),
         target_n,
         confirm: Duration::from_millis(200),
+        dither_n: 0.0,
         close_timeout: Duration::from_secs(3),
         move_timeout: Duration::from_secs(3),
         lift: LiftPlan {

@@ -16,12 +16,14 @@ pub mod datasets;
 mod event;
 pub mod file;
 mod grasp;
+mod grasp_calibration;
 mod models;
 pub mod report;
 pub use event::EventKind;
 pub use grasp::{
     GraspSessionRow, GraspTrace, GraspTrialKey, GraspTrialRow, TRACE_ENCODING, unpack_f32,
 };
+pub use grasp_calibration::GraspCalibrationRow;
 pub mod rows;
 mod runs;
 mod sync;

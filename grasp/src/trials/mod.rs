@@ -315,8 +315,15 @@ pub struct TrialConfig {
     pub pregrasp_position: u8,
     /// Closed loop: F_ref, N.
     pub target_n: f64,
-    /// Closed loop: how long |F_ref − F_est| ≤ δ must hold before the lift.
+    /// Closed loop: how long the force must be confirmed before the lift: over this
+    /// window the mean of F_est lies within δ of F_ref and every F_est within
+    /// δ + `dither_n` ([`confirmed`]).
     pub confirm: Duration,
+    /// Closed loop: the force of one count at the calibrated Λ_max, N (Method S4). A
+    /// loop whose δ is below half of it dithers by a count around F_ref for ever; the
+    /// confirmation accepts that dither when its mean is within δ. 0: every estimate
+    /// within δ.
+    pub dither_n: f64,
     /// Closed loop: how long the loop may take to confirm.
     pub close_timeout: Duration,
     /// How long a pre-grasp or open-loop move may take.
@@ -327,9 +334,34 @@ pub struct TrialConfig {
     pub hold: Duration,
 }
 
+/// Whether a closed loop's force is confirmed over `window` (the estimates of the
+/// last `confirm`, oldest first): every estimate usable and within δ + `dither_n` of
+/// F_ref, and their mean within δ. With `dither_n` = 0 this is "every estimate
+/// within δ"; with one count's force it also confirms a loop dithering one count
+/// around a target between two counts, which no δ below half a count's force
+/// otherwise lets through (a feasible target that would time out).
+#[must_use]
+pub fn confirmed(window: &[Option<f64>], target_n: f64, tolerance_n: f64, dither_n: f64) -> bool {
+    let slack = tolerance_n + dither_n.max(0.0);
+    let mut sum = 0.0;
+    for e in window {
+        match e {
+            Some(f) if f.is_finite() && (target_n - f).abs() <= slack => sum += f,
+            _ => return false,
+        }
+    }
+    !window.is_empty() && (target_n - sum / window.len() as f64).abs() <= tolerance_n
+}
+
 impl TrialConfig {
     fn validate(&self) -> Result<(), GraspError> {
         self.lift.validate()?;
+        if !(self.dither_n.is_finite() && self.dither_n >= 0.0) {
+            return Err(GraspError::Config(format!(
+                "dither_n = {}: expected a force of at least 0 N",
+                self.dither_n
+            )));
+        }
         if !(self.target_n.is_finite() && self.target_n > 0.0) {
             return Err(GraspError::Config(format!(
                 "target_n = {}: expected a finite force above 0 N",
@@ -347,6 +379,42 @@ impl TrialConfig {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod confirm_tests {
+    use super::confirmed;
+
+    #[test]
+    fn a_one_count_dither_around_the_target_confirms_only_with_its_allowance() {
+        // One count is 0.23 N; δ = 0.1 N: the loop alternates 1.38 and 1.61 N around 1.5.
+        let dither: Vec<Option<f64>> = (0..30)
+            .map(|i| Some(if i % 2 == 0 { 1.38 } else { 1.61 }))
+            .collect();
+        assert!(
+            !confirmed(&dither, 1.5, 0.1, 0.0),
+            "the old rule never confirms it"
+        );
+        assert!(confirmed(&dither, 1.5, 0.1, 0.23));
+        // Held a count off: the mean is outside δ.
+        let off: Vec<Option<f64>> = vec![Some(1.38); 30];
+        assert!(!confirmed(&off, 1.5, 0.1, 0.23));
+        // A swing beyond one count, a missing or NaN estimate, an empty window.
+        let mut swing = dither.clone();
+        swing[7] = Some(2.0);
+        assert!(!confirmed(&swing, 1.5, 0.1, 0.23));
+        let mut hole = dither.clone();
+        hole[3] = None;
+        assert!(!confirmed(&hole, 1.5, 0.1, 0.23));
+        hole[3] = Some(f64::NAN);
+        assert!(!confirmed(&hole, 1.5, 0.1, 0.23));
+        assert!(!confirmed(&[], 1.5, 0.1, 0.23));
+        // Without a dither allowance: every estimate within δ.
+        assert!(confirmed(&[Some(1.45), Some(1.58)], 1.5, 0.1, 0.0));
+        assert!(!confirmed(&[Some(1.45), Some(1.61)], 1.5, 0.1, 0.0));
+        // A negative allowance counts as none.
+        assert!(!confirmed(&dither, 1.5, 0.1, -1.0));
     }
 }
 

@@ -291,20 +291,26 @@ impl Run {
             self.record(&c);
         }
         let close_start = self.clock.now();
-        let mut within_since: Option<TimestampNs> = None;
+        // The last `confirm` of estimates, oldest first, with their times.
+        let mut window: std::collections::VecDeque<(TimestampNs, Option<f64>)> =
+            std::collections::VecDeque::new();
+        let confirm_ns = trial.confirm.as_nanos() as u64;
         loop {
             let c = ctl.cycle(trial.target_n).await?;
             self.record(&c);
-            let within = c
-                .estimate_n
-                .is_some_and(|f| (trial.target_n - f).abs() <= tolerance_n);
-            if within {
-                let since = *within_since.get_or_insert(c.t);
-                if c.t.0.saturating_sub(since.0) >= trial.confirm.as_nanos() as u64 {
-                    break;
-                }
-            } else {
-                within_since = None;
+            window.push_back((c.t, c.estimate_n));
+            while window
+                .get(1)
+                .is_some_and(|(t, _)| c.t.0.saturating_sub(t.0) >= confirm_ns)
+            {
+                window.pop_front();
+            }
+            let spans = window
+                .front()
+                .is_some_and(|(t, _)| c.t.0.saturating_sub(t.0) >= confirm_ns);
+            let estimates: Vec<Option<f64>> = window.iter().map(|(_, e)| *e).collect();
+            if spans && super::confirmed(&estimates, trial.target_n, tolerance_n, trial.dither_n) {
+                break;
             }
             if elapsed_ns(self.clock.as_ref(), close_start) > trial.close_timeout.as_nanos() as u64
             {

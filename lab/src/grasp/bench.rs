@@ -1,5 +1,5 @@
 //! `softtouch bench grasp`: the force loop on the simulated soft grasp, measured over
-//! the gain K (as a multiple of the stiffness Λ_max the simulator measures, including
+//! the gain K (as a multiple of the stiffness Λ_max the model's calibration measures, including
 //! values below Λ_max/2 where Method S4 says it may not settle), the tolerance δ, the
 //! camera rate and the model. One factor is varied at a time around a baseline (K =
 //! 0.75 Λ_max, δ = 0.1 N, 120 Hz); each run holds one target from a pre-grasp a few
@@ -15,7 +15,7 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use super::sim::{SimTruth, projection, sim_err, stiffness};
+use super::sim::{SimTruth, projection, sim_err};
 use softtouch_drivers::{Clock, Frame, TokioClock};
 use softtouch_grasp::{
     Controller, ControllerConfig, ForceEstimator, GraspError, HoldMetrics, hold_metrics,
@@ -99,11 +99,14 @@ pub struct Setup {
 }
 
 /// One run of the loop at `point` with `predictor`, on tokio's clock as it is (paused:
-/// virtual time; running: the wall clock).
+/// virtual time; running: the wall clock). `calibrated` is the model's first touch
+/// (counts) and Λ_max (N/mm) on the object, from its stiffness calibration
+/// ([`crate::grasp::calibration`]): K is `point.gain_over_lambda` × that Λ_max.
 pub async fn run_point(
     setup: &Setup,
     predictor: Predictor,
     point: Point,
+    calibrated: (u8, f64),
 ) -> Result<Outcome, GraspError> {
     let clock = TokioClock::new();
     let (gripper, camera, handle) = soft_grasp(
@@ -114,7 +117,7 @@ pub async fn run_point(
         clock,
     )
     .map_err(sim_err)?;
-    let (touch, lambda) = stiffness(&handle, setup.target_n)?;
+    let (touch, lambda) = calibrated;
     let gain_n_per_mm = point.gain_over_lambda * lambda;
     let mut config = ControllerConfig::new(projection()?);
     config.stepper.gain_n_per_mm = gain_n_per_mm;

@@ -191,6 +191,61 @@ pub async fn follow_on_rig(
     })
 }
 
+/// A stiffness calibration on the rig: open the devices, calibrate the ends (nothing
+/// between the fingers), then keep the Hand-E alive (the fingers held open, a command
+/// every 200 ms, under its 1 s watchdog) until `ready` says the reference object is in
+/// place, then close on it one count at a time ([`softtouch_grasp::calibrate_stiffness`]).
+/// The fingers end open.
+///
+/// # Errors
+/// A device that cannot be opened, a failed end calibration, `ready`'s error (the
+/// operator gave up), a fault, or a closing that finds no touch.
+pub async fn stiffness_on_rig(
+    rig: &RigConfig,
+    mut predictor: Predictor,
+    projection: Projection,
+    top_n: f64,
+    ready: impl std::future::Future<Output = Result<(), String>>,
+) -> Result<(EndCalibration, softtouch_grasp::StiffnessCalibration), RigFollowError> {
+    let clock = TokioClock::new();
+    let shared: Arc<dyn Clock> = Arc::new(clock);
+    let mut devices = real_grasp_devices(rig, shared.clone()).await?;
+    let ends = calibrate(&mut devices, &clock).await?;
+    let open = softtouch_drivers::GripperCommand {
+        position: ends.stroke.open_count,
+        speed: 64,
+        force: 20,
+    };
+    tokio::pin!(ready);
+    loop {
+        tokio::select! {
+            r = &mut ready => {
+                r.map_err(GraspError::Interrupted)?;
+                break;
+            }
+            () = tokio::time::sleep(Duration::from_millis(200)) => {
+                devices.gripper.command_and_status(open).await.map_err(GraspError::Device)?;
+            }
+        }
+    }
+    let config = softtouch_grasp::StiffnessConfig {
+        start_count: ends.stroke.open_count,
+        top_n,
+        ..softtouch_grasp::StiffnessConfig::default()
+    };
+    let cal = softtouch_grasp::calibrate_stiffness(
+        devices.gripper.as_mut(),
+        devices.camera.as_mut(),
+        &mut predictor,
+        &projection,
+        &ends.stroke,
+        shared.as_ref(),
+        &config,
+    )
+    .await?;
+    Ok((ends, cal))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

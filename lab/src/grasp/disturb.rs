@@ -65,6 +65,7 @@ pub async fn disturb_sim(
     model_bytes: &[u8],
     scene: &SceneSpec,
     object: GraspObject,
+    calibration: &super::calibration::Calibrated,
 ) -> Result<DisturbRun, GraspRunError> {
     let mut p = prepare(
         &settings.loop_settings,
@@ -73,6 +74,7 @@ pub async fn disturb_sim(
         object,
         &[settings.target_n],
         ExitAction::Open,
+        calibration,
     )
     .await?;
     let start = p.clock.now();

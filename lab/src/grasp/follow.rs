@@ -52,6 +52,7 @@ pub async fn follow_sim(
     model_bytes: &[u8],
     scene: &SceneSpec,
     object: GraspObject,
+    calibration: &super::calibration::Calibrated,
 ) -> Result<(Setup, Vec<Cycle>), GraspRunError> {
     let mut p = prepare(
         &settings.loop_settings,
@@ -60,6 +61,7 @@ pub async fn follow_sim(
         object,
         &settings.targets_n,
         ExitAction::Open,
+        calibration,
     )
     .await?;
     let hold = Duration::from_secs_f64(settings.hold_s);

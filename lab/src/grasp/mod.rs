@@ -2,6 +2,9 @@
 //!
 //! - [`sim`]: the simulated soft grasp behind the grasp library's traits (judge, lift,
 //!   wrist, the recorded truth) and the simulator's measured stiffness.
+//! - [`calibration`]: the stiffness calibration from the model's own estimate that
+//!   every verb takes K = 0.75 Λ_max and its pre-grasp opening from (stored, reused
+//!   when the setup, model and object match).
 //! - [`devices`]: a real Hand-E and the finger cameras from the rig config, end
 //!   calibration, force following on a rig.
 //! - [`settings`]: each setting's one validation (rate, δ, durations, fingers), shared
@@ -17,6 +20,7 @@
 //! Nothing here parses arguments; the verbs under `cli/` do, and print.
 
 pub mod bench;
+pub mod calibration;
 pub mod devices;
 pub mod disturb;
 pub mod follow;

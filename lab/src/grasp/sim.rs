@@ -109,17 +109,6 @@ pub fn measure_stiffness(
     Ok(Some((touch, handle.max_stiffness_n_per_mm(touch, end)?)))
 }
 
-/// The pre-grasp count and Λ_max from first touch to 1.5 × the target
-/// ([`measure_stiffness`]).
-///
-/// # Errors
-/// The fingers never touch the object, or the simulator fails.
-pub fn stiffness(handle: &SoftGraspHandle, target_n: f64) -> Result<(u8, f64), GraspError> {
-    measure_stiffness(handle, 1.5 * target_n)
-        .map_err(sim_err)?
-        .ok_or_else(|| GraspError::Config("the closing fingers never touch the object".into()))
-}
-
 /// The simulator's judge: where the physics left the object after the hold.
 #[derive(Debug, Clone)]
 pub struct SimJudge(pub SoftGraspHandle);

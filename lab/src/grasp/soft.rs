@@ -1,9 +1,9 @@
 //! Algorithm 1 made ready on the simulated soft grasp, for the experiments of Figure 5
-//! (`follow`, `disturb`, `twist`): the grasp of one object built, Λ_max measured on
-//! the simulator from first touch to half again the largest target, K = 0.75 Λ_max
-//! unless given, and the fingers approached to four counts before the touch. The
-//! model's estimate is the only force the loop sees; the simulator's truth is logged
-//! beside it ([`LoggedTruth`]).
+//! (`follow`, `disturb`, `twist`): the grasp of one object built, K = 0.75 Λ_max
+//! unless given, with Λ_max and the first touch from the stiffness calibration on the
+//! model's own estimate ([`super::calibration`]), and the fingers approached to four
+//! counts before the touch. The model's estimate is the only force the loop sees; the
+//! simulator's truth is logged beside it ([`LoggedTruth`]).
 
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -20,7 +20,8 @@ use softtouch_sim::{
 };
 use softtouch_trainer::Predictor;
 
-use super::sim::{LoggedTruth, TruthSample, measure_stiffness};
+use super::calibration::Calibrated;
+use super::sim::{LoggedTruth, TruthSample};
 use crate::models::ModelError;
 
 /// The grasp scene shipped in `scenes/grasp.toml`: the default for `disturb` and
@@ -136,10 +137,15 @@ pub struct LoopSettings {
 /// What the setup measured and chose, and Method S4's verdicts on it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Setup {
-    /// The first count at which the closing fingers touch the object.
+    /// The first count at which the closing fingers touch the object (calibrated).
     pub touch: u8,
-    /// Λ_max from first touch to half again the largest target, N/mm.
+    /// Λ_max from the calibration on the model's estimate, N/mm.
     pub lambda_max: f64,
+    /// The simulator's true Λ_max over the same range, N/mm: printed as a check of
+    /// the estimate, never used.
+    pub true_lambda_max: Option<f64>,
+    /// The stored calibration used, and whether this run made it.
+    pub calibration: (i64, bool),
     /// K, N/mm.
     pub gain: f64,
     /// Method S4 on K against Λ_max.
@@ -169,13 +175,13 @@ pub struct Prepared {
     pub setup: Setup,
 }
 
-/// Builds the soft grasp of `object`, measures Λ_max, configures Algorithm 1 and
-/// approaches to four counts before the touch. Run on a paused tokio clock.
+/// Builds the soft grasp of `object`, takes Λ_max and the first touch from
+/// `calibration`, configures Algorithm 1 and approaches to four counts before the
+/// touch. Run on a paused tokio clock.
 ///
 /// # Errors
-/// A target the loop cannot hold (checked before K is derived from the targets), an
-/// object the fingers never touch, a Λ_max too small for a gain, the model, the
-/// simulator.
+/// A target the loop cannot hold (checked before K is derived from the targets), a
+/// Λ_max too small for a gain, the model, the simulator.
 pub async fn prepare(
     settings: &LoopSettings,
     model_bytes: &[u8],
@@ -183,6 +189,7 @@ pub async fn prepare(
     object: GraspObject,
     targets_n: &[f64],
     on_exit: ExitAction,
+    calibration: &Calibrated,
 ) -> Result<Prepared, GraspRunError> {
     // The targets first: K is derived from them, so a bad target must not read as a
     // bad K (a flag the user never gave).
@@ -196,23 +203,18 @@ pub async fn prepare(
             .map_err(|e| invalid(format!("--targets: {e}")))?;
     }
     // Λ is measured up to half again the largest target.
-    let top_n = 1.5 * targets_n.iter().copied().fold(0.0, f64::max);
+    let top_n = super::calibration::top_for(targets_n.iter().copied().fold(0.0, f64::max));
     let predictor = Predictor::from_bytes(model_bytes)?;
     let clock = TokioClock::new();
     let (gripper, camera, handle) =
         soft_grasp(scene, object.clone(), settings.fps, settings.seed, clock)
             .map_err(|e| invalid(format!("object `{}`: {e}", object.name)))?;
-    let Some((touch, lambda_max)) = measure_stiffness(&handle, top_n)? else {
-        return Err(invalid(format!(
-            "object `{}` is never touched by the closing fingers",
-            object.name
-        )));
-    };
+    let (touch, lambda_max) = (calibration.touch(), calibration.lambda_max());
     let gain = settings.gain_n_per_mm.unwrap_or(0.75 * lambda_max);
     if settings.gain_n_per_mm.is_none() && !(gain.is_finite() && gain > 0.0) {
         return Err(invalid(format!(
-            "object `{}`: the stiffness measured from first touch up to {top_n:.3} N (1.5 × the largest target) is {lambda_max} N/mm, so K = 0.75 Λ_max is unusable; ask for a larger target or give --gain",
-            object.name
+            "object `{}`: the calibrated stiffness (calibration #{}, from first touch up to {top_n:.3} N) is {lambda_max} N/mm, so K = 0.75 Λ_max is unusable; give --gain",
+            object.name, calibration.row.calibration_id
         )));
     }
     let projections = projections()?;
@@ -226,6 +228,8 @@ pub async fn prepare(
     let setup = Setup {
         touch,
         lambda_max,
+        true_lambda_max: calibration.row.true_lambda_max_n_per_mm,
+        calibration: (calibration.row.calibration_id, calibration.fresh),
         gain,
         gain_check: check_gain(gain, lambda_max)?,
         one_count_n: one_count_force_n(lambda_max, &config.stepper.stroke),

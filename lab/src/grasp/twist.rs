@@ -59,6 +59,7 @@ pub async fn twist_sim(
     model_bytes: &[u8],
     scene: &SceneSpec,
     object: &GraspObject,
+    calibration: &super::calibration::Calibrated,
 ) -> Result<(Setup, [TwistRun; 2]), GraspRunError> {
     let wrist_loop = WristLoop::new(settings.wrist)
         .map_err(|e| GraspRunError::Invalid(format!("--wrist-gain / --wrist-deadband-nmm: {e}")))?;
@@ -72,6 +73,7 @@ pub async fn twist_sim(
             object.clone(),
             &[settings.target_n],
             ExitAction::Open,
+            calibration,
         )
         .await?;
         setup.get_or_insert(p.setup);

@@ -385,6 +385,50 @@ pub struct Session {
     pub scenes: Vec<SceneSpec>,
     /// The model's artifact.
     model_bytes: Vec<u8>,
+    /// Each (scene index, object)'s stiffness calibration, made or found before any
+    /// trial ran, and the δ the closed loop uses on it.
+    pub calibrations: std::collections::HashMap<(u32, String), run::ObjectSetup>,
+}
+
+impl Session {
+    /// One line per calibrated object: the calibration used, Λ_max from the model's
+    /// estimate beside the simulator's truth, K, and δ (and why it was widened).
+    #[must_use]
+    pub fn setup_lines(&self) -> Vec<String> {
+        let mut keys: Vec<&(u32, String)> = self.calibrations.keys().collect();
+        keys.sort();
+        keys.into_iter()
+            .filter_map(|k| {
+                let o = self.calibrations.get(k)?;
+                let medium = self
+                    .scenes
+                    .get(k.0 as usize)
+                    .map_or("?", |s| medium_name(s.medium));
+                let c = &o.calibration;
+                Some(format!(
+                    "`{}` ({medium}): calibration #{} ({}): first touch at count {}, Λ_max = {:.3} N/mm from the model's estimate{}; K = {:.3} N/mm, δ = {} N{}",
+                    k.1,
+                    c.row.calibration_id,
+                    if c.fresh { "made now" } else { "stored" },
+                    c.touch(),
+                    c.lambda_max(),
+                    c.row.true_lambda_max_n_per_mm.map_or_else(String::new, |t| format!(
+                        " (true {t:.3}, a check only)"
+                    )),
+                    self.plan.gain_over_lambda * c.lambda_max().max(0.05),
+                    o.tolerance_n,
+                    if o.tolerance_n > self.plan.tolerance_n {
+                        format!(
+                            " (widened from {} N: one count is {:.3} N here, and a loop dithering by one count confirms only within a quarter of it)",
+                            self.plan.tolerance_n, o.count_n
+                        )
+                    } else {
+                        String::new()
+                    }
+                ))
+            })
+            .collect()
+    }
 }
 
 /// A new session of `plan` (checked) with `model` on `scenes`, stored before any
@@ -406,9 +450,28 @@ pub async fn start_session(
             .map(|s| s.objects.iter().map(|o| o.name.clone()).collect())
             .unwrap_or_default();
     }
-    objects_of(&plan, &scenes)?; // checked before anything is stored
+    let objects = objects_of(&plan, &scenes)?; // checked before anything is stored
     // The model must exist before a session names it.
     let model_bytes = crate::models::force_artifact(store, model).await?;
+    // Every object calibrated (or its stored calibration found) before the session is
+    // stored: an object the fingers never touch leaves no empty session.
+    let pairs = (0..scenes.len()).flat_map(|si| {
+        plan.objects
+            .iter()
+            .map(move |o| (u32::try_from(si).unwrap_or(u32::MAX), o.clone()))
+    });
+    let pairs: Vec<(u32, String)> = pairs.collect();
+    let calibrations = run::calibrate_all(
+        store,
+        model,
+        &model_bytes,
+        seed,
+        &plan,
+        &scenes,
+        &objects,
+        pairs,
+    )
+    .await?;
     let model_sha256 = sha256_hex(&model_bytes);
     let config_json = serde_json::to_string(&plan)
         .map_err(|e| TrialsError::Failed(format!("cannot encode the settings: {e}")))?;
@@ -425,6 +488,7 @@ pub async fn start_session(
         plan,
         scenes,
         model_bytes,
+        calibrations,
     })
 }
 
@@ -475,6 +539,25 @@ pub async fn resume_session(
             &now[..12]
         )));
     }
+    let objects = objects_of(&plan, &scenes)?;
+    let pairs: Vec<(u32, String)> = (0..scenes.len())
+        .flat_map(|si| {
+            plan.objects
+                .iter()
+                .map(move |o| (u32::try_from(si).unwrap_or(u32::MAX), o.clone()))
+        })
+        .collect();
+    let calibrations = run::calibrate_all(
+        store,
+        &s.model,
+        &model_bytes,
+        s.seed,
+        &plan,
+        &scenes,
+        &objects,
+        pairs,
+    )
+    .await?;
     Ok(Session {
         id,
         model: s.model,
@@ -483,6 +566,7 @@ pub async fn resume_session(
         plan,
         scenes,
         model_bytes,
+        calibrations,
     })
 }
 

@@ -8,15 +8,17 @@ use std::time::{Duration, Instant};
 use softtouch_drivers::gripper::{opening_mm, position_for_opening};
 use softtouch_drivers::{Clock, TokioClock};
 use softtouch_grasp::{
-    ControllerConfig, GraspError, Mode, TrialConfig, TrialDevices, TrialResult, perturbation_m,
-    run_trial, trial_seed,
+    ControllerConfig, GraspError, Mode, Stroke, TrialConfig, TrialDevices, TrialResult,
+    one_count_force_n, perturbation_m, run_trial, trial_seed,
 };
 use softtouch_schemas::{Medium, SceneSpec};
 use softtouch_sim::{GraspObject, soft_grasp};
 use softtouch_trainer::Predictor;
 
 use super::{Planned, Session, TrialsError, invalid, medium_name, objects_of};
-use crate::grasp::sim::{SimJudge, SimLift, SimTruth, projection, stiffness};
+use crate::grasp::calibration::{Calibrated, calibration_for, top_for};
+use crate::grasp::sim::{SimJudge, SimLift, SimTruth, projection};
+use crate::grasp::soft::GraspRunError;
 use crate::store::{GraspTrace, GraspTrialRow, Store};
 
 /// One trial, as it ends: its stored row and its timing.
@@ -43,8 +45,10 @@ pub struct TrialTiming {
 
 /// Runs `todo` (from [`Session::progress`]) one trial at a time, each stored as it
 /// ends; `done` hears of each (to print progress; its error stops the session).
-/// K per (scene, object) is 0.75 × Λ_max measured on the simulator's contact physics,
-/// before any trial, on the unperturbed object.
+/// K per (scene, object) is 0.75 × Λ_max from the stiffness calibration on the
+/// model's own estimate ([`crate::grasp::calibration`]: the latest stored, else one
+/// made on the unperturbed object and stored), all made before any trial; the
+/// closed loop's confirmation accepts one count's dither at that Λ_max.
 ///
 /// # Errors
 /// A trial that fails (a device, the model), the store, or `done`.
@@ -71,7 +75,6 @@ pub async fn run_trials(
             .map_err(|e| TrialsError::Failed(format!("cannot build a thread pool: {e}")))?,
     );
     let mut predictor = Some(predictor);
-    let mut gains: HashMap<(u32, String), f64> = HashMap::new();
     for p in todo {
         let si = p.key.scene_index as usize;
         let scene = &scenes[si];
@@ -81,22 +84,21 @@ pub async fn run_trials(
             .position(|o| *o == p.key.object)
             .unwrap_or(0);
         let template = objects[si][oi].clone();
-        let gain_key = (p.key.scene_index, p.key.object.clone());
-        let gain = match gains.get(&gain_key) {
-            Some(g) => *g,
-            None => {
-                let (_, _, handle) =
-                    soft_grasp(scene, template.clone(), plan.fps, seed, TokioClock::new())
-                        .map_err(|e| invalid(format!("object `{}`: {e}", template.name)))?;
-                let (_, lambda) = stiffness(&handle, plan.target_n)?;
-                let g = plan.gain_over_lambda * lambda.max(0.05);
-                gains.insert(gain_key, g);
-                g
-            }
+        let Some(setup) = session
+            .calibrations
+            .get(&(p.key.scene_index, p.key.object.clone()))
+        else {
+            return Err(TrialsError::Failed(format!(
+                "no calibration of `{}` was made",
+                p.key.object
+            )));
         };
+        let gain = plan.gain_over_lambda * setup.calibration.lambda_max().max(0.05);
+        let dither_n = setup.count_n;
+        let tolerance_n = setup.tolerance_n;
         let mut controller = ControllerConfig::new(projection()?);
         controller.stepper.gain_n_per_mm = gain;
-        controller.stepper.tolerance_n = plan.tolerance_n;
+        controller.stepper.tolerance_n = tolerance_n;
         let grasp_mm = plan
             .open_width_mm
             .unwrap_or(template.grasp_width_m * 1000.0);
@@ -106,6 +108,7 @@ pub async fn run_trials(
             pregrasp_position: position_for_opening(grasp_mm + plan.pregrasp_margin_mm),
             target_n: plan.target_n,
             confirm: Duration::from_secs_f64(plan.confirm_s),
+            dither_n,
             close_timeout: Duration::from_secs_f64(plan.close_timeout_s),
             move_timeout: Duration::from_secs(5),
             lift: plan.lift(),
@@ -164,6 +167,86 @@ pub async fn run_trials(
         })?;
     }
     Ok(())
+}
+
+/// An object's calibration and the closed loop's δ on it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObjectSetup {
+    /// The stiffness calibration (K = gain_over_lambda × its Λ_max).
+    pub calibration: Calibrated,
+    /// The force of one count at its Λ_max, N (the confirmation's dither allowance).
+    pub count_n: f64,
+    /// δ, N: the plan's, widened to a quarter of one count where that is larger.
+    pub tolerance_n: f64,
+}
+
+/// δ on an object whose one count is `count_n`: the confirmation accepts one count's
+/// dither whose mean lies within δ, which confirms a target anywhere between two
+/// counts only while one count is at most 4δ; a smaller δ is widened to that
+/// (rounded up to the mN).
+#[must_use]
+pub(super) fn tolerance_for(plan_tolerance_n: f64, count_n: f64) -> f64 {
+    if count_n.is_finite() && count_n > 4.0 * plan_tolerance_n {
+        (count_n / 4.0 * 1000.0).ceil() / 1000.0
+    } else {
+        plan_tolerance_n
+    }
+}
+
+/// The calibration of every (scene, object) in `pairs`, before any trial runs (the
+/// latest stored, else one made and stored), with the δ the closed loop uses there.
+///
+/// # Errors
+/// An object the fingers never touch, the model, the store.
+#[allow(clippy::too_many_arguments)] // a session's parts, before the session exists
+pub(super) async fn calibrate_all(
+    store: &Store,
+    model: &str,
+    model_bytes: &[u8],
+    seed: u64,
+    plan: &super::TrialPlan,
+    scenes: &[SceneSpec],
+    objects: &[Vec<GraspObject>],
+    pairs: impl IntoIterator<Item = (u32, String)>,
+) -> Result<HashMap<(u32, String), ObjectSetup>, TrialsError> {
+    let mut out: HashMap<(u32, String), ObjectSetup> = HashMap::new();
+    for key in pairs {
+        if out.contains_key(&key) {
+            continue;
+        }
+        let si = key.0 as usize;
+        let (Some(scene), Some(list)) = (scenes.get(si), objects.get(si)) else {
+            return Err(TrialsError::Failed(format!("no scene {si} in the session")));
+        };
+        let Some(object) = list.iter().find(|o| o.name == key.1) else {
+            return Err(invalid(format!("object `{}` is not in scene {si}", key.1)));
+        };
+        let calibration = calibration_for(
+            store,
+            model,
+            model_bytes,
+            scene,
+            object,
+            plan.fps,
+            seed,
+            top_for(plan.target_n),
+        )
+        .await
+        .map_err(|e| match e {
+            GraspRunError::Invalid(m) => invalid(format!("calibrating `{}`: {m}", object.name)),
+            e => TrialsError::Failed(format!("calibrating `{}`: {e}", object.name)),
+        })?;
+        let count_n = one_count_force_n(calibration.lambda_max(), &Stroke::default());
+        out.insert(
+            key,
+            ObjectSetup {
+                calibration,
+                count_n,
+                tolerance_n: tolerance_for(plan.tolerance_n, count_n),
+            },
+        );
+    }
+    Ok(out)
 }
 
 /// Everything one simulated trial needs, owned (it runs on its own thread and paused

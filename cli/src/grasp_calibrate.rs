@@ -1,0 +1,183 @@
+//! `softtouch grasp calibrate`: the stiffness of an object as the finger's own estimate
+//! sees it (Λ(P) and Λ_max by Theil–Sen, the first touch), on the simulated soft grasp
+//! or on a rig's Hand-E; stored, so that the grasp verbs take K = 0.75 Λ_max and their
+//! pre-grasp opening from it.
+
+use std::io::{BufRead, Write};
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+use softtouch_collector::dataset::export::sha256_hex;
+use softtouch_lab::grasp::calibration::{calibrate_on_sim, scene_setup_hash, to_row, top_for};
+use softtouch_lab::grasp::follow::object_for;
+use softtouch_trainer::Predictor;
+
+use super::grasp_loop::{bad, grasp_failure};
+use super::{Failure, io_failure, open_existing};
+
+/// Options of `grasp calibrate`.
+#[derive(Debug, Args)]
+pub struct CalibrateArgs {
+    /// Stored model whose estimate is calibrated.
+    #[arg(long)]
+    pub model: String,
+    /// The reference object (a `[[objects]]` name of the scene; on a rig, its name for
+    /// the record, matched by `grasp follow --rig … --object`).
+    #[arg(long)]
+    pub object: Option<String>,
+    /// Scene file (simulated grasp); default: the built-in scene.
+    #[arg(long, conflicts_with = "rig")]
+    pub scene: Option<PathBuf>,
+    /// Rig file with a real Hand-E and finger camera: the ends are calibrated first
+    /// (nothing between the fingers), then you place the object and press Enter.
+    #[arg(long)]
+    pub rig: Option<PathBuf>,
+    /// The largest target the loop will hold, N: the closing goes up to 1.5 × it (at
+    /// least 4.5 N).
+    #[arg(long, default_value_t = 3.0)]
+    pub target: f64,
+    /// Camera rate of the simulated grasp, Hz.
+    #[arg(long, default_value_t = 120.0)]
+    pub fps: f64,
+    /// Seed of the simulated scene's effects.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+/// Run `grasp calibrate`.
+pub async fn run(args: CalibrateArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    softtouch_lab::grasp::settings::FPS_HZ.check("--fps", args.fps)?;
+    if !(args.target.is_finite() && args.target > 0.0 && args.target <= 20.0) {
+        return Err(bad(format!(
+            "--target {}: expected a force in (0, 20] N",
+            args.target
+        )));
+    }
+    let top_n = top_for(args.target);
+    let store = open_existing(db).await?;
+    let bytes = softtouch_lab::models::force_artifact(&store, &args.model).await?;
+    let model_sha256 = sha256_hex(&bytes);
+    let predictor = Predictor::from_bytes(&bytes)?;
+    let w = io_failure;
+    let (row, ends) = if let Some(rig_path) = &args.rig {
+        let object = args
+            .object
+            .clone()
+            .ok_or_else(|| bad("--object: expected the reference object's name on a rig".into()))?;
+        let text = std::fs::read_to_string(rig_path)
+            .map_err(|e| bad(format!("{}: cannot read: {e}", rig_path.display())))?;
+        let rig = softtouch_collector::configs::resolve(Some(rig_path), None)?.rig;
+        let projection = softtouch_lab::grasp::soft::projections().map_err(grasp_failure)?[0];
+        writeln!(
+            out,
+            "rig {}: calibrating the gripper's ends: nothing may be between the fingers",
+            rig_path.display()
+        )
+        .map_err(w)?;
+        out.flush().map_err(w)?;
+        let prompt = format!(
+            "place `{object}` between the open fingers, then press Enter (an empty input stops)"
+        );
+        let ready = async move {
+            eprintln!("{prompt}");
+            tokio::task::spawn_blocking(|| {
+                let mut line = String::new();
+                match std::io::stdin().lock().read_line(&mut line) {
+                    Ok(0) | Err(_) => Err("no answer: the input closed".to_owned()),
+                    Ok(_) => Ok(()),
+                }
+            })
+            .await
+            .map_err(|e| e.to_string())?
+        };
+        let (ends, cal) = softtouch_lab::grasp::devices::stiffness_on_rig(
+            &rig, predictor, projection, top_n, ready,
+        )
+        .await
+        .map_err(|e| match e {
+            softtouch_lab::grasp::devices::RigFollowError::Open(e) => {
+                Failure::Runtime(anyhow::anyhow!("{e}"))
+            }
+            softtouch_lab::grasp::devices::RigFollowError::Grasp(e) => grasp_failure(e),
+        })?;
+        let mut row = to_row(
+            &cal,
+            ("rig", &sha256_hex(text.as_bytes())),
+            (&args.model, &model_sha256),
+            &object,
+            None,
+        )?;
+        row.mm_per_count = ends.stroke.mm_per_count;
+        (row, Some(ends))
+    } else {
+        let scene = softtouch_collector::configs::resolve(None, args.scene.as_deref())?.scene;
+        let object = object_for(&scene, args.object.as_deref())?;
+        let (scene2, object2, fps, seed) = (scene.clone(), object.clone(), args.fps, args.seed);
+        let (_, made) = tokio::task::spawn_blocking(move || {
+            calibrate_on_sim(&scene2, &object2, fps, seed, top_n, predictor)
+        })
+        .await
+        .map_err(|e| Failure::Runtime(anyhow::anyhow!("the calibration's thread failed: {e}")))?;
+        let (cal, truth) = made?;
+        let row = to_row(
+            &cal,
+            ("scene", &scene_setup_hash(&scene, args.fps, args.seed)?),
+            (&args.model, &model_sha256),
+            &object.name,
+            truth,
+        )?;
+        (row, None)
+    };
+    let id = store
+        .insert_grasp_calibration(&row)
+        .await
+        .map_err(|e| Failure::Runtime(anyhow::anyhow!("{e}")))?;
+    store.close().await;
+    if let Some(e) = ends {
+        writeln!(
+            out,
+            "ends: counts {}..={} at {:.4} mm per count",
+            e.stroke.open_count, e.stroke.closed_count, e.stroke.mm_per_count
+        )
+        .map_err(w)?;
+    }
+    writeln!(
+        out,
+        "calibration #{id}: `{}` with model `{}`: first touch at count {} (no-contact estimate {:.3} N); Λ_max = {:.3} N/mm (IQR of its window's slopes {:.3}–{:.3}) over {} counts, closing ended: {}",
+        row.object,
+        row.model,
+        row.touch_count,
+        row.baseline_n,
+        row.lambda_max_n_per_mm,
+        row.lambda_iqr_n_per_mm.0,
+        row.lambda_iqr_n_per_mm.1,
+        row.counts_spanned,
+        row.ended
+    )
+    .map_err(w)?;
+    if let Some(t) = row.true_lambda_max_n_per_mm {
+        writeln!(
+            out,
+            "the simulator's true Λ_max over the same range: {t:.3} N/mm ({:+.1} %; a check of the estimate, never used by a loop)",
+            (row.lambda_max_n_per_mm / t - 1.0) * 100.0
+        )
+        .map_err(w)?;
+    }
+    writeln!(
+        out,
+        "K = 0.75 Λ_max = {:.3} N/mm; one count is {:.3} N at Λ_max",
+        0.75 * row.lambda_max_n_per_mm,
+        row.lambda_max_n_per_mm * row.mm_per_count
+    )
+    .map_err(w)?;
+    // Λ(P) every few windows, for a look.
+    let curve: Vec<(u8, f64)> = serde_json::from_str(&row.lambda_json).unwrap_or_default();
+    let step = (curve.len() / 8).max(1);
+    let shown: Vec<String> = curve
+        .iter()
+        .step_by(step)
+        .map(|(p, l)| format!("{p}: {l:.2}"))
+        .collect();
+    writeln!(out, "Λ(P) N/mm by count: {}", shown.join(", ")).map_err(w)?;
+    Ok(())
+}
