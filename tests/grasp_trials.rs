@@ -300,6 +300,65 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
         rt.block_on(session_rows(&db, 6))
     );
 
+    // Session 7, sent SIGTERM once 2 trials are stored: it finishes the trial in hand,
+    // stores it, prints the table of what ran and exits 0.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_softtouch"))
+        .args([
+            "grasp",
+            "trials",
+            "--model",
+            "air-svae",
+            "--objects",
+            "cylinder",
+            "--trials",
+            "3",
+            "--seed",
+            "11",
+        ])
+        .args(FAST)
+        .current_dir(d)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let stored7 = "SELECT COUNT(*) FROM grasp_trials WHERE session_id = 7";
+    loop {
+        let exited = child.try_wait().ok().flatten();
+        assert!(
+            exited.is_none(),
+            "the session ended on its own ({exited:?}) before 2 trials were stored"
+        );
+        if rt.block_on(count(&db, stored7)) >= 2 {
+            break;
+        }
+        std::thread::yield_now();
+    }
+    let pid = child.id().to_string();
+    let sent = Command::new("kill")
+        .args(["-TERM", &pid])
+        .status()
+        .expect("kill")
+        .success();
+    assert!(sent, "kill -TERM failed");
+    let done = child.wait_with_output().expect("reaped");
+    let stdout = String::from_utf8_lossy(&done.stdout);
+    assert!(
+        done.status.success(),
+        "exit {:?}: {}",
+        done.status.code(),
+        String::from_utf8_lossy(&done.stderr)
+    );
+    let after = rt.block_on(count(&db, stored7));
+    assert!(
+        stdout.contains(&format!("stopped after {after} of {planned} trials")),
+        "{stdout}"
+    );
+    assert!((2..planned).contains(&after), "{after}");
+    assert!(
+        stdout.contains("σ = 5 mm, land"),
+        "the table of what ran: {stdout}"
+    );
+
     // Bad input: exit 2, saying what is known.
     fails_with(
         &trials(d, &["--model", "air-svae", "--objects", "vase"]),
@@ -371,7 +430,7 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
     );
     assert_eq!(
         rt.block_on(count(&db, "SELECT COUNT(*) FROM grasp_sessions")),
-        6,
+        7,
         "refused runs create no session"
     );
 }

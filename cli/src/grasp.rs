@@ -132,8 +132,20 @@ async fn follow(args: FollowArgs, db: &Path, out: &mut dyn Write) -> Result<(), 
         hold_s: args.hold_s,
     };
     let name = object.name.clone();
-    let (setup, cycles) = follow_sim(&settings, &model, &scene, object, &calibrated).await?;
+    // Ctrl-C, SIGTERM or SIGHUP ends the loop after its cycle, the fingers open; the
+    // table and files then show what ran.
+    let signals = super::signals::SignalWatch::start();
+    let (setup, cycles, stopped) = follow_sim(
+        &settings,
+        &model,
+        &scene,
+        object,
+        &calibrated,
+        Some(signals.request()),
+    )
+    .await?;
     print_setup(&name, &setup, &loop_settings, out)?;
+    print_stopped(stopped, &cycles, out)?;
     print_follow(&cycles, &args.targets, c.tolerance, &c.out_dir, out)
 }
 
@@ -197,7 +209,29 @@ async fn follow_on_rig(
         cal.stroke.mm_per_count
     )
     .map_err(io_failure)?;
+    print_stopped(run.stopped, &run.cycles, out)?;
     print_follow(&run.cycles, &args.targets, c.tolerance, &c.out_dir, out)
+}
+
+/// A line when a stop request ended the loop early: what follows is what ran.
+fn print_stopped(
+    stopped: Option<&'static str>,
+    cycles: &[Cycle],
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    if let Some(name) = stopped {
+        let ran_s = match (cycles.first(), cycles.last()) {
+            (Some(a), Some(b)) => b.t.0.saturating_sub(a.t.0) as f64 * 1e-9,
+            _ => 0.0,
+        };
+        writeln!(
+            out,
+            "stopped by {name} after {} cycles ({ran_s:.2} s); the fingers are open; below is what ran",
+            cycles.len()
+        )
+        .map_err(io_failure)?;
+    }
+    Ok(())
 }
 
 /// `grasp follow`'s table per target, then its CSV and chart.

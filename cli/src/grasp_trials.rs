@@ -233,8 +233,36 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
         })
         .map_err(|e| TrialsError::Failed(format!("cannot write output: {e}")))
     };
-    run_trials(&store, &session, &todo, &mut on_trial).await?;
+    // The first Ctrl-C, SIGTERM or SIGHUP finishes the trial in hand and ends with the
+    // summary of what ran (exit 0); a second stops at once.
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
+    let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx));
+    let ran = run_trials(&store, &session, &todo, &stop_rx, &mut on_trial).await;
+    signals.abort();
     bar.finish_and_clear();
+    let ran = match ran {
+        Err(TrialsError::Interrupted) => {
+            return Err(Failure::Runtime(anyhow::anyhow!(
+                "grasp session {}: stopped at once by a second stop request; the trials before it are stored (resume with --resume {})",
+                session.id,
+                session.id
+            )));
+        }
+        other => other?,
+    };
+    let todo = match ran {
+        softtouch_lab::grasp::trials::RunEnd::Completed => &todo[..],
+        softtouch_lab::grasp::trials::RunEnd::Stopped { ran } => {
+            writeln!(
+                out,
+                "stopped after {ran} of {} trials (a stop request; resume with --resume {})",
+                todo.len(),
+                session.id
+            )
+            .map_err(w)?;
+            todo.get(..ran).unwrap_or(&[])
+        }
+    };
     if !todo.is_empty() {
         writeln!(
             out,

@@ -345,11 +345,37 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
         for (target_n, _) in targets {
             self.config.stepper.check_target(*target_n)?;
         }
-        let result = self.follow_inner(targets).await;
+        let mut cycles = Vec::new();
+        let result = self.follow_inner(targets, &mut cycles).await;
         let exit = self.exit().await;
-        let cycles = result?;
+        result?;
         exit?;
         Ok(cycles)
+    }
+
+    /// [`Self::follow`], but a stop request ([`Self::with_stop`]) ends it cleanly: the
+    /// gripper is left as [`ControllerConfig::on_exit`] says and the cycles run so far
+    /// come back with the request's name, for a summary of what ran.
+    ///
+    /// # Errors
+    /// As [`Self::follow`], but never [`GraspError::Interrupted`].
+    pub async fn follow_until_stopped(
+        &mut self,
+        targets: &[(f64, Duration)],
+    ) -> Result<(Vec<Cycle>, Option<&'static str>), GraspError> {
+        for (target_n, _) in targets {
+            self.config.stepper.check_target(*target_n)?;
+        }
+        let mut cycles = Vec::new();
+        let result = self.follow_inner(targets, &mut cycles).await;
+        let exit = self.exit().await;
+        let stopped = match result {
+            Ok(()) => None,
+            Err(GraspError::Interrupted(_)) => self.stop.as_ref().and_then(|s| *s.borrow()),
+            Err(e) => return Err(e),
+        };
+        exit?;
+        Ok((cycles, stopped))
     }
 
     /// Moves the fingers to `position` (clamped to the stroke) without force control,
@@ -423,10 +449,10 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
     async fn follow_inner(
         &mut self,
         targets: &[(f64, Duration)],
-    ) -> Result<Vec<Cycle>, GraspError> {
+        cycles: &mut Vec<Cycle>,
+    ) -> Result<(), GraspError> {
         self.activate().await?;
         self.next_frame_t = self.clock.now();
-        let mut cycles = Vec::new();
         for (hold, (target_n, duration)) in targets.iter().enumerate() {
             self.hold = hold;
             let end = TimestampNs(
@@ -442,7 +468,7 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
                 cycles.push(self.cycle(*target_n).await?);
             }
         }
-        Ok(cycles)
+        Ok(())
     }
 
     /// One cycle: frame → estimate → projection → step → request.

@@ -736,3 +736,28 @@ async fn the_simulated_soft_gripper_calibrates_to_its_whole_scale() {
         );
     }
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_stop_request_ends_the_follow_with_the_cycles_run_and_the_fingers_open() {
+    let cfg = config(4.0, 0.15);
+    let (c, handle, _) = rig(predictor(), cfg, 60.0);
+    let (tx, rx) = tokio::sync::watch::channel(None);
+    let mut c = c.with_stop(rx);
+    pre_grasp(&mut c, &handle).await;
+    // The request comes 0.5 s into a 2 s hold.
+    tokio::spawn(async move {
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let _ = tx.send(Some("SIGTERM"));
+        std::future::pending::<()>().await;
+    });
+    let (cycles, stopped) = c
+        .follow_until_stopped(&[(1.5, Duration::from_secs(2))])
+        .await
+        .expect("stops cleanly");
+    assert_eq!(stopped, Some("SIGTERM"));
+    // About 0.5 s of cycles at 60 Hz, not the 2 s asked for.
+    assert!((25..=35).contains(&cycles.len()), "{}", cycles.len());
+    let (g, ..) = c.into_parts();
+    let last = g.commands.last().expect("commands").1;
+    assert_eq!(last.position, cfg.stepper.stroke.open_count, "left open");
+}

@@ -132,6 +132,8 @@ pub struct RigFollow {
     pub calibration: EndCalibration,
     /// Every cycle.
     pub cycles: Vec<Cycle>,
+    /// The stop request that ended it early, by name.
+    pub stopped: Option<&'static str>,
 }
 
 /// Why a run on real devices failed.
@@ -151,7 +153,8 @@ pub enum RigFollowError {
 /// caller passes `second_projection` for the rig's `second_camera`), on the wall clock. There is no
 /// simulator to measure Λ, so the gain is the caller's. The gripper opens at the end
 /// (and on every error, [`softtouch_grasp::ExitAction::Open`]), and also when `stop`
-/// holds a request (checked every cycle). Settings and targets are checked before any
+/// holds a request (checked every cycle): the cycles run so far then come back with
+/// its name. Settings and targets are checked before any
 /// device is opened.
 ///
 /// # Errors
@@ -184,10 +187,11 @@ pub async fn follow_on_rig(
     if let (Some(second), Some(projection)) = (devices.second_camera, second_projection) {
         controller = controller.with_second_finger(second, projection);
     }
-    let cycles = controller.follow(targets).await?;
+    let (cycles, stopped) = controller.follow_until_stopped(targets).await?;
     Ok(RigFollow {
         calibration,
         cycles,
+        stopped,
     })
 }
 

@@ -44,6 +44,8 @@ pub fn object_for(scene: &SceneSpec, name: Option<&str>) -> Result<GraspObject, 
 }
 
 /// Runs the targets on the simulated soft grasp of `object` (a paused tokio clock).
+/// A request on `stop` ends it after the cycle in hand, the fingers opened: the cycles
+/// run so far come back with the request's name.
 ///
 /// # Errors
 /// As [`prepare`], and the loop.
@@ -53,8 +55,9 @@ pub async fn follow_sim(
     scene: &SceneSpec,
     object: GraspObject,
     calibration: &super::calibration::Calibrated,
-) -> Result<(Setup, Vec<Cycle>), GraspRunError> {
-    let mut p = prepare(
+    stop: Option<softtouch_grasp::StopRequest>,
+) -> Result<(Setup, Vec<Cycle>, Option<&'static str>), GraspRunError> {
+    let p = prepare(
         &settings.loop_settings,
         model_bytes,
         scene,
@@ -66,8 +69,12 @@ pub async fn follow_sim(
     .await?;
     let hold = Duration::from_secs_f64(settings.hold_s);
     let targets: Vec<(f64, Duration)> = settings.targets_n.iter().map(|t| (*t, hold)).collect();
-    let cycles = p.controller.follow(&targets).await?;
-    Ok((p.setup, cycles))
+    let mut controller = match stop {
+        Some(stop) => p.controller.with_stop(stop),
+        None => p.controller,
+    };
+    let (cycles, stopped) = controller.follow_until_stopped(&targets).await?;
+    Ok((p.setup, cycles, stopped))
 }
 
 /// One target's numbers.

@@ -14,7 +14,7 @@
 mod run;
 pub mod table;
 
-pub use run::{TrialDone, TrialTiming, pack_trace, run_trials};
+pub use run::{RunEnd, TrialDone, TrialTiming, pack_trace, run_trials};
 
 use serde::{Deserialize, Serialize};
 use softtouch_drivers::gripper::STROKE_MM;
@@ -79,6 +79,9 @@ pub enum TrialsError {
     /// trial's thread, an output file).
     #[error("{0}")]
     Failed(String),
+    /// A second stop request ended the run at once; the trial in hand is not stored.
+    #[error("stopped at once by a second stop request; the trial in hand was not stored")]
+    Interrupted,
 }
 
 impl TrialsError {
@@ -90,7 +93,7 @@ impl TrialsError {
             Self::Model(e) => e.is_bad_input(),
             Self::Store(e) if matches!(**e, StoreError::NoSuchRun(_)) => true,
             Self::Grasp(GraspError::Config(_) | GraspError::UnreachableTarget { .. }) => true,
-            Self::Store(_) | Self::Grasp(_) | Self::Failed(_) => false,
+            Self::Store(_) | Self::Grasp(_) | Self::Failed(_) | Self::Interrupted => false,
         }
     }
 }

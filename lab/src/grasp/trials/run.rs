@@ -43,8 +43,24 @@ pub struct TrialTiming {
     pub cycles: usize,
 }
 
+/// How a run of trials ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RunEnd {
+    /// Every trial of `todo` ran and was stored.
+    Completed,
+    /// A stop request (the first signal) ended it after the trial in hand, which was
+    /// stored; this many of `todo` ran.
+    Stopped {
+        /// Trials run and stored before the stop.
+        ran: usize,
+    },
+}
+
 /// Runs `todo` (from [`Session::progress`]) one trial at a time, each stored as it
 /// ends; `done` hears of each (to print progress; its error stops the session).
+/// `stop` counts stop requests: at 1 the run ends after the trial in hand (stored),
+/// at 2 it ends at once with [`TrialsError::Interrupted`] and that trial is not stored
+/// (a simulated trial moves nothing real: its thread is left to finish unseen).
 /// K per (scene, object) is 0.75 × Λ_max from the stiffness calibration on the
 /// model's own estimate ([`crate::grasp::calibration`]: the latest stored, else one
 /// made on the unperturbed object and stored), all made before any trial; the
@@ -56,8 +72,9 @@ pub async fn run_trials(
     store: &Store,
     session: &Session,
     todo: &[Planned],
+    stop: &tokio::sync::watch::Receiver<u32>,
     done: &mut dyn FnMut(&TrialDone) -> Result<(), TrialsError>,
-) -> Result<(), TrialsError> {
+) -> Result<RunEnd, TrialsError> {
     let plan = &session.plan;
     let scenes = &session.scenes;
     let seed = session.seed;
@@ -75,7 +92,11 @@ pub async fn run_trials(
             .map_err(|e| TrialsError::Failed(format!("cannot build a thread pool: {e}")))?,
     );
     let mut predictor = Some(predictor);
-    for p in todo {
+    let mut stop = stop.clone();
+    for (ran, p) in todo.iter().enumerate() {
+        if *stop.borrow_and_update() >= 1 {
+            return Ok(RunEnd::Stopped { ran });
+        }
         let si = p.key.scene_index as usize;
         let scene = &scenes[si];
         let oi = plan
@@ -131,10 +152,21 @@ pub async fn run_trials(
             ));
         };
         let pool = Arc::clone(&inference_pool);
-        let (pred, result) =
-            tokio::task::spawn_blocking(move || pool.install(|| run_job(job, pred)))
-                .await
-                .map_err(|e| TrialsError::Failed(format!("a trial's thread failed: {e}")))?;
+        let handle = tokio::task::spawn_blocking(move || pool.install(|| run_job(job, pred)));
+        let at_once = async {
+            while *stop.borrow_and_update() < 2 {
+                if stop.changed().await.is_err() {
+                    // No more requests can come: never stop at once.
+                    std::future::pending::<()>().await;
+                }
+            }
+        };
+        let (pred, result) = tokio::select! {
+            joined = handle => {
+                joined.map_err(|e| TrialsError::Failed(format!("a trial's thread failed: {e}")))?
+            }
+            () = at_once => return Err(TrialsError::Interrupted),
+        };
         predictor = Some(pred);
         let result = result?;
         let wall_s = t0.elapsed().as_secs_f64();
@@ -166,7 +198,7 @@ pub async fn run_trials(
             row,
         })?;
     }
-    Ok(())
+    Ok(RunEnd::Completed)
 }
 
 /// An object's calibration and the closed loop's δ on it.
