@@ -408,8 +408,28 @@ impl Session {
                     .get(k.0 as usize)
                     .map_or("?", |s| medium_name(s.medium));
                 let c = &o.calibration;
+                let gain = self.plan.gain_over_lambda * c.lambda_max().max(0.05);
+                // Method S4 on the calibrated Λ_max, said with the calibration's number.
+                let s4 = match softtouch_grasp::check_gain(gain, c.lambda_max()) {
+                    Ok(softtouch_grasp::GainCheck::Converges { contraction_at_max }) => {
+                        format!("S4: K > Λ_max/2, the error × {contraction_at_max:.2} a step at Λ_max")
+                    }
+                    Ok(softtouch_grasp::GainCheck::MayNotConverge { amplification }) => format!(
+                        "warning (S4, calibration #{}): K ≤ Λ_max/2, the loop may oscillate (× {amplification:.2} a step)",
+                        c.row.calibration_id
+                    ),
+                    Ok(softtouch_grasp::GainCheck::NoStiffness) | Err(_) => format!(
+                        "warning (S4, calibration #{}): no usable stiffness",
+                        c.row.calibration_id
+                    ),
+                };
+                let dither = if o.tolerance_n < o.count_n / 2.0 {
+                    "; δ is under half a count: the loop dithers by one count around F_ref, which the confirmation accepts when its mean is within δ"
+                } else {
+                    ""
+                };
                 Some(format!(
-                    "`{}` ({medium}): calibration #{} ({}): first touch at count {}, Λ_max = {:.3} N/mm from the model's estimate{}; K = {:.3} N/mm, δ = {} N{}",
+                    "`{}` ({medium}): calibration #{} ({}): first touch at count {}, Λ_max = {:.3} N/mm from the model's estimate{}; K = {:.3} N/mm, δ = {} N{}; {s4}{dither}",
                     k.1,
                     c.row.calibration_id,
                     if c.fresh { "made now" } else { "stored" },
@@ -418,7 +438,7 @@ impl Session {
                     c.row.true_lambda_max_n_per_mm.map_or_else(String::new, |t| format!(
                         " (true {t:.3}, a check only)"
                     )),
-                    self.plan.gain_over_lambda * c.lambda_max().max(0.05),
+                    gain,
                     o.tolerance_n,
                     if o.tolerance_n > self.plan.tolerance_n {
                         format!(
