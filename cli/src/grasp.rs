@@ -214,7 +214,7 @@ async fn follow_on_rig(
 }
 
 /// A line when a stop request ended the loop early: what follows is what ran.
-fn print_stopped(
+pub(super) fn print_stopped(
     stopped: Option<&'static str>,
     cycles: &[Cycle],
     out: &mut dyn Write,

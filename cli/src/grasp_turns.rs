@@ -133,8 +133,20 @@ pub(super) async fn disturb(
         turn_s: args.turn_s,
         phase_s: args.phase_s,
     };
-    let run = disturb_sim(&settings, &model, &scene, object, &calibrated).await?;
+    // Ctrl-C, SIGTERM or SIGHUP ends the loop after its cycle, the fingers open; the
+    // table and files then show what ran.
+    let signals = super::signals::SignalWatch::start();
+    let run = disturb_sim(
+        &settings,
+        &model,
+        &scene,
+        object,
+        &calibrated,
+        Some(signals.request()),
+    )
+    .await?;
     print_setup(&args.object, &run.setup, &loop_settings, out)?;
+    super::grasp::print_stopped(run.stopped, &run.cycles, out)?;
     let w = io_failure;
     let opt = |v: Option<f64>| v.map_or_else(|| "never".to_owned(), |s| format!("{s:.3}"));
     writeln!(

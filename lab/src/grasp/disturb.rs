@@ -53,10 +53,12 @@ pub struct DisturbRun {
     pub yaws_deg: Vec<f64>,
     /// The phases.
     pub phases: Vec<Phase>,
+    /// The stop request that ended it early, by name (the cycles are what ran).
+    pub stopped: Option<&'static str>,
 }
 
 /// Runs the disturbance on the simulated soft grasp of `object` (a paused tokio
-/// clock).
+/// clock). A request on `stop` ends it after the cycle in hand, the fingers opened.
 ///
 /// # Errors
 /// As [`prepare`], the loop, the simulator.
@@ -66,8 +68,9 @@ pub async fn disturb_sim(
     scene: &SceneSpec,
     object: GraspObject,
     calibration: &super::calibration::Calibrated,
+    stop: Option<softtouch_grasp::StopRequest>,
 ) -> Result<DisturbRun, GraspRunError> {
-    let mut p = prepare(
+    let p = prepare(
         &settings.loop_settings,
         model_bytes,
         scene,
@@ -93,9 +96,12 @@ pub async fn disturb_sim(
         });
     }
     let total_s = settings.settle_s + settings.turns_deg.len() as f64 * settings.phase_s;
-    let cycles = p
-        .controller
-        .follow(&[(settings.target_n, Duration::from_secs_f64(total_s))])
+    let mut controller = match stop {
+        Some(stop) => p.controller.with_stop(stop),
+        None => p.controller,
+    };
+    let (cycles, stopped) = controller
+        .follow_until_stopped(&[(settings.target_n, Duration::from_secs_f64(total_s))])
         .await?;
     let yaws_deg = cycles
         .iter()
@@ -106,6 +112,7 @@ pub async fn disturb_sim(
         cycles,
         yaws_deg,
         phases,
+        stopped,
     })
 }
 
