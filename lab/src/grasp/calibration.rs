@@ -90,11 +90,7 @@ pub fn calibrate_on_sim(
     Predictor,
     Result<(StiffnessCalibration, Option<f64>), GraspRunError>,
 ) {
-    let rt = match tokio::runtime::Builder::new_current_thread()
-        .enable_time()
-        .start_paused(true)
-        .build()
-    {
+    let rt = match crate::grasp::sim::paused_runtime() {
         Ok(rt) => rt,
         Err(e) => {
             return (

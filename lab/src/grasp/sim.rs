@@ -24,6 +24,18 @@ pub fn projection() -> Result<Projection, GraspError> {
     ))
 }
 
+/// A runtime of its own on a paused clock, for one simulated grasp on this thread
+/// (a trial, a calibration): the caller's runtime, and its database, keep real time.
+///
+/// # Errors
+/// The runtime cannot be built.
+pub(crate) fn paused_runtime() -> std::io::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .start_paused(true)
+        .build()
+}
+
 pub(crate) fn sim_err(e: SimError) -> GraspError {
     GraspError::Config(format!("simulated grasp: {e}"))
 }

@@ -295,11 +295,7 @@ struct Job {
 
 /// Runs one trial on a fresh simulated grasp, on virtual time.
 fn run_job(job: Job, mut predictor: Predictor) -> (Predictor, Result<TrialResult, GraspError>) {
-    let rt = match tokio::runtime::Builder::new_current_thread()
-        .enable_time()
-        .start_paused(true)
-        .build()
-    {
+    let rt = match crate::grasp::sim::paused_runtime() {
         Ok(rt) => rt,
         Err(e) => {
             return (
