@@ -139,8 +139,9 @@ fn live_presses_on_the_simulated_rig_and_bench_grasp_writes_its_table() {
         "workspace",
     );
 
-    // `grasp follow --rig` with a real Hand-E: the gain is required (no simulator to
-    // measure Λ), and a finger camera that cannot be opened is a runtime failure.
+    // `grasp follow --rig` with a real Hand-E: K is --gain or the rig's calibration of
+    // --object (no simulator to measure Λ), and a finger camera that cannot be opened
+    // is a runtime failure.
     let rig = softtouch_schemas::defaults::RIG_TOML
         .replace(
             "[gripper]\ndriver = \"sim\"",
@@ -164,10 +165,61 @@ fn live_presses_on_the_simulated_rig_and_bench_grasp_writes_its_table() {
         "--rig",
         "real.toml",
     ];
-    fails_with(&softtouch(d, &follow), 2, "--gain");
+    fails_with(&softtouch(d, &follow), 2, "--gain or --object");
     let mut with_gain = follow.to_vec();
     with_gain.extend(["--gain", "4"]);
     fails_with(&softtouch(d, &with_gain), 1, "camera");
+    // K from the rig's calibration of the object: none yet, then one stored (as
+    // `grasp calibrate --rig` stores it), which takes the verb as far as the devices.
+    let mut with_object = follow.to_vec();
+    with_object.extend(["--object", "bottle"]);
+    fails_with(
+        &softtouch(d, &with_object),
+        2,
+        "no calibration of `bottle` with model `air-svae` on this rig file",
+    );
+    common::runtime().block_on(async {
+        let store = softtouch_collector::store::Store::open(&d.join("softtouch.db"))
+            .await
+            .expect("open");
+        let (artifact, _) = store
+            .model_artifact("air-svae")
+            .await
+            .expect("query")
+            .expect("stored model");
+        let sha = softtouch_collector::dataset::export::sha256_hex;
+        let rig_bytes = std::fs::read(d.join("real.toml")).expect("rig");
+        store
+            .insert_grasp_calibration(&softtouch_collector::store::GraspCalibrationRow {
+                calibration_id: 0,
+                created_at: String::new(),
+                setup_kind: "rig".into(),
+                setup_hash: sha(&rig_bytes),
+                model: "air-svae".into(),
+                model_sha256: sha(&artifact),
+                object: "bottle".into(),
+                touch_count: 120,
+                lambda_max_n_per_mm: 2.0,
+                lambda_iqr_n_per_mm: (1.8, 2.2),
+                counts_spanned: 15,
+                baseline_n: 0.0,
+                mm_per_count: 0.196,
+                ended: "reached_top".into(),
+                points_json: "[]".into(),
+                lambda_json: "[]".into(),
+                true_lambda_max_n_per_mm: None,
+            })
+            .await
+            .expect("insert");
+        store.close().await;
+    });
+    let out = softtouch(d, &with_object);
+    assert!(
+        text(&out.stdout).contains("Λ_max = 2.000 N/mm from the model's estimate; K = 0.75 Λ_max"),
+        "{}",
+        text(&out.stdout)
+    );
+    fails_with(&out, 1, "camera");
 }
 
 #[test]

@@ -30,7 +30,7 @@ pub enum GraspCommand {
     /// estimate closing the loop (Algorithm 1); prints rise time, settling time,
     /// overshoot, steady-state and RMS error per target; writes a CSV and a PNG.
     #[command(
-        after_help = "Example:\n  softtouch grasp follow --model land-v1-svae --targets 0.4,1.6,3\n  softtouch grasp follow --model land-v1-svae --scene scenes/grasp.toml --object ball --fingers 2\n  softtouch grasp follow --model land-v1-svae --rig lab.toml --gain 4 --targets 0.4,1.6   # a real Hand-E"
+        after_help = "Example:\n  softtouch grasp follow --model land-v1-svae --targets 0.4,1.6,3\n  softtouch grasp follow --model land-v1-svae --scene scenes/grasp.toml --object ball --fingers 2\n  softtouch grasp follow --model land-v1-svae --rig lab.toml --object bottle --targets 0.4,1.6   # a real Hand-E, K from its calibration"
     )]
     Follow(FollowArgs),
     /// Hold 0.4 N on land or 1.6 N in water (the scene's medium) on an oval tube while
@@ -88,8 +88,10 @@ pub struct FollowArgs {
     pub hold_s: f64,
     /// Rig file: when it names a real gripper (`driver = "hand-e"`), the loop runs on
     /// the real Hand-E and finger cameras (`camera`, and `second_camera` for a second
-    /// finger), after an end calibration with nothing between the fingers; `--gain` is
-    /// then required. A rig with a simulated gripper runs the simulated soft grasp.
+    /// finger), after an end calibration with nothing between the fingers; K is then
+    /// `--gain`, or 0.75 Λ_max of the latest `grasp calibrate --rig` of `--object`
+    /// with this model and rig file. A rig with a simulated gripper runs the simulated
+    /// soft grasp.
     #[arg(long)]
     pub rig: Option<PathBuf>,
     /// Shared loop options.
@@ -149,8 +151,10 @@ async fn follow(args: FollowArgs, db: &Path, out: &mut dyn Write) -> Result<(), 
     print_follow(&cycles, &args.targets, c.tolerance, &c.out_dir, out)
 }
 
-/// `grasp follow --rig FILE` on a real Hand-E: no simulator, so no measured Λ (the
-/// gain is given) and no truth column; the stroke comes from the end calibration.
+/// `grasp follow --rig FILE` on a real Hand-E: K from `--gain`, else 0.75 × Λ_max of
+/// the latest `grasp calibrate --rig FILE` of `--object` with this model (the rig
+/// file's bytes and the model's artifact must be the same); no truth column; the
+/// stroke comes from the end calibration.
 async fn follow_on_rig(
     args: &FollowArgs,
     rig: &softtouch_schemas::RigConfig,
@@ -158,9 +162,6 @@ async fn follow_on_rig(
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
     let c = &args.common;
-    let gain = c.gain.ok_or_else(|| {
-        bad("--gain: expected K in N/mm on a real gripper (there is no simulator to measure the stiffness Λ)".into())
-    })?;
     if c.fingers == 2 && rig.second_camera.is_none() {
         return Err(bad(
             "--fingers 2: the rig has no second_camera for the second finger".into(),
@@ -168,7 +169,38 @@ async fn follow_on_rig(
     }
     let store = open_existing(db).await?;
     let bytes = softtouch_lab::models::force_artifact(&store, &c.model).await?;
-    drop(store);
+    let gain = match c.gain {
+        Some(g) => g,
+        None => {
+            let object = args.object.as_deref().ok_or_else(|| {
+                bad("--gain or --object: on a real gripper K is --gain, or 0.75 Λ_max of the latest `grasp calibrate --rig` of --object with this model".into())
+            })?;
+            let rig_path = args.rig.as_deref().unwrap_or_else(|| Path::new(""));
+            let text = std::fs::read(rig_path)
+                .map_err(|e| bad(format!("{}: cannot read: {e}", rig_path.display())))?;
+            let sha = softtouch_collector::dataset::export::sha256_hex;
+            let cal = store
+                .latest_grasp_calibration(&sha(&text), &sha(&bytes), object)
+                .await
+                .map_err(|e| Failure::Runtime(anyhow!("{e}")))?
+                .ok_or_else(|| {
+                    bad(format!(
+                        "no calibration of `{object}` with model `{}` on this rig file: run `softtouch grasp calibrate --rig {} --model {} --object {object}` first, or give --gain",
+                        c.model,
+                        rig_path.display(),
+                        c.model
+                    ))
+                })?;
+            writeln!(
+                out,
+                "calibration #{} (stored, {}): first touch at count {}, Λ_max = {:.3} N/mm from the model's estimate; K = 0.75 Λ_max",
+                cal.calibration_id, cal.created_at, cal.touch_count, cal.lambda_max_n_per_mm
+            )
+            .map_err(io_failure)?;
+            0.75 * cal.lambda_max_n_per_mm
+        }
+    };
+    store.close().await;
     let predictor = Predictor::from_bytes(&bytes)?;
     let projections = projections().map_err(grasp_failure)?;
     let mut config = ControllerConfig::new(projections[0]);
