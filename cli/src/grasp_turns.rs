@@ -253,9 +253,23 @@ pub(super) async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Re
         hold_s: args.hold_s,
         wrist,
     };
-    let (setup, runs) = twist_sim(&settings, &model, &scene, &object, &calibrated).await?;
+    // Ctrl-C, SIGTERM or SIGHUP ends the run in hand after its cycle (fingers open)
+    // and skips the next; the table and files show what ran.
+    let signals = super::signals::SignalWatch::start();
+    let (setup, runs, stopped) = twist_sim(
+        &settings,
+        &model,
+        &scene,
+        &object,
+        &calibrated,
+        Some(signals.request()),
+    )
+    .await?;
     // The same grasp twice: its setup and warnings are printed once.
     print_setup(&args.object, &setup, &loop_settings, out)?;
+    if let Some(last) = runs.last() {
+        super::grasp::print_stopped(stopped, &last.cycles, out)?;
+    }
     let w = io_failure;
     writeln!(
         out,

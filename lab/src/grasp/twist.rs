@@ -49,8 +49,9 @@ pub struct TwistRun {
 }
 
 /// Runs the twist twice on the simulated soft grasp of `object`, without and with the
-/// wrist loop (a paused tokio clock). Returns the setup (the same both times) and the
-/// two runs.
+/// wrist loop (a paused tokio clock). Returns the setup (the same both times), the
+/// runs, and the stop request that ended it early: a request on `stop` ends the run in
+/// hand after its cycle (fingers opened) and skips the next, so one run may come back.
 ///
 /// # Errors
 /// As [`prepare`], a wrist loop that cannot work, the loop, the simulator.
@@ -60,11 +61,13 @@ pub async fn twist_sim(
     scene: &SceneSpec,
     object: &GraspObject,
     calibration: &super::calibration::Calibrated,
-) -> Result<(Setup, [TwistRun; 2]), GraspRunError> {
+    stop: Option<softtouch_grasp::StopRequest>,
+) -> Result<(Setup, Vec<TwistRun>, Option<&'static str>), GraspRunError> {
     let wrist_loop = WristLoop::new(settings.wrist)
         .map_err(|e| GraspRunError::Invalid(format!("--wrist-gain / --wrist-deadband-nmm: {e}")))?;
     let mut runs = Vec::new();
     let mut setup = None;
+    let mut stopped: Option<&'static str> = None;
     for with_wrist in [false, true] {
         let p = prepare(
             &settings.loop_settings,
@@ -94,9 +97,13 @@ pub async fn twist_sim(
         } else {
             p.controller
         };
-        let cycles = controller
-            .follow(&[(settings.target_n, Duration::from_secs_f64(total_s))])
+        if let Some(stop) = &stop {
+            controller = controller.with_stop(stop.clone());
+        }
+        let (cycles, stop_name) = controller
+            .follow_until_stopped(&[(settings.target_n, Duration::from_secs_f64(total_s))])
             .await?;
+        stopped = stopped.or(stop_name);
         let truth = p
             .truth_log
             .lock()
@@ -112,12 +119,12 @@ pub async fn twist_sim(
             truth,
             object_yaw_rad,
         });
+        if stopped.is_some() {
+            break;
+        }
     }
-    let [off, on]: [TwistRun; 2] = runs
-        .try_into()
-        .map_err(|_| GraspRunError::Failed("expected two runs".into()))?;
     let setup = setup.ok_or_else(|| GraspRunError::Failed("no run".into()))?;
-    Ok((setup, [off, on]))
+    Ok((setup, runs, stopped))
 }
 
 /// One run's numbers, N·mm for torques.
@@ -145,9 +152,9 @@ fn rms(v: &[f64]) -> f64 {
     }
 }
 
-/// The numbers of both runs (without, then with the wrist loop).
+/// The numbers of each run (without, then with the wrist loop).
 #[must_use]
-pub fn twist_rows(runs: &[TwistRun; 2]) -> [TwistRow; 2] {
+pub fn twist_rows(runs: &[TwistRun]) -> Vec<TwistRow> {
     let row = |i: usize| {
         let run = &runs[i];
         let est: Vec<f64> = run
@@ -182,14 +189,14 @@ pub fn twist_rows(runs: &[TwistRun; 2]) -> [TwistRow; 2] {
                 .to_degrees(),
         }
     };
-    [row(0), row(1)]
+    (0..runs.len()).map(row).collect()
 }
 
 /// `grasp-twist.csv`: one line per cycle of each run.
 ///
 /// # Errors
 /// The file cannot be written.
-pub fn write_twist_csv(path: &Path, runs: &[TwistRun; 2]) -> Result<(), GraspRunError> {
+pub fn write_twist_csv(path: &Path, runs: &[TwistRun]) -> Result<(), GraspRunError> {
     let mut text = String::from(
         "wrist_loop,t_s,target_n,estimate_n,true_n,tz_estimate_nmm,tz_true_nmm,object_yaw_deg,wrist_yaw_deg\n",
     );
@@ -225,30 +232,35 @@ pub fn write_twist_csv(path: &Path, runs: &[TwistRun; 2]) -> Result<(), GraspRun
 ///
 /// # Errors
 /// The chart cannot be drawn or written.
-pub fn write_twist_png(path: &Path, runs: &[TwistRun; 2]) -> Result<(), GraspRunError> {
-    let torque_series = |i: usize, label: &str| {
+pub fn write_twist_png(path: &Path, runs: &[TwistRun]) -> Result<(), GraspRunError> {
+    let torque_series = |run: &TwistRun, label: &str| {
         line(
             label,
-            runs[i]
-                .truth
+            run.truth
                 .iter()
                 .map(|s| (t_s(s.t), s.torque_z_nm * 1000.0))
                 .collect(),
         )
     };
-    let torques = [
-        torque_series(0, "true τz, wrist loop off"),
-        torque_series(1, "true τz, wrist loop on"),
-        line(
-            "estimated τz, wrist loop on",
-            runs[1]
-                .cycles
-                .iter()
-                .filter_map(|cy| Some((t_s(cy.t), cy.torque_z_nm? * 1000.0)))
-                .collect(),
-        ),
-    ];
-    let on = &runs[1];
+    let Some(off) = runs.first() else {
+        return Err(GraspRunError::Failed("no twist run to draw".into()));
+    };
+    let mut torques = vec![torque_series(off, "true τz, wrist loop off")];
+    // The run with the wrist loop (the first, when a stop skipped it).
+    let on = match runs.get(1) {
+        Some(on) => {
+            torques.push(torque_series(on, "true τz, wrist loop on"));
+            torques.push(line(
+                "estimated τz, wrist loop on",
+                on.cycles
+                    .iter()
+                    .filter_map(|cy| Some((t_s(cy.t), cy.torque_z_nm? * 1000.0)))
+                    .collect(),
+            ));
+            on
+        }
+        None => off,
+    };
     let angles = [
         line(
             "object yaw",
@@ -259,7 +271,7 @@ pub fn write_twist_png(path: &Path, runs: &[TwistRun; 2]) -> Result<(), GraspRun
                 .collect(),
         ),
         line(
-            "wrist yaw (loop on)",
+            "wrist yaw",
             on.truth
                 .iter()
                 .map(|s| (t_s(s.t), s.wrist_rad.to_degrees()))
