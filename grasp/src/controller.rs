@@ -342,12 +342,7 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
     /// returns every cycle. Targets are checked before anything moves. The gripper is
     /// left as [`ControllerConfig::on_exit`] says on every path out.
     pub async fn follow(&mut self, targets: &[(f64, Duration)]) -> Result<Vec<Cycle>, GraspError> {
-        for (target_n, _) in targets {
-            self.config.stepper.check_target(*target_n)?;
-        }
-        let mut cycles = Vec::new();
-        let result = self.follow_inner(targets, &mut cycles).await;
-        let exit = self.exit().await;
+        let (cycles, result, exit) = self.follow_and_exit(targets).await?;
         result?;
         exit?;
         Ok(cycles)
@@ -363,12 +358,7 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
         &mut self,
         targets: &[(f64, Duration)],
     ) -> Result<(Vec<Cycle>, Option<&'static str>), GraspError> {
-        for (target_n, _) in targets {
-            self.config.stepper.check_target(*target_n)?;
-        }
-        let mut cycles = Vec::new();
-        let result = self.follow_inner(targets, &mut cycles).await;
-        let exit = self.exit().await;
+        let (cycles, result, exit) = self.follow_and_exit(targets).await?;
         let stopped = match result {
             Ok(()) => None,
             Err(GraspError::Interrupted(_)) => self.stop.as_ref().and_then(|s| *s.borrow()),
@@ -376,6 +366,22 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
         };
         exit?;
         Ok((cycles, stopped))
+    }
+
+    /// The targets checked (nothing moves on a bad one), the loop run, and the exit
+    /// action taken whatever the loop did: the cycles, the loop's outcome and the
+    /// exit's, for the caller to rank.
+    async fn follow_and_exit(
+        &mut self,
+        targets: &[(f64, Duration)],
+    ) -> Result<(Vec<Cycle>, Result<(), GraspError>, Result<(), GraspError>), GraspError> {
+        for (target_n, _) in targets {
+            self.config.stepper.check_target(*target_n)?;
+        }
+        let mut cycles = Vec::new();
+        let result = self.follow_inner(targets, &mut cycles).await;
+        let exit = self.exit().await;
+        Ok((cycles, result, exit))
     }
 
     /// Moves the fingers to `position` (clamped to the stroke) without force control,
