@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use clap::Args;
 use softtouch_collector::dataset::export::sha256_hex;
-use softtouch_lab::grasp::calibration::{calibrate_on_sim, scene_setup_hash, to_row, top_for};
+use softtouch_lab::grasp::calibration::{calibrate_sim_row, to_row, top_for};
 use softtouch_lab::grasp::follow::object_for;
 use softtouch_trainer::Predictor;
 
@@ -57,7 +57,6 @@ pub async fn run(args: CalibrateArgs, db: &Path, out: &mut dyn Write) -> Result<
     let store = open_existing(db).await?;
     let bytes = softtouch_lab::models::force_artifact(&store, &args.model).await?;
     let model_sha256 = sha256_hex(&bytes);
-    let predictor = Predictor::from_bytes(&bytes)?;
     let w = io_failure;
     let (row, ends) = if let Some(rig_path) = &args.rig {
         let object = args
@@ -67,6 +66,7 @@ pub async fn run(args: CalibrateArgs, db: &Path, out: &mut dyn Write) -> Result<
         let text = std::fs::read_to_string(rig_path)
             .map_err(|e| bad(format!("{}: cannot read: {e}", rig_path.display())))?;
         let rig = softtouch_collector::configs::resolve(Some(rig_path), None)?.rig;
+        let predictor = Predictor::from_bytes(&bytes)?;
         let projection = softtouch_lab::grasp::soft::projections().map_err(grasp_failure)?[0];
         writeln!(
             out,
@@ -112,20 +112,16 @@ pub async fn run(args: CalibrateArgs, db: &Path, out: &mut dyn Write) -> Result<
     } else {
         let scene = softtouch_collector::configs::resolve(None, args.scene.as_deref())?.scene;
         let object = object_for(&scene, args.object.as_deref())?;
-        let (scene2, object2, fps, seed) = (scene.clone(), object.clone(), args.fps, args.seed);
-        let (_, made) = tokio::task::spawn_blocking(move || {
-            calibrate_on_sim(&scene2, &object2, fps, seed, top_n, predictor)
-        })
-        .await
-        .map_err(|e| Failure::Runtime(anyhow::anyhow!("the calibration's thread failed: {e}")))?;
-        let (cal, truth) = made?;
-        let row = to_row(
-            &cal,
-            ("scene", &scene_setup_hash(&scene, args.fps, args.seed)?),
-            (&args.model, &model_sha256),
-            &object.name,
-            truth,
-        )?;
+        let row = calibrate_sim_row(
+            &args.model,
+            &bytes,
+            &scene,
+            &object,
+            args.fps,
+            args.seed,
+            top_n,
+        )
+        .await?;
         (row, None)
     };
     let id = store

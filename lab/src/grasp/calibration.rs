@@ -177,6 +177,39 @@ pub fn to_row(
     })
 }
 
+/// A new calibration of `object` on the simulator (on a blocking thread, its own paused
+/// clock), as a row ready to store: keyed by the scene's fingerprint and the model's
+/// artifact, with the simulator's true Λ_max beside it.
+///
+/// # Errors
+/// The model, or a calibration that finds no touch.
+pub async fn calibrate_sim_row(
+    model: &str,
+    model_bytes: &[u8],
+    scene: &SceneSpec,
+    object: &GraspObject,
+    fps: f64,
+    seed: u64,
+    top_n: f64,
+) -> Result<GraspCalibrationRow, GraspRunError> {
+    let setup_hash = scene_setup_hash(scene, fps, seed)?;
+    let predictor = Predictor::from_bytes(model_bytes)?;
+    let (scene2, object2) = (scene.clone(), object.clone());
+    let (_, made) = tokio::task::spawn_blocking(move || {
+        calibrate_on_sim(&scene2, &object2, fps, seed, top_n, predictor)
+    })
+    .await
+    .map_err(|e| GraspRunError::Failed(format!("the calibration's thread failed: {e}")))?;
+    let (cal, truth) = made?;
+    to_row(
+        &cal,
+        ("scene", &setup_hash),
+        (model, &sha256_hex(model_bytes)),
+        &object.name,
+        truth,
+    )
+}
+
 /// The latest stored calibration of `object` with this model on this simulated setup,
 /// else a new one made on the simulator (on a blocking thread) and stored.
 ///
@@ -202,21 +235,7 @@ pub async fn calibration_for(
     if let Some(row) = stored {
         return Ok(Calibrated { row, fresh: false });
     }
-    let predictor = Predictor::from_bytes(model_bytes)?;
-    let (scene2, object2) = (scene.clone(), object.clone());
-    let (_, made) = tokio::task::spawn_blocking(move || {
-        calibrate_on_sim(&scene2, &object2, fps, seed, top_n, predictor)
-    })
-    .await
-    .map_err(|e| GraspRunError::Failed(format!("the calibration's thread failed: {e}")))?;
-    let (cal, truth) = made?;
-    let mut row = to_row(
-        &cal,
-        ("scene", &setup_hash),
-        (model, &model_sha256),
-        &object.name,
-        truth,
-    )?;
+    let mut row = calibrate_sim_row(model, model_bytes, scene, object, fps, seed, top_n).await?;
     row.calibration_id = store
         .insert_grasp_calibration(&row)
         .await
