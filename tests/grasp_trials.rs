@@ -79,6 +79,52 @@ async fn execute(db: &Path, sql: &'static str) {
         .unwrap_or_else(|e| panic!("{sql}: {e}"));
 }
 
+/// `grasp trials` of 3 cylinder trials per cell at `seed` (the fast settings), as a
+/// child process whose output goes to `output()` (null, or piped to be read).
+fn spawn_cylinder_trials(dir: &Path, seed: &str, output: fn() -> Stdio) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_softtouch"))
+        .args([
+            "grasp",
+            "trials",
+            "--model",
+            "air-svae",
+            "--objects",
+            "cylinder",
+            "--trials",
+            "3",
+            "--seed",
+            seed,
+        ])
+        .args(FAST)
+        .current_dir(dir)
+        .stdout(output())
+        .stderr(output())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Waits until `stored` counts at least `n` trials, failing if the child ends first
+/// (then there would be nothing left to interrupt).
+fn wait_until_stored(
+    rt: &tokio::runtime::Runtime,
+    child: &mut std::process::Child,
+    db: &Path,
+    stored: &'static str,
+    n: i64,
+) {
+    loop {
+        let exited = child.try_wait().ok().flatten();
+        assert!(
+            exited.is_none(),
+            "the session ended on its own ({exited:?}) before {n} trials were stored: nothing to interrupt"
+        );
+        if rt.block_on(count(db, stored)) >= n {
+            return;
+        }
+        std::thread::yield_now();
+    }
+}
+
 async fn count(db: &Path, sql: &'static str) -> i64 {
     let options = sqlx::sqlite::SqliteConnectOptions::new()
         .filename(db)
@@ -230,37 +276,9 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
 
     // Session 5, killed with SIGKILL once a few trials are stored, then resumed.
     let planned = 12i64;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_softtouch"))
-        .args([
-            "grasp",
-            "trials",
-            "--model",
-            "air-svae",
-            "--objects",
-            "cylinder",
-            "--trials",
-            "3",
-            "--seed",
-            "9",
-        ])
-        .args(FAST)
-        .current_dir(d)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap_or_else(|e| panic!("{e}"));
+    let mut child = spawn_cylinder_trials(d, "9", Stdio::null);
     let stored = "SELECT COUNT(*) FROM grasp_trials WHERE session_id = 5";
-    loop {
-        let exited = child.try_wait().ok().flatten();
-        assert!(
-            exited.is_none(),
-            "the session ended on its own ({exited:?}) before 3 trials were stored: nothing to kill"
-        );
-        if rt.block_on(count(&db, stored)) >= 3 {
-            break;
-        }
-        std::thread::yield_now();
-    }
+    wait_until_stored(&rt, &mut child, &db, stored, 3);
     child.kill().expect("SIGKILL"); // the child was still running just above
     let status = child.wait().expect("reaped");
     assert!(!status.success(), "killed, not finished: {status:?}");
@@ -302,37 +320,9 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
 
     // Session 7, sent SIGTERM once 2 trials are stored: it finishes the trial in hand,
     // stores it, prints the table of what ran and exits 0.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_softtouch"))
-        .args([
-            "grasp",
-            "trials",
-            "--model",
-            "air-svae",
-            "--objects",
-            "cylinder",
-            "--trials",
-            "3",
-            "--seed",
-            "11",
-        ])
-        .args(FAST)
-        .current_dir(d)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap_or_else(|e| panic!("{e}"));
+    let mut child = spawn_cylinder_trials(d, "11", Stdio::piped);
     let stored7 = "SELECT COUNT(*) FROM grasp_trials WHERE session_id = 7";
-    loop {
-        let exited = child.try_wait().ok().flatten();
-        assert!(
-            exited.is_none(),
-            "the session ended on its own ({exited:?}) before 2 trials were stored"
-        );
-        if rt.block_on(count(&db, stored7)) >= 2 {
-            break;
-        }
-        std::thread::yield_now();
-    }
+    wait_until_stored(&rt, &mut child, &db, stored7, 2);
     let pid = child.id().to_string();
     let sent = Command::new("kill")
         .args(["-TERM", &pid])
