@@ -55,8 +55,14 @@ pub enum GraspCommand {
     /// crush, miss or timeout. Each trial is stored as it ends; `--resume SESSION`
     /// continues. Prints success rates with Wilson 95 % intervals beside the paper's;
     /// writes `grasp-trials.csv`, `grasp-trials-rows.csv` and `grasp-trials.png`.
+    /// With `--rig FILE` the trials run on the rig's Franka, Hand-E and finger camera
+    /// at the grasp poses of its `[grasp]` section, K from each object's stored
+    /// `grasp calibrate --rig`; the rig judges (gOBJ, position, estimate) and the
+    /// operator confirms each verdict and each return of the object to its place.
     #[command(after_help = "Example:
   softtouch grasp trials --model land-v1-svae --trials 10 --sigma-mm 5 --modes open,closed
+  softtouch grasp trials --model land-v1-svae --rig lab.toml --objects bottle,ball --trials 10
+  softtouch grasp trials --rig lab.toml --resume 4
   softtouch grasp trials --model land-v1-svae --objects cake,ball --scene scenes/grasp.toml
   softtouch grasp trials --resume 3
   softtouch grasp trials --model land-v1-svae --sweep-sigma 0,2,5,8,12 --trials 5")]
@@ -176,16 +182,16 @@ async fn follow_on_rig(
                 bad("--gain or --object: on a real gripper K is --gain, or 0.75 Λ_max of the latest `grasp calibrate --rig` of --object with this model".into())
             })?;
             let rig_path = args.rig.as_deref().unwrap_or_else(|| Path::new(""));
-            let text = std::fs::read(rig_path)
-                .map_err(|e| bad(format!("{}: cannot read: {e}", rig_path.display())))?;
             let sha = softtouch_collector::dataset::export::sha256_hex;
+            let setup = softtouch_lab::grasp::calibration::rig_setup_hash(rig)
+                .map_err(|e| Failure::Runtime(anyhow!("{e}")))?;
             let cal = store
-                .latest_grasp_calibration(&sha(&text), &sha(&bytes), object)
+                .latest_grasp_calibration(&setup, &sha(&bytes), object)
                 .await
                 .map_err(|e| Failure::Runtime(anyhow!("{e}")))?
                 .ok_or_else(|| {
                     bad(format!(
-                        "no calibration of `{object}` with model `{}` on this rig file: run `softtouch grasp calibrate --rig {} --model {} --object {object}` first, or give --gain",
+                        "no calibration of `{object}` with model `{}` on this rig's gripper and cameras: run `softtouch grasp calibrate --rig {} --model {} --object {object}` first, or give --gain",
                         c.model,
                         rig_path.display(),
                         c.model

@@ -63,9 +63,8 @@ pub async fn run(args: CalibrateArgs, db: &Path, out: &mut dyn Write) -> Result<
             .object
             .clone()
             .ok_or_else(|| bad("--object: expected the reference object's name on a rig".into()))?;
-        let text = std::fs::read_to_string(rig_path)
-            .map_err(|e| bad(format!("{}: cannot read: {e}", rig_path.display())))?;
         let rig = softtouch_collector::configs::resolve(Some(rig_path), None)?.rig;
+        let setup_hash = softtouch_lab::grasp::calibration::rig_setup_hash(&rig)?;
         let predictor = Predictor::from_bytes(&bytes)?;
         let projection = softtouch_lab::grasp::soft::projections().map_err(grasp_failure)?[0];
         writeln!(
@@ -102,7 +101,7 @@ pub async fn run(args: CalibrateArgs, db: &Path, out: &mut dyn Write) -> Result<
         })?;
         let mut row = to_row(
             &cal,
-            ("rig", &sha256_hex(text.as_bytes())),
+            ("rig", &setup_hash),
             (&args.model, &model_sha256),
             &object,
             None,

@@ -84,6 +84,15 @@ pub struct TrialsArgs {
     /// gripping width.
     #[arg(long)]
     pub open_width_mm: Option<f64>,
+    /// Rig file: run the trials on its real arm, Hand-E and finger camera at the grasp
+    /// poses, widths, lifts and set-down places of its `[grasp]` section (the scene
+    /// flags do not apply). With --resume: the rig of the stored session.
+    #[arg(long, conflicts_with_all = ["scene", "open_width_mm", "lift_mm"])]
+    pub rig: Option<PathBuf>,
+    /// On a rig: take the rig judge's verdict without asking the operator (the
+    /// operator still confirms each return of the object to its place).
+    #[arg(long, requires = "rig")]
+    pub no_confirm: bool,
     /// Folder for `grasp-trials.csv`, `grasp-trials-rows.csv`, `grasp-trials.png` and,
     /// with --sweep-sigma, `grasp-trials-sigma.png`.
     #[arg(long, default_value = "grasp-out")]
@@ -173,6 +182,9 @@ fn fmt_duration(s: f64) -> String {
 
 /// Run `grasp trials`.
 pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    if let Some(rig) = args.rig.clone() {
+        return run_on_rig(args, &rig, db, out).await;
+    }
     let store = open_existing(db).await?;
     let session = match args.resume {
         Some(id) => resume_session(&store, id, args.model.as_deref()).await?,
@@ -276,7 +288,8 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
     }
 
     let rows = store.grasp_trials(session.id).await?;
-    let table = summarise(&session.plan, &session.scenes, &rows)?;
+    let media: Vec<Medium> = session.scenes.iter().map(|s| s.medium).collect();
+    let table = summarise(&session.plan, &media, &rows)?;
     print_table(&table, &session.plan, out)?;
     let written = write_outputs(&args.out_dir, &table, &rows, &session.plan)?;
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
@@ -289,6 +302,144 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
         }
         _ => writeln!(out, "wrote {}", names.join(", ")).map_err(w)?,
     }
+    Ok(())
+}
+
+/// `grasp trials --rig FILE`: the rig's devices opened, then the trials of a new or
+/// resumed rig session, each stored as it ends; questions to the operator on stderr,
+/// answers on stdin.
+async fn run_on_rig(
+    args: TrialsArgs,
+    rig_path: &Path,
+    db: &Path,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    use softtouch_lab::grasp::trials::rig::{
+        Operator, RigTrialDevices, resume_rig_session, run_rig_trials, start_rig_session,
+    };
+    let rig = softtouch_collector::configs::resolve(Some(rig_path), None)?.rig;
+    let store = open_existing(db).await?;
+    let session = match args.resume {
+        Some(id) => resume_rig_session(&store, id, args.model.as_deref(), &rig).await?,
+        None => {
+            let plan = args.plan().checked()?;
+            let model = args.model.clone().unwrap_or_default();
+            start_rig_session(&store, &model, args.seed, plan, &rig).await?
+        }
+    };
+    let progress = session.progress(&store).await?;
+    let todo = progress.todo;
+    let w = io_failure;
+    writeln!(
+        out,
+        "rig grasp session {}: model `{}` (sha256 {}), seed {}, {} trials planned, {} stored, {} to run",
+        session.id,
+        session.model,
+        &session.model_sha256[..12],
+        session.seed,
+        progress.planned.len(),
+        progress.planned.len() - todo.len(),
+        todo.len()
+    )
+    .map_err(w)?;
+    for line in session.setup_lines() {
+        writeln!(out, "{line}").map_err(w)?;
+    }
+    out.flush().map_err(w)?;
+    if !todo.is_empty() {
+        if !softtouch_lab::grasp::devices::has_real_gripper(&rig) {
+            return Err(super::grasp_loop::bad(format!(
+                "--rig {}: its gripper is simulated: run the simulated trials without --rig",
+                rig_path.display()
+            )));
+        }
+        let clock: std::sync::Arc<dyn softtouch_drivers::Clock> =
+            std::sync::Arc::new(softtouch_drivers::TokioClock::new());
+        let arm = softtouch_drivers::open::real_arm(&rig.arm, clock.clone())
+            .await
+            .map_err(|e| Failure::Runtime(anyhow::anyhow!("arm: {e}")))?
+            .ok_or_else(|| {
+                super::grasp_loop::bad(format!(
+                    "--rig {}: its arm is simulated: expected arm.driver = \"franka\"",
+                    rig_path.display()
+                ))
+            })?;
+        let grasp = softtouch_lab::grasp::devices::real_grasp_devices(&rig, clock.clone())
+            .await
+            .map_err(|e| Failure::Runtime(anyhow::anyhow!("{e}")))?;
+        let mut devices = RigTrialDevices {
+            arm: std::sync::Arc::new(tokio::sync::Mutex::new(arm)),
+            gripper: grasp.gripper,
+            camera: grasp.camera,
+            clock,
+        };
+        let mut operator = Operator {
+            input: softtouch_grasp::OperatorInput::from_reader(std::io::BufReader::new(
+                std::io::stdin(),
+            )),
+            output: Box::new(std::io::stderr()),
+            confirm_verdicts: !args.no_confirm,
+        };
+        let mut on_trial =
+            |t: &softtouch_lab::grasp::trials::TrialDone| -> Result<(), TrialsError> {
+                let row = &t.row;
+                writeln!(
+                    out,
+                    "σ {} mm {} {} #{}: {}{} ({:.1} s)",
+                    row.sigma_m * 1000.0,
+                    row.key.object,
+                    row.key.mode,
+                    row.key.trial,
+                    row.reason.as_deref().unwrap_or("held"),
+                    row.detail
+                        .as_deref()
+                        .map_or_else(String::new, |d| format!(": {d}")),
+                    t.timing.wall_s
+                )
+                .map_err(|e| TrialsError::Failed(format!("cannot write output: {e}")))
+            };
+        let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
+        let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx));
+        let ran = run_rig_trials(
+            &store,
+            &session,
+            &mut devices,
+            &mut operator,
+            &todo,
+            &stop_rx,
+            &mut on_trial,
+        )
+        .await;
+        signals.abort();
+        match ran {
+            Err(TrialsError::Interrupted) => {
+                return Err(Failure::Runtime(anyhow::anyhow!(
+                    "rig grasp session {}: stopped at once by a second stop request, through the safe exit; the trials before it are stored (resume with --rig {} --resume {})",
+                    session.id,
+                    rig_path.display(),
+                    session.id
+                )));
+            }
+            Err(e) => return Err(e.into()),
+            Ok(softtouch_lab::grasp::trials::RunEnd::Stopped { ran }) => writeln!(
+                out,
+                "stopped after {ran} of {} trials (a stop request; resume with --rig {} --resume {})",
+                todo.len(),
+                rig_path.display(),
+                session.id
+            )
+            .map_err(w)?,
+            Ok(softtouch_lab::grasp::trials::RunEnd::Completed) => {}
+        }
+    }
+    let rows = store.grasp_trials(session.id).await?;
+    let table = summarise(&session.plan, &session.media(), &rows)?;
+    print_table(&table, &session.plan, out)?;
+    let written = write_outputs(&args.out_dir, &table, &rows, &session.plan)?;
+    for p in written {
+        writeln!(out, "wrote {}", p.display()).map_err(w)?;
+    }
+    store.close().await;
     Ok(())
 }
 

@@ -65,3 +65,24 @@ impl<T: Camera + ?Sized> Camera for Box<T> {
         (**self).settings()
     }
 }
+
+/// A camera lent for a while (one trial of a session that keeps it).
+#[async_trait]
+impl<T: Camera + ?Sized> Camera for &mut T {
+    async fn frame_after(&mut self, t: TimestampNs, timeout_ms: u64) -> Result<Frame, DeviceError> {
+        (**self).frame_after(t, timeout_ms).await
+    }
+    async fn latest_frame_after(
+        &mut self,
+        t: TimestampNs,
+        timeout_ms: u64,
+    ) -> Result<Frame, DeviceError> {
+        (**self).latest_frame_after(t, timeout_ms).await
+    }
+    fn dropped_frames(&self) -> u64 {
+        (**self).dropped_frames()
+    }
+    fn settings(&self) -> Option<String> {
+        (**self).settings()
+    }
+}

@@ -112,6 +112,26 @@ impl<T: Gripper + ?Sized> Gripper for Box<T> {
     }
 }
 
+/// A gripper lent for a while (one trial of a session that keeps it).
+#[async_trait]
+impl<T: Gripper + ?Sized> Gripper for &mut T {
+    async fn activate(&mut self) -> Result<(), DeviceError> {
+        (**self).activate().await
+    }
+    async fn command(&mut self, cmd: GripperCommand) -> Result<(), DeviceError> {
+        (**self).command(cmd).await
+    }
+    async fn status(&mut self) -> Result<GripperStatus, DeviceError> {
+        (**self).status().await
+    }
+    async fn command_and_status(
+        &mut self,
+        cmd: GripperCommand,
+    ) -> Result<GripperStatus, DeviceError> {
+        (**self).command_and_status(cmd).await
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -111,7 +111,10 @@ fn fault(message: String) -> GraspError {
 
 /// Sends `position` and waits until the gripper echoes it and stops (at the position
 /// or on a contact), re-sending within the keep-alive.
-async fn move_to_end<G: Gripper + ?Sized>(
+///
+/// # Errors
+/// A fault, a link error, or no stop within `config.move_timeout`.
+pub async fn move_to_end<G: Gripper + ?Sized>(
     gripper: &mut G,
     clock: &dyn Clock,
     config: &CalibrationConfig,

@@ -40,7 +40,7 @@ pub mod stiffness;
 pub mod trials;
 pub mod wrist;
 
-pub use calibrate::{CalibrationConfig, EndCalibration, calibrate_ends};
+pub use calibrate::{CalibrationConfig, EndCalibration, calibrate_ends, move_to_end};
 pub use controller::{
     Controller, ControllerConfig, Cycle, ExitAction, NoTruth, StopRequest, TrueForce,
     combine_fingers,
@@ -56,9 +56,10 @@ pub use stiffness::{
     CalibrationEnd, CalibrationPoint, StiffnessCalibration, StiffnessConfig, calibrate_stiffness,
 };
 pub use trials::{
-    FailReason, Judge, Lift, LiftPlan, Mode, ObjectState, Observation, OperatorJudge, RigJudge,
-    TOUCH_N, TraceRow, TrialConfig, TrialDevices, TrialResult, Verdict, Z_95, confirmed,
-    perturbation_m, physics_verdict, run_trial, trial_seed, wilson_interval,
+    ArmLift, FailReason, Judge, KEEP_ALIVE, Lift, LiftPlan, Mode, ObjectState, Observation,
+    OperatorInput, OperatorJudge, RigJudge, SharedArm, TOUCH_N, TraceRow, TrialConfig,
+    TrialDevices, TrialResult, Verdict, Z_95, confirmed, operator_verdict, perturbation_m,
+    physics_verdict, run_trial, trial_seed, wilson_interval,
 };
 pub use wrist::{Wrist, WristConfig, WristLoop};
 

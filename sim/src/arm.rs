@@ -32,7 +32,7 @@ pub(crate) fn profile(tau: f64) -> f64 {
 }
 
 /// Duration of a quintic move over `dist` under a speed and acceleration limit.
-fn duration(dist: f64, v: f64, a: f64) -> f64 {
+pub(crate) fn duration(dist: f64, v: f64, a: f64) -> f64 {
     if dist <= 0.0 {
         return 0.0;
     }

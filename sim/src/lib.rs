@@ -104,7 +104,8 @@ pub use camera::SimCamera;
 pub use contact::{ContactParams, FingerGeometry};
 pub use force::{BUFFER_READINGS, COUNTS_PER_FORCE, COUNTS_PER_TORQUE, SimForceSensor};
 pub use grasp::{
-    GraspObject, SoftFingerCamera, SoftGrasp, SoftGraspHandle, SoftGripper, soft_grasp,
+    GraspObject, SoftFingerCamera, SoftGrasp, SoftGraspArm, SoftGraspHandle, SoftGripper,
+    soft_grasp,
 };
 pub use grasp::{HoldState, WRIST_MAX_RAD_S};
 pub use gripper::{

@@ -122,10 +122,7 @@ impl<J: Judge, R: std::io::BufRead + Send, W: std::io::Write + Send> Judge
 {
     async fn judge(&mut self, seen: &Observation) -> Result<Verdict, GraspError> {
         let machine = self.judge.judge(seen).await?;
-        let said = match machine {
-            Verdict::Held => "held",
-            Verdict::Failed(reason) => reason.as_str(),
-        };
+        let said = super::operator::verdict_name(machine);
         let gone =
             |e: std::io::Error| GraspError::Interrupted(format!("the operator's input ({e})"));
         loop {
@@ -141,16 +138,7 @@ impl<J: Judge, R: std::io::BufRead + Send, W: std::io::Write + Send> Judge
                     "the operator's input closing before an answer".into(),
                 ));
             }
-            let answer = line.trim().to_ascii_lowercase();
-            let verdict = match answer.as_str() {
-                "" => Some(machine),
-                "y" | "yes" | "held" => Some(Verdict::Held),
-                "n" | "no" => Some(match machine {
-                    Verdict::Held => Verdict::Failed(FailReason::Slip),
-                    failed => failed,
-                }),
-                other => FailReason::parse(other).ok().map(Verdict::Failed),
-            };
+            let verdict = super::operator::operator_verdict(machine, &line);
             match verdict {
                 Some(v) => return Ok(v),
                 None => writeln!(

@@ -5,22 +5,26 @@
 //!
 //! The protocol is generic over the devices ([`Gripper`], [`Camera`], a
 //! [`ForceEstimator`]) plus two narrow traits: [`Lift`] raises the gripper (the
-//! simulator's, in the collector; a real arm's is not written yet) and [`Judge`]
+//! simulator's, in the lab crate; a real arm's through [`ArmLift`]) and [`Judge`]
 //! decides the outcome (where the object ended, through [`physics_verdict`], for the
 //! simulator's judge in the collector; gOBJ, position and the estimate on a real rig
 //! through [`RigJudge`], optionally confirmed or corrected by an operator through
 //! [`OperatorJudge`]). Outcomes are never drawn at random: the physics, the rig or the
-//! operator decides. No SQL, no files and no simulator here. `softtouch grasp trials`
-//! runs the simulator only so far: a real rig also needs a [`Lift`] on its arm.
+//! operator decides. No SQL, no files and no simulator here. On a rig the operator
+//! answers through [`OperatorInput`], which keeps the Hand-E alive while it waits.
 //!
 //! Perturbations are a pure function of `(seed, object, trial)` ([`perturbation_m`]),
 //! so any trial can be replayed alone; the same draws are scaled by σ, so a σ sweep
 //! compares like with like.
 
+mod arm;
 mod judges;
+mod operator;
+pub use arm::{ArmLift, SharedArm};
 pub use judges::{
     GOBJ_CONFIRM_FRACTION, ObjectState, OperatorJudge, RigJudge, TOUCH_N, physics_verdict,
 };
+pub use operator::{KEEP_ALIVE, OperatorInput, operator_verdict, verdict_name};
 
 use std::future::Future;
 use std::sync::Arc;
@@ -120,16 +124,20 @@ pub enum FailReason {
     Timeout,
     /// A device faulted or its link failed.
     DeviceFault,
+    /// The perturbed grasp pose lay outside the workspace: nothing moved. Stored and
+    /// shown, never counted as a trial of the success rate.
+    Refused,
 }
 
 impl FailReason {
     /// Every reason, in the order tables list them.
-    pub const ALL: [Self; 5] = [
+    pub const ALL: [Self; 6] = [
         Self::Slip,
         Self::Crush,
         Self::Miss,
         Self::Timeout,
         Self::DeviceFault,
+        Self::Refused,
     ];
 
     /// As stored: `slip`, `crush`, `miss`, `timeout`, `device_fault`.
@@ -141,6 +149,7 @@ impl FailReason {
             Self::Miss => "miss",
             Self::Timeout => "timeout",
             Self::DeviceFault => "device_fault",
+            Self::Refused => "refused",
         }
     }
 
@@ -153,7 +162,7 @@ impl FailReason {
             .into_iter()
             .find(|r| r.as_str() == s)
             .ok_or_else(|| {
-                format!("unknown failure reason `{s}`: expected slip, crush, miss, timeout or device_fault")
+                format!("unknown failure reason `{s}`: expected slip, crush, miss, timeout, device_fault or refused")
             })
     }
 }
@@ -278,6 +287,15 @@ pub trait Lift: Send {
     ) -> impl Future<Output = Result<(), GraspError>> + Send;
 }
 
+impl<L: Lift> Lift for &mut L {
+    fn start_lift(
+        &mut self,
+        plan: &LiftPlan,
+    ) -> impl Future<Output = Result<(), GraspError>> + Send {
+        (**self).start_lift(plan)
+    }
+}
+
 /// What a trial saw, for the [`Judge`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Observation {
@@ -302,6 +320,15 @@ pub trait Judge: Send {
         &mut self,
         seen: &Observation,
     ) -> impl Future<Output = Result<Verdict, GraspError>> + Send;
+}
+
+impl<J: Judge> Judge for &mut J {
+    fn judge(
+        &mut self,
+        seen: &Observation,
+    ) -> impl Future<Output = Result<Verdict, GraspError>> + Send {
+        (**self).judge(seen)
+    }
 }
 
 /// A trial's settings.

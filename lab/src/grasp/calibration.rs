@@ -57,6 +57,18 @@ pub fn scene_setup_hash(scene: &SceneSpec, fps: f64, seed: u64) -> Result<String
     Ok(sha256_hex(json.as_bytes()))
 }
 
+/// What a rig's calibration depends on: its gripper and its finger cameras (the rest
+/// of the rig file, the arm, the grasp poses, may change without making a stiffness
+/// calibration stale). Its fingerprint keys the rig's stored calibrations.
+///
+/// # Errors
+/// The rig does not serialise (never for a parsed one).
+pub fn rig_setup_hash(rig: &softtouch_schemas::RigConfig) -> Result<String, GraspRunError> {
+    let json = serde_json::to_string(&(&rig.gripper, &rig.camera, &rig.second_camera))
+        .map_err(|e| GraspRunError::Failed(format!("cannot fingerprint the rig: {e}")))?;
+    Ok(sha256_hex(json.as_bytes()))
+}
+
 /// The closing for `object`: from 10 mm wider than it (the scene says how wide it
 /// is) up to `top_n`.
 #[must_use]

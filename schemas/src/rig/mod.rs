@@ -6,7 +6,9 @@ use crate::geometry::{ArmPose, ContactPose, Range};
 use crate::scene::Medium;
 use serde::{Deserialize, Serialize};
 
+mod grasp;
 mod validate;
+pub use grasp::{GraspObjectSetup, GraspSetup, raised};
 pub use validate::MAX_SENSOR_LATENCY_S;
 
 /// A whole rig.
@@ -32,6 +34,10 @@ pub struct RigConfig {
     pub limits: ForceLimits,
     /// Timings of one sample.
     pub procedure: Procedure,
+    /// Grasp trials on this rig (`grasp trials --rig`): the objects' grasp poses,
+    /// widths, lifts and set-down places. Absent: the rig runs no grasp trials.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grasp: Option<GraspSetup>,
 }
 
 /// The arm's driver.

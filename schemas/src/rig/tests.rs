@@ -196,3 +196,94 @@ gain = 12
         );
     }
 }
+
+/// A `[grasp]` section on the default rig's workspace (reach x 0.3–0.7, y ±0.2,
+/// z 0.1–0.6 m), gripper pointing down.
+const GRASP_TOML: &str = r#"
+medium = "air"
+safe_pose = { translation_m = [0.45, 0.0, 0.4], rotation_wxyz = [0.0, 1.0, 0.0, 0.0] }
+approach_height_m = 0.08
+speed_m_s = 0.2
+
+[[objects]]
+name = "bottle"
+base_from_grasp = { translation_m = [0.5, 0.1, 0.2], rotation_wxyz = [0.0, 1.0, 0.0, 0.0] }
+open_width_mm = 38.0
+lift_mm = 50.0
+
+[[objects]]
+name = "ball"
+base_from_grasp = { translation_m = [0.5, -0.1, 0.2], rotation_wxyz = [0.0, 1.0, 0.0, 0.0] }
+open_width_mm = 30.0
+lift_mm = 50.0
+place = { translation_m = [0.55, -0.1, 0.2], rotation_wxyz = [0.0, 1.0, 0.0, 0.0] }
+"#;
+
+#[test]
+fn a_grasp_section_reads_and_is_checked_against_the_reach_box() {
+    let mut rig = crate::defaults::rig();
+    assert!(rig.grasp.is_none(), "the default rig runs no grasp trials");
+    let grasp: GraspSetup = toml::from_str(GRASP_TOML).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(grasp.objects.len(), 2);
+    assert_eq!(
+        grasp.object("bottle").map(GraspObjectSetup::place_pose),
+        Some(grasp.objects[0].base_from_grasp),
+        "no place: set down where it was grasped"
+    );
+    rig.grasp = Some(grasp.clone());
+    assert!(refused(&rig).is_empty(), "{:?}", refused(&rig));
+
+    // Each mistake is refused by its field.
+    type Spoil = Box<dyn Fn(&mut GraspSetup)>;
+    let cases: Vec<(Spoil, &str)> = vec![
+        (
+            Box::new(|g| g.objects[0].base_from_grasp.translation_m[0] = 0.9),
+            "grasp.objects[0].base_from_grasp",
+        ),
+        (
+            // The grasp is inside, but 0.45 m above it is not (z up to 0.6 m).
+            Box::new(|g| g.objects[1].lift_mm = 450.0),
+            "grasp.objects[1].base_from_grasp raised by lift_mm",
+        ),
+        (
+            Box::new(|g| g.objects[0].open_width_mm = f64::NAN),
+            "grasp.objects[0].open_width_mm",
+        ),
+        (
+            Box::new(|g| g.objects[1].name = "bottle".into()),
+            "grasp.objects[1].name",
+        ),
+        (Box::new(|g| g.objects.clear()), "grasp.objects"),
+        (
+            Box::new(|g| g.safe_pose.rotation_wxyz = [0.0; 4]),
+            "grasp.safe_pose",
+        ),
+        (Box::new(|g| g.speed_m_s = 0.0), "grasp.speed_m_s"),
+        (
+            Box::new(|g| {
+                g.objects[1]
+                    .place
+                    .as_mut()
+                    .map_or((), |p| p.translation_m[2] = 0.05)
+            }),
+            "grasp.objects[1].place",
+        ),
+    ];
+    for (spoil, field) in cases {
+        let mut g = grasp.clone();
+        spoil(&mut g);
+        rig.grasp = Some(g);
+        let fields = refused(&rig);
+        assert!(fields.iter().any(|f| f == field), "{field}: {fields:?}");
+    }
+
+    // Malformed text is an error, not a panic.
+    for bad in [
+        GRASP_TOML.replace("lift_mm = 50.0\n\n", "lift_mm = \"high\"\n\n"),
+        GRASP_TOML.replace("open_width_mm = 38.0", "open_width_mm = 38.0\nwidth = 1"),
+        GRASP_TOML.replace("medium = \"air\"", "medium = \"oil\""),
+        GRASP_TOML.replace("speed_m_s = 0.2", ""),
+    ] {
+        assert!(toml::from_str::<GraspSetup>(&bad).is_err(), "{bad}");
+    }
+}

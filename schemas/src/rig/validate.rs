@@ -211,6 +211,10 @@ impl Validate for RigConfig {
             }
         }
 
+        if let Some(g) = &self.grasp {
+            g.validate_in(w, c);
+        }
+
         let l = &self.limits;
         c.positive("limits.max_force_n", l.max_force_n, "N");
         c.positive("limits.max_torque_nm", l.max_torque_nm, "N·m");

@@ -55,6 +55,41 @@ impl SoftGraspHandle {
         Ok(())
     }
 
+    /// Puts a fresh object where the fingers meet it with the grasp point moved by
+    /// `offset_m` ([`GraspObject::placed`]), resting on its support (an operator set
+    /// it back in place and the arm came down around it); none when the fingers miss
+    /// it. Returns whether it is between them.
+    pub fn place_object(&self, offset_m: [f64; 3]) -> Result<bool, SimError> {
+        let mut s = self.lock()?;
+        let now = s.clock.now();
+        s.advance(now)?;
+        s.object = s.template.placed(offset_m);
+        s.last_contact = RefCell::default();
+        s.strips = RefCell::default();
+        s.hold = if s.object.is_some() {
+            HoldState::Resting
+        } else {
+            HoldState::Absent
+        };
+        s.lift = None;
+        s.stick_m = [0.0; 2];
+        s.shear_n = [[0.0; 2]; 2];
+        Ok(s.object.is_some())
+    }
+
+    /// The arm lowered a held object onto its support: it rests again, still between
+    /// the fingers, and a later lift is a new one. An object that fell stays fallen.
+    pub fn set_down(&self) -> Result<(), SimError> {
+        let mut s = self.lock()?;
+        let now = s.clock.now();
+        s.advance(now)?;
+        if matches!(s.hold, HoldState::Held | HoldState::Resting) {
+            s.hold = HoldState::Resting;
+            s.lift = None;
+        }
+        Ok(())
+    }
+
     /// Whether the object is between the fingers.
     pub fn has_object(&self) -> Result<bool, SimError> {
         Ok(self.lock()?.object.is_some())

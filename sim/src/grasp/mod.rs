@@ -69,8 +69,10 @@ use std::cell::RefCell;
 use std::sync::{Arc, Mutex, MutexGuard};
 use touch::{FingerContact, Grip, SqueezeAlongShift, Strips, contact_on, finger_contact};
 
+mod arm;
 mod devices;
 mod handle;
+pub use arm::SoftGraspArm;
 mod state;
 use state::*;
 

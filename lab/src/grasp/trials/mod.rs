@@ -11,6 +11,7 @@
 //! [`table::write_outputs`] the CSVs and charts. Nothing here parses arguments or
 //! prints.
 
+pub mod rig;
 mod run;
 pub mod table;
 
@@ -149,6 +150,22 @@ pub struct TrialPlan {
     pub open_width_mm: Option<f64>,
     /// The pre-grasp opening: this much wider than the grasp, mm.
     pub pregrasp_margin_mm: f64,
+    /// A rig's session: what its rig file chose (absent: a simulated session).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rig: Option<RigPlan>,
+}
+
+/// What a rig session runs on, stored with it: the fingerprint of the rig's gripper
+/// and finger cameras (its calibrations' key), and the grasp section and workspace of
+/// its rig file, so that a resume runs the same poses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RigPlan {
+    /// [`crate::grasp::calibration::rig_setup_hash`] of the rig.
+    pub setup_hash: String,
+    /// The rig file's `[grasp]`.
+    pub grasp: softtouch_schemas::rig::GraspSetup,
+    /// The rig file's `[workspace]`.
+    pub workspace: softtouch_schemas::rig::WorkspaceBounds,
 }
 
 impl Default for TrialPlan {
@@ -172,6 +189,7 @@ impl Default for TrialPlan {
             hold_s: 2.0,
             open_width_mm: None,
             pregrasp_margin_mm: 6.0,
+            rig: None,
         }
     }
 }
@@ -545,6 +563,11 @@ pub async fn resume_session(
             "grasp session {id}: stored settings do not read back: {e}"
         ))
     })?;
+    if plan.rig.is_some() {
+        return Err(invalid(format!(
+            "--resume {id}: session {id} ran on a rig: resume it with --rig FILE --resume {id}"
+        )));
+    }
     let scenes: Vec<SceneSpec> = serde_json::from_str(&s.scenes_json).map_err(|e| {
         TrialsError::Failed(format!(
             "grasp session {id}: stored scenes do not read back: {e}"

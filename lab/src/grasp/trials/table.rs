@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use softtouch_grasp::{FailReason, Mode, Z_95, wilson_interval};
-use softtouch_schemas::{Medium, SceneSpec};
+use softtouch_schemas::Medium;
 
 use super::{TrialPlan, TrialsError, medium_name, paper_rate};
 use crate::store::GraspTrialRow;
@@ -52,19 +52,21 @@ impl Cell {
     }
 }
 
-/// The table of `rows`: per σ, scene, object (and all objects) and mode.
+/// The table of `rows`: per σ, scene (one medium each: `media`), object (and all
+/// objects) and mode. A trial refused before anything moved (its perturbed pose
+/// outside the workspace) is counted under `refused` and in no rate.
 ///
 /// # Errors
 /// A damaged stored plan.
 pub fn summarise(
     plan: &TrialPlan,
-    scenes: &[SceneSpec],
+    media: &[Medium],
     rows: &[GraspTrialRow],
 ) -> Result<Vec<Cell>, TrialsError> {
     let modes = plan.parsed_modes()?;
     let mut cells = Vec::new();
     for si in 0..plan.sigmas_mm.len() as u32 {
-        for (ci, scene) in scenes.iter().enumerate() {
+        for (ci, medium) in media.iter().enumerate() {
             let ci = ci as u32;
             let objects: Vec<Option<&String>> =
                 plan.objects.iter().map(Some).chain([None]).collect();
@@ -79,7 +81,11 @@ pub fn summarise(
                                 && object.is_none_or(|o| *o == r.key.object)
                         })
                         .collect();
-                    let trials = mine.len() as u64;
+                    let refused = FailReason::Refused.as_str();
+                    let trials = mine
+                        .iter()
+                        .filter(|r| r.reason.as_deref() != Some(refused))
+                        .count() as u64;
                     let held = mine.iter().filter(|r| r.success).count() as u64;
                     let mut reasons = BTreeMap::new();
                     for r in &FailReason::ALL {
@@ -92,7 +98,7 @@ pub fn summarise(
                     cells.push(Cell {
                         sigma_index: si,
                         scene_index: ci,
-                        medium: scene.medium,
+                        medium: *medium,
                         object: object.cloned(),
                         mode: *mode,
                         trials,
@@ -156,13 +162,13 @@ pub fn csv_field(s: &str) -> String {
 /// The file cannot be written.
 pub fn write_summary_csv(path: &Path, cells: &[Cell]) -> Result<(), TrialsError> {
     let mut text = String::from(
-        "sigma_index,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,paper_rate,slip,crush,miss,timeout,device_fault\n",
+        "sigma_index,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,paper_rate,slip,crush,miss,timeout,device_fault,refused\n",
     );
     let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
     for c in cells {
         let r = |k: &str| c.reasons.get(k).copied().unwrap_or(0);
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             c.sigma_index,
             medium_name(c.medium),
             csv_field(c.object.as_deref().unwrap_or("all")),
@@ -178,6 +184,7 @@ pub fn write_summary_csv(path: &Path, cells: &[Cell]) -> Result<(), TrialsError>
             r("miss"),
             r("timeout"),
             r("device_fault"),
+            r("refused"),
         ));
     }
     write_file(path, &text)

@@ -1,0 +1,5 @@
+// `sqlx::migrate!` embeds ../migrations at build time: a new or edited migration
+// must rebuild this crate (cargo does not track that folder by itself).
+fn main() {
+    println!("cargo:rerun-if-changed=../migrations");
+}
