@@ -418,6 +418,58 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
         2,
         "--sigma-mm",
     );
+    // On a rig: the rig file must say where to grasp, and each object needs its
+    // calibration on that rig with that model, before any session is stored.
+    let plain = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../schemas/defaults/rig.toml"
+    ))
+    .expect("the default rig");
+    std::fs::write(d.join("plain.toml"), &plain).expect("writes");
+    let grasp = |x: f64| {
+        format!(
+            "{plain}\n[grasp]\nmedium = \"air\"\nsafe_pose = {{ translation_m = [0.5, 0.0, 0.4], rotation_wxyz = [0.0, 1.0, 0.0, 0.0] }}\napproach_height_m = 0.05\nspeed_m_s = 0.2\n\n[[grasp.objects]]\nname = \"bottle\"\nbase_from_grasp = {{ translation_m = [{x}, 0.0, 0.2], rotation_wxyz = [0.0, 1.0, 0.0, 0.0] }}\nopen_width_mm = 30.0\nlift_mm = 50.0\n"
+        )
+    };
+    std::fs::write(d.join("lab.toml"), grasp(0.5)).expect("writes");
+    std::fs::write(d.join("far.toml"), grasp(0.95)).expect("writes");
+    let on_rig = |extra: &[&str]| {
+        let mut args = vec!["grasp", "trials"];
+        args.extend_from_slice(extra);
+        softtouch(d, &args)
+    };
+    fails_with(
+        &on_rig(&["--model", "air-svae", "--rig", "plain.toml"]),
+        2,
+        "the rig file has no [grasp] section",
+    );
+    fails_with(
+        &on_rig(&["--model", "air-svae", "--rig", "far.toml"]),
+        2,
+        "grasp.objects[0].base_from_grasp",
+    );
+    fails_with(
+        &on_rig(&[
+            "--model",
+            "air-svae",
+            "--rig",
+            "lab.toml",
+            "--objects",
+            "vase",
+        ]),
+        2,
+        "has no object `vase` (it has: bottle)",
+    );
+    fails_with(
+        &on_rig(&["--model", "air-svae", "--rig", "lab.toml"]),
+        2,
+        "run `softtouch grasp calibrate --rig FILE --model air-svae --object bottle` first",
+    );
+    fails_with(
+        &on_rig(&["--rig", "lab.toml", "--resume", "1"]),
+        2,
+        "session 1 ran on the simulator: resume it without --rig",
+    );
     assert_eq!(
         rt.block_on(count(&db, "SELECT COUNT(*) FROM grasp_sessions")),
         7,

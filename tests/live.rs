@@ -176,7 +176,7 @@ fn live_presses_on_the_simulated_rig_and_bench_grasp_writes_its_table() {
     fails_with(
         &softtouch(d, &with_object),
         2,
-        "no calibration of `bottle` with model `air-svae` on this rig file",
+        "no calibration of `bottle` with model `air-svae` on this rig's gripper and cameras",
     );
     common::runtime().block_on(async {
         let store = softtouch_collector::store::Store::open(&d.join("softtouch.db"))
@@ -188,13 +188,17 @@ fn live_presses_on_the_simulated_rig_and_bench_grasp_writes_its_table() {
             .expect("query")
             .expect("stored model");
         let sha = softtouch_collector::dataset::export::sha256_hex;
-        let rig_bytes = std::fs::read(d.join("real.toml")).expect("rig");
+        // Keyed by the rig's gripper and finger cameras, as `grasp calibrate --rig` keys it.
+        let rig = softtouch_collector::configs::resolve(Some(&d.join("real.toml")), None)
+            .expect("the rig reads")
+            .rig;
+        let setup_hash = softtouch_lab::grasp::calibration::rig_setup_hash(&rig).expect("hash");
         store
             .insert_grasp_calibration(&softtouch_collector::store::GraspCalibrationRow {
                 calibration_id: 0,
                 created_at: String::new(),
                 setup_kind: "rig".into(),
-                setup_hash: sha(&rig_bytes),
+                setup_hash,
                 model: "air-svae".into(),
                 model_sha256: sha(&artifact),
                 object: "bottle".into(),

@@ -61,7 +61,7 @@ pub use trials::{
     TrialDevices, TrialResult, Verdict, Z_95, confirmed, operator_verdict, perturbation_m,
     physics_verdict, run_trial, trial_seed, wilson_interval,
 };
-pub use wrist::{Wrist, WristConfig, WristLoop};
+pub use wrist::{ArmWrist, Wrist, WristConfig, WristLoop, turned};
 
 use softtouch_drivers::DeviceError;
 

@@ -9,11 +9,13 @@
 //! missing or non-finite τz holds the target (it never moves the arm).
 //!
 //! [`Wrist`] is what the loop drives. The simulated soft grasp's handle drives it in
-//! the collector (this crate names no simulator); on a real rig it is the arm's last joint: for the Panda a joint-7
-//! position set-point streamed by the arm's control task (franka-rs joint position
-//! motion generator), the loop only handing it targets.
+//! the lab crate (this crate names no simulator); on a rig, [`ArmWrist`] turns the
+//! arm's flange about the fingers' axis through the [`Arm`] trait (a Franka's
+//! Cartesian moves), on a task of its own that follows the loop's latest target.
 
 use crate::GraspError;
+#[cfg(doc)]
+use softtouch_drivers::Arm;
 
 /// Something that turns the gripper about its approach axis.
 pub trait Wrist: Send + std::fmt::Debug {
@@ -121,6 +123,151 @@ impl WristLoop {
     }
 }
 
+/// A wrist on a real arm: the gripper turned about its own z (the fingers' axis)
+/// from where the grasp started, by Cartesian moves of the arm ([`Arm::move_to`],
+/// the translation unchanged). A task of its own follows the loop's latest target in
+/// steps of at most `max_step_rad` (so a newer target is taken up within one short
+/// move), keeps every target inside ±`max_yaw_rad` and refuses a start pose outside
+/// the reach box. A move that fails stops the task; the next call reports it (the
+/// controller then ends through its own safe exit). Dropping the wrist stops the task.
+pub struct ArmWrist {
+    target: tokio::sync::watch::Sender<f64>,
+    state: std::sync::Arc<std::sync::Mutex<(f64, Option<String>)>>,
+    max_yaw_rad: f64,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl std::fmt::Debug for ArmWrist {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ArmWrist")
+            .field("max_yaw_rad", &self.max_yaw_rad)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Drop for ArmWrist {
+    fn drop(&mut self) {
+        self.task.abort();
+    }
+}
+
+/// Where the gripper stands at wrist yaw `yaw_rad` from `start`: turned about its own z.
+#[must_use]
+pub fn turned(start: &softtouch_schemas::ArmPose, yaw_rad: f64) -> softtouch_schemas::ArmPose {
+    start.compose(&softtouch_schemas::ArmPose::from_translation_yaw(
+        [0.0; 3], yaw_rad,
+    ))
+}
+
+impl ArmWrist {
+    /// Starts following targets from `start` (the gripper's pose when the grasp began)
+    /// at `speed_m_s` (the arm's moves; the turn itself is bounded by the arm's own
+    /// rotation limits), each step at most `max_step_rad`, every target within
+    /// ±`max_yaw_rad`. Needs a tokio runtime.
+    ///
+    /// # Errors
+    /// A start pose outside `workspace`'s reach box, or limits not finite and above 0.
+    pub fn start(
+        arm: crate::trials::SharedArm,
+        start: softtouch_schemas::ArmPose,
+        workspace: &softtouch_schemas::rig::WorkspaceBounds,
+        speed_m_s: f64,
+        max_step_rad: f64,
+        max_yaw_rad: f64,
+    ) -> Result<Self, GraspError> {
+        for (field, v) in [
+            ("speed_m_s", speed_m_s),
+            ("max_step_rad", max_step_rad),
+            ("max_yaw_rad", max_yaw_rad),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(GraspError::Config(format!(
+                    "arm wrist {field} {v}: expected a finite value above 0"
+                )));
+            }
+        }
+        if !workspace.contains_arm(&start) {
+            return Err(GraspError::Config(format!(
+                "arm wrist: the start pose {:?} m lies outside workspace.reach_in_base_m",
+                start.translation_m
+            )));
+        }
+        let (target, mut rx) = tokio::sync::watch::channel(0.0_f64);
+        let state = std::sync::Arc::new(std::sync::Mutex::new((0.0_f64, None::<String>)));
+        let shared = std::sync::Arc::clone(&state);
+        let task = tokio::spawn(async move {
+            let mut at = 0.0_f64;
+            loop {
+                let goal = *rx.borrow_and_update();
+                if (goal - at).abs() < 1e-6 {
+                    if rx.changed().await.is_err() {
+                        return;
+                    }
+                    continue;
+                }
+                let next = at + (goal - at).clamp(-max_step_rad, max_step_rad);
+                let moved = arm
+                    .lock()
+                    .await
+                    .move_to(&turned(&start, next), speed_m_s)
+                    .await;
+                let Ok(mut s) = shared.lock() else { return };
+                match moved {
+                    Ok(_) => {
+                        at = next;
+                        s.0 = at;
+                    }
+                    Err(e) => {
+                        s.1 = Some(e.to_string());
+                        return;
+                    }
+                }
+            }
+        });
+        Ok(Self {
+            target,
+            state,
+            max_yaw_rad,
+            task,
+        })
+    }
+
+    fn failed(&self) -> Result<f64, GraspError> {
+        let s = self
+            .state
+            .lock()
+            .map_err(|_| GraspError::Config("arm wrist: its state was poisoned".into()))?;
+        match &s.1 {
+            Some(e) => Err(GraspError::Device(softtouch_drivers::DeviceError::Fault {
+                device: "arm wrist".into(),
+                code: None,
+                message: format!("the wrist's move failed: {e}"),
+            })),
+            None => Ok(s.0),
+        }
+    }
+}
+
+impl Wrist for ArmWrist {
+    fn set_yaw_target(&mut self, yaw_rad: f64) -> Result<(), GraspError> {
+        self.failed()?;
+        if !yaw_rad.is_finite() {
+            // A non-finite target never moves the arm.
+            return Err(GraspError::Config(format!(
+                "arm wrist: target {yaw_rad} rad: expected a finite yaw"
+            )));
+        }
+        let _ = self
+            .target
+            .send(yaw_rad.clamp(-self.max_yaw_rad, self.max_yaw_rad));
+        Ok(())
+    }
+
+    fn yaw_rad(&mut self) -> Result<f64, GraspError> {
+        self.failed()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -152,5 +299,101 @@ mod tests {
         };
         let e = WristLoop::new(bad).expect_err("zero gain");
         assert!(e.to_string().contains("gain_rad_per_nm_s"), "{e}");
+    }
+
+    /// An arm that records where it is sent, failing from move `fail_at` on.
+    #[derive(Debug)]
+    struct Recording {
+        poses: std::sync::Arc<std::sync::Mutex<Vec<softtouch_schemas::ArmPose>>>,
+        fail_at: usize,
+    }
+
+    #[async_trait::async_trait]
+    impl softtouch_drivers::Arm for Recording {
+        async fn move_to(
+            &mut self,
+            target: &softtouch_schemas::ArmPose,
+            _speed_m_s: f64,
+        ) -> Result<softtouch_drivers::ArmState, softtouch_drivers::DeviceError> {
+            tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+            let mut p = self.poses.lock().expect("lock");
+            if p.len() >= self.fail_at {
+                return Err(softtouch_drivers::DeviceError::Fault {
+                    device: "arm".into(),
+                    code: Some(1),
+                    message: "reflex".into(),
+                });
+            }
+            p.push(*target);
+            Ok(softtouch_drivers::ArmState {
+                t: softtouch_schemas::TimestampNs::ZERO,
+                base_from_finger: *target,
+                external_wrench: None,
+                faulted: false,
+                command_success_rate: None,
+            })
+        }
+        async fn state(
+            &mut self,
+        ) -> Result<softtouch_drivers::ArmState, softtouch_drivers::DeviceError> {
+            Err(softtouch_drivers::DeviceError::InvalidCommand {
+                device: "arm".into(),
+                message: "unused".into(),
+            })
+        }
+        async fn recover(&mut self) -> Result<(), softtouch_drivers::DeviceError> {
+            Ok(())
+        }
+        async fn stop(&mut self) -> Result<(), softtouch_drivers::DeviceError> {
+            Ok(())
+        }
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_arm_wrist_turns_the_flange_in_capped_steps_and_never_on_a_bad_target() {
+        let poses = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let arm: crate::trials::SharedArm =
+            std::sync::Arc::new(tokio::sync::Mutex::new(Box::new(Recording {
+                poses: std::sync::Arc::clone(&poses),
+                fail_at: 6,
+            })));
+        let workspace = softtouch_schemas::defaults::rig().workspace;
+        // Pointing down, inside the default reach box.
+        let start = softtouch_schemas::ArmPose {
+            translation_m: [0.5, 0.0, 0.3],
+            rotation_wxyz: [0.0, 1.0, 0.0, 0.0],
+        };
+        let mut outside = start;
+        outside.translation_m[0] = 2.0;
+        assert!(ArmWrist::start(arm.clone(), outside, &workspace, 0.1, 0.1, 1.0).is_err());
+        let mut w = ArmWrist::start(arm, start, &workspace, 0.1, 0.1, 1.0).expect("starts");
+        w.set_yaw_target(0.25).expect("takes it");
+        tokio::time::sleep(std::time::Duration::from_millis(200)).await;
+        let seen: Vec<(f64, [f64; 3])> = poses
+            .lock()
+            .expect("lock")
+            .iter()
+            .map(|p| (start.inverse().compose(p).yaw_rad(), p.translation_m))
+            .collect();
+        // Steps of at most 0.1 rad about the gripper's own axis, the flange staying put.
+        assert_eq!(seen.len(), 3, "{seen:?}");
+        for ((yaw, at), want) in seen.iter().zip([0.1, 0.2, 0.25]) {
+            assert!((yaw - want).abs() < 1e-9, "{seen:?}");
+            assert!(
+                at.iter()
+                    .zip(start.translation_m)
+                    .all(|(a, b)| (a - b).abs() < 1e-12),
+                "{seen:?}"
+            );
+        }
+        assert!((w.yaw_rad().expect("yaw") - 0.25).abs() < 1e-9);
+        // A NaN target moves nothing; one past the limit stops at it.
+        assert!(w.set_yaw_target(f64::NAN).is_err());
+        w.set_yaw_target(5.0).expect("clamped");
+        tokio::time::sleep(std::time::Duration::from_millis(500)).await;
+        // The arm faults on its 7th move: the wrist stops there and says so.
+        assert_eq!(poses.lock().expect("lock").len(), 6);
+        assert!(w.yaw_rad().is_err());
+        assert!(w.set_yaw_target(0.0).is_err());
     }
 }

@@ -74,7 +74,9 @@
 //! [`SimGripper`] on one shared [`SimWorld`]; [`SimHandle`] changes the rod and puts
 //! objects in the gripper. [`soft_grasp`] builds the Hand-E with soft, sensorised
 //! fingers ([`SoftGripper`], [`SoftFingerCamera`]): an object's contact on the finger
-//! goes through the same contact model, lattice and renderer as the rod presses. All of them wait on tokio's clock: run them on a paused
+//! goes through the same contact model, lattice and renderer as the rod presses;
+//! [`SoftGraspArm`] carries that gripper between poses of a grasp rig (behind `Arm`:
+//! down around the object, up with it, down to set it down). All of them wait on tokio's clock: run them on a paused
 //! runtime (`start_paused`) and a night of collection takes minutes, and the same seed
 //! gives the same bytes (every device and frame draws from its own ChaCha stream
 //! derived from `(seed, stream name)`). Randomness is counter-based, never one

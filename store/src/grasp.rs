@@ -401,6 +401,75 @@ mod tests {
         }
     }
 
+    /// The migration that lets a refused trial be stored rebuilds both grasp tables:
+    /// on a database made before it, every trial and its trace survive, and a refused
+    /// trial (never counted as held) can then be written.
+    #[tokio::test]
+    async fn the_refused_reason_migration_keeps_every_trial_and_trace() {
+        use sqlx::{ConnectOptions, Connection};
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("old.db");
+        let mut conn = sqlx::sqlite::SqliteConnectOptions::new()
+            .filename(&path)
+            .create_if_missing(true)
+            .foreign_keys(true)
+            .connect()
+            .await
+            .expect("connects");
+        let all: Vec<&sqlx::migrate::Migration> = crate::MIGRATOR.iter().collect();
+        let at = all
+            .iter()
+            .position(|m| m.description.contains("grasp trial refused"))
+            .expect("the migration is embedded");
+        for m in &all[..at] {
+            sqlx::raw_sql(sqlx::AssertSqlSafe(m.sql.as_str().to_owned()))
+                .execute(&mut conn)
+                .await
+                .unwrap_or_else(|e| panic!("{}: {e}", m.description));
+        }
+        sqlx::raw_sql(
+            "INSERT INTO grasp_sessions (session_id, created_at, model, seed, scenes_json, config_json, software_version) VALUES (1, 'then', 'm', 0, '[]', '{}', 'v');
+             INSERT INTO grasp_trials VALUES (7, 1, 0, 0, 'cake', 'open', 0, 'land', 0.005, 0.001, 0.0, 0.0, 0.02, 0.02, 1.2, NULL, 0, 'slip', NULL, NULL, 0.4, 'then');
+             INSERT INTO grasp_traces VALUES (7, 2, 'f32le-v1', x'0000000000000040', x'0000000000000040', x'0000c07f0000c07f', x'0102', x'0304');",
+        )
+        .execute(&mut conn)
+        .await
+        .expect("an old session");
+        let refused = "INSERT INTO grasp_trials VALUES (8, 1, 0, 0, 'cake', 'open', 1, 'land', 0.005, 0.9, 0.0, 0.0, 0.0, 0.0, NULL, NULL, 0, 'refused', 'outside', NULL, 0.0, 'now')";
+        assert!(
+            sqlx::raw_sql(refused).execute(&mut conn).await.is_err(),
+            "refused is new"
+        );
+        for m in &all[at..] {
+            sqlx::raw_sql(sqlx::AssertSqlSafe(m.sql.as_str().to_owned()))
+                .execute(&mut conn)
+                .await
+                .unwrap_or_else(|e| panic!("{}: {e}", m.description));
+        }
+        sqlx::raw_sql(refused)
+            .execute(&mut conn)
+            .await
+            .expect("a refused trial is stored");
+        let kept: (i64, String, Vec<u8>) = sqlx::query_as(
+            "SELECT t.trial_id, t.reason, c.measured_count FROM grasp_trials t JOIN grasp_traces c USING (trial_id)",
+        )
+        .fetch_one(&mut conn)
+        .await
+        .expect("the old trial and its trace");
+        assert_eq!(kept, (7, "slip".to_owned(), vec![1, 2]));
+        // The traces still cascade from their trials.
+        sqlx::raw_sql("DELETE FROM grasp_trials WHERE trial_id = 7")
+            .execute(&mut conn)
+            .await
+            .expect("deletes");
+        let left: (i64,) = sqlx::query_as("SELECT COUNT(*) FROM grasp_traces")
+            .fetch_one(&mut conn)
+            .await
+            .expect("counts");
+        assert_eq!(left.0, 0);
+        conn.close().await.expect("closes");
+    }
+
     #[tokio::test]
     async fn a_trial_and_its_trace_store_once_and_read_back() {
         let dir = tempfile::tempdir().expect("temp dir");

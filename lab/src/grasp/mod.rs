@@ -13,7 +13,9 @@
 //!   chosen, the fingers approached), shared by [`follow`], [`disturb`] and [`twist`],
 //!   Figure 5's force following, disturbance and twist.
 //! - [`trials`]: the success-rate trials of Figure 4: sessions, trials run and stored
-//!   one at a time, the table with Wilson intervals, its CSVs and charts.
+//!   one at a time, the table with Wilson intervals, its CSVs and charts; on the
+//!   simulated soft grasp, and on a lab's rig ([`trials::rig`]: the arm at the rig
+//!   file's grasp poses, the operator in the loop, a safe exit on every path).
 //! - [`bench`](mod@bench): `softtouch bench grasp`, the force loop measured over K, δ, camera rate
 //!   and model on the simulated soft grasp.
 //!
