@@ -12,7 +12,8 @@
 //! lift (the trial finishes, is stored, the object is set down); a second stop
 //! during a lift (at once: not stored, set down before the fingers open); a closed
 //! operator input; perturbed poses outside the workspace (refused, stored as such,
-//! nothing moves); the Hand-E server stopping mid-trial. Needs `socat` (skipped with
+//! nothing moves); the twist with the wrist loop turning the arm's flange; the Hand-E
+//! server stopping mid-trial. Needs `socat` (skipped with
 //! a message when missing; with `CI` set a missing socat fails the test).
 
 mod common;
@@ -25,14 +26,18 @@ use std::time::Duration;
 
 use softtouch_drivers::hande::{self, HandE, HandEConfig, HandEService};
 use softtouch_drivers::{Arm, Clock, Gripper, TokioClock};
-use softtouch_grasp::{CalibrationConfig, OperatorInput, calibrate_ends, calibrate_stiffness};
+use softtouch_grasp::{
+    CalibrationConfig, OperatorInput, WristConfig, calibrate_ends, calibrate_stiffness,
+};
 use softtouch_lab::grasp::calibration::{config_for, rig_setup_hash, to_row, top_for};
+use softtouch_lab::grasp::trials::rig::twist::{RigTwistSettings, twist_on_rig};
 use softtouch_lab::grasp::trials::rig::{
-    Operator, RigSession, RigTrialDevices, resume_rig_session, run_rig_trials, start_rig_session,
+    Operator, RigSession, RigTrialDevices, object_setup_on_rig, resume_rig_session, run_rig_trials,
+    start_rig_session,
 };
 use softtouch_lab::grasp::trials::{RunEnd, TrialPlan, TrialsError, load_scenes};
 use softtouch_schemas::rig::{GraspObjectSetup, GraspSetup};
-use softtouch_schemas::{ArmPose, Medium, RigConfig};
+use softtouch_schemas::{ArmPose, Medium, RigConfig, TimestampNs};
 use softtouch_sim::{GraspObject, HoldState, SoftGraspArm, SoftGraspHandle, soft_grasp};
 use softtouch_store::Store;
 use softtouch_trainer::Predictor;
@@ -471,7 +476,88 @@ async fn a_rig_session_runs_judges_stops_and_ends_safe_on_the_simulated_rig() {
     );
 
     lap("session 5 (refused) done");
-    // 6. The Hand-E server stops mid-trial: a device fault, stored; the session
+    // 6. The twist on the rig's wrist: held at 1 N, once without and once with the
+    //    wrist loop (no dead band: the loop acts on any τz the finger reads); in the
+    //    second the object is turned 0.3 rad about the fingers' axis "by hand".
+    let calibrated = object_setup_on_rig(&store, &rig, MODEL, &bytes, OBJECT, 0.1)
+        .await
+        .expect("the stored calibration");
+    let grasp = rig.grasp.clone().expect("grasp");
+    let (_signal, no_signal) = tokio::sync::watch::channel(None::<&'static str>);
+    let mut twists = Vec::new();
+    for with_wrist in [false, true] {
+        if with_wrist {
+            let soon = TimestampNs(clock.now().0 + 2_500_000_000);
+            handle
+                .schedule_object_yaw(soon, 0.3, 0.5)
+                .expect("a turn by hand");
+        }
+        let before = moves.load(Ordering::Relaxed);
+        let (mut op, shown) = operator("\n", false);
+        let run = twist_on_rig(
+            &grasp,
+            &rig.workspace,
+            &calibrated,
+            &mut devices,
+            &mut op,
+            Predictor::from_bytes(&bytes).expect("loads"),
+            &RigTwistSettings {
+                object: OBJECT.into(),
+                target_n: 1.0,
+                duration_s: 3.5,
+                gain_over_lambda: 0.75,
+                wrist: with_wrist.then_some(WristConfig {
+                    deadband_nm: 0.0,
+                    ..WristConfig::default()
+                }),
+                wrist_step_rad: 0.05,
+                pregrasp_margin_mm: 6.0,
+            },
+            no_signal.clone(),
+        )
+        .await
+        .unwrap_or_else(|e| panic!("{e}\n{}", shown.text()));
+        at_safe_pose(&devices).await;
+        fingers_open(&mut devices).await;
+        twists.push((run, moves.load(Ordering::Relaxed) - before));
+    }
+    let turned = |r: &softtouch_lab::grasp::trials::rig::twist::RigTwist| {
+        r.cycles
+            .iter()
+            .filter_map(|c| c.wrist_target_rad)
+            .fold(0.0_f64, |m, y| m.max(y.abs()))
+    };
+    for (r, m) in &twists {
+        let tz: Vec<f64> = r.cycles.iter().filter_map(|c| c.torque_z_nm).collect();
+        eprintln!(
+            "twist: {} cycles, {m} arm moves, τz RMS {:.3} N·mm (estimate), wrist up to {:.1}°",
+            r.cycles.len(),
+            (tz.iter().map(|t| (t * 1e3).powi(2)).sum::<f64>() / tz.len().max(1) as f64).sqrt(),
+            turned(r).to_degrees()
+        );
+    }
+    assert!(
+        twists
+            .iter()
+            .all(|(r, _)| r.cycles.len() > 30 && r.stopped.is_none())
+    );
+    assert!(
+        twists[0]
+            .0
+            .cycles
+            .iter()
+            .all(|c| c.wrist_target_rad.is_none()),
+        "no wrist loop, no wrist target"
+    );
+    assert!(turned(&twists[1].0) > 0.01, "the wrist loop never turned");
+    assert!(
+        twists[1].1 > twists[0].1,
+        "the flange never moved: {} moves against {}",
+        twists[1].1,
+        twists[0].1
+    );
+    lap("twist on the rig done");
+    // 7. The Hand-E server stops mid-trial: a device fault, stored; the session
     //    stops with the error, the arm not left moving.
     let session = start_rig_session(&store, MODEL, 7, plan(&["closed"], 2, 0.0), &rig)
         .await

@@ -83,6 +83,16 @@ pub struct TwistArgs {
     /// Wrist loop dead band, N·mm of τz.
     #[arg(long, default_value_t = 0.5)]
     pub wrist_deadband_nmm: f64,
+    /// Rig file: hold `--object` at its grasp pose from the rig's `[grasp]` on the real
+    /// arm, Hand-E and finger camera while you turn it by hand, once without and once
+    /// with the wrist loop turning the arm's flange (K from the object's stored
+    /// `grasp calibrate --rig`; `--turn-deg`, `--settle-s`, `--turn-s`, `--hold-s`
+    /// and the scene do not apply).
+    #[arg(long)]
+    pub rig: Option<std::path::PathBuf>,
+    /// On a rig: how long each run holds the object, s.
+    #[arg(long, default_value_t = 10.0, requires = "rig")]
+    pub duration_s: f64,
     /// Shared loop options.
     #[command(flatten)]
     pub common: LoopArgs,
@@ -216,6 +226,9 @@ pub(super) async fn disturb(
 }
 
 pub(super) async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    if let Some(rig) = args.rig.clone() {
+        return twist_rig(args, &rig, db, out).await;
+    }
     let c = &args.common;
     let loop_settings = loop_settings(c)?;
     if !(args.turn_deg.is_finite() && args.turn_deg.abs() <= 90.0) {
@@ -302,5 +315,140 @@ pub(super) async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Re
     let png = c.out_dir.join("grasp-twist.png");
     write_twist_png(&png, &runs)?;
     writeln!(out, "wrote {} and {}", csv.display(), png.display()).map_err(w)?;
+    Ok(())
+}
+
+/// `grasp twist --rig FILE`: the twist on the rig's real wrist, without then with the
+/// wrist loop (each run asks the operator to set the object in place); prints the τz
+/// the finger's estimate felt in each and writes `grasp-twist-rig.csv`.
+async fn twist_rig(
+    args: TwistArgs,
+    rig_path: &Path,
+    db: &Path,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    use softtouch_lab::grasp::trials::rig::twist::{RigTwistSettings, twist_on_rig};
+    use softtouch_lab::grasp::trials::rig::{Operator, RigTrialDevices, object_setup_on_rig};
+    let c = &args.common;
+    let wrist = WristConfig {
+        gain_rad_per_nm_s: args.wrist_gain,
+        deadband_nm: args.wrist_deadband_nmm / 1000.0,
+        ..WristConfig::default()
+    };
+    wrist
+        .validate()
+        .map_err(|e| bad(format!("--wrist-gain / --wrist-deadband-nmm: {e}")))?;
+    check_duration("--duration-s", args.duration_s, false)?;
+    let rig = softtouch_collector::configs::resolve(Some(rig_path), None)?.rig;
+    let store = super::open_existing(db).await?;
+    let bytes = softtouch_lab::models::force_artifact(&store, &c.model).await?;
+    let setup =
+        object_setup_on_rig(&store, &rig, &c.model, &bytes, &args.object, c.tolerance).await?;
+    let grasp = rig
+        .grasp
+        .clone()
+        .ok_or_else(|| bad("--rig: no [grasp] section".into()))?;
+    if !softtouch_lab::grasp::devices::has_real_gripper(&rig) {
+        return Err(bad(format!(
+            "--rig {}: its gripper is simulated: run the simulated twist without --rig",
+            rig_path.display()
+        )));
+    }
+    let clock: std::sync::Arc<dyn softtouch_drivers::Clock> =
+        std::sync::Arc::new(softtouch_drivers::TokioClock::new());
+    let arm = softtouch_drivers::open::real_arm(&rig.arm, clock.clone())
+        .await
+        .map_err(|e| Failure::Runtime(anyhow::anyhow!("arm: {e}")))?
+        .ok_or_else(|| {
+            bad("--rig: its arm is simulated: expected arm.driver = \"franka\"".into())
+        })?;
+    let devices = softtouch_lab::grasp::devices::real_grasp_devices(&rig, clock.clone())
+        .await
+        .map_err(|e| Failure::Runtime(anyhow::anyhow!("{e}")))?;
+    let mut devices = RigTrialDevices {
+        arm: std::sync::Arc::new(tokio::sync::Mutex::new(arm)),
+        gripper: devices.gripper,
+        camera: devices.camera,
+        clock,
+    };
+    let mut operator = Operator {
+        input: softtouch_grasp::OperatorInput::from_reader(std::io::BufReader::new(
+            std::io::stdin(),
+        )),
+        output: Box::new(std::io::stderr()),
+        confirm_verdicts: false,
+    };
+    let signals = super::signals::SignalWatch::start();
+    let w = io_failure;
+    let mut rows = String::from("wrist_loop,t_s,estimate_n,torque_z_nmm,wrist_target_deg\n");
+    writeln!(
+        out,
+        "{:>11} {:>8} {:>13} {:>13}",
+        "wrist loop", "cycles", "τz RMS N·mm", "wrist max °"
+    )
+    .map_err(w)?;
+    for with_wrist in [false, true] {
+        let settings = RigTwistSettings {
+            object: args.object.clone(),
+            target_n: args.target,
+            duration_s: args.duration_s,
+            gain_over_lambda: 0.75,
+            wrist: with_wrist.then_some(wrist),
+            wrist_step_rad: 0.05,
+            pregrasp_margin_mm: 6.0,
+        };
+        let run = twist_on_rig(
+            &grasp,
+            &rig.workspace,
+            &setup,
+            &mut devices,
+            &mut operator,
+            softtouch_trainer::Predictor::from_bytes(&bytes)?,
+            &settings,
+            signals.request(),
+        )
+        .await?;
+        let t0 = run.cycles.first().map_or(0, |cy| cy.t.0);
+        let tz: Vec<f64> = run.cycles.iter().filter_map(|cy| cy.torque_z_nm).collect();
+        let rms = if tz.is_empty() {
+            f64::NAN
+        } else {
+            (tz.iter().map(|t| (t * 1000.0).powi(2)).sum::<f64>() / tz.len() as f64).sqrt()
+        };
+        let wrist_max = run
+            .cycles
+            .iter()
+            .filter_map(|cy| cy.wrist_target_rad)
+            .fold(0.0_f64, |m, y| m.max(y.abs().to_degrees()));
+        for cy in &run.cycles {
+            let opt = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v}"));
+            rows.push_str(&format!(
+                "{},{},{},{},{}\n",
+                if with_wrist { "on" } else { "off" },
+                cy.t.0.saturating_sub(t0) as f64 * 1e-9,
+                opt(cy.estimate_n),
+                opt(cy.torque_z_nm.map(|t| t * 1000.0)),
+                opt(cy.wrist_target_rad.map(f64::to_degrees))
+            ));
+        }
+        writeln!(
+            out,
+            "{:>11} {:>8} {:>13.3} {:>13.2}",
+            if with_wrist { "on" } else { "off" },
+            run.cycles.len(),
+            rms,
+            wrist_max
+        )
+        .map_err(w)?;
+        if let Some(name) = run.stopped {
+            writeln!(out, "stopped by {name}: the runs after it are skipped").map_err(w)?;
+            break;
+        }
+    }
+    create_out_dir(&c.out_dir)?;
+    let csv = c.out_dir.join("grasp-twist-rig.csv");
+    std::fs::write(&csv, rows)
+        .map_err(|e| Failure::Runtime(anyhow::anyhow!("{}: {e}", csv.display())))?;
+    writeln!(out, "wrote {}", csv.display()).map_err(w)?;
     Ok(())
 }

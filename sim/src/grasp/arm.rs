@@ -8,7 +8,9 @@
 //!   none when they miss it);
 //! - going up from there starts the grasp's lift ([`SoftGraspHandle::start_lift`]):
 //!   the physics decides whether the fingers carry the object;
-//! - coming down to the object's height with a held object sets it down.
+//! - coming down to the object's height with a held object sets it down;
+//! - a turn about the gripper's own axis there turns the grasp's wrist
+//!   ([`SoftGraspHandle::set_wrist_target`]; the simulated wrist's own rate applies).
 //!
 //! One object per arm: the rig's trials of a simulated rig run one object. Poses
 //! within [`AT_HEIGHT_M`] of the object's grasp height count as at it, so the rig's
@@ -150,6 +152,13 @@ impl Arm for SoftGraspArm {
             let mean_speed = (dz / secs.max(1e-6)).min(speed);
             self.handle
                 .start_lift(now, dz.min(2.0), mean_speed.max(1e-3), MAX_ACCEL_M_S2)
+                .map_err(|e| self.sim(&e))?;
+        }
+        if self.at_object_height(&to) {
+            // A turn of the gripper about its own axis at the object is the wrist's.
+            let yaw = self.object_at.inverse().compose(&to).yaw_rad();
+            self.handle
+                .set_wrist_target(yaw)
                 .map_err(|e| self.sim(&e))?;
         }
         tokio::time::sleep_until(self.clock.instant_at(t1)).await;

@@ -18,20 +18,22 @@
 //! nothing: the trial is stored as `refused`, counted in no rate.
 
 use std::collections::HashMap;
-use std::future::Future;
 use std::io::Write;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use softtouch_drivers::{Camera, Clock, DeviceError, Gripper, GripperCommand};
+use softtouch_drivers::{Camera, Clock, Gripper, GripperCommand};
 use softtouch_grasp::{
-    ArmLift, CalibrationConfig, ControllerConfig, EndCalibration, FailReason, GraspError, LiftPlan,
-    NoTruth, OperatorInput, RigJudge, SharedArm, Stroke, TrialConfig, TrialDevices, Verdict,
-    calibrate_ends, move_to_end, perturbation_m, run_trial,
+    ArmLift, CalibrationConfig, ControllerConfig, EndCalibration, FailReason, LiftPlan, NoTruth,
+    OperatorInput, RigJudge, SharedArm, Stroke, TrialConfig, TrialDevices, Verdict, calibrate_ends,
+    perturbation_m, run_trial,
 };
 use softtouch_schemas::rig::{GraspObjectSetup, raised};
 use softtouch_schemas::{ArmPose, Medium, RigConfig};
 use softtouch_trainer::Predictor;
+
+mod moves;
+pub mod twist;
 
 use super::run::{ObjectSetup, tolerance_for};
 use super::{
@@ -40,6 +42,7 @@ use super::{
 };
 use crate::grasp::calibration::{Calibrated, rig_setup_hash};
 use crate::store::{GraspTrace, GraspTrialRow, Store};
+use moves::{Holding, Moves, arm_to, end_safe, open_fingers, or_stop, set_down, until_stop};
 use softtouch_collector::dataset::export::sha256_hex;
 
 /// The devices of a rig's trials.
@@ -222,6 +225,43 @@ async fn rig_calibrations(
     Ok(out)
 }
 
+/// The stored calibration of `object` on `rig` with the model whose artifact is
+/// `model_bytes`, and the closed loop's δ on it (`tolerance_n`, widened as the trials
+/// widen it): what `grasp twist --rig` holds with.
+///
+/// # Errors
+/// No `[grasp]`, no such object in it, no calibration (the message names the
+/// command that makes one), the store.
+pub async fn object_setup_on_rig(
+    store: &Store,
+    rig: &RigConfig,
+    model: &str,
+    model_bytes: &[u8],
+    object: &str,
+    tolerance_n: f64,
+) -> Result<ObjectSetup, TrialsError> {
+    let grasp = grasp_of(rig)?;
+    if grasp.object(object).is_none() {
+        return Err(invalid(format!(
+            "--object: the rig file's [grasp] has no object `{object}`"
+        )));
+    }
+    let plan = TrialPlan {
+        objects: vec![object.to_owned()],
+        tolerance_n,
+        ..TrialPlan::default()
+    };
+    let rig_plan = RigPlan {
+        setup_hash: rig_setup_hash(rig).map_err(|e| TrialsError::Failed(e.to_string()))?,
+        grasp: grasp.clone(),
+        workspace: rig.workspace.clone(),
+    };
+    let mut all =
+        rig_calibrations(store, &plan, &rig_plan, model, &sha256_hex(model_bytes)).await?;
+    all.remove(object)
+        .ok_or_else(|| TrialsError::Failed(format!("no calibration of `{object}`")))
+}
+
 /// A new rig session of `plan` with `model`, stored before any trial runs, once every
 /// object is known to the rig file and has a stored calibration. With no objects in
 /// the plan, every object of the rig's `[grasp]`.
@@ -348,220 +388,6 @@ pub async fn resume_rig_session(
         model_bytes,
         calibrations,
     })
-}
-
-/// Where the object is, for the safe exit.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Holding {
-    /// Nothing between the fingers that the arm must mind.
-    Clear,
-    /// The gripper stands at the object on its support (it may have closed on it).
-    AtObject,
-    /// Lifted `height_m` above the grasp; `place` is where it goes down.
-    InAir { place: ArmPose, height_m: f64 },
-}
-
-/// Runs `future` unless `level` stop requests come first (`None`).
-async fn until_stop<T>(
-    stop: &tokio::sync::watch::Receiver<u32>,
-    level: u32,
-    future: impl Future<Output = T>,
-) -> Option<T> {
-    let mut rx = stop.clone();
-    let reached = async move {
-        while *rx.borrow_and_update() < level {
-            if rx.changed().await.is_err() {
-                std::future::pending::<()>().await;
-            }
-        }
-    };
-    tokio::select! {
-        biased;
-        v = future => Some(v),
-        () = reached => None,
-    }
-}
-
-/// Runs `future` unless a second stop request comes first.
-async fn or_stop<T>(
-    stop: &tokio::sync::watch::Receiver<u32>,
-    future: impl Future<Output = T>,
-) -> Result<T, TrialsError> {
-    until_stop(stop, 2, future)
-        .await
-        .ok_or(TrialsError::Interrupted)
-}
-
-fn device(e: DeviceError) -> TrialsError {
-    TrialsError::Grasp(GraspError::Device(e))
-}
-
-/// The rig's speed and heights, and what the gripper last heard.
-#[derive(Debug, Clone, Copy)]
-struct Moves {
-    speed_m_s: f64,
-    approach_m: f64,
-    open: GripperCommand,
-    /// The gripper's standing request, re-sent while the arm moves (`None` before
-    /// the gripper is activated).
-    hold: Option<GripperCommand>,
-}
-
-impl Moves {
-    /// The slow speed of a descent onto the object or its place.
-    fn slow(&self) -> f64 {
-        self.speed_m_s / 4.0
-    }
-}
-
-/// Moves the arm to `pose`, re-sending the gripper's standing request every
-/// [`softtouch_grasp::KEEP_ALIVE`] meanwhile (a move may take longer than the Hand-E's
-/// 1 s watchdog). A gripper that fails meanwhile is reported once the arm stands.
-async fn arm_to(
-    devices: &mut RigTrialDevices,
-    moves: &Moves,
-    pose: &ArmPose,
-    speed_m_s: f64,
-) -> Result<(), TrialsError> {
-    let arm = Arc::clone(&devices.arm);
-    let moving = async move { arm.lock().await.move_to(pose, speed_m_s).await };
-    tokio::pin!(moving);
-    let mut tick = tokio::time::interval(softtouch_grasp::KEEP_ALIVE);
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    let mut gripper_failed = None;
-    let moved = loop {
-        tokio::select! {
-            moved = &mut moving => break moved,
-            _ = tick.tick() => {
-                if let (Some(hold), None) = (moves.hold, &gripper_failed)
-                    && let Err(e) = devices.gripper.command(hold).await
-                {
-                    gripper_failed = Some(e);
-                }
-            }
-        }
-    };
-    moved.map_err(device)?;
-    gripper_failed.map_or(Ok(()), |e| Err(device(e)))
-}
-
-async fn arm_here(arm: &SharedArm) -> Result<ArmPose, TrialsError> {
-    Ok(arm
-        .lock()
-        .await
-        .state()
-        .await
-        .map_err(device)?
-        .base_from_finger)
-}
-
-/// The fingers open fully, waited for.
-async fn open_fingers(devices: &mut RigTrialDevices, moves: &mut Moves) -> Result<(), TrialsError> {
-    moves.hold = Some(moves.open);
-    let config = CalibrationConfig::default();
-    move_to_end(
-        devices.gripper.as_mut(),
-        devices.clock.as_ref(),
-        &config,
-        moves.open.position,
-    )
-    .await?;
-    Ok(())
-}
-
-/// Sets a held object down (in the air: at its place; on its support: where it
-/// stands), opens the fingers and raises the gripper clear.
-async fn set_down(
-    devices: &mut RigTrialDevices,
-    holding: &mut Holding,
-    moves: &mut Moves,
-) -> Result<(), TrialsError> {
-    match *holding {
-        Holding::Clear => return Ok(()),
-        Holding::InAir { place, height_m } => {
-            arm_to(devices, moves, &raised(&place, height_m), moves.speed_m_s).await?;
-            arm_to(devices, moves, &place, moves.slow()).await?;
-            *holding = Holding::AtObject;
-        }
-        Holding::AtObject => {}
-    }
-    open_fingers(devices, moves).await?;
-    let here = arm_here(&devices.arm).await?;
-    arm_to(
-        devices,
-        moves,
-        &raised(&here, moves.approach_m),
-        moves.speed_m_s,
-    )
-    .await?;
-    *holding = Holding::Clear;
-    Ok(())
-}
-
-/// The safe exit: stop the arm; a faulted arm leaves the gripper holding; otherwise
-/// set a held object down, open, and return to the safe pose. Says what it did.
-async fn end_safe(
-    devices: &mut RigTrialDevices,
-    holding: &mut Holding,
-    moves: &mut Moves,
-    safe_pose: &ArmPose,
-) -> (Vec<String>, Option<String>) {
-    let mut lines = Vec::new();
-    let faulted = {
-        let mut arm = devices.arm.lock().await;
-        if let Err(e) = arm.stop().await {
-            lines.push(format!("safe exit: stopping the arm failed: {e}"));
-        }
-        arm.state().await.map_or(true, |s| s.faulted)
-    };
-    if faulted {
-        let held = *holding != Holding::Clear;
-        if held {
-            // The object may hang in the air: open fingers would drop it.
-            let hold = match devices.gripper.status().await {
-                Ok(s) => devices
-                    .gripper
-                    .command(GripperCommand {
-                        position: s.position,
-                        ..moves.open
-                    })
-                    .await
-                    .map_err(|e| e.to_string()),
-                Err(e) => Err(e.to_string()),
-            };
-            let m = format!(
-                "safe exit: the arm is faulted (a reflex or a lost link) with the object between the fingers: the gripper holds it where it is ({}); clear the reflex, then take the object out by hand",
-                hold.map_or_else(
-                    |e| format!("its hold command failed: {e}"),
-                    |()| "hold sent".into()
-                )
-            );
-            lines.push(m.clone());
-            return (lines, Some(m));
-        }
-        let m = "safe exit: the arm is faulted; nothing between the fingers; clear the reflex before the next session".to_owned();
-        lines.push(m.clone());
-        return (lines, Some(m));
-    }
-    let was = *holding;
-    if let Err(e) = set_down(devices, holding, moves).await {
-        let m = format!("safe exit: setting the object down and opening failed: {e}");
-        lines.push(m.clone());
-        // Still try to leave the fingers open with nothing in the air.
-        if *holding == Holding::Clear || *holding == Holding::AtObject {
-            let _ = open_fingers(devices, moves).await;
-        }
-        return (lines, Some(m));
-    }
-    if was != Holding::Clear {
-        lines.push("safe exit: the object was set down and the fingers opened".into());
-    }
-    if let Err(e) = arm_to(devices, moves, safe_pose, moves.speed_m_s).await {
-        let m = format!("safe exit: the arm did not reach the safe pose: {e}");
-        lines.push(m.clone());
-        return (lines, Some(m));
-    }
-    (lines, None)
 }
 
 /// Runs `todo` (from [`RigSession::progress`]) on the rig's devices, each trial stored
