@@ -46,7 +46,7 @@ pub enum GraspCommand {
     /// estimate; runs with and without the wrist loop and prints the τz RMS of both;
     /// writes `grasp-twist.csv` and `grasp-twist.png`.
     #[command(
-        after_help = "Example:\n  softtouch grasp twist --model land-v1-svae\n  softtouch grasp twist --model land-v1-svae --turn-deg 30 --wrist-gain 1000"
+        after_help = "Example:\n  softtouch grasp twist --model land-v1-svae\n  softtouch grasp twist --model land-v1-svae --turn-deg 30 --wrist-gain 1000\n  softtouch grasp twist --model land-v1-svae --rig lab.toml --object bottle --duration-s 15   # the real wrist"
     )]
     Twist(super::grasp_turns::TwistArgs),
     /// Grasp success-rate trials (Figure 4): per object, mode (open, closed) and medium

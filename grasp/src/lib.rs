@@ -22,9 +22,12 @@
 //! - [`stiffness`]: Λ(P) and Λ_max from the finger's own estimate while the fingers
 //!   close on a reference object one count at a time (Theil–Sen), for K = 0.75 Λ_max.
 //! - [`wrist`]: the second, narrow loop that holds τz ≈ 0 by turning the wrist
-//!   ([`Wrist`], [`WristLoop`]).
+//!   ([`Wrist`], [`WristLoop`]; on a rig [`ArmWrist`], the flange turned through the
+//!   drivers' [`softtouch_drivers::Arm`]).
 //! - [`trials`]: the success-rate trials of Figure 4 (perturbed grasp point, open or
-//!   closed loop, lift, hold, a judge's verdict) and the Wilson interval.
+//!   closed loop, lift, hold, a judge's verdict) and the Wilson interval; on a rig the
+//!   arm lifts through [`ArmLift`] and the operator answers through [`OperatorInput`]
+//!   (the Hand-E kept alive while a question waits).
 //! - [`metrics`]: rise time, settling time, overshoot, steady-state and RMS error of a
 //!   held target.
 //!

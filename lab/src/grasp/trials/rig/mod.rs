@@ -1,4 +1,4 @@
-//! Grasp trials on a lab's rig (`grasp trials --rig`): the arm (behind [`Arm`])
+//! Grasp trials on a lab's rig (`grasp trials --rig`): the arm (behind [`softtouch_drivers::Arm`])
 //! places the gripper at each trial's perturbed grasp pose from the rig file, the
 //! fingers close open loop or closed loop on the finger's estimate, the arm lifts
 //! while the loop keeps cycling ([`ArmLift`]), [`RigJudge`] reads gOBJ, position and
