@@ -307,9 +307,128 @@ fn an_empty_database_gives_a_page_saying_which_verbs_to_run() {
     }
     // The sections this report cannot show yet say so.
     assert!(
-        todo.contains("does not show grasping yet")
+        todo.contains("No grasp sessions in this database yet")
+            && todo.contains("does not show Figure 5")
             && todo.contains("does not show the land-to-water comparison yet"),
         "{todo}"
+    );
+}
+
+/// A stored grasp session: 2 trials a mode of the cylinder on land (open: both held;
+/// closed: a slip and a timeout) and one refused, each with a short trace.
+async fn grasp_session(db: &Path) -> i64 {
+    use softtouch_lab::grasp::trials::{TrialPlan, load_scenes};
+    use softtouch_store::{GraspTrace, GraspTrialKey, GraspTrialRow, Store};
+    let store = Store::open(db).await.unwrap_or_else(|e| panic!("{e}"));
+    let plan = TrialPlan {
+        objects: vec!["cylinder".into()],
+        trials: 2,
+        ..TrialPlan::default()
+    };
+    let scenes = load_scenes(&[]).unwrap_or_else(|e| panic!("{e}"));
+    let id = store
+        .create_grasp_session(
+            "m",
+            "0123456789abcdef",
+            7,
+            &serde_json::to_string(&scenes).unwrap_or_else(|e| panic!("{e}")),
+            &serde_json::to_string(&plan).unwrap_or_else(|e| panic!("{e}")),
+        )
+        .await
+        .unwrap_or_else(|e| panic!("{e}"));
+    for (mode, trial, reason) in [
+        ("open", 0, None),
+        ("open", 1, None),
+        ("closed", 0, Some("slip")),
+        ("closed", 1, Some("timeout")),
+        ("closed", 2, Some("refused")),
+    ] {
+        let row = GraspTrialRow {
+            key: GraspTrialKey {
+                sigma_index: 0,
+                scene_index: 0,
+                object: "cylinder".into(),
+                mode: mode.into(),
+                trial,
+            },
+            medium: "land".into(),
+            sigma_m: 0.005,
+            offset_m: [0.001, 0.0, 0.0],
+            commanded_width_m: 0.022,
+            final_width_m: 0.022,
+            peak_estimate_n: Some(1.4),
+            peak_true_n: Some(1.5),
+            success: reason.is_none(),
+            reason: reason.map(str::to_owned),
+            detail: None,
+            confirmed_after_s: None,
+            wall_s: 0.25,
+        };
+        let n = if reason == Some("refused") { 0 } else { 40 };
+        let trace = GraspTrace {
+            t_s: (0..n).map(|i| i as f32 / 30.0).collect(),
+            estimate_n: (0..n).map(|i| (i as f32 / 20.0).min(1.5)).collect(),
+            true_n: (0..n).map(|i| (i as f32 / 19.0).min(1.6)).collect(),
+            measured_count: (0..n).map(|i| 100 + i as u8).collect(),
+            request_count: (0..n).map(|i| 101 + i as u8).collect(),
+        };
+        store
+            .append_grasp_trial(id, &row, &trace)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+    store.close().await;
+    id
+}
+
+#[test]
+fn the_grasping_section_shows_each_stored_session_and_draws_chosen_trials() {
+    let dir = tempdir();
+    let d = dir.path();
+    ok(&softtouch(d, &["db", "init"]));
+    let db = d.join("softtouch.db");
+    let id = runtime().block_on(grasp_session(&db));
+    ok(&softtouch(d, &["report", "--out", "g.html"]));
+    let (text, html) = parse(&d.join("g.html"));
+    // The table `grasp trials` prints, from the database's rows.
+    assert_eq!(value(&html, &format!("grasp-{id}-stored")), "5");
+    assert_eq!(
+        value(&html, &format!("grasp-{id}-0-0-cylinder-open")),
+        "2/2"
+    );
+    assert_eq!(
+        value(&html, &format!("grasp-{id}-0-0-cylinder-closed")),
+        "0/2",
+        "the refused trial counts in no cell"
+    );
+    assert_eq!(value(&html, &format!("grasp-{id}-0-0-all-closed")), "0/2");
+    assert_eq!(
+        value(&html, &format!("grasp-{id}-0-1-all-open")),
+        "0/0",
+        "the water scene ran nothing"
+    );
+    let counted = ints(
+        &db,
+        "SELECT COUNT(*) FROM grasp_trials WHERE mode = 'open' AND success = 1",
+    );
+    assert_eq!(counted, vec![2]);
+    let section = select(&html, "section#grasping").join("\n");
+    for said in [
+        "Session 1: simulator",
+        "refused 1, slip 1, timeout 1",
+        "still between the fingers after the lift and the hold",
+        "Wilson 95 %",
+        "44 %",
+        "100 %",
+    ] {
+        assert!(section.contains(said), "`{said}` in: {section}");
+    }
+    // The viewer: one success (open, land) and the first slip and timeout, two
+    // figures each; the refused trial has no trace and is not drawn.
+    assert_eq!(select(&html, "section#grasping svg").len(), 6, "{section}");
+    assert!(
+        text.contains("F_ref + δ"),
+        "the closed loop's band is drawn"
     );
 }
 

@@ -295,40 +295,7 @@ impl Store {
     /// # Errors
     /// The query failed or a row does not read back.
     pub async fn grasp_trials(&self, session_id: i64) -> Result<Vec<GraspTrialRow>, StoreError> {
-        let rows = sqlx::query(
-            "SELECT sigma_index, scene_index, object, mode, trial, medium, sigma_m, dx_m, dy_m, dz_m, commanded_width_m, final_width_m, \
-             peak_estimate_n, peak_true_n, success, reason, detail, confirmed_after_s, wall_s \
-             FROM grasp_trials WHERE session_id = ? ORDER BY trial_id",
-        )
-        .bind(session_id)
-        .fetch_all(self.pool())
-        .await
-        .map_err(query_err("reading grasp trials"))?;
-        rows.iter()
-            .map(|r| {
-                Ok(GraspTrialRow {
-                    key: GraspTrialKey {
-                        sigma_index: int("grasp_trials.sigma_index", r.get(0))?,
-                        scene_index: int("grasp_trials.scene_index", r.get(1))?,
-                        object: r.get(2),
-                        mode: r.get(3),
-                        trial: int("grasp_trials.trial", r.get(4))?,
-                    },
-                    medium: r.get(5),
-                    sigma_m: r.get(6),
-                    offset_m: [r.get(7), r.get(8), r.get(9)],
-                    commanded_width_m: r.get(10),
-                    final_width_m: r.get(11),
-                    peak_estimate_n: r.get(12),
-                    peak_true_n: r.get(13),
-                    success: r.get::<i64, _>(14) == 1,
-                    reason: r.get(15),
-                    detail: r.get(16),
-                    confirmed_after_s: r.get(17),
-                    wall_s: r.get(18),
-                })
-            })
-            .collect()
+        trials_of(self.pool(), session_id).await
     }
 
     /// The trace of a session's trial, if stored.
@@ -340,36 +307,111 @@ impl Store {
         session_id: i64,
         key: &GraspTrialKey,
     ) -> Result<Option<GraspTrace>, StoreError> {
-        let row = sqlx::query(
-            "SELECT c.encoding, c.t_s, c.estimate_n, c.true_n, c.measured_count, c.request_count \
-             FROM grasp_traces c JOIN grasp_trials t ON t.trial_id = c.trial_id \
-             WHERE t.session_id = ? AND t.sigma_index = ? AND t.scene_index = ? AND t.object = ? AND t.mode = ? AND t.trial = ?",
-        )
-        .bind(session_id)
-        .bind(i64::from(key.sigma_index))
-        .bind(i64::from(key.scene_index))
-        .bind(&key.object)
-        .bind(&key.mode)
-        .bind(i64::from(key.trial))
-        .fetch_optional(self.pool())
-        .await
-        .map_err(query_err("reading a grasp trace"))?;
-        let Some(r) = row else { return Ok(None) };
-        let encoding: String = r.get(0);
-        if encoding != TRACE_ENCODING {
-            return Err(StoreError::Damaged {
-                what: "grasp_traces.encoding",
-                why: format!("`{encoding}`: expected `{TRACE_ENCODING}`"),
-            });
-        }
-        Ok(Some(GraspTrace {
-            t_s: unpack_f32("grasp_traces.t_s", &r.get::<Vec<u8>, _>(1))?,
-            estimate_n: unpack_f32("grasp_traces.estimate_n", &r.get::<Vec<u8>, _>(2))?,
-            true_n: unpack_f32("grasp_traces.true_n", &r.get::<Vec<u8>, _>(3))?,
-            measured_count: r.get(4),
-            request_count: r.get(5),
-        }))
+        trace_of(self.pool(), session_id, key).await
     }
+}
+
+/// A session's trials in the order they were stored (the store's and the report's
+/// reader).
+pub(crate) async fn trials_of(
+    pool: &sqlx::SqlitePool,
+    session_id: i64,
+) -> Result<Vec<GraspTrialRow>, StoreError> {
+    let rows = sqlx::query(
+        "SELECT sigma_index, scene_index, object, mode, trial, medium, sigma_m, dx_m, dy_m, dz_m, commanded_width_m, final_width_m, \
+         peak_estimate_n, peak_true_n, success, reason, detail, confirmed_after_s, wall_s \
+         FROM grasp_trials WHERE session_id = ? ORDER BY trial_id",
+    )
+    .bind(session_id)
+    .fetch_all(pool)
+    .await
+    .map_err(query_err("reading grasp trials"))?;
+    rows.iter()
+        .map(|r| {
+            Ok(GraspTrialRow {
+                key: GraspTrialKey {
+                    sigma_index: int("grasp_trials.sigma_index", r.get(0))?,
+                    scene_index: int("grasp_trials.scene_index", r.get(1))?,
+                    object: r.get(2),
+                    mode: r.get(3),
+                    trial: int("grasp_trials.trial", r.get(4))?,
+                },
+                medium: r.get(5),
+                sigma_m: r.get(6),
+                offset_m: [r.get(7), r.get(8), r.get(9)],
+                commanded_width_m: r.get(10),
+                final_width_m: r.get(11),
+                peak_estimate_n: r.get(12),
+                peak_true_n: r.get(13),
+                success: r.get::<i64, _>(14) == 1,
+                reason: r.get(15),
+                detail: r.get(16),
+                confirmed_after_s: r.get(17),
+                wall_s: r.get(18),
+            })
+        })
+        .collect()
+}
+
+/// A session's trial's trace, if stored (the store's and the report's reader).
+pub(crate) async fn trace_of(
+    pool: &sqlx::SqlitePool,
+    session_id: i64,
+    key: &GraspTrialKey,
+) -> Result<Option<GraspTrace>, StoreError> {
+    let row = sqlx::query(
+        "SELECT c.encoding, c.t_s, c.estimate_n, c.true_n, c.measured_count, c.request_count \
+         FROM grasp_traces c JOIN grasp_trials t ON t.trial_id = c.trial_id \
+         WHERE t.session_id = ? AND t.sigma_index = ? AND t.scene_index = ? AND t.object = ? AND t.mode = ? AND t.trial = ?",
+    )
+    .bind(session_id)
+    .bind(i64::from(key.sigma_index))
+    .bind(i64::from(key.scene_index))
+    .bind(&key.object)
+    .bind(&key.mode)
+    .bind(i64::from(key.trial))
+    .fetch_optional(pool)
+    .await
+    .map_err(query_err("reading a grasp trace"))?;
+    let Some(r) = row else { return Ok(None) };
+    let encoding: String = r.get(0);
+    if encoding != TRACE_ENCODING {
+        return Err(StoreError::Damaged {
+            what: "grasp_traces.encoding",
+            why: format!("`{encoding}`: expected `{TRACE_ENCODING}`"),
+        });
+    }
+    Ok(Some(GraspTrace {
+        t_s: unpack_f32("grasp_traces.t_s", &r.get::<Vec<u8>, _>(1))?,
+        estimate_n: unpack_f32("grasp_traces.estimate_n", &r.get::<Vec<u8>, _>(2))?,
+        true_n: unpack_f32("grasp_traces.true_n", &r.get::<Vec<u8>, _>(3))?,
+        measured_count: r.get(4),
+        request_count: r.get(5),
+    }))
+}
+
+/// Every grasp session, oldest first (the report's reader).
+pub(crate) async fn sessions_of(
+    pool: &sqlx::SqlitePool,
+) -> Result<Vec<GraspSessionRow>, StoreError> {
+    let rows = sqlx::query(
+        "SELECT session_id, created_at, model, seed, scenes_json, config_json, model_sha256 FROM grasp_sessions ORDER BY session_id",
+    )
+    .fetch_all(pool)
+    .await
+    .map_err(query_err("reading grasp sessions"))?;
+    Ok(rows
+        .iter()
+        .map(|r| GraspSessionRow {
+            session_id: r.get(0),
+            created_at: r.get(1),
+            model: r.get(2),
+            model_sha256: r.get(6),
+            seed: seed_from_sql(r.get(3)),
+            scenes_json: r.get(4),
+            config_json: r.get(5),
+        })
+        .collect())
 }
 
 #[cfg(test)]

@@ -52,6 +52,9 @@ pub enum ReadError {
         #[source]
         source: sqlx::Error,
     },
+    /// Stored rows that do not read back (a damaged grasp trace, say).
+    #[error(transparent)]
+    Rows(Box<StoreError>),
     /// `--runs` names a run that is not there.
     #[error("--runs: no run {0} in this database (see `softtouch runs`)")]
     NoSuchRun(i64),
@@ -457,4 +460,36 @@ pub async fn now(db: &ReadOnly) -> Result<String, ReadError> {
         .fetch_one(&db.pool)
         .await
         .map_err(query("reading the clock"))
+}
+
+/// Every grasp session with its trials, oldest first.
+///
+/// # Errors
+/// A query failed, or a row does not read back.
+pub async fn grasp_sessions(
+    db: &ReadOnly,
+) -> Result<Vec<(crate::GraspSessionRow, Vec<crate::GraspTrialRow>)>, ReadError> {
+    let rows = |e: StoreError| ReadError::Rows(Box::new(e));
+    let mut out = Vec::new();
+    for session in crate::grasp::sessions_of(&db.pool).await.map_err(rows)? {
+        let trials = crate::grasp::trials_of(&db.pool, session.session_id)
+            .await
+            .map_err(rows)?;
+        out.push((session, trials));
+    }
+    Ok(out)
+}
+
+/// One trial's trace, if stored.
+///
+/// # Errors
+/// A query failed, or the trace does not read back.
+pub async fn grasp_trace(
+    db: &ReadOnly,
+    session_id: i64,
+    key: &crate::GraspTrialKey,
+) -> Result<Option<crate::GraspTrace>, ReadError> {
+    crate::grasp::trace_of(&db.pool, session_id, key)
+        .await
+        .map_err(|e| ReadError::Rows(Box::new(e)))
 }

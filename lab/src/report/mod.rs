@@ -16,6 +16,7 @@
 
 mod csv;
 mod data;
+mod grasp;
 mod page;
 mod predict;
 mod svg;
@@ -174,6 +175,7 @@ pub(crate) struct Content {
     pub models: Vec<ModelData>,
     pub sweeps: Vec<csv::SweepFile>,
     pub collection: Option<csv::CollectionFile>,
+    pub grasp: Vec<grasp::GraspData>,
 }
 
 async fn gather(
@@ -251,5 +253,6 @@ async fn gather(
         models,
         sweeps,
         collection,
+        grasp: grasp::gather(pool).await?,
     })
 }

@@ -21,6 +21,8 @@ mod runs;
 use runs::*;
 mod sweeps;
 use sweeps::*;
+mod grasping;
+use grasping::*;
 
 /// A row of the paper's Table 1: model, α (SVAE rows), image MSE, mean R² in %.
 type PaperRow = (&'static str, Option<f64>, Option<f64>, Option<f64>);
@@ -137,7 +139,7 @@ pub(crate) fn render(c: &Content) -> Result<String, ReportError> {
                     (models_section(c)?)
                     (sweeps_section(c)?)
                     (land_to_water_section())
-                    (grasping_section())
+                    (grasping_section(c)?)
                 }
                 footer {
                     p.prov {
@@ -167,18 +169,6 @@ fn land_to_water_section() -> Markup {
                     "softtouch transfer --model land-v1-svae --land land-v1 --water water-v1",
                     "softtouch sweep finetune --init land-v1-svae --dataset water-v1",
                     "softtouch latent land-v1-svae --dataset land-v1 --water water-v1"]))
-        }
-    }
-}
-
-fn grasping_section() -> Markup {
-    html! {
-        section #grasping {
-            h2 { "Grasping" }
-            (todo("This report does not show grasping yet. The verbs print their tables and write CSVs and PNGs (success with Wilson intervals beside the paper's Figure 4f; force following, disturbance and twist traces of Figure 5; the bench grasp trade-offs), and the trials are stored as grasp sessions:",
-                  &["softtouch grasp trials --model land-v1-svae --trials 10 --sigma-mm 5",
-                    "softtouch grasp follow --model land-v1-svae --targets 0.4,1.6,3",
-                    "softtouch bench grasp --model land-v1-svae"]))
         }
     }
 }

@@ -112,15 +112,28 @@ pub async fn twist_on_rig(
             "twist: set `{}` in its place, clear of the fingers, then press Enter; once the fingers hold it, turn it about the fingers' axis by hand",
             object.name
         );
-        operator
-            .input
-            .ask(
+        // A stop request while the question waits ends the twist before anything moves.
+        let mut stop_rx = stop.clone();
+        let asked = tokio::select! {
+            answer = operator.input.ask(
                 &question,
                 operator.output.as_mut(),
                 devices.gripper.as_mut(),
                 moves.open,
-            )
-            .await?;
+            ) => Some(answer),
+            _ = stop_rx.wait_for(Option::is_some) => None,
+        };
+        match asked {
+            Some(answer) => {
+                answer?;
+            }
+            None => {
+                return Ok(RigTwist {
+                    cycles: Vec::new(),
+                    stopped: *stop.borrow(),
+                });
+            }
+        }
         let pose = object.base_from_grasp;
         arm_to(
             devices,

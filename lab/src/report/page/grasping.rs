@@ -1,0 +1,234 @@
+//! The grasping section: every stored grasp session's success table (the one `grasp
+//! trials` prints: Wilson 95 % intervals beside the paper's Figure 4f, the failure
+//! reasons per cell), its wall time, and a viewer of chosen trials' traces.
+
+use super::*;
+use crate::report::grasp::{GraspData, medium};
+use crate::store::GraspTrace;
+
+/// What "held" means and how the cells pool, said once above the tables.
+fn criterion() -> Markup {
+    html! {
+        p.note {
+            "A trial succeeds when the object is still between the fingers after the lift and the hold (the session's "
+            code { "lift_mm" } " and " code { "hold_s" } "). "
+            "On the simulator its physics judges (the object held, slipped, crushed, missed; a closed loop that never confirmed its force is a timeout). "
+            "On a rig the rig judge reads gOBJ, the final position and the finger's estimate, and the operator confirms or corrects it (a crush only a person sees). "
+            "A device error is a device fault. Each cell pools the trials of one σ, medium, object and mode; the "
+            em { "all" } " rows pool the objects, and the paper's rates (Figure 4f) stand beside those only. "
+            "A trial refused before anything moved (a perturbed pose outside the rig's workspace) counts in no cell. Intervals: Wilson 95 %."
+        }
+    }
+}
+
+/// The grasping section.
+pub(super) fn grasping_section(c: &Content) -> Result<Markup, ReportError> {
+    let sessions = c.grasp.iter().map(session).collect::<Result<Vec<_>, _>>()?;
+    Ok(html! {
+        section #grasping {
+            h2 { "Grasping" }
+            @if c.grasp.is_empty() {
+                (todo("No grasp sessions in this database yet. The trials are stored as grasp sessions as they run:",
+                      &["softtouch grasp trials --model land-v1-svae --trials 10 --sigma-mm 5",
+                        "softtouch grasp trials --model land-v1-svae --rig lab.toml --objects bottle,ball"]))
+            } @else {
+                (criterion())
+                @for s in &sessions { (s) }
+            }
+            (todo("This report does not show Figure 5 (force following, disturbance, twist) or the bench grasp trade-offs yet: those verbs print their tables and write CSVs and PNGs under --out-dir, and store nothing:",
+                  &["softtouch grasp follow --model land-v1-svae --targets 0.4,1.6,3",
+                    "softtouch grasp twist --model land-v1-svae",
+                    "softtouch bench grasp --model land-v1-svae"]))
+        }
+    })
+}
+
+fn pct(v: Option<f64>) -> String {
+    v.map_or_else(|| "–".to_owned(), |v| format!("{:.0} %", 100.0 * v))
+}
+
+fn session(g: &GraspData) -> Result<Markup, ReportError> {
+    let id = g.session.session_id;
+    let planned = g.plan.as_ref().map_or(0, |p| {
+        p.objects.len() * p.modes.len() * p.trials as usize * p.sigmas_mm.len() * g.media.len()
+    });
+    let sigma = |i: u32| {
+        g.plan
+            .as_ref()
+            .and_then(|p| p.sigmas_mm.get(i as usize))
+            .map_or_else(|| "?".to_owned(), |s| format!("{s}"))
+    };
+    let figures = g
+        .viewed
+        .iter()
+        .map(|(r, t)| trial_figure(g, r, t.as_ref()))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(html! {
+        h3 #(format!("grasp-session-{id}")) { "Session " (id) ": " (g.kind()) }
+        p.prov {
+            "Model " code { (g.session.model) }
+            @if let Some(sha) = &g.session.model_sha256 { " (sha256 " code { (&sha[..12.min(sha.len())]) } ")" }
+            ", seed " (g.session.seed) ", started " (g.session.created_at) ", "
+            span data-k=(format!("grasp-{id}-stored")) { (g.rows.len()) } " of " (planned) " trials stored"
+            @if let Some(p) = &g.plan {
+                "; σ " (join(p.sigmas_mm.iter())) " mm, lift " (p.lift_mm) " mm, hold " (p.hold_s) " s, F_ref " (p.target_n) " N ± " (p.tolerance_n) " N"
+            }
+            "."
+        }
+        @for p in &g.problems { p.todo { "Could not read: " (p) } }
+        table {
+            tr { th { "σ mm" } th.l { "medium" } th.l { "object" } th.l { "mode" } th { "held/n" } th { "rate" } th { "Wilson 95 %" } th { "paper" } th.l { "failures" } }
+            @for c in &g.cells {
+                @let object = c.object.clone().unwrap_or_else(|| "all".into());
+                tr {
+                    td { (sigma(c.sigma_index)) }
+                    td.l { (medium(c.medium)) }
+                    td.l { @if c.object.is_none() { b { "all" } } @else { (object) } }
+                    td.l { (c.mode.as_str()) }
+                    td data-k=(format!("grasp-{id}-{}-{}-{}-{}", c.sigma_index, c.scene_index, object, c.mode.as_str())) { (c.held) "/" (c.trials) }
+                    td { (pct(c.rate())) }
+                    td.nw { "[" (format!("{:.0}", 100.0 * c.interval[0])) ", " (format!("{:.0}", 100.0 * c.interval[1])) "] %" }
+                    td { (pct(c.paper())) }
+                    td.l { (c.reasons.iter().filter(|(_, n)| **n > 0).map(|(r, n)| format!("{r} {n}")).collect::<Vec<_>>().join(", ")) }
+                }
+            }
+        }
+        (wall_time(g))
+        @if !figures.is_empty() {
+            p.note {
+                "Trials drawn: the first failure of each kind and the first success of each medium and mode. "
+                "The finger's frames are not stored with a trace, so none are shown."
+            }
+            div.figs { @for f in figures { (f) } }
+        }
+    })
+}
+
+/// Wall time per medium and mode.
+fn wall_time(g: &GraspData) -> Markup {
+    let mut groups: Vec<(String, String)> = Vec::new();
+    for r in &g.rows {
+        let k = (r.medium.clone(), r.key.mode.clone());
+        if !groups.contains(&k) {
+            groups.push(k);
+        }
+    }
+    html! {
+        table {
+            tr { th.l { "medium" } th.l { "mode" } th { "trials" } th { "mean s" } th { "max s" } }
+            @for (m, mode) in &groups {
+                @let w: Vec<f64> = g.rows.iter().filter(|r| &r.medium == m && &r.key.mode == mode).map(|r| r.wall_s).collect();
+                tr {
+                    td.l { (m) } td.l { (mode) } td { (w.len()) }
+                    td { (f(w.iter().sum::<f64>() / w.len().max(1) as f64, 3)) }
+                    td { (f(w.iter().copied().fold(0.0, f64::max), 3)) }
+                }
+            }
+        }
+    }
+}
+
+/// One trial's trace: the estimate (and the truth, on the simulator) against time with
+/// the target band, and the commanded and measured positions.
+fn trial_figure(
+    g: &GraspData,
+    r: &crate::store::GraspTrialRow,
+    trace: Option<&GraspTrace>,
+) -> Result<Markup, ReportError> {
+    let verdict = r.reason.as_deref().unwrap_or("held");
+    let title = format!(
+        "{} {} #{} ({}, σ {} mm): {verdict}",
+        r.key.object,
+        r.key.mode,
+        r.key.trial,
+        r.medium,
+        r.sigma_m * 1000.0
+    );
+    let Some(t) = trace.filter(|t| !t.t_s.is_empty()) else {
+        return Ok(html! { p.note { (title) ": no trace stored" } });
+    };
+    let pts = |v: &[f32]| -> Vec<(f64, f64)> {
+        t.t_s
+            .iter()
+            .zip(v)
+            .map(|(x, y)| (f64::from(*x), f64::from(*y)))
+            .collect()
+    };
+    let mut force = vec![Series {
+        label: "estimate".into(),
+        points: pts(&t.estimate_n),
+        style: SeriesStyle::Line,
+    }];
+    if t.true_n.iter().any(|v| v.is_finite()) {
+        force.push(Series {
+            label: "true (simulator)".into(),
+            points: pts(&t.true_n),
+            style: SeriesStyle::Line,
+        });
+    }
+    let end = f64::from(t.t_s.last().copied().unwrap_or(0.0));
+    if let Some(p) = g.plan.as_ref().filter(|_| r.key.mode == "closed") {
+        for (label, v) in [
+            ("F_ref + δ", p.target_n + p.tolerance_n),
+            ("F_ref − δ", p.target_n - p.tolerance_n),
+        ] {
+            force.push(Series {
+                label: label.into(),
+                points: vec![(0.0, v), (end, v)],
+                style: SeriesStyle::Line,
+            });
+        }
+    }
+    let counts = |v: &[u8]| -> Vec<(f64, f64)> {
+        t.t_s
+            .iter()
+            .zip(v)
+            .map(|(x, y)| (f64::from(*x), f64::from(*y)))
+            .collect()
+    };
+    let positions = [
+        Series {
+            label: "requested".into(),
+            points: counts(&t.request_count),
+            style: SeriesStyle::Line,
+        },
+        Series {
+            label: "measured".into(),
+            points: counts(&t.measured_count),
+            style: SeriesStyle::Line,
+        },
+    ];
+    let force_svg = svg::xy(
+        &Xy {
+            title: &title,
+            x_label: "time since the trial's first cycle, s",
+            y_label: "grip force, N",
+            series: &force,
+            diagonal: false,
+            y_range: None,
+            marker_px: 2,
+        },
+        (460, 280),
+    )?;
+    let position_title = format!(
+        "{} {} #{}: position{}",
+        r.key.object,
+        r.key.mode,
+        r.key.trial,
+        r.confirmed_after_s
+            .map_or_else(String::new, |s| format!(" (confirmed after {s:.2} s)"))
+    );
+    let position_svg = svg::xy(
+        &Xy {
+            title: &position_title,
+            x_label: "time since the trial's first cycle, s",
+            y_label: "gripper position, counts",
+            series: &positions,
+            diagonal: false,
+            y_range: None,
+            marker_px: 2,
+        },
+        (460, 280),
+    )?;
+    Ok(html! { (figure(force_svg)) (figure(position_svg)) })
+}
