@@ -205,6 +205,6 @@ pub fn bar_chart(path: &Path, chart: &BarChart<'_>, size: (u32, u32)) -> Result<
     if !(y0.is_finite() && y1.is_finite() && y1 > y0) {
         return Err(invalid("the y range is empty or not finite"));
     }
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+    let root = super::GlyphFix(BitMapBackend::new(path, size)).into_drawing_area();
     draw_bars(&root, chart, &BarLook::PNG).map_err(draw_err(path))
 }

@@ -63,7 +63,7 @@ pub fn heatmap(path: &Path, map: &Heatmap<'_>, size: (u32, u32)) -> Result<(), P
         (left + cw * cols as i32 + right).max(width),
         top + ch * rows as i32 + bottom,
     );
-    let root = BitMapBackend::new(path, (w as u32, h as u32)).into_drawing_area();
+    let root = super::GlyphFix(BitMapBackend::new(path, (w as u32, h as u32))).into_drawing_area();
     root.fill(&WHITE).map_err(&err)?;
     let font = |px: u32| (FONT_FAMILY, px).into_font();
     root.draw(&Text::new(map.title.to_owned(), (12, 12), font(18)))

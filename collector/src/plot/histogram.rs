@@ -187,6 +187,6 @@ pub fn histogram_grid(
             bins: b,
         })
         .collect();
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+    let root = super::GlyphFix(BitMapBackend::new(path, size)).into_drawing_area();
     draw_histograms(&root, title, &binned, columns, &HistLook::PNG).map_err(draw_err(path))
 }

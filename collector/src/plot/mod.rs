@@ -16,11 +16,13 @@ mod heatmap;
 mod histogram;
 #[cfg(test)]
 mod tests;
+mod text;
 mod xy;
 
 pub use bars::{BarChart, BarLook, BarSeries, bar_chart, draw_bars};
 pub use heatmap::{Heatmap, diverging, heatmap};
 pub use histogram::{BinnedPanel, HistLook, HistogramPanel, bin, draw_histograms, histogram_grid};
+pub use text::{GlyphFix, glyph_pixels};
 pub use xy::{
     Series, SeriesStyle, XyChart, XyLook, draw_xy, finite_bounds, pad, two_panel_chart, xy_chart,
     xy_ranges,

@@ -243,7 +243,7 @@ pub fn xy_chart(path: &Path, chart: &XyChart<'_>, size: (u32, u32)) -> Result<()
             why: "no finite points".into(),
         });
     };
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+    let root = super::GlyphFix(BitMapBackend::new(path, size)).into_drawing_area();
     draw_xy(&root, chart, &XyLook::PNG, ranges, false).map_err(draw_err(path))?;
     root.present().map_err(draw_err(path))?;
     Ok(())
@@ -281,7 +281,7 @@ pub fn two_panel_chart(
     };
     let both: Vec<(f64, f64)> = all_top.iter().chain(&all_bottom).copied().collect();
     let (x0, x1) = bounds(&both, 0);
-    let root = BitMapBackend::new(path, (900, 700)).into_drawing_area();
+    let root = super::GlyphFix(BitMapBackend::new(path, (900, 700))).into_drawing_area();
     root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
     let root = root
         .titled(title, (FONT_FAMILY, 22))
