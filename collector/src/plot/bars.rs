@@ -3,6 +3,7 @@
 use super::{FONT_FAMILY, PALETTE, PlotError, draw_err, format_tick_in, register_font};
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::path::Path;
 
 /// One series of bars: a value per group with its interval, and optionally a
@@ -15,6 +16,9 @@ pub struct BarSeries {
     pub bars: Vec<Option<(f64, f64, f64)>>,
     /// Per group: a reference value, or `None`.
     pub reference: Vec<Option<f64>>,
+    /// Per group: a short text above the bar (its whisker's top), e.g. its n; may be
+    /// shorter than `bars`.
+    pub notes: Vec<Option<String>>,
 }
 
 /// A grouped bar chart with interval whiskers.
@@ -32,6 +36,9 @@ pub struct BarChart<'a> {
     pub series: &'a [BarSeries],
     /// The y range.
     pub y_range: (f64, f64),
+    /// Tick labels above this are left blank (the range's headroom holds the legend,
+    /// not values: a rate axis labelled only up to 1).
+    pub y_labels_up_to: Option<f64>,
 }
 
 /// How a bar chart looks where it is shown: [`BarLook::PNG`] for files a person
@@ -109,7 +116,16 @@ pub fn draw_bars<DB: DrawingBackend>(
             String::new()
         }
     };
-    let tick = |v: &f64| format_tick_in(*v, y1 - y0);
+    let tick = |v: &f64| {
+        if chart
+            .y_labels_up_to
+            .is_some_and(|top| *v > top + 1e-9 * (y1 - y0).abs())
+        {
+            String::new()
+        } else {
+            format_tick_in(*v, y1 - y0)
+        }
+    };
     let mut mesh = ctx.configure_mesh();
     mesh.disable_x_mesh()
         .x_labels(n * 2 + 1)
@@ -156,6 +172,19 @@ pub fn draw_bars<DB: DrawingBackend>(
                     ])
                     .map_err(e)?;
                 }
+            }
+            if let (Some(note), Some((v, _, hi))) = (
+                s.notes.get(gi).cloned().flatten(),
+                bar.filter(|b| b.0.is_finite()),
+            ) {
+                let top = if hi.is_finite() { hi.max(v) } else { v };
+                let y = top.clamp(y0, y1) + 0.015 * (y1 - y0);
+                let style = (FONT_FAMILY, look.text_px.0)
+                    .into_font()
+                    .color(&BLACK)
+                    .pos(Pos::new(HPos::Center, VPos::Bottom));
+                ctx.draw_series(std::iter::once(Text::new(note, (xc, y), style)))
+                    .map_err(e)?;
             }
             if let Some(r) = s
                 .reference

@@ -87,6 +87,7 @@ fn both_helpers_write_png_files() {
         label: "rate".into(),
         bars: vec![Some((0.5, 0.2, 0.8)), None],
         reference: vec![Some(0.44), None],
+        notes: vec![Some("n=10".into())],
     }];
     let chart = BarChart {
         title: "t",
@@ -94,7 +95,8 @@ fn both_helpers_write_png_files() {
         y_label: "success rate",
         groups: &groups,
         series: &series,
-        y_range: (0.0, 1.0),
+        y_range: (0.0, 1.3),
+        y_labels_up_to: Some(1.0),
     };
     bar_chart(&bars, &chart, (480, 360)).unwrap_or_else(|e| panic!("{e}"));
     assert!(image::open(&bars).is_ok_and(|i| i.width() == 480));

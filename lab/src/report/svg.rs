@@ -134,6 +134,7 @@ pub(crate) fn bars(
                 .map(|&v| Some((v, f64::NAN, f64::NAN)))
                 .collect(),
             reference: Vec::new(),
+            notes: Vec::new(),
         })
         .collect();
     let chart = BarChart {
@@ -143,6 +144,7 @@ pub(crate) fn bars(
         groups: categories,
         series: &series,
         y_range: (0.0, top),
+        y_labels_up_to: None,
     };
     let mut svg = String::new();
     {

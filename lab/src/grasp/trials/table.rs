@@ -270,6 +270,10 @@ pub fn write_bars(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), T
                     .iter()
                     .map(|g| cell(g).and_then(|c| c.paper()))
                     .collect(),
+                notes: groups
+                    .iter()
+                    .map(|g| cell(g).map(|c| format!("n={}", c.trials)))
+                    .collect(),
             }
         })
         .collect();
@@ -282,11 +286,12 @@ pub fn write_bars(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), T
         &BarChart {
             title: &title,
             x_label: None,
-            y_label: "success rate",
+            y_label: "success rate (held/n)",
             groups: &names,
             series: &series,
-            // Headroom above 100 % for the legend.
+            // Headroom above 100 % for the legend, its ticks unlabelled.
             y_range: (0.0, 1.3),
+            y_labels_up_to: Some(1.0),
         },
         ((180 * names.len() as u32).clamp(640, 2400), 520),
     )
