@@ -198,6 +198,18 @@ fn the_page_parses_has_every_section_and_shows_the_databases_numbers() {
                     format!("{r2:.4}")
                 );
             }
+            // Figure 2c: each range's n as stored: above its bar, or under the range
+            // where fewer than 2 labels leave no bar.
+            for range in m["test"]["force_error_by_range"]
+                .as_array()
+                .unwrap_or_else(|| panic!("force ranges in {metrics}"))
+            {
+                let n = range["count"].as_u64().unwrap_or(0);
+                assert!(
+                    text.contains(&format!("n={n}\n")),
+                    "n={n} on model {id}'s force spread"
+                );
+            }
             // Figure 2b: every one of the 24 test samples (fewer than the default cap).
             let scatter = value(&html, &format!("model-{id}-scatter"));
             assert!(

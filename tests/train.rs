@@ -56,10 +56,23 @@ fn train_store_list_and_evaluate_a_model() {
     let metrics = |s: &str| {
         s.lines()
             .skip_while(|l| !l.starts_with("samples"))
+            .filter(|l| !l.starts_with("wrote "))
             .collect::<Vec<_>>()
             .join("\n")
     };
     assert_eq!(metrics(&from_store), metrics(&from_file));
+    // What it printed, as a plot: predicted against true, one panel per axis (3 × 2).
+    assert!(
+        from_store.contains("wrote eval-out/air-svae-test-eval.png"),
+        "{from_store}"
+    );
+    let png = image::open(d.join("eval-out/air-svae-test-eval.png"))
+        .unwrap_or_else(|e| panic!("the eval plot: {e}"));
+    assert_eq!((png.width(), png.height()), (1260, 840));
+    assert!(
+        from_file.contains("wrote eval-out/air-test-eval.png"),
+        "{from_file}"
+    );
 
     // Same name again: refused, nothing overwritten.
     fails_with(&softtouch(d, &args), 2, "already exists");

@@ -19,6 +19,10 @@ pub struct EvalArgs {
     /// Which split: test, val, train or all.
     #[arg(long, default_value = "test")]
     pub split: String,
+    /// Folder for `MODEL-SPLIT-eval.png`, predicted against true per axis (created if
+    /// missing).
+    #[arg(long, default_value = "eval-out")]
+    pub out: std::path::PathBuf,
 }
 
 pub async fn run_eval(args: EvalArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
@@ -71,7 +75,7 @@ pub async fn run_eval(args: EvalArgs, db: &Path, out: &mut dyn Write) -> Result<
         )));
     }
     let h = &artifact.header;
-    let (metrics, _) = evaluate(&artifact.net, &h.config, &h.norm, &examples, &device);
+    let (metrics, predictions) = evaluate(&artifact.net, &h.config, &h.norm, &examples, &device);
     writeln!(
         out,
         "model {} ({} width {} latent {} input {}×{}), {dataset} {} split",
@@ -86,6 +90,51 @@ pub async fn run_eval(args: EvalArgs, db: &Path, out: &mut dyn Write) -> Result<
     .map_err(io_failure)?;
     write!(out, "{}", metrics.render()).map_err(io_failure)?;
     store.close().await;
+    // What it printed, to look at: predicted against true per axis (none for a VAE).
+    if let Some(predicted) = predictions {
+        let name = Path::new(&args.model)
+            .file_stem()
+            .map_or_else(|| args.model.clone(), |s| s.to_string_lossy().into_owned());
+        let name: String = name
+            .chars()
+            .map(|c| {
+                if c.is_alphanumeric() || "-_.".contains(c) {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        std::fs::create_dir_all(&args.out)
+            .map_err(|e| Failure::Runtime(anyhow!("{}: {e}", args.out.display())))?;
+        let png = args.out.join(format!("{name}-{}-eval.png", args.split));
+        let panels: Vec<softtouch_collector::plot::PredictedPanel<'_>> = (0..6)
+            .map(|axis| {
+                (
+                    softtouch_trainer::AXES[axis],
+                    softtouch_trainer::UNITS[axis],
+                    examples
+                        .iter()
+                        .zip(&predicted)
+                        .map(|(e, p)| (f64::from(e.label[axis]), f64::from(p[axis])))
+                        .collect(),
+                )
+            })
+            .collect();
+        softtouch_collector::plot::predicted_grid(
+            &png,
+            &format!(
+                "{}: predicted against true, {dataset} {} split ({} samples)",
+                args.model,
+                args.split,
+                examples.len()
+            ),
+            &panels,
+            3,
+        )
+        .map_err(|e| Failure::Runtime(anyhow!("{e}")))?;
+        writeln!(out, "wrote {}", png.display()).map_err(io_failure)?;
+    }
     Ok(())
 }
 

@@ -24,8 +24,8 @@ pub use heatmap::{Heatmap, diverging, heatmap};
 pub use histogram::{BinnedPanel, HistLook, HistogramPanel, bin, draw_histograms, histogram_grid};
 pub use text::{GlyphFix, glyph_pixels};
 pub use xy::{
-    Series, SeriesStyle, XyChart, XyLook, draw_xy, finite_bounds, pad, two_panel_chart, xy_chart,
-    xy_ranges,
+    PredictedPanel, Series, SeriesStyle, XyChart, XyLook, draw_xy, finite_bounds, pad,
+    predicted_grid, two_panel_chart, xy_chart, xy_ranges,
 };
 
 use plotters::style::{FontStyle, RGBColor};

@@ -249,6 +249,79 @@ pub fn xy_chart(path: &Path, chart: &XyChart<'_>, size: (u32, u32)) -> Result<()
     Ok(())
 }
 
+/// One panel of [`predicted_grid`]: the axis, its unit, `(true, predicted)` points.
+pub type PredictedPanel<'a> = (&'a str, &'a str, Vec<(f64, f64)>);
+
+/// Predicted against true, one panel per `(axis, unit, (true, predicted) points)`, in
+/// a grid of `columns`, each square around its own points with y = x drawn: what
+/// `eval` prints as R² per axis, to look at. Non-finite points are left out.
+///
+/// # Errors
+/// No panels, a panel with no finite point, the font, the drawing or the file.
+pub fn predicted_grid(
+    path: &Path,
+    title: &str,
+    panels: &[PredictedPanel<'_>],
+    columns: usize,
+) -> Result<(), PlotError> {
+    let fail = draw_err::<String>(path);
+    let invalid = |why: String| PlotError::Invalid {
+        path: path.display().to_string(),
+        why,
+    };
+    register_font()?;
+    if panels.is_empty() || columns == 0 {
+        return Err(invalid("no panels to draw".into()));
+    }
+    let rows = panels.len().div_ceil(columns);
+    let size = (420 * columns as u32, 400 * rows as u32 + 40);
+    let root = super::GlyphFix(BitMapBackend::new(path, size)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+    let root = root
+        .titled(title, (FONT_FAMILY, 22))
+        .map_err(|e| fail(e.to_string()))?;
+    let areas = root.split_evenly((rows, columns));
+    for ((axis, unit, points), area) in panels.iter().zip(areas.iter()) {
+        let finite: Vec<(f64, f64)> = points
+            .iter()
+            .copied()
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .collect();
+        let (lo, hi) = finite
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), (x, y)| {
+                (l.min(*x).min(*y), h.max(*x).max(*y))
+            });
+        if !lo.is_finite() {
+            return Err(invalid(format!("{axis}: no finite point")));
+        }
+        let (lo, hi) = pad(lo, hi);
+        let x_label = format!("true {axis}, {unit}");
+        let y_label = format!("predicted {axis}, {unit}");
+        let series = [Series {
+            label: format!("{} samples", finite.len()),
+            points: finite,
+            style: SeriesStyle::Points,
+        }];
+        let chart = XyChart {
+            title: axis,
+            x_label: &x_label,
+            y_label: &y_label,
+            series: &series,
+        };
+        // One series a panel: no legend box over the points (the title gives n).
+        let look = XyLook {
+            marker_px: 2,
+            translucent_points: true,
+            legend: (XyLook::PNG.legend.0, XyLook::PNG.legend.1, false, false),
+            ..XyLook::PNG
+        };
+        draw_xy(area, &chart, &look, (lo, hi, lo, hi), true).map_err(&fail)?;
+    }
+    root.present().map_err(|e| fail(e.to_string()))?;
+    Ok(())
+}
+
 /// Two charts over the same time axis (seconds), one above the other, in one PNG of
 /// 900×700: `top` and `bottom` are their series and y labels.
 ///

@@ -106,35 +106,40 @@ pub(crate) fn histograms(
     Ok(svg)
 }
 
-/// Grouped bars: one group per category, one bar per series (`(label, values)`, a
-/// value per category; non-finite values leave a gap), from zero to a little above
-/// the highest value: the PNG charts' drawing
+/// A series of [`bars`]: its label, a value per category and a note per category.
+pub(crate) type BarValues = (String, Vec<f64>, Vec<Option<String>>);
+
+/// Grouped bars: one group per category, one bar per series (`(label, values,
+/// notes)`, a value per category; non-finite values leave a gap; a note, such as the
+/// bar's n, written above it), from zero to a little above the highest value: the
+/// PNG charts' drawing
 /// ([`softtouch_collector::plot::draw_bars`]) in the page's look.
 pub(crate) fn bars(
     title: &str,
     x_label: &str,
     y_label: &str,
     categories: &[String],
-    series: &[(String, Vec<f64>)],
+    series: &[BarValues],
     size: Size,
 ) -> Result<String, ReportError> {
     register_font().map_err(|e| draw_err(title)(e.to_string()))?;
     let top = series
         .iter()
-        .flat_map(|(_, v)| v.iter().copied())
+        .flat_map(|(_, v, _)| v.iter().copied())
         .filter(|v| v.is_finite())
         .fold(0.0f64, f64::max);
-    let top = if top > 0.0 { top * 1.15 } else { 1.0 };
+    // Room above the highest bar for its note.
+    let top = if top > 0.0 { top * 1.25 } else { 1.0 };
     let series: Vec<BarSeries> = series
         .iter()
-        .map(|(label, values)| BarSeries {
+        .map(|(label, values, notes)| BarSeries {
             label: label.clone(),
             bars: values
                 .iter()
                 .map(|&v| Some((v, f64::NAN, f64::NAN)))
                 .collect(),
             reference: Vec::new(),
-            notes: Vec::new(),
+            notes: notes.clone(),
         })
         .collect();
     let chart = BarChart {

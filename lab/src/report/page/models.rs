@@ -188,7 +188,7 @@ pub(super) fn model_detail(m: &ModelData) -> Result<Markup, ReportError> {
         }
         h4 { "Error spread per range (Figure 2c)" }
         @if let Some((force, torque)) = spread {
-            p.note { "Standard deviation of predicted − true, pooled over the three axes, per range of |true| on the whole test split; the paper's values beside." }
+            p.note { "Standard deviation of predicted − true, pooled over the three axes, per range of |true| on the whole test split, with the number of labels n above each bar (none drawn where n < 2); the paper's values beside." }
             div.figs { (PreEscaped(force)) (PreEscaped(torque)) }
         } @else {
             p.note { "No wrench errors stored (the VAE predicts none)." }
@@ -210,12 +210,26 @@ pub(super) fn spread_figure(
     ours: &[RangeError],
     paper: &[f64],
 ) -> Result<String, ReportError> {
-    let categories: Vec<String> = ours.iter().map(range_label).collect();
+    // A range with no bar says its n under it.
+    let categories: Vec<String> = ours
+        .iter()
+        .map(|r| {
+            if r.count >= 2 {
+                range_label(r)
+            } else {
+                format!("{} n={}", range_label(r), r.count)
+            }
+        })
+        .collect();
     let series = vec![
+        // No bar where fewer than 2 labels fall in the range: its n says why.
         (
             name.to_owned(),
             ours.iter()
-                .map(|r| if r.count > 1 { r.error_std } else { f64::NAN })
+                .map(|r| if r.count >= 2 { r.error_std } else { f64::NAN })
+                .collect(),
+            ours.iter()
+                .map(|r| (r.count >= 2).then(|| format!("n={}", r.count)))
                 .collect(),
         ),
         (
@@ -223,6 +237,7 @@ pub(super) fn spread_figure(
             (0..ours.len())
                 .map(|i| paper.get(i).copied().unwrap_or(f64::NAN))
                 .collect(),
+            Vec::new(),
         ),
     ];
     svg::bars(
