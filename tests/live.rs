@@ -98,6 +98,10 @@ fn live_presses_on_the_simulated_rig_and_bench_grasp_writes_its_table() {
     assert!(peak > 1.0, "peak {peak} N");
     // Frames in order, on the 120 Hz grid.
     assert!(rows.windows(2).all(|w| w[1][0] > w[0][0]));
+    // And as a plot: the estimate beside the sensor, one panel per axis (3 × 2).
+    assert!(out.contains("wrote live.png"), "{out}");
+    let png = image::open(d.join("live.png")).expect("the live plot");
+    assert_eq!((png.width(), png.height()), (1560, 720));
 
     let out = ok(&softtouch(
         d,

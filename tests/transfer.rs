@@ -95,6 +95,10 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(f64::NAN);
     assert!((0.0..=1.0).contains(&cka), "{out}");
+    // The table as a plot: R² per axis of each model on each medium.
+    assert!(out.contains("wrote t.csv and t.png"), "{out}");
+    let png = image::open(d.join("t.png")).expect("the transfer plot");
+    assert_eq!((png.width(), png.height()), (1100, 520));
     let csv = std::fs::read_to_string(d.join("t.csv")).expect("t.csv");
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines[0], "section,model,tested_on,axis,metric,value");

@@ -172,5 +172,67 @@ pub async fn run(args: LiveArgs, db: &Path, out: &mut dyn Write) -> Result<(), F
     flushed.map_err(|e| Failure::Runtime(anyhow!("cannot write {}: {e}", args.out.display())))?;
     summary.print(out).map_err(io_failure)?;
     writeln!(out, "wrote {}", args.out.display()).map_err(io_failure)?;
+    let png = args.out.with_extension("png");
+    plot_csv(&args.out, &png, &args.model)?;
+    writeln!(out, "wrote {}", png.display()).map_err(io_failure)?;
     Ok(())
+}
+
+/// The CSV `live` wrote, as a plot: per axis, the model's estimate and the sensor over
+/// time (torques in N·mm).
+fn plot_csv(csv: &Path, png: &Path, model: &str) -> Result<(), Failure> {
+    use softtouch_collector::plot::{Series, SeriesStyle, TimePanel, time_grid};
+    let text = std::fs::read_to_string(csv)
+        .map_err(|e| Failure::Runtime(anyhow!("cannot read {}: {e}", csv.display())))?;
+    // 14 columns: t, frame, the estimate's 6 axes, the sensor's 6 (empty: none).
+    let mut est: [Vec<(f64, f64)>; 6] = Default::default();
+    let mut ft: [Vec<(f64, f64)>; 6] = Default::default();
+    for line in text.lines().skip(1) {
+        let cells: Vec<&str> = line.split(',').collect();
+        let Some(t) = cells.first().and_then(|c| c.parse::<f64>().ok()) else {
+            continue;
+        };
+        for axis in 0..6 {
+            let scale = if axis < 3 { 1.0 } else { 1000.0 };
+            let at = |i: usize| {
+                cells
+                    .get(i)
+                    .and_then(|c| c.parse::<f64>().ok())
+                    .map_or(f64::NAN, |v| v * scale)
+            };
+            est[axis].push((t, at(2 + axis)));
+            ft[axis].push((t, at(8 + axis)));
+        }
+    }
+    let names = softtouch_trainer::AXES;
+    let labels: Vec<String> = (0..6)
+        .map(|a| format!("{}, {}", names[a], softtouch_trainer::UNITS[a]))
+        .collect();
+    let panels: Vec<TimePanel<'_>> = (0..6)
+        .map(|a| {
+            (
+                names[a],
+                labels[a].as_str(),
+                vec![
+                    Series {
+                        label: "model".into(),
+                        points: std::mem::take(&mut est[a]),
+                        style: SeriesStyle::Line,
+                    },
+                    Series {
+                        label: "sensor".into(),
+                        points: std::mem::take(&mut ft[a]),
+                        style: SeriesStyle::Line,
+                    },
+                ],
+            )
+        })
+        .collect();
+    time_grid(
+        png,
+        &format!("live: model `{model}` (blue) beside the force/torque sensor (orange)"),
+        &panels,
+        3,
+    )
+    .map_err(|e| Failure::Runtime(anyhow!("{e}")))
 }

@@ -282,12 +282,59 @@ pub async fn run_transfer(
     }
     std::fs::write(&args.out, csv)
         .map_err(|e| Failure::Runtime(anyhow!("cannot write {}: {e}", args.out.display())))?;
+    let png = args.out.with_extension("png");
+    plot_r2(&png, &scored)?;
     writeln!(
         out,
-        "wrote {} in {:.1} s",
+        "wrote {} and {} in {:.1} s",
         args.out.display(),
+        png.display(),
         started.elapsed().as_secs_f64()
     )
     .map_err(w)?;
     Ok(())
+}
+
+/// The table as a plot: R² per axis of every model on each medium's test split.
+fn plot_r2(png: &Path, scored: &[Scored]) -> Result<(), Failure> {
+    use softtouch_collector::plot::{BarChart, BarSeries, bar_chart};
+    let groups: Vec<String> = AXES.iter().map(|a| a.name.to_owned()).collect();
+    let series: Vec<BarSeries> = scored
+        .iter()
+        .filter_map(|s| {
+            let r2 = s.metrics.r2.as_ref()?;
+            Some(BarSeries {
+                label: format!("{} on {}", s.model, s.tested_on),
+                bars: r2
+                    .iter()
+                    .map(|a| Some((a.r2, f64::NAN, f64::NAN)))
+                    .collect(),
+                reference: Vec::new(),
+                notes: Vec::new(),
+            })
+        })
+        .collect();
+    if series.is_empty() {
+        return Ok(());
+    }
+    // A model that transfers badly has R² below 0: the axis shows how far.
+    let lowest = series
+        .iter()
+        .flat_map(|s| s.bars.iter().flatten().map(|b| b.0))
+        .filter(|v| v.is_finite())
+        .fold(0.0_f64, f64::min);
+    bar_chart(
+        png,
+        &BarChart {
+            title: "Land to water: test R² per axis",
+            x_label: Some("axis"),
+            y_label: "R², dimensionless",
+            groups: &groups,
+            series: &series,
+            y_range: (lowest.max(-5.0) - 0.05, 1.45),
+            y_labels_up_to: Some(1.0),
+        },
+        (1100, 520),
+    )
+    .map_err(|e| Failure::Runtime(anyhow!("{e}")))
 }

@@ -151,7 +151,8 @@ pub fn draw_bars<DB: DrawingBackend>(
             if let Some((v, lo, hi)) = bar.filter(|b| b.0.is_finite()) {
                 let drawn = ctx
                     .draw_series(std::iter::once(Rectangle::new(
-                        [(x0, y0), (x1, v.clamp(y0, y1))],
+                        // From zero (a negative value hangs below it).
+                        [(x0, 0.0_f64.clamp(y0, y1)), (x1, v.clamp(y0, y1))],
                         colour.filled(),
                     )))
                     .map_err(e)?;

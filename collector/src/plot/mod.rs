@@ -24,8 +24,8 @@ pub use heatmap::{Heatmap, diverging, heatmap};
 pub use histogram::{BinnedPanel, HistLook, HistogramPanel, bin, draw_histograms, histogram_grid};
 pub use text::{GlyphFix, glyph_pixels};
 pub use xy::{
-    PredictedPanel, Series, SeriesStyle, XyChart, XyLook, draw_xy, finite_bounds, pad,
-    predicted_grid, two_panel_chart, xy_chart, xy_ranges,
+    PredictedPanel, Series, SeriesStyle, TimePanel, XyChart, XyLook, draw_xy, finite_bounds, pad,
+    predicted_grid, time_grid, two_panel_chart, xy_chart, xy_ranges,
 };
 
 use plotters::style::{FontStyle, RGBColor};
@@ -97,6 +97,10 @@ pub fn format_tick_in(v: f64, span: f64) -> String {
     let a = v.abs();
     let step = span / 10.0;
     let usable = step.is_finite() && step > 0.0;
+    // A tick at zero that the axis arithmetic left at 1e-17 reads "0".
+    if usable && a < step * 1e-9 {
+        return "0".to_owned();
+    }
     if a != 0.0 && a < 0.01 {
         let digits = if usable {
             (a / step).log10().ceil().clamp(1.0, 6.0) as usize

@@ -18,6 +18,11 @@ fn ticks_are_short() {
         .map(|v| format_tick_in(v, f64::INFINITY))
         .collect();
     assert_eq!(got, ["-5", "0.5", "2.25", "0", "-1.0e-4", "150", "12.5"]);
+    // A zero tick the axis arithmetic left at -5.6e-17 on a 0.4-wide axis is 0, and a
+    // real small value on a small axis keeps its digits.
+    assert_eq!(format_tick_in(-5.6e-17, 0.4), "0");
+    assert_eq!(format_tick_in(-2.8e-17, 0.6), "0");
+    assert_eq!(format_tick_in(0.002, 0.01), "2.0e-3");
 }
 
 #[test]

@@ -62,8 +62,9 @@ pub struct XyLook {
     pub swatches: bool,
     /// Points of a points-only series drawn translucent (a dense scatter).
     pub translucent_points: bool,
-    /// Legend text size, px; its box's border darkness (0–1); whether it sits at the
-    /// lower right (else plotters' default); whether a single series gets one.
+    /// Legend text size, px (0: no legend); its box's border darkness (0–1); whether it
+    /// sits at the lower right (else plotters' default); whether a single series gets
+    /// one.
     pub legend: (u32, f64, bool, bool),
 }
 
@@ -219,7 +220,8 @@ pub fn draw_xy<DB: DrawingBackend>(
         }
     }
     let (legend_px, border, lower_right, single) = look.legend;
-    if single || chart.series.len() > 1 {
+    // A legend text size of 0: no legend (the caller says what the colours are).
+    if legend_px > 0 && (single || chart.series.len() > 1) {
         let mut labels = ctx.configure_series_labels();
         labels
             .background_style(WHITE.mix(0.85))
@@ -317,6 +319,58 @@ pub fn predicted_grid(
             ..XyLook::PNG
         };
         draw_xy(area, &chart, &look, (lo, hi, lo, hi), true).map_err(&fail)?;
+    }
+    root.present().map_err(|e| fail(e.to_string()))?;
+    Ok(())
+}
+
+/// One panel of [`time_grid`]: its title, y label (with the unit) and series.
+pub type TimePanel<'a> = (&'a str, &'a str, Vec<Series>);
+
+/// Series against time (s), one panel per [`TimePanel`], in a grid of `columns`, each
+/// with its own y range and no legend (the series take the palette's colours in
+/// order: say which is which in `title`): what `live` prints, the estimate beside the
+/// sensor per axis.
+/// A panel with no finite point is drawn empty (its axes at [0, 1]).
+///
+/// # Errors
+/// No panels, the font, the drawing or the file.
+pub fn time_grid(
+    path: &Path,
+    title: &str,
+    panels: &[TimePanel<'_>],
+    columns: usize,
+) -> Result<(), PlotError> {
+    let fail = draw_err::<String>(path);
+    register_font()?;
+    if panels.is_empty() || columns == 0 {
+        return Err(PlotError::Invalid {
+            path: path.display().to_string(),
+            why: "no panels to draw".into(),
+        });
+    }
+    let rows = panels.len().div_ceil(columns);
+    let size = (520 * columns as u32, 340 * rows as u32 + 40);
+    let root = super::GlyphFix(BitMapBackend::new(path, size)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+    let root = root
+        .titled(title, (FONT_FAMILY, 22))
+        .map_err(|e| fail(e.to_string()))?;
+    let areas = root.split_evenly((rows, columns));
+    for ((name, y_label, series), area) in panels.iter().zip(areas.iter()) {
+        let ranges = xy_ranges(series).unwrap_or((0.0, 1.0, 0.0, 1.0));
+        let chart = XyChart {
+            title: name,
+            x_label: "time (s)",
+            y_label,
+            series,
+        };
+        // No legend box over the traces: the title names the colours.
+        let look = XyLook {
+            legend: (0, 1.0, false, false),
+            ..XyLook::PNG
+        };
+        draw_xy(area, &chart, &look, ranges, false).map_err(&fail)?;
     }
     root.present().map_err(|e| fail(e.to_string()))?;
     Ok(())
