@@ -148,8 +148,15 @@ pub struct TrialPlan {
     pub hold_s: f64,
     /// Open loop: every object closed to this opening, mm, instead of its own width.
     pub open_width_mm: Option<f64>,
-    /// The pre-grasp opening: this much wider than the grasp, mm.
+    /// The pre-grasp opening's margin, mm: with `pregrasp_from_touch`, this much short
+    /// of the calibrated first touch; else this much wider than the grasp width.
     pub pregrasp_margin_mm: f64,
+    /// The closed loop starts from the stiffness calibration's first touch less the
+    /// margin (every session started by this build); `false` in sessions stored
+    /// before, which keep the grasp width plus the margin, so a resume runs as the
+    /// session began.
+    #[serde(default)]
+    pub pregrasp_from_touch: bool,
     /// A rig's session: what its rig file chose (absent: a simulated session).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rig: Option<RigPlan>,
@@ -189,6 +196,7 @@ impl Default for TrialPlan {
             hold_s: 2.0,
             open_width_mm: None,
             pregrasp_margin_mm: 6.0,
+            pregrasp_from_touch: true,
             rig: None,
         }
     }
@@ -722,6 +730,24 @@ mod tests {
             assert!(e.is_bad_input(), "{e}");
             assert!(e.to_string().starts_with(flag), "{e}");
         }
+    }
+
+    #[test]
+    fn a_session_stored_before_the_calibrated_pregrasp_keeps_its_own_on_resume() {
+        let mut json = serde_json::to_value(TrialPlan::default()).expect("encodes");
+        assert_eq!(
+            json["pregrasp_from_touch"], true,
+            "new sessions start from the touch"
+        );
+        json.as_object_mut()
+            .expect("an object")
+            .remove("pregrasp_from_touch");
+        let old: TrialPlan = serde_json::from_value(json).expect("an older session reads");
+        assert!(
+            !old.pregrasp_from_touch,
+            "it keeps the grasp width plus the margin"
+        );
+        assert!(old.rig.is_none());
     }
 
     #[test]

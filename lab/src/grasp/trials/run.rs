@@ -126,7 +126,14 @@ pub async fn run_trials(
         let trial = TrialConfig {
             mode: p.mode,
             grasp_position: position_for_opening(grasp_mm),
-            pregrasp_position: position_for_opening(grasp_mm + plan.pregrasp_margin_mm),
+            pregrasp_position: if plan.pregrasp_from_touch {
+                // The margin short of where the finger's own estimate first felt it.
+                let stroke = Stroke::default();
+                let margin = (plan.pregrasp_margin_mm / stroke.mm_per_count).round() as i64;
+                stroke.clamp(i64::from(setup.calibration.touch()) - margin)
+            } else {
+                position_for_opening(grasp_mm + plan.pregrasp_margin_mm)
+            },
             target_n: plan.target_n,
             confirm: Duration::from_secs_f64(plan.confirm_s),
             dither_n,
