@@ -17,6 +17,10 @@
 //! a message when missing; with `CI` set a missing socat fails the test).
 
 mod common;
+#[path = "../drivers/tests/common/pty.rs"]
+mod pty;
+use pty::pty_pair;
+
 use common::{tempdir, tiny_model};
 
 use std::io::Write;
@@ -44,63 +48,6 @@ use softtouch_trainer::Predictor;
 
 const MODEL: &str = "air-svae";
 const OBJECT: &str = "cylinder";
-
-fn ci() -> bool {
-    std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "0" && !v.eq_ignore_ascii_case("false"))
-}
-
-/// `socat -d -d pty,raw,echo=0 pty,raw,echo=0`; dropping it kills socat.
-struct PtyPair {
-    child: std::process::Child,
-    a: String,
-    b: String,
-}
-
-impl Drop for PtyPair {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn pty_pair() -> Option<PtyPair> {
-    use std::io::BufRead;
-    let have = std::process::Command::new("socat")
-        .arg("-V")
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if !have {
-        assert!(
-            !ci(),
-            "socat is not installed but CI is set (apt-get install socat)"
-        );
-        eprintln!("SKIPPED: socat is not installed (apt-get install socat)");
-        return None;
-    }
-    let mut child = std::process::Command::new("socat")
-        .args(["-d", "-d", "pty,raw,echo=0", "pty,raw,echo=0"])
-        .stderr(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::null())
-        .spawn()
-        .expect("spawn socat");
-    let stderr = child.stderr.take().expect("socat stderr");
-    let mut lines = std::io::BufReader::new(stderr).lines();
-    let mut paths = Vec::new();
-    while paths.len() < 2 {
-        let line = lines.next().expect("socat reports its ptys").expect("read");
-        if let Some(i) = line.find("PTY is ") {
-            paths.push(line[i + 7..].trim().to_string());
-        }
-    }
-    std::thread::spawn(move || for _ in lines {});
-    Some(PtyPair {
-        child,
-        a: paths[0].clone(),
-        b: paths[1].clone(),
-    })
-}
 
 /// What the operator's output shows, shared with the test.
 #[derive(Clone, Default)]

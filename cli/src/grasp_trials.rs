@@ -180,6 +180,80 @@ fn fmt_duration(s: f64) -> String {
     }
 }
 
+/// The session's first line (id, model, seed, trials planned, stored and to run) and
+/// its setup lines, before any trial runs.
+fn print_header(
+    out: &mut dyn Write,
+    what: &str,
+    (id, model, sha256, seed): (i64, &str, &str, u64),
+    (planned, todo): (usize, usize),
+    setup: &[String],
+) -> Result<(), Failure> {
+    let w = io_failure;
+    writeln!(
+        out,
+        "{what} {id}: model `{model}` (sha256 {}), seed {seed}, {planned} trials planned, {} stored, {todo} to run",
+        &sha256[..12.min(sha256.len())],
+        planned - todo,
+    )
+    .map_err(w)?;
+    for line in setup {
+        writeln!(out, "{line}").map_err(w)?;
+    }
+    Ok(())
+}
+
+/// The rig's Franka, Hand-E and finger camera for `grasp VERB --rig`; a rig whose
+/// gripper or arm is simulated is refused, naming what to run instead.
+///
+/// # Errors
+/// A simulated device (bad input), a device that does not open.
+pub(super) async fn open_rig_devices(
+    rig: &softtouch_schemas::RigConfig,
+    rig_path: &Path,
+    verb: &str,
+) -> Result<softtouch_lab::grasp::trials::rig::RigTrialDevices, Failure> {
+    if !softtouch_lab::grasp::devices::has_real_gripper(rig) {
+        return Err(super::grasp_loop::bad(format!(
+            "--rig {}: its gripper is simulated: run the simulated {verb} without --rig",
+            rig_path.display()
+        )));
+    }
+    let clock: std::sync::Arc<dyn softtouch_drivers::Clock> =
+        std::sync::Arc::new(softtouch_drivers::TokioClock::new());
+    let arm = softtouch_drivers::open::real_arm(&rig.arm, clock.clone())
+        .await
+        .map_err(|e| Failure::Runtime(anyhow::anyhow!("arm: {e}")))?
+        .ok_or_else(|| {
+            super::grasp_loop::bad(format!(
+                "--rig {}: its arm is simulated: expected arm.driver = \"franka\"",
+                rig_path.display()
+            ))
+        })?;
+    let grasp = softtouch_lab::grasp::devices::real_grasp_devices(rig, clock.clone())
+        .await
+        .map_err(|e| Failure::Runtime(anyhow::anyhow!("{e}")))?;
+    Ok(softtouch_lab::grasp::trials::rig::RigTrialDevices {
+        arm: std::sync::Arc::new(tokio::sync::Mutex::new(arm)),
+        gripper: grasp.gripper,
+        camera: grasp.camera,
+        clock,
+    })
+}
+
+/// The operator at this terminal: answers on stdin, questions on stderr.
+pub(super) fn terminal_operator(
+    confirm_verdicts: bool,
+) -> softtouch_lab::grasp::trials::rig::Operator {
+    softtouch_lab::grasp::trials::rig::Operator {
+        input: softtouch_grasp::OperatorInput::from_reader(std::io::BufReader::new(
+            std::io::stdin(),
+        )),
+        output: Box::new(std::io::stderr()),
+        confirm_verdicts,
+    }
+}
+
 /// Run `grasp trials`.
 pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
     if let Some(rig) = args.rig.clone() {
@@ -199,21 +273,18 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
     let progress = session.progress(&store).await?;
     let todo = progress.todo;
     let w = io_failure;
-    writeln!(
+    print_header(
         out,
-        "grasp session {}: model `{}` (sha256 {}), seed {}, {} trials planned, {} stored, {} to run",
-        session.id,
-        session.model,
-        &session.model_sha256[..12],
-        session.seed,
-        progress.planned.len(),
-        progress.planned.len() - todo.len(),
-        todo.len()
-    )
-    .map_err(w)?;
-    for line in session.setup_lines() {
-        writeln!(out, "{line}").map_err(w)?;
-    }
+        "grasp session",
+        (
+            session.id,
+            &session.model,
+            &session.model_sha256,
+            session.seed,
+        ),
+        (progress.planned.len(), todo.len()),
+        &session.setup_lines(),
+    )?;
 
     let bar = softtouch_collector::progress::progress_bar(todo.len() as u64, true, "trials");
     let started = Instant::now();
@@ -315,7 +386,7 @@ async fn run_on_rig(
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
     use softtouch_lab::grasp::trials::rig::{
-        Operator, RigTrialDevices, resume_rig_session, run_rig_trials, start_rig_session,
+        resume_rig_session, run_rig_trials, start_rig_session,
     };
     let rig = softtouch_collector::configs::resolve(Some(rig_path), None)?.rig;
     let store = open_existing(db).await?;
@@ -330,56 +401,22 @@ async fn run_on_rig(
     let progress = session.progress(&store).await?;
     let todo = progress.todo;
     let w = io_failure;
-    writeln!(
+    print_header(
         out,
-        "rig grasp session {}: model `{}` (sha256 {}), seed {}, {} trials planned, {} stored, {} to run",
-        session.id,
-        session.model,
-        &session.model_sha256[..12],
-        session.seed,
-        progress.planned.len(),
-        progress.planned.len() - todo.len(),
-        todo.len()
-    )
-    .map_err(w)?;
-    for line in session.setup_lines() {
-        writeln!(out, "{line}").map_err(w)?;
-    }
+        "rig grasp session",
+        (
+            session.id,
+            &session.model,
+            &session.model_sha256,
+            session.seed,
+        ),
+        (progress.planned.len(), todo.len()),
+        &session.setup_lines(),
+    )?;
     out.flush().map_err(w)?;
     if !todo.is_empty() {
-        if !softtouch_lab::grasp::devices::has_real_gripper(&rig) {
-            return Err(super::grasp_loop::bad(format!(
-                "--rig {}: its gripper is simulated: run the simulated trials without --rig",
-                rig_path.display()
-            )));
-        }
-        let clock: std::sync::Arc<dyn softtouch_drivers::Clock> =
-            std::sync::Arc::new(softtouch_drivers::TokioClock::new());
-        let arm = softtouch_drivers::open::real_arm(&rig.arm, clock.clone())
-            .await
-            .map_err(|e| Failure::Runtime(anyhow::anyhow!("arm: {e}")))?
-            .ok_or_else(|| {
-                super::grasp_loop::bad(format!(
-                    "--rig {}: its arm is simulated: expected arm.driver = \"franka\"",
-                    rig_path.display()
-                ))
-            })?;
-        let grasp = softtouch_lab::grasp::devices::real_grasp_devices(&rig, clock.clone())
-            .await
-            .map_err(|e| Failure::Runtime(anyhow::anyhow!("{e}")))?;
-        let mut devices = RigTrialDevices {
-            arm: std::sync::Arc::new(tokio::sync::Mutex::new(arm)),
-            gripper: grasp.gripper,
-            camera: grasp.camera,
-            clock,
-        };
-        let mut operator = Operator {
-            input: softtouch_grasp::OperatorInput::from_reader(std::io::BufReader::new(
-                std::io::stdin(),
-            )),
-            output: Box::new(std::io::stderr()),
-            confirm_verdicts: !args.no_confirm,
-        };
+        let mut devices = open_rig_devices(&rig, rig_path, "trials").await?;
+        let mut operator = terminal_operator(!args.no_confirm);
         let mut on_trial =
             |t: &softtouch_lab::grasp::trials::TrialDone| -> Result<(), TrialsError> {
                 let row = &t.row;

@@ -327,8 +327,8 @@ async fn twist_rig(
     db: &Path,
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
+    use softtouch_lab::grasp::trials::rig::object_setup_on_rig;
     use softtouch_lab::grasp::trials::rig::twist::{RigTwistSettings, twist_on_rig};
-    use softtouch_lab::grasp::trials::rig::{Operator, RigTrialDevices, object_setup_on_rig};
     let c = &args.common;
     let wrist = WristConfig {
         gain_rad_per_nm_s: args.wrist_gain,
@@ -348,36 +348,8 @@ async fn twist_rig(
         .grasp
         .clone()
         .ok_or_else(|| bad("--rig: no [grasp] section".into()))?;
-    if !softtouch_lab::grasp::devices::has_real_gripper(&rig) {
-        return Err(bad(format!(
-            "--rig {}: its gripper is simulated: run the simulated twist without --rig",
-            rig_path.display()
-        )));
-    }
-    let clock: std::sync::Arc<dyn softtouch_drivers::Clock> =
-        std::sync::Arc::new(softtouch_drivers::TokioClock::new());
-    let arm = softtouch_drivers::open::real_arm(&rig.arm, clock.clone())
-        .await
-        .map_err(|e| Failure::Runtime(anyhow::anyhow!("arm: {e}")))?
-        .ok_or_else(|| {
-            bad("--rig: its arm is simulated: expected arm.driver = \"franka\"".into())
-        })?;
-    let devices = softtouch_lab::grasp::devices::real_grasp_devices(&rig, clock.clone())
-        .await
-        .map_err(|e| Failure::Runtime(anyhow::anyhow!("{e}")))?;
-    let mut devices = RigTrialDevices {
-        arm: std::sync::Arc::new(tokio::sync::Mutex::new(arm)),
-        gripper: devices.gripper,
-        camera: devices.camera,
-        clock,
-    };
-    let mut operator = Operator {
-        input: softtouch_grasp::OperatorInput::from_reader(std::io::BufReader::new(
-            std::io::stdin(),
-        )),
-        output: Box::new(std::io::stderr()),
-        confirm_verdicts: false,
-    };
+    let mut devices = super::grasp_trials::open_rig_devices(&rig, rig_path, "twist").await?;
+    let mut operator = super::grasp_trials::terminal_operator(false);
     let signals = super::signals::SignalWatch::start();
     let w = io_failure;
     let mut rows = String::from("wrist_loop,t_s,estimate_n,torque_z_nmm,wrist_target_deg\n");

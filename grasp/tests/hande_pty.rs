@@ -7,6 +7,10 @@
 //! Needs `socat` (skipped with a message when missing; with `CI` set a missing socat
 //! fails the test).
 
+#[path = "../../drivers/tests/common/pty.rs"]
+mod pty;
+use pty::pty_pair;
+
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
@@ -26,70 +30,6 @@ use softtouch_trainer::{
 
 const ROD: &str = "circle-20";
 const DIAMETER_M: f64 = 0.02;
-
-fn ci() -> bool {
-    std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "0" && !v.eq_ignore_ascii_case("false"))
-}
-
-fn have_socat() -> bool {
-    std::process::Command::new("socat")
-        .arg("-V")
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success())
-}
-
-/// `socat -d -d pty,raw,echo=0 pty,raw,echo=0`; dropping it kills socat.
-#[derive(Debug)]
-struct PtyPair {
-    child: std::process::Child,
-    a: String,
-    b: String,
-}
-
-impl Drop for PtyPair {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn pty_pair() -> Option<PtyPair> {
-    use std::io::BufRead;
-    if !have_socat() {
-        assert!(
-            !ci(),
-            "socat is not installed but CI is set: the pty test must run in CI (apt-get install socat)"
-        );
-        eprintln!("SKIPPED: socat is not installed (apt-get install socat); the pty test needs it");
-        return None;
-    }
-    let mut child = std::process::Command::new("socat")
-        .args(["-d", "-d", "pty,raw,echo=0", "pty,raw,echo=0"])
-        .stderr(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::null())
-        .spawn()
-        .expect("spawn socat");
-    let stderr = child.stderr.take().expect("socat stderr");
-    let mut lines = std::io::BufReader::new(stderr).lines();
-    let mut paths = Vec::new();
-    while paths.len() < 2 {
-        let line = lines
-            .next()
-            .expect("socat reports its ptys")
-            .expect("read socat stderr");
-        if let Some(i) = line.find("PTY is ") {
-            paths.push(line[i + 7..].trim().to_string());
-        }
-    }
-    std::thread::spawn(move || for _ in lines {});
-    Some(PtyPair {
-        child,
-        a: paths[0].clone(),
-        b: paths[1].clone(),
-    })
-}
 
 /// A tiny SVAE trained on 240 presses of the 20 mm rod (16×16, width 4; a few seconds).
 fn predictor() -> Predictor {

@@ -120,6 +120,26 @@ fn int(what: &'static str, v: i64) -> Result<u32, StoreError> {
     })
 }
 
+/// The columns [`session_row`] reads, in its order.
+macro_rules! session_columns {
+    () => {
+        "session_id, created_at, model, seed, scenes_json, config_json, model_sha256"
+    };
+}
+
+/// A session row as [`session_columns`] selects it.
+fn session_row(r: &sqlx::sqlite::SqliteRow) -> GraspSessionRow {
+    GraspSessionRow {
+        session_id: r.get(0),
+        created_at: r.get(1),
+        model: r.get(2),
+        seed: seed_from_sql(r.get(3)),
+        scenes_json: r.get(4),
+        config_json: r.get(5),
+        model_sha256: r.get(6),
+    }
+}
+
 impl Store {
     /// Creates a grasp session; returns its id.
     ///
@@ -158,22 +178,16 @@ impl Store {
         &self,
         session_id: i64,
     ) -> Result<Option<GraspSessionRow>, StoreError> {
-        let row = sqlx::query(
-            "SELECT session_id, created_at, model, seed, scenes_json, config_json, model_sha256 FROM grasp_sessions WHERE session_id = ?",
-        )
+        let row = sqlx::query(concat!(
+            "SELECT ",
+            session_columns!(),
+            " FROM grasp_sessions WHERE session_id = ?"
+        ))
         .bind(session_id)
         .fetch_optional(self.pool())
         .await
         .map_err(query_err("reading a grasp session"))?;
-        Ok(row.map(|r| GraspSessionRow {
-            session_id: r.get(0),
-            created_at: r.get(1),
-            model: r.get(2),
-            model_sha256: r.get(6),
-            seed: seed_from_sql(r.get(3)),
-            scenes_json: r.get(4),
-            config_json: r.get(5),
-        }))
+        Ok(row.as_ref().map(session_row))
     }
 
     /// The keys of a session's stored trials.
@@ -394,24 +408,15 @@ pub(crate) async fn trace_of(
 pub(crate) async fn sessions_of(
     pool: &sqlx::SqlitePool,
 ) -> Result<Vec<GraspSessionRow>, StoreError> {
-    let rows = sqlx::query(
-        "SELECT session_id, created_at, model, seed, scenes_json, config_json, model_sha256 FROM grasp_sessions ORDER BY session_id",
-    )
+    let rows = sqlx::query(concat!(
+        "SELECT ",
+        session_columns!(),
+        " FROM grasp_sessions ORDER BY session_id"
+    ))
     .fetch_all(pool)
     .await
     .map_err(query_err("reading grasp sessions"))?;
-    Ok(rows
-        .iter()
-        .map(|r| GraspSessionRow {
-            session_id: r.get(0),
-            created_at: r.get(1),
-            model: r.get(2),
-            model_sha256: r.get(6),
-            seed: seed_from_sql(r.get(3)),
-            scenes_json: r.get(4),
-            config_json: r.get(5),
-        })
-        .collect())
+    Ok(rows.iter().map(session_row).collect())
 }
 
 #[cfg(test)]

@@ -251,6 +251,36 @@ pub fn xy_chart(path: &Path, chart: &XyChart<'_>, size: (u32, u32)) -> Result<()
     Ok(())
 }
 
+/// A PNG of `panels` cells of `cell_px` in rows of `columns` under `title`: the
+/// titled area (to present once drawn) and its cells, in reading order.
+type Grid<'a> = DrawingArea<super::GlyphFix<BitMapBackend<'a>>, Shift>;
+
+fn titled_grid<'a>(
+    path: &'a Path,
+    title: &str,
+    panels: usize,
+    columns: usize,
+    cell_px: (u32, u32),
+) -> Result<(Grid<'a>, Vec<Grid<'a>>), PlotError> {
+    let fail = draw_err::<String>(path);
+    register_font()?;
+    if panels == 0 || columns == 0 {
+        return Err(PlotError::Invalid {
+            path: path.display().to_string(),
+            why: "no panels to draw".into(),
+        });
+    }
+    let rows = panels.div_ceil(columns);
+    let size = (cell_px.0 * columns as u32, cell_px.1 * rows as u32 + 40);
+    let root = super::GlyphFix(BitMapBackend::new(path, size)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+    let root = root
+        .titled(title, (FONT_FAMILY, 22))
+        .map_err(|e| fail(e.to_string()))?;
+    let areas = root.split_evenly((rows, columns));
+    Ok((root, areas))
+}
+
 /// One panel of [`predicted_grid`]: the axis, its unit, `(true, predicted)` points.
 pub type PredictedPanel<'a> = (&'a str, &'a str, Vec<(f64, f64)>);
 
@@ -271,18 +301,7 @@ pub fn predicted_grid(
         path: path.display().to_string(),
         why,
     };
-    register_font()?;
-    if panels.is_empty() || columns == 0 {
-        return Err(invalid("no panels to draw".into()));
-    }
-    let rows = panels.len().div_ceil(columns);
-    let size = (420 * columns as u32, 400 * rows as u32 + 40);
-    let root = super::GlyphFix(BitMapBackend::new(path, size)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
-    let root = root
-        .titled(title, (FONT_FAMILY, 22))
-        .map_err(|e| fail(e.to_string()))?;
-    let areas = root.split_evenly((rows, columns));
+    let (root, areas) = titled_grid(path, title, panels.len(), columns, (420, 400))?;
     for ((axis, unit, points), area) in panels.iter().zip(areas.iter()) {
         let finite: Vec<(f64, f64)> = points
             .iter()
@@ -342,21 +361,7 @@ pub fn time_grid(
     columns: usize,
 ) -> Result<(), PlotError> {
     let fail = draw_err::<String>(path);
-    register_font()?;
-    if panels.is_empty() || columns == 0 {
-        return Err(PlotError::Invalid {
-            path: path.display().to_string(),
-            why: "no panels to draw".into(),
-        });
-    }
-    let rows = panels.len().div_ceil(columns);
-    let size = (520 * columns as u32, 340 * rows as u32 + 40);
-    let root = super::GlyphFix(BitMapBackend::new(path, size)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
-    let root = root
-        .titled(title, (FONT_FAMILY, 22))
-        .map_err(|e| fail(e.to_string()))?;
-    let areas = root.split_evenly((rows, columns));
+    let (root, areas) = titled_grid(path, title, panels.len(), columns, (520, 340))?;
     for ((name, y_label, series), area) in panels.iter().zip(areas.iter()) {
         let ranges = xy_ranges(series).unwrap_or((0.0, 1.0, 0.0, 1.0));
         let chart = XyChart {

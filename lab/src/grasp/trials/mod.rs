@@ -541,17 +541,16 @@ pub async fn start_session(
     })
 }
 
-/// Stored session `id`, on its stored settings. `model`, when given, must be the
-/// session's; the model must not have changed under its name since.
+/// Stored session `id` and its settings, for a resume on the simulator or a rig:
+/// `model`, when given, must be the session's.
 ///
 /// # Errors
-/// No such session, another model, a changed model, stored settings that do not
-/// read back, the store.
-pub async fn resume_session(
+/// No such session, another model, stored settings that do not read back, the store.
+pub(crate) async fn stored_session(
     store: &Store,
     id: i64,
     model: Option<&str>,
-) -> Result<Session, TrialsError> {
+) -> Result<(crate::store::GraspSessionRow, TrialPlan), TrialsError> {
     let s = store.grasp_session(id).await?.ok_or_else(|| {
         invalid(format!(
             "--resume {id}: no grasp session {id} in {}",
@@ -571,6 +570,46 @@ pub async fn resume_session(
             "grasp session {id}: stored settings do not read back: {e}"
         ))
     })?;
+    Ok((s, plan))
+}
+
+/// The artifact of a stored session's model and its sha256, refused if the model
+/// changed under its name since the session started.
+///
+/// # Errors
+/// A changed or missing model, the store.
+pub(crate) async fn unchanged_model(
+    store: &Store,
+    s: &crate::store::GraspSessionRow,
+) -> Result<(Vec<u8>, String), TrialsError> {
+    let model_bytes = crate::models::force_artifact(store, &s.model).await?;
+    let now = sha256_hex(&model_bytes);
+    if let Some(then) = &s.model_sha256
+        && *then != now
+    {
+        return Err(invalid(format!(
+            "--resume {}: model `{}` has changed since the session started (sha256 {} then, {} now); start a new session",
+            s.session_id,
+            s.model,
+            &then[..then.len().min(12)],
+            &now[..12]
+        )));
+    }
+    Ok((model_bytes, now))
+}
+
+/// Stored session `id`, on its stored settings. `model`, when given, must be the
+/// session's; the model must not have changed under its name since.
+///
+/// # Errors
+/// No such session, another model, a changed model, stored settings that do not
+/// read back, the store.
+pub async fn resume_session(
+    store: &Store,
+    id: i64,
+    model: Option<&str>,
+) -> Result<Session, TrialsError> {
+    let (s, plan) = stored_session(store, id, model).await?;
     if plan.rig.is_some() {
         return Err(invalid(format!(
             "--resume {id}: session {id} ran on a rig: resume it with --rig FILE --resume {id}"
@@ -581,18 +620,7 @@ pub async fn resume_session(
             "grasp session {id}: stored scenes do not read back: {e}"
         ))
     })?;
-    let model_bytes = crate::models::force_artifact(store, &s.model).await?;
-    let now = sha256_hex(&model_bytes);
-    if let Some(then) = &s.model_sha256
-        && *then != now
-    {
-        return Err(invalid(format!(
-            "--resume {id}: model `{}` has changed since the session started (sha256 {} then, {} now); start a new session",
-            s.model,
-            &then[..then.len().min(12)],
-            &now[..12]
-        )));
-    }
+    let (model_bytes, now) = unchanged_model(store, &s).await?;
     let objects = objects_of(&plan, &scenes)?;
     let pairs: Vec<(u32, String)> = (0..scenes.len())
         .flat_map(|si| {

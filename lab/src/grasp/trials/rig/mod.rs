@@ -42,7 +42,7 @@ use super::{
 };
 use crate::grasp::calibration::{Calibrated, rig_setup_hash};
 use crate::store::{GraspTrace, GraspTrialRow, Store};
-use moves::{Holding, Moves, arm_to, end_safe, open_fingers, or_stop, set_down, until_stop};
+use moves::{Holding, Moves, arm_to, exit_safe, open_fingers, or_stop, set_down, until_stop};
 use softtouch_collector::dataset::export::sha256_hex;
 
 /// The devices of a rig's trials.
@@ -331,25 +331,7 @@ pub async fn resume_rig_session(
     model: Option<&str>,
     rig: &RigConfig,
 ) -> Result<RigSession, TrialsError> {
-    let s = store.grasp_session(id).await?.ok_or_else(|| {
-        invalid(format!(
-            "--resume {id}: no grasp session {id} in {}",
-            store.path().display()
-        ))
-    })?;
-    if let Some(m) = model
-        && m != s.model
-    {
-        return Err(invalid(format!(
-            "--model {m}: session {id} runs model `{}` (leave --model out to resume it)",
-            s.model
-        )));
-    }
-    let plan: TrialPlan = serde_json::from_str(&s.config_json).map_err(|e| {
-        TrialsError::Failed(format!(
-            "grasp session {id}: stored settings do not read back: {e}"
-        ))
-    })?;
+    let (s, plan) = super::stored_session(store, id, model).await?;
     let Some(stored) = plan.rig.as_ref() else {
         return Err(invalid(format!(
             "--resume {id}: session {id} ran on the simulator: resume it without --rig"
@@ -368,16 +350,7 @@ pub async fn resume_rig_session(
             "--rig: the rig file's [grasp] or [workspace] changed since session {id} started: its trials must run on the same poses; start a new session"
         )));
     }
-    let model_bytes = crate::models::force_artifact(store, &s.model).await?;
-    let model_sha256 = sha256_hex(&model_bytes);
-    if let Some(then) = &s.model_sha256
-        && *then != model_sha256
-    {
-        return Err(invalid(format!(
-            "--resume {id}: model `{}` has changed since the session started; start a new session",
-            s.model
-        )));
-    }
+    let (model_bytes, model_sha256) = super::unchanged_model(store, &s).await?;
     let calibrations = rig_calibrations(store, &plan, stored, &s.model, &model_sha256).await?;
     Ok(RigSession {
         id,
@@ -409,16 +382,7 @@ pub async fn run_rig_trials(
     done: &mut dyn FnMut(&TrialDone) -> Result<(), TrialsError>,
 ) -> Result<RunEnd, TrialsError> {
     let rig = session.rig()?.clone();
-    let mut moves = Moves {
-        speed_m_s: rig.grasp.speed_m_s,
-        approach_m: rig.grasp.approach_height_m,
-        open: GripperCommand {
-            position: 0,
-            speed: 64,
-            force: 20,
-        },
-        hold: None,
-    };
+    let mut moves = Moves::for_setup(&rig.grasp);
     let mut holding = Holding::Clear;
     let ran = run_inner(
         store,
@@ -433,18 +397,15 @@ pub async fn run_rig_trials(
         &mut moves,
     )
     .await;
-    let (lines, failed) = end_safe(devices, &mut holding, &mut moves, &rig.grasp.safe_pose).await;
-    for l in &lines {
-        let _ = writeln!(operator.output, "{l}");
-    }
-    let _ = operator.output.flush();
-    match (ran, failed) {
-        (Ok(end), None) => Ok(end),
-        (Ok(_), Some(m)) => Err(TrialsError::Failed(m)),
-        (Err(TrialsError::Interrupted), _) => Err(TrialsError::Interrupted),
-        (Err(e), None) => Err(e),
-        (Err(e), Some(m)) => Err(TrialsError::Failed(format!("{e}; then {m}"))),
-    }
+    exit_safe(
+        ran,
+        devices,
+        &mut holding,
+        &mut moves,
+        &rig.grasp.safe_pose,
+        operator.output.as_mut(),
+    )
+    .await
 }
 
 /// The opening's count on a calibrated stroke.

@@ -77,6 +77,21 @@ pub(crate) struct Moves {
 }
 
 impl Moves {
+    /// The rig's speed and approach height; the fingers' open end (count 0) until
+    /// the ends are calibrated, and nothing heard yet.
+    pub(crate) const fn for_setup(setup: &softtouch_schemas::rig::GraspSetup) -> Self {
+        Self {
+            speed_m_s: setup.speed_m_s,
+            approach_m: setup.approach_height_m,
+            open: GripperCommand {
+                position: 0,
+                speed: 64,
+                force: 20,
+            },
+            hold: None,
+        }
+    }
+
     /// The slow speed of a descent onto the object or its place.
     pub(crate) fn slow(&self) -> f64 {
         self.speed_m_s / 4.0
@@ -172,7 +187,7 @@ pub(crate) async fn set_down(
 
 /// The safe exit: stop the arm; a faulted arm leaves the gripper holding; otherwise
 /// set a held object down, open, and return to the safe pose. Says what it did.
-pub(crate) async fn end_safe(
+async fn end_safe(
     devices: &mut RigTrialDevices,
     holding: &mut Holding,
     moves: &mut Moves,
@@ -234,4 +249,33 @@ pub(crate) async fn end_safe(
         return (lines, Some(m));
     }
     (lines, None)
+}
+
+/// Ends a run through the safe exit ([`end_safe`]), whatever `ran` was: says on
+/// `output` what the exit did, and keeps `ran`'s error first, with an exit that
+/// could not finish added to its message (a stop at once stays
+/// [`TrialsError::Interrupted`]).
+///
+/// # Errors
+/// `ran`'s error, or the safe exit's.
+pub(crate) async fn exit_safe<T>(
+    ran: Result<T, TrialsError>,
+    devices: &mut RigTrialDevices,
+    holding: &mut Holding,
+    moves: &mut Moves,
+    safe_pose: &ArmPose,
+    output: &mut (dyn std::io::Write + Send),
+) -> Result<T, TrialsError> {
+    let (lines, failed) = end_safe(devices, holding, moves, safe_pose).await;
+    for l in &lines {
+        let _ = writeln!(output, "{l}");
+    }
+    let _ = output.flush();
+    match (ran, failed) {
+        (Ok(end), None) => Ok(end),
+        (Ok(_), Some(m)) => Err(TrialsError::Failed(m)),
+        (Err(TrialsError::Interrupted), _) => Err(TrialsError::Interrupted),
+        (Err(e), None) => Err(e),
+        (Err(e), Some(m)) => Err(TrialsError::Failed(format!("{e}; then {m}"))),
+    }
 }

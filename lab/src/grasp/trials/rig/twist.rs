@@ -7,7 +7,6 @@
 //! the τz the finger feels. The same safe exit as the trials: the object set down
 //! where it stands, the fingers open, the arm back at the safe pose.
 
-use std::io::Write as _;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -19,7 +18,7 @@ use softtouch_grasp::{
 use softtouch_schemas::rig::{GraspSetup, WorkspaceBounds, raised};
 use softtouch_trainer::Predictor;
 
-use super::moves::{Holding, Moves, arm_to, end_safe, open_fingers};
+use super::moves::{Holding, Moves, arm_to, exit_safe, open_fingers};
 use super::{Operator, RigTrialDevices};
 use crate::grasp::trials::run::ObjectSetup;
 use crate::grasp::trials::{TrialsError, invalid};
@@ -86,16 +85,7 @@ pub async fn twist_on_rig(
         .map(WristLoop::new)
         .transpose()
         .map_err(|e| invalid(format!("the wrist loop: {e}")))?;
-    let mut moves = Moves {
-        speed_m_s: setup.speed_m_s,
-        approach_m: setup.approach_height_m,
-        open: GripperCommand {
-            position: 0,
-            speed: 64,
-            force: 20,
-        },
-        hold: None,
-    };
+    let mut moves = Moves::for_setup(setup);
     let mut holding = Holding::Clear;
     let ran = async {
         arm_to(devices, &moves, &setup.safe_pose, moves.speed_m_s).await?;
@@ -191,14 +181,13 @@ pub async fn twist_on_rig(
         Ok::<_, TrialsError>(RigTwist { cycles, stopped })
     }
     .await;
-    let (lines, failed) = end_safe(devices, &mut holding, &mut moves, &setup.safe_pose).await;
-    for l in &lines {
-        let _ = writeln!(operator.output, "{l}");
-    }
-    match (ran, failed) {
-        (Ok(run), None) => Ok(run),
-        (Ok(_), Some(m)) => Err(TrialsError::Failed(m)),
-        (Err(e), None) => Err(e),
-        (Err(e), Some(m)) => Err(TrialsError::Failed(format!("{e}; then {m}"))),
-    }
+    exit_safe(
+        ran,
+        devices,
+        &mut holding,
+        &mut moves,
+        &setup.safe_pose,
+        operator.output.as_mut(),
+    )
+    .await
 }
