@@ -260,7 +260,38 @@ pub async fn run(args: BenchGraspArgs, db: &Path, out: &mut dyn Write) -> Result
     )
     .map_err(|e| Failure::Runtime(e.into()))?;
     writeln!(out, "wrote {} and {}", csv_path.display(), png.display()).map_err(w)?;
-    Ok(())
+    let scene_hash =
+        softtouch_lab::grasp::calibration::scene_setup_hash(&setup.scene, 120.0, args.seed).ok();
+    super::results::Recorder::new("bench grasp")
+        .model(&args.model[0])
+        .setting("models", args.model.clone())
+        .setting("object", setup.object.name.as_str())
+        .setting("target_n", args.target)
+        .setting("hold_s", args.hold_s)
+        .setting("gains_over_lambda", args.gains.clone())
+        .setting("tolerances_n", args.tolerances.clone())
+        .setting("fps", args.fps.clone())
+        .setting("wall_clock", args.wall_clock)
+        .setting("seed", args.seed)
+        .setting(
+            "scene",
+            args.scene.as_ref().map(|p| p.display().to_string()),
+        )
+        .scene_hash(scene_hash)
+        .table(&csv_path)
+        .store(
+            db,
+            format!(
+                "{} runs over K, δ and rate for {} model(s) on `{}` at {} N",
+                points.len(),
+                models.len(),
+                setup.object.name,
+                args.target
+            ),
+            out,
+        )
+        .await
+        .map(drop)
 }
 
 fn print_row(

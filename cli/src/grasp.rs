@@ -19,7 +19,8 @@ use super::grasp_loop::{
 };
 use super::{Failure, io_failure, open_existing};
 use softtouch_lab::grasp::follow::{
-    FollowSettings, follow_rows, follow_sim, object_for, write_follow_csv, write_follow_png,
+    FollowSettings, follow_rows, follow_sim, object_for, write_follow_csv,
+    write_follow_metrics_csv, write_follow_png,
 };
 use softtouch_lab::grasp::soft::projections;
 
@@ -154,7 +155,30 @@ async fn follow(args: FollowArgs, db: &Path, out: &mut dyn Write) -> Result<(), 
     .await?;
     print_setup(&name, &setup, &loop_settings, out)?;
     print_stopped(stopped, &cycles, out)?;
-    print_follow(&cycles, &args.targets, c.tolerance, &c.out_dir, out)
+    let (files, summary) = print_follow(&cycles, &args.targets, c.tolerance, &c.out_dir, out)?;
+    follow_recorder(&args, &name, stopped, files)
+        .setting("gain_n_per_mm", setup.gain)
+        .scene_hash(super::grasp_loop::scene_hash(&scene, c))
+        .store(db, summary, out)
+        .await
+        .map(drop)
+}
+
+/// What `grasp follow` stores: its settings, the model, the tables it wrote.
+fn follow_recorder(
+    args: &FollowArgs,
+    object: &str,
+    stopped: Option<&'static str>,
+    files: [PathBuf; 2],
+) -> super::results::Recorder {
+    super::grasp_loop::loop_recorder("grasp follow", &args.common)
+        .setting("targets_n", args.targets.clone())
+        .setting("hold_s", args.hold_s)
+        .setting("object", object)
+        .setting("rig", args.rig.as_ref().map(|p| p.display().to_string()))
+        .setting("stopped_by", stopped)
+        .table(&files[0])
+        .table(&files[1])
 }
 
 /// `grasp follow --rig FILE` on a real Hand-E: K from `--gain`, else 0.75 × Λ_max of
@@ -248,7 +272,19 @@ async fn follow_on_rig(
     )
     .map_err(io_failure)?;
     print_stopped(run.stopped, &run.cycles, out)?;
-    print_follow(&run.cycles, &args.targets, c.tolerance, &c.out_dir, out)
+    let (files, summary) = print_follow(&run.cycles, &args.targets, c.tolerance, &c.out_dir, out)?;
+    let rig_hash = softtouch_lab::grasp::calibration::rig_setup_hash(rig).ok();
+    follow_recorder(
+        args,
+        args.object.as_deref().unwrap_or("-"),
+        run.stopped,
+        files,
+    )
+    .setting("gain_n_per_mm", gain)
+    .rig_hash(rig_hash)
+    .store(db, summary, out)
+    .await
+    .map(drop)
 }
 
 /// A line when a stop request ended the loop early: what follows is what ran.
@@ -272,14 +308,15 @@ pub(super) fn print_stopped(
     Ok(())
 }
 
-/// `grasp follow`'s table per target, then its CSV and chart.
+/// `grasp follow`'s table per target, then its CSVs (cycles, metrics) and chart;
+/// returns the CSVs and a one-line summary.
 fn print_follow(
     cycles: &[Cycle],
     targets: &[f64],
     tolerance_n: f64,
     out_dir: &Path,
     out: &mut dyn Write,
-) -> Result<(), Failure> {
+) -> Result<([PathBuf; 2], String), Failure> {
     let opt = |v: Option<f64>| v.map_or_else(|| "never".to_owned(), |s| format!("{s:.3}"));
     writeln!(
         out,
@@ -294,7 +331,8 @@ fn print_follow(
         "true RMS N"
     )
     .map_err(io_failure)?;
-    for row in follow_rows(cycles, targets, tolerance_n) {
+    let rows = follow_rows(cycles, targets, tolerance_n);
+    for row in &rows {
         let target = row.target_n;
         let tru = row.truth;
         match row.estimate {
@@ -317,8 +355,32 @@ fn print_follow(
     create_out_dir(out_dir)?;
     let csv = out_dir.join("grasp-follow.csv");
     write_follow_csv(&csv, cycles)?;
+    let metrics = out_dir.join("grasp-follow-metrics.csv");
+    write_follow_metrics_csv(&metrics, &rows)?;
     let png = out_dir.join("grasp-follow.png");
     write_follow_png(&png, cycles)?;
-    writeln!(out, "wrote {} and {}", csv.display(), png.display()).map_err(io_failure)?;
-    Ok(())
+    writeln!(
+        out,
+        "wrote {}, {} and {}",
+        csv.display(),
+        metrics.display(),
+        png.display()
+    )
+    .map_err(io_failure)?;
+    let summary = rows
+        .iter()
+        .map(|r| {
+            r.estimate.map_or_else(
+                || format!("{:.2} N: no estimate", r.target_n),
+                |m| {
+                    format!(
+                        "{:.2} N: ss error {:.3} N",
+                        r.target_n, m.steady_state_error_n
+                    )
+                },
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; ");
+    Ok(([csv, metrics], summary))
 }

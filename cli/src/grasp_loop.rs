@@ -45,6 +45,24 @@ pub struct LoopArgs {
     pub seed: u64,
 }
 
+/// What a grasp experiment stores: the model and the shared flags (each verb adds
+/// its own settings, hashes and tables).
+pub(super) fn loop_recorder(verb: &'static str, c: &LoopArgs) -> super::results::Recorder {
+    super::results::Recorder::new(verb)
+        .model(&c.model)
+        .setting("gain_flag_n_per_mm", c.gain)
+        .setting("tolerance_n", c.tolerance)
+        .setting("fps", c.fps)
+        .setting("fingers", c.fingers)
+        .setting("seed", c.seed)
+        .setting("scene", c.scene.as_ref().map(|p| p.display().to_string()))
+}
+
+/// The simulated scene's fingerprint as a result records it.
+pub(super) fn scene_hash(scene: &softtouch_schemas::SceneSpec, c: &LoopArgs) -> Option<String> {
+    softtouch_lab::grasp::calibration::scene_setup_hash(scene, c.fps, c.seed).ok()
+}
+
 pub(super) fn grasp_failure(e: GraspError) -> Failure {
     GraspRunError::Grasp(e).into()
 }

@@ -222,7 +222,35 @@ pub(super) async fn disturb(
     let png = c.out_dir.join("grasp-disturb.png");
     write_disturb_png(&png, &run)?;
     writeln!(out, "wrote {} and {}", csv.display(), png.display()).map_err(w)?;
-    Ok(())
+    let rows = disturb_rows(&run, &settings);
+    let worst = rows
+        .iter()
+        .filter_map(|r| r.truth.or(r.estimate))
+        .map(|m| m.peak_deviation_n)
+        .fold(f64::NAN, f64::max);
+    let summary = format!(
+        "{target} N held through {} turns; largest force deviation {} N",
+        rows.len(),
+        if worst.is_finite() {
+            format!("{worst:.3}")
+        } else {
+            "-".into()
+        }
+    );
+    super::grasp_loop::loop_recorder("grasp disturb", c)
+        .setting("object", args.object.as_str())
+        .setting("target_n", target)
+        .setting("turns_deg", args.turns_deg.clone())
+        .setting("settle_s", args.settle_s)
+        .setting("turn_s", args.turn_s)
+        .setting("phase_s", args.phase_s)
+        .setting("gain_n_per_mm", run.setup.gain)
+        .setting("stopped_by", run.stopped)
+        .scene_hash(super::grasp_loop::scene_hash(&scene, c))
+        .table(&csv)
+        .store(db, summary, out)
+        .await
+        .map(drop)
 }
 
 pub(super) async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
@@ -296,7 +324,8 @@ pub(super) async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Re
         "wrist loop", "τz RMS N·mm", "true τz RMS", "true τz peak", "true F RMS N", "wrist max °"
     )
     .map_err(w)?;
-    for row in twist_rows(&runs) {
+    let rows = twist_rows(&runs);
+    for row in &rows {
         writeln!(
             out,
             "{:>14} {:>14.3} {:>15.3} {:>16.3} {:>15.3} {:>14.2}",
@@ -315,7 +344,33 @@ pub(super) async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Re
     let png = c.out_dir.join("grasp-twist.png");
     write_twist_png(&png, &runs)?;
     writeln!(out, "wrote {} and {}", csv.display(), png.display()).map_err(w)?;
-    Ok(())
+    let summary = rows
+        .iter()
+        .map(|r| {
+            format!(
+                "wrist loop {}: true τz RMS {:.3} N·mm",
+                if r.wrist_loop { "on" } else { "off" },
+                r.true_tz_rms_nmm
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; ");
+    super::grasp_loop::loop_recorder("grasp twist", c)
+        .setting("object", args.object.as_str())
+        .setting("target_n", args.target)
+        .setting("turn_deg", args.turn_deg)
+        .setting("settle_s", args.settle_s)
+        .setting("turn_s", args.turn_s)
+        .setting("hold_s", args.hold_s)
+        .setting("wrist_gain_rad_per_nm_s", args.wrist_gain)
+        .setting("wrist_deadband_nmm", args.wrist_deadband_nmm)
+        .setting("gain_n_per_mm", setup.gain)
+        .setting("stopped_by", stopped)
+        .scene_hash(super::grasp_loop::scene_hash(&scene, c))
+        .table(&csv)
+        .store(db, summary, out)
+        .await
+        .map(drop)
 }
 
 /// `grasp twist --rig FILE`: the twist on the rig's real wrist, without then with the
@@ -353,6 +408,7 @@ async fn twist_rig(
     let signals = super::signals::SignalWatch::start();
     let w = io_failure;
     let mut rows = String::from("wrist_loop,t_s,estimate_n,torque_z_nmm,wrist_target_deg\n");
+    let mut summary = Vec::new();
     writeln!(
         out,
         "{:>11} {:>8} {:>13} {:>13}",
@@ -403,6 +459,10 @@ async fn twist_rig(
                 opt(cy.wrist_target_rad.map(f64::to_degrees))
             ));
         }
+        summary.push(format!(
+            "wrist loop {}: estimated τz RMS {rms:.3} N·mm",
+            if with_wrist { "on" } else { "off" }
+        ));
         writeln!(
             out,
             "{:>11} {:>8} {:>13.3} {:>13.2}",
@@ -422,5 +482,16 @@ async fn twist_rig(
     std::fs::write(&csv, rows)
         .map_err(|e| Failure::Runtime(anyhow::anyhow!("{}: {e}", csv.display())))?;
     writeln!(out, "wrote {}", csv.display()).map_err(w)?;
-    Ok(())
+    super::grasp_loop::loop_recorder("grasp twist", c)
+        .setting("object", args.object.as_str())
+        .setting("target_n", args.target)
+        .setting("duration_s", args.duration_s)
+        .setting("wrist_gain_rad_per_nm_s", args.wrist_gain)
+        .setting("wrist_deadband_nmm", args.wrist_deadband_nmm)
+        .setting("rig", rig_path.display().to_string())
+        .rig_hash(softtouch_lab::grasp::calibration::rig_setup_hash(&rig).ok())
+        .table(&csv)
+        .store(db, summary.join("; "), out)
+        .await
+        .map(drop)
 }

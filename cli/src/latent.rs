@@ -79,6 +79,7 @@ pub async fn run_latent(args: LatentArgs, db: &Path, out: &mut dyn Write) -> Res
     // The test split (and the land/water pairs) preprocessed for the last model's
     // input; made again only when the next model reads another input.
     let mut loaded: Option<(Preprocess, TestSplit, Option<Pairs>)> = None;
+    let mut tables = Vec::new();
     for name in &args.models {
         let bytes = models::artifact(&store, name).await?;
         let artifact = ModelArtifact::from_bytes(&bytes, &device)?;
@@ -248,11 +249,35 @@ pub async fn run_latent(args: LatentArgs, db: &Path, out: &mut dyn Write) -> Res
         let csv_path = args.out.join(format!("{name}-latent.csv"));
         std::fs::write(&csv_path, csv)
             .map_err(|e| Failure::Runtime(anyhow!("cannot write {}: {e}", csv_path.display())))?;
+        tables.push(csv_path.clone());
         written.push(csv_path);
         for p in written {
             writeln!(out, "  wrote {}", p.display()).map_err(io_failure)?;
         }
     }
     store.close().await;
-    Ok(())
+    let mut recorder = super::results::Recorder::new("latent")
+        .model(&args.models[0])
+        .dataset(&args.dataset)
+        .setting("models", args.models.clone())
+        .setting("water", args.water.clone())
+        .setting("dims", args.dims.clone())
+        .setting("span", args.span)
+        .setting("steps", args.steps)
+        .setting("pairs", args.pairs);
+    for t in &tables {
+        recorder = recorder.table(t);
+    }
+    recorder
+        .store(
+            db,
+            format!(
+                "latent correlation maps of {} model(s) on `{}`",
+                args.models.len(),
+                args.dataset
+            ),
+            out,
+        )
+        .await
+        .map(drop)
 }

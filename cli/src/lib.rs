@@ -20,6 +20,7 @@ pub mod grasp_turns;
 pub mod latent;
 pub mod live;
 pub mod report;
+pub mod results;
 pub mod rig;
 pub mod runs;
 pub(crate) mod signals;
@@ -164,6 +165,18 @@ MODEL-paired.png (with --water) and MODEL-latent.csv under --out (latent-out).")
   softtouch report --out run3.html --runs 3 --models land-v1-svae
   softtouch report --out report.html --sweep sweep-out/sweep-alpha.csv --bench-collection bench-out/collection-sweep.csv")]
     Report(report::ReportArgs),
+    /// The experiment verbs' stored results (with what ran, on what, and which
+    /// software) and the grasp sessions: list them, show one, export a trial's trace.
+    #[command(after_help = "Examples:
+  softtouch results                      # the same as `results list`
+  softtouch results show 4
+  softtouch results show 4 --table grasp-follow.csv > follow.csv
+  softtouch results trace 812 --out trial-812.csv")]
+    Results {
+        /// What to do (default: list).
+        #[command(subcommand)]
+        command: Option<results::ResultsCommand>,
+    },
 }
 
 /// A failed command, with its class for the exit code.
@@ -304,6 +317,7 @@ pub async fn run(cli: Cli, out: &mut dyn std::io::Write) -> Result<(), Failure> 
         Command::Models => eval::run_models(&cli.db, out).await,
         Command::Sweep(cmd) => sweep::run_sweep(cmd, &cli.db, out).await,
         Command::Report(args) => report::run_report(args, &cli.db, out).await,
+        Command::Results { command } => results::run(command, &cli.db, out).await,
     }
 }
 

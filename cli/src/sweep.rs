@@ -163,7 +163,33 @@ pub async fn run_sweep(cmd: SweepCommand, db: &Path, out: &mut dyn Write) -> Res
     let png = common.out.join(format!("{}.png", sweep.stem()));
     experiments::plot_sweep(&png, sweep, &rows)?;
     writeln!(out, "wrote {} and {}", csv.display(), png.display()).map_err(io_failure)?;
-    Ok(())
+    let best = rows
+        .iter()
+        .filter_map(|r| Some((r.label.as_str(), r.test.r2_mean?)))
+        .max_by(|a, b| a.1.total_cmp(&b.1));
+    let verb = match sweep {
+        Sweep::Alpha => "sweep alpha",
+        Sweep::Latent => "sweep latent",
+    };
+    super::results::Recorder::new(verb)
+        .dataset(&common.dataset)
+        .setting(
+            "rows",
+            rows.iter().map(|r| r.label.clone()).collect::<Vec<_>>(),
+        )
+        .setting("config", serde_json::to_value(&base).unwrap_or_default())
+        .setting("train", serde_json::to_value(&train).unwrap_or_default())
+        .table(&csv)
+        .store(
+            db,
+            best.map_or_else(
+                || format!("{} rows, none reads force", rows.len()),
+                |(label, r2)| format!("{} rows; best test R² mean {r2:.4} ({label})", rows.len()),
+            ),
+            out,
+        )
+        .await
+        .map(drop)
 }
 
 /// Method S2 b–g: the traversal of one row of the latent sweep (the strongest
@@ -343,7 +369,40 @@ async fn run_finetune(args: FinetuneArgs, db: &Path, out: &mut dyn Write) -> Res
     } else {
         writeln!(out, "wrote {} (nothing trained: no plot)", csv.display()).map_err(io_failure)?;
     }
-    Ok(())
+    let largest = rows
+        .iter()
+        .filter(|r| r.start.name() != "scratch")
+        .max_by_key(|r| r.samples);
+    super::results::Recorder::new("sweep finetune")
+        .model(&args.init)
+        .dataset(&args.dataset)
+        .setting("samples", args.samples.clone())
+        .setting("no_scratch", args.no_scratch)
+        .setting("target_r2", args.target_r2)
+        .setting("epochs", args.epochs)
+        .setting("batch", args.batch)
+        .setting("lr", args.lr)
+        .setting("lr_decay", args.lr_decay)
+        .setting("patience", args.patience)
+        .setting("seed", args.seed)
+        .table(&csv)
+        .store(
+            db,
+            largest.map_or_else(
+                || format!("{} rows", rows.len()),
+                |r| {
+                    format!(
+                        "{} rows; fine-tuned on {} samples: test R² mean {}",
+                        rows.len(),
+                        r.samples,
+                        fmt_opt(r.test.r2_mean, |v| format!("{v:.4}"))
+                    )
+                },
+            ),
+            out,
+        )
+        .await
+        .map(drop)
 }
 
 fn print_table(rows: &[Row], out: &mut dyn Write) -> Result<(), Failure> {

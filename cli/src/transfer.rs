@@ -280,19 +280,59 @@ pub async fn run_transfer(
             csv.push_str(&format!("table,{},{},,r2_mean,{m}\n", s.model, s.tested_on));
         }
     }
+    store.close().await;
     std::fs::write(&args.out, csv)
         .map_err(|e| Failure::Runtime(anyhow!("cannot write {}: {e}", args.out.display())))?;
+    // The cosine of every pair, for its distribution (the report's histogram).
+    let stem = args
+        .out
+        .file_stem()
+        .map_or_else(|| "transfer".into(), |s| s.to_string_lossy().into_owned());
+    let cos_path = args.out.with_file_name(format!("{stem}-cosines.csv"));
+    let mut cos_csv = String::from("pair,cosine\n");
+    for (i, c) in cosines.iter().enumerate() {
+        cos_csv.push_str(&format!("{i},{c}\n"));
+    }
+    std::fs::write(&cos_path, cos_csv)
+        .map_err(|e| Failure::Runtime(anyhow!("cannot write {}: {e}", cos_path.display())))?;
     let png = args.out.with_extension("png");
     plot_r2(&png, &scored)?;
     writeln!(
         out,
-        "wrote {} and {} in {:.1} s",
+        "wrote {}, {} and {} in {:.1} s",
         args.out.display(),
+        cos_path.display(),
         png.display(),
         started.elapsed().as_secs_f64()
     )
     .map_err(w)?;
-    Ok(())
+    let drop_mean = match (scored[0].metrics.r2_mean, scored[1].metrics.r2_mean) {
+        (Some(l), Some(wa)) => format!("R² mean {l:.4} on land, {wa:.4} on water"),
+        _ => "no R² (a VAE)".into(),
+    };
+    super::results::Recorder::new("transfer")
+        .model(&args.model)
+        .dataset(&args.land)
+        .setting("land", args.land.as_str())
+        .setting("water", args.water.as_str())
+        .setting("water_model", args.water_model.clone())
+        .setting("both_model", args.both_model.clone())
+        .setting("permutations", args.permutations)
+        .setting("seed", args.seed)
+        .table(&args.out)
+        .table(&cos_path)
+        .store(
+            db,
+            format!(
+                "{drop_mean}; {} pairs: cosine median {:.3}, CKA {cka:.3}, MMD p = {:.3}",
+                cosines.len(),
+                cos.median,
+                mmd.p_value
+            ),
+            out,
+        )
+        .await
+        .map(drop)
 }
 
 /// The table as a plot: R² per axis of every model on each medium's test split.

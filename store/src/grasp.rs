@@ -323,6 +323,69 @@ impl Store {
     ) -> Result<Option<GraspTrace>, StoreError> {
         trace_of(self.pool(), session_id, key).await
     }
+
+    /// Every grasp session, oldest first.
+    ///
+    /// # Errors
+    /// The query failed.
+    pub async fn grasp_sessions(&self) -> Result<Vec<GraspSessionRow>, StoreError> {
+        sessions_of(self.pool()).await
+    }
+
+    /// The ids of a session's first and last stored trials (`None`: none stored), for
+    /// `softtouch results trace TRIAL_ID`.
+    ///
+    /// # Errors
+    /// The query failed.
+    pub async fn grasp_trial_id_range(
+        &self,
+        session_id: i64,
+    ) -> Result<Option<(i64, i64)>, StoreError> {
+        let r = sqlx::query(
+            "SELECT MIN(trial_id), MAX(trial_id) FROM grasp_trials WHERE session_id = ?",
+        )
+        .bind(session_id)
+        .fetch_one(self.pool())
+        .await
+        .map_err(query_err("reading a session's trial ids"))?;
+        Ok(r.get::<Option<i64>, _>(0).zip(r.get::<Option<i64>, _>(1)))
+    }
+
+    /// A trial by its id: its session, its row and its trace (if stored).
+    ///
+    /// # Errors
+    /// The query failed or the row does not read back.
+    pub async fn grasp_trial_by_id(
+        &self,
+        trial_id: i64,
+    ) -> Result<Option<(i64, GraspTrialRow, Option<GraspTrace>)>, StoreError> {
+        let session: Option<i64> =
+            sqlx::query_scalar("SELECT session_id FROM grasp_trials WHERE trial_id = ?")
+                .bind(trial_id)
+                .fetch_optional(self.pool())
+                .await
+                .map_err(query_err("finding a grasp trial"))?;
+        let Some(session_id) = session else {
+            return Ok(None);
+        };
+        let ids: Vec<i64> = sqlx::query_scalar(
+            "SELECT trial_id FROM grasp_trials WHERE session_id = ? ORDER BY trial_id",
+        )
+        .bind(session_id)
+        .fetch_all(self.pool())
+        .await
+        .map_err(query_err("finding a grasp trial"))?;
+        let trials = trials_of(self.pool(), session_id).await?;
+        let Some(row) = ids
+            .iter()
+            .position(|id| *id == trial_id)
+            .and_then(|i| trials.get(i).cloned())
+        else {
+            return Ok(None);
+        };
+        let trace = trace_of(self.pool(), session_id, &row.key).await?;
+        Ok(Some((session_id, row, trace)))
+    }
 }
 
 /// A session's trials in the order they were stored (the store's and the report's

@@ -19,11 +19,13 @@ mod grasp;
 mod grasp_calibration;
 mod models;
 pub mod report;
+mod results;
 pub use event::EventKind;
 pub use grasp::{
     GraspSessionRow, GraspTrace, GraspTrialKey, GraspTrialRow, TRACE_ENCODING, unpack_f32,
 };
 pub use grasp_calibration::GraspCalibrationRow;
+pub use results::{NewResult, ResultRow, StoredResult};
 pub mod rows;
 mod runs;
 mod sync;

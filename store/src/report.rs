@@ -493,3 +493,19 @@ pub async fn grasp_trace(
         .await
         .map_err(|e| ReadError::Rows(Box::new(e)))
 }
+
+/// Every stored experiment result with its tables, oldest first.
+///
+/// # Errors
+/// A query failed.
+pub async fn results(db: &ReadOnly) -> Result<Vec<crate::StoredResult>, ReadError> {
+    let rows = |e: StoreError| ReadError::Rows(Box::new(e));
+    let mut out = Vec::new();
+    for row in crate::results::results_of(&db.pool).await.map_err(rows)? {
+        let tables = crate::results::tables_of(&db.pool, row.result_id)
+            .await
+            .map_err(rows)?;
+        out.push(crate::StoredResult { row, tables });
+    }
+    Ok(out)
+}

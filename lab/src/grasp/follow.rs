@@ -136,6 +136,42 @@ pub fn write_follow_csv(path: &Path, cycles: &[Cycle]) -> Result<(), GraspRunErr
     write_text(path, &text)
 }
 
+/// `grasp-follow-metrics.csv`: one line per target (`est_`: from the estimate,
+/// `true_`: from the simulator's truth; empty where there is none).
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_follow_metrics_csv(path: &Path, rows: &[FollowRow]) -> Result<(), GraspRunError> {
+    let mut text = String::from(
+        "target_n,est_rise_s,est_settle_s,est_overshoot_n,est_ss_error_n,est_rms_n,true_rise_s,true_settle_s,true_overshoot_n,true_ss_error_n,true_rms_n\n",
+    );
+    let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
+    let cells = |m: Option<HoldMetrics>| {
+        m.map_or_else(
+            || ",,,,".to_owned(),
+            |m| {
+                format!(
+                    "{},{},{},{},{}",
+                    opt(m.rise_time_s),
+                    opt(m.settling_time_s),
+                    m.overshoot_n,
+                    m.steady_state_error_n,
+                    m.rms_error_n
+                )
+            },
+        )
+    };
+    for r in rows {
+        text.push_str(&format!(
+            "{},{},{}\n",
+            r.target_n,
+            cells(r.estimate),
+            cells(r.truth)
+        ));
+    }
+    write_text(path, &text)
+}
+
 /// `grasp-follow.png`: commanded, estimated and true force over time.
 ///
 /// # Errors
