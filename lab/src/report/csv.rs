@@ -182,8 +182,13 @@ const AXIS_COLUMNS: [&str; 6] = ["r2_fx", "r2_fy", "r2_fz", "r2_tx", "r2_ty", "r
 
 /// Reads a sweep or model-benchmark CSV.
 pub(crate) fn read_sweep(path: &Path) -> Result<SweepFile, ReportError> {
-    let text = read(path)?;
-    let table = Table::parse(path, &text, &SWEEP_COLUMNS)?;
+    parse_sweep(path, &read(path)?)
+}
+
+/// Parses a sweep or model-benchmark CSV's text; `path` names where it came from (a
+/// file, or a stored result's table).
+pub(crate) fn parse_sweep(path: &Path, text: &str) -> Result<SweepFile, ReportError> {
+    let table = Table::parse(path, text, &SWEEP_COLUMNS)?;
     let mut rows = Vec::new();
     for (line, r) in &table.rows {
         let model = table.text(r, "model");
@@ -227,7 +232,7 @@ pub(crate) fn read_sweep(path: &Path) -> Result<SweepFile, ReportError> {
         path: path.to_owned(),
         kind,
         rows,
-        hash: super::data::config_hash(&text),
+        hash: super::data::config_hash(text),
     })
 }
 

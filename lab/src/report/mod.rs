@@ -4,13 +4,16 @@
 //! - `data.rs`: the content, read through the store's read-only rows (`store::report`:
 //!   the report never writes).
 //! - `predict.rs`: predicted against true on a downsampled test split (Figure 2b).
-//! - `csv.rs`: sweep and benchmark results the database does not hold, from the CSV
-//!   files the verbs write.
+//! - `results.rs`: the experiment verbs' stored results (Figure 5, land to water,
+//!   sweeps), their tables read by column.
+//! - `csv.rs`: sweep rows (stored, or from older CSV files given with `--sweep`) and
+//!   the collection benchmark's CSV.
 //! - `svg.rs`: the figures, inline SVG through plotters.
-//! - `page/`: the page, maud templates (type-checked, escaping every value): the frame
-//!   and its style in `mod.rs`, a file per section (runs, datasets, models, sweeps).
+//! - `page/`: the page, maud templates (type-checked, escaping every value): the frame,
+//!   its style and the summary in `mod.rs`, a file per section.
 //!
-//! Sections: Runs, Datasets, Models, Sweeps, Land to water, Grasping; each gives its
+//! Sections: Summary, Runs, Datasets, Models, Sweeps, Land to water, Grasping, Figure 5;
+//! each gives its
 //! provenance (seeds, config hashes, software versions) and, when it has nothing to
 //! show, the command that would give it something.
 
@@ -19,6 +22,7 @@ mod data;
 mod grasp;
 mod page;
 mod predict;
+mod results;
 mod svg;
 
 use std::path::{Path, PathBuf};
@@ -176,6 +180,10 @@ pub(crate) struct Content {
     pub sweeps: Vec<csv::SweepFile>,
     pub collection: Option<csv::CollectionFile>,
     pub grasp: Vec<grasp::GraspData>,
+    /// The experiment verbs' stored results.
+    pub results: results::Results,
+    /// Stored results that could not be read (each costs its part, not the page).
+    pub result_problems: Vec<String>,
 }
 
 async fn gather(
@@ -194,6 +202,20 @@ async fn gather(
         .as_deref()
         .map(csv::read_collection)
         .transpose()?;
+    let mut sweeps = sweeps;
+    let results = results::Results {
+        all: crate::store::report::results(pool).await?,
+    };
+    let mut result_problems = Vec::new();
+    for r in results.of("sweep alpha").chain(results.of("sweep latent")) {
+        for (name, text) in &r.tables {
+            let source = PathBuf::from(format!("result {} ({name})", r.row.result_id));
+            match csv::parse_sweep(&source, text) {
+                Ok(file) => sweeps.push(file),
+                Err(e) => result_problems.push(e.to_string()),
+            }
+        }
+    }
     let runs = data::runs(pool, options.runs.as_deref()).await?;
     let datasets = data::datasets(pool, options.runs.as_deref()).await?;
     let rows = data::models(pool, options.models.as_deref()).await?;
@@ -254,5 +276,7 @@ async fn gather(
         sweeps,
         collection,
         grasp: grasp::gather(pool).await?,
+        results,
+        result_problems,
     })
 }

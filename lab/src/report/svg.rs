@@ -128,8 +128,12 @@ pub(crate) fn bars(
         .flat_map(|(_, v, _)| v.iter().copied())
         .filter(|v| v.is_finite())
         .fold(0.0f64, f64::max);
-    // Room above the highest bar for its note.
-    let top = if top > 0.0 { top * 1.25 } else { 1.0 };
+    // Room above the highest bar for its note and for the legend (a line per series).
+    let top = if top > 0.0 {
+        top * (1.2 + 0.1 * series.len() as f64)
+    } else {
+        1.0
+    };
     let series: Vec<BarSeries> = series
         .iter()
         .map(|(label, values, notes)| BarSeries {
@@ -150,6 +154,46 @@ pub(crate) fn bars(
         series: &series,
         y_range: (0.0, top),
         y_labels_up_to: None,
+    };
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+        draw_bars(&root, &chart, &BarLook::PAGE).map_err(draw_err(title))?;
+    }
+    Ok(svg)
+}
+
+/// A series of [`rate_bars`]: its label, and per category the rate with its interval
+/// (`None`: no trials) and a note (the bar's n).
+pub(crate) type RateValues = (String, Vec<Option<(f64, f64, f64)>>, Vec<Option<String>>);
+
+/// Success rates (0 to 1) as grouped bars with their intervals as whiskers; the axis is
+/// labelled up to 1, the headroom above holds the notes and the legend.
+pub(crate) fn rate_bars(
+    title: &str,
+    x_label: &str,
+    categories: &[String],
+    series: &[RateValues],
+    size: Size,
+) -> Result<String, ReportError> {
+    register_font().map_err(|e| draw_err(title)(e.to_string()))?;
+    let series: Vec<BarSeries> = series
+        .iter()
+        .map(|(label, values, notes)| BarSeries {
+            label: label.clone(),
+            bars: values.clone(),
+            reference: Vec::new(),
+            notes: notes.clone(),
+        })
+        .collect();
+    let chart = BarChart {
+        title,
+        x_label: Some(x_label),
+        y_label: "success rate (Wilson 95 %)",
+        groups: categories,
+        series: &series,
+        y_range: (0.0, 1.2 + 0.1 * series.len() as f64),
+        y_labels_up_to: Some(1.0),
     };
     let mut svg = String::new();
     {

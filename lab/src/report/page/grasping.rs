@@ -35,10 +35,6 @@ pub(super) fn grasping_section(c: &Content) -> Result<Markup, ReportError> {
                 (criterion())
                 @for s in &sessions { (s) }
             }
-            (todo("This report does not show Figure 5 (force following, disturbance, twist) or the bench grasp trade-offs yet: those verbs print their tables and write CSVs and PNGs under --out-dir, and store nothing:",
-                  &["softtouch grasp follow --model land-v1-svae --targets 0.4,1.6,3",
-                    "softtouch grasp twist --model land-v1-svae",
-                    "softtouch bench grasp --model land-v1-svae"]))
         }
     })
 }
@@ -93,6 +89,7 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
                 }
             }
         }
+        div.figs { (rates_figure(g, false)?) (rates_figure(g, true)?) }
         (wall_time(g))
         @if !figures.is_empty() {
             p.note {
@@ -102,6 +99,95 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
             div.figs { @for f in figures { (f) } }
         }
     })
+}
+
+/// Success per object (the first σ), or per σ (all objects pooled; drawn only with
+/// more than one σ), one bar per medium and mode, with its Wilson interval and n.
+fn rates_figure(g: &GraspData, by_sigma: bool) -> Result<Markup, ReportError> {
+    let sigmas: Vec<u32> = {
+        let mut v: Vec<u32> = g.cells.iter().map(|c| c.sigma_index).collect();
+        v.dedup();
+        v.sort_unstable();
+        v.dedup();
+        v
+    };
+    if g.cells.is_empty() || (by_sigma && sigmas.len() < 2) {
+        return Ok(html! {});
+    }
+    let first = sigmas[0];
+    let cells: Vec<&crate::grasp::trials::table::Cell> = g
+        .cells
+        .iter()
+        .filter(|c| {
+            if by_sigma {
+                c.object.is_none()
+            } else {
+                c.sigma_index == first
+            }
+        })
+        .collect();
+    let category = |c: &crate::grasp::trials::table::Cell| -> String {
+        if by_sigma {
+            g.plan
+                .as_ref()
+                .and_then(|p| p.sigmas_mm.get(c.sigma_index as usize))
+                .map_or_else(|| "?".into(), |s| format!("σ {s} mm"))
+        } else {
+            c.object.clone().unwrap_or_else(|| "all".into())
+        }
+    };
+    let mut categories: Vec<String> = Vec::new();
+    let mut series_keys: Vec<(String, String)> = Vec::new();
+    for c in &cells {
+        let cat = category(c);
+        if !categories.contains(&cat) {
+            categories.push(cat);
+        }
+        let key = (medium(c.medium).to_owned(), c.mode.as_str().to_owned());
+        if !series_keys.contains(&key) {
+            series_keys.push(key);
+        }
+    }
+    let series: Vec<svg::RateValues> = series_keys
+        .iter()
+        .map(|(m, mode)| {
+            let mut values = vec![None; categories.len()];
+            let mut notes = vec![None; categories.len()];
+            for c in cells
+                .iter()
+                .filter(|c| medium(c.medium) == m && c.mode.as_str() == mode)
+            {
+                let Some(i) = categories.iter().position(|x| *x == category(c)) else {
+                    continue;
+                };
+                if let Some(rate) = c.rate() {
+                    values[i] = Some((rate, c.interval[0], c.interval[1]));
+                    notes[i] = Some(format!("n={}", c.trials));
+                }
+            }
+            (format!("{m} {mode}"), values, notes)
+        })
+        .collect();
+    let title = if by_sigma {
+        format!(
+            "Session {}: success against σ (objects pooled)",
+            g.session.session_id
+        )
+    } else {
+        format!("Session {}: success per object", g.session.session_id)
+    };
+    let width = (220 + 90 * categories.len() * series_keys.len().max(1)).clamp(460, 1100) as u32;
+    Ok(figure(Some(svg::rate_bars(
+        &title,
+        if by_sigma {
+            "grasp-point perturbation σ"
+        } else {
+            "object"
+        },
+        &categories,
+        &series,
+        (width, 340),
+    )?)))
 }
 
 /// Wall time per medium and mode.

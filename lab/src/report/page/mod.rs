@@ -23,6 +23,10 @@ mod sweeps;
 use sweeps::*;
 mod grasping;
 use grasping::*;
+mod figure5;
+use figure5::*;
+mod land_water;
+use land_water::*;
 
 /// A row of the paper's Table 1: model, α (SVAE rows), image MSE, mean R² in %.
 type PaperRow = (&'static str, Option<f64>, Option<f64>, Option<f64>);
@@ -63,6 +67,8 @@ td.l,th.l{text-align:left}
 td.nw{white-space:nowrap}
 .figs{display:flex;flex-wrap:wrap;gap:8px}
 .figs svg{background:#fff;border:1px solid #e3e3e3;max-width:100%;height:auto}
+table.heat td{padding:2px 4px;font-size:.8em;text-align:center}
+table.heat caption{text-align:left;font-size:.9em;padding:2px 0}
 code{background:#f0f0f0;padding:0 3px}
 ";
 
@@ -125,21 +131,25 @@ pub(crate) fn render(c: &Content) -> Result<String, ReportError> {
                         "Forces in N, torques in N·mm, sensor frame."
                     }
                     nav {
+                        a href="#summary" { "Summary" }
                         a href="#runs" { "Runs" }
                         a href="#datasets" { "Datasets" }
                         a href="#models" { "Models" }
                         a href="#sweeps" { "Sweeps" }
                         a href="#land-to-water" { "Land to water" }
                         a href="#grasping" { "Grasping" }
+                        a href="#figure-5" { "Figure 5" }
                     }
                 }
                 main {
+                    (summary_section(c))
                     (runs_section(c)?)
                     (datasets_section(c)?)
                     (models_section(c)?)
                     (sweeps_section(c)?)
-                    (land_to_water_section())
+                    (land_to_water_section(c)?)
                     (grasping_section(c)?)
+                    (figure5_section(c)?)
                 }
                 footer {
                     p.prov {
@@ -157,18 +167,89 @@ fn join<T: std::fmt::Display>(items: impl Iterator<Item = T>) -> String {
     items.map(|x| x.to_string()).collect::<Vec<_>>().join(", ")
 }
 
-// ---------------------------------------------------------------- Not landed yet
-
-fn land_to_water_section() -> Markup {
+/// One screen: what was collected, the best model, the latest grasp table, what else
+/// is stored.
+fn summary_section(c: &Content) -> Markup {
+    let ok: i64 = c.runs.iter().map(|r| r.row.counts.ok).sum();
+    let mut media: Vec<(String, i64, usize)> = Vec::new();
+    for r in &c.runs {
+        let m = &r.row.counts.medium;
+        match media.iter_mut().find(|x| &x.0 == m) {
+            Some(x) => {
+                x.1 += r.row.counts.ok;
+                x.2 += 1;
+            }
+            None => media.push((m.clone(), r.row.counts.ok, 1)),
+        }
+    }
+    let best = c
+        .models
+        .iter()
+        .filter_map(|m| Some((m, m.row.test_r2_mean.filter(|v| v.is_finite())?)))
+        .max_by(|a, b| a.1.total_cmp(&b.1));
+    let worst_axis = best.and_then(|(m, _)| {
+        let r2 = m.summary.as_ref()?.test.r2?;
+        r2.iter()
+            .enumerate()
+            .min_by(|a, b| a.1.r2.total_cmp(&b.1.r2))
+            .map(|(i, a)| (AXES[i], a.r2))
+    });
+    let latest = c.grasp.iter().rev().find(|g| !g.rows.is_empty());
+    let mut verbs: Vec<(&str, usize)> = Vec::new();
+    for r in &c.results.all {
+        match verbs.iter_mut().find(|v| v.0 == r.row.verb) {
+            Some(v) => v.1 += 1,
+            None => verbs.push((&r.row.verb, 1)),
+        }
+    }
     html! {
-        section #land-to-water {
-            h2 { "Land to water" }
-            (todo("This report does not show the land-to-water comparison yet. Collect the water run with the land run's poses; softtouch transfer prints the comparison and writes a CSV, sweep finetune the fine-tuning curve (CSV, PNG), latent the latent figures (PNGs):",
-                  &["softtouch collect --scene scenes/water.toml --poses-from 1",
-                    "softtouch dataset create water-v1 --runs 2",
-                    "softtouch transfer --model land-v1-svae --land land-v1 --water water-v1",
-                    "softtouch sweep finetune --init land-v1-svae --dataset water-v1",
-                    "softtouch latent land-v1-svae --dataset land-v1 --water water-v1"]))
+        section #summary {
+            h2 { "Summary" }
+            ul {
+                li {
+                    "Collected: " span data-k="summary-ok" { (ok) } " accepted samples in " (c.runs.len()) " run(s)"
+                    @if !media.is_empty() {
+                        " (" (media.iter().map(|(m, n, runs)| format!("{m}: {n} in {runs} run(s)")).collect::<Vec<_>>().join(", ")) ")"
+                    }
+                    "; " (c.datasets.len()) " dataset(s), " (c.models.len()) " model(s)."
+                }
+                li {
+                    @match best {
+                        Some((m, r2)) => {
+                            "Best model by test R² (mean of 6 axes): " code { (m.row.name) } " on " code { (m.row.dataset_name) } ", "
+                            span data-k="summary-best-r2" { (f(r2, 4)) }
+                            @if let Some((axis, v)) = worst_axis { " (worst axis " (axis) " " (f(v, 4)) ")" }
+                            "; the paper's SVAE: 0.9953 (Table 1)."
+                        }
+                        None => { "No model that reads force yet: " code { "softtouch train --dataset NAME" } "." }
+                    }
+                }
+                li {
+                    @match latest {
+                        Some(g) => {
+                            "Latest grasp session (" a href=(format!("#grasp-session-{}", g.session.session_id)) { (g.session.session_id) } ", " (g.kind()) ", model " code { (g.session.model) } "): "
+                            (g.cells.iter().filter(|cell| cell.object.is_none()).map(|cell| format!(
+                                "{} {} {}/{} ({})",
+                                crate::report::grasp::medium(cell.medium),
+                                cell.mode.as_str(),
+                                cell.held,
+                                cell.trials,
+                                cell.rate().map_or_else(|| "–".to_owned(), |r| format!("{:.0} %, Wilson [{:.0}, {:.0}] %", 100.0 * r, 100.0 * cell.interval[0], 100.0 * cell.interval[1]))
+                            )).collect::<Vec<_>>().join("; "))
+                            "; the paper: land 44 → 100 %, water 30 → 90 % (open → closed)."
+                        }
+                        None => { "No grasp trials yet: " code { "softtouch grasp trials --model NAME" } "." }
+                    }
+                }
+                li {
+                    "Stored results: "
+                    @if verbs.is_empty() { "none yet (the experiment verbs store theirs as they end)." }
+                    @else {
+                        (verbs.iter().map(|(v, n)| format!("{v} ×{n}")).collect::<Vec<_>>().join(", "))
+                        " (" code { "softtouch results" } " lists them)."
+                    }
+                }
+            }
         }
     }
 }

@@ -11,17 +11,16 @@ pub(super) fn sweeps_section(c: &Content) -> Result<Markup, ReportError> {
     Ok(html! {
         section #sweeps {
             h2 { "Sweeps" }
-            p.note { "Sweep rows are not stored in the database: the sweep verbs write CSV files, which the report reads when given with --sweep." }
+            p.note { "Each sweep is stored as it ends (" code { "softtouch results" } " lists them); every stored sweep is shown, then any older CSV given with --sweep." }
+            @for p in &c.result_problems { p.todo { "Could not read: " (p) } }
             @for p in parts { (p) }
             @if !has(SweepKind::Alpha) {
-                (todo("No Table 1 (α sweep) given. Run it on a dataset, then pass its CSV:",
-                      &["softtouch sweep alpha --dataset land-v1 --out sweep-out",
-                        "softtouch report --out report.html --sweep sweep-out/sweep-alpha.csv"]))
+                (todo("No Table 1 (α sweep) stored. Run it on a dataset:",
+                      &["softtouch sweep alpha --dataset land-v1"]))
             }
             @if !has(SweepKind::Latent) {
-                (todo("No latent-size sweep (Method S2) given. Run it, then pass its CSV:",
-                      &["softtouch sweep latent --dataset land-v1 --out sweep-out",
-                        "softtouch report --out report.html --sweep sweep-out/sweep-latent.csv"]))
+                (todo("No latent-size sweep (Method S2) stored. Run it:",
+                      &["softtouch sweep latent --dataset land-v1"]))
             }
         }
     })
