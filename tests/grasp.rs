@@ -53,6 +53,8 @@ fn grasp_follow_prints_a_row_per_target_and_writes_csv_and_png() {
     assert!(png.starts_with(b"\x89PNG"));
 
     disturb_and_twist(d);
+    stored_results_match_the_exports_and_the_report(d);
+    a_kill_leaves_a_whole_result_or_none(d);
 
     fails_with(
         &softtouch(
@@ -277,4 +279,147 @@ fn grasp_calibrate_stores_a_calibration_the_loop_then_reuses_and_refuses_a_blind
         2,
         "--target 0",
     );
+}
+
+/// `grasp follow`, `disturb` and `twist` stored their results as they ended: the tables
+/// are the exports byte for byte, and the report's Figure 5 shows their numbers.
+fn stored_results_match_the_exports_and_the_report(d: &std::path::Path) {
+    let listed = ok(&softtouch(d, &["results"]));
+    for verb in ["grasp follow", "grasp disturb", "grasp twist"] {
+        assert!(listed.contains(verb), "`{verb}` in:\n{listed}");
+    }
+    for (id, table) in [
+        ("1", "grasp-follow.csv"),
+        ("1", "grasp-follow-metrics.csv"),
+        ("2", "grasp-disturb.csv"),
+        ("3", "grasp-twist.csv"),
+    ] {
+        let file = std::fs::read_to_string(d.join("g").join(table)).expect("export");
+        let stored = ok(&softtouch(d, &["results", "show", id, "--table", table]));
+        assert_eq!(stored, file, "{table}");
+    }
+    let shown = ok(&softtouch(d, &["results", "show", "1"]));
+    for needle in [
+        "result 1: grasp follow",
+        "model:     air-svae (artifact sha256 ",
+        "\"targets_n\":[0.4,1.6]",
+        "\"fps\":30.0",
+        "scene:     ",
+    ] {
+        assert!(shown.contains(needle), "`{needle}` in:\n{shown}");
+    }
+
+    ok(&softtouch(d, &["report", "--out", "r.html"]));
+    let page = std::fs::read_to_string(d.join("r.html")).expect("page");
+    let html = scraper::Html::parse_document(&page);
+    assert!(html.errors.is_empty(), "{:?}", html.errors);
+    let cell = |key: &str| {
+        let sel = scraper::Selector::parse(&format!("[data-k=\"{key}\"]")).expect("selector");
+        let found: Vec<String> = html
+            .select(&sel)
+            .map(|e| e.text().collect::<String>().trim().to_owned())
+            .collect();
+        assert_eq!(found.len(), 1, "{key}: {found:?}");
+        found[0].clone()
+    };
+    // Following: the steady-state error per target, as stored.
+    let metrics = std::fs::read_to_string(d.join("g/grasp-follow-metrics.csv")).expect("csv");
+    for (i, line) in metrics.lines().skip(1).enumerate() {
+        let ss: f64 = line
+            .split(',')
+            .nth(4)
+            .and_then(|v| v.parse().ok())
+            .expect("ss");
+        assert_eq!(cell(&format!("follow-1-{i}-ss")), format!("{ss:.3}"));
+    }
+    // Twist: the true τz RMS per wrist-loop state, from the stored cycles.
+    let twist = std::fs::read_to_string(d.join("g/grasp-twist.csv")).expect("csv");
+    for state in ["off", "on"] {
+        let tz: Vec<f64> = twist
+            .lines()
+            .filter(|l| l.starts_with(&format!("{state},")))
+            .filter_map(|l| l.split(',').nth(6).and_then(|v| v.parse().ok()))
+            .collect();
+        let rms = (tz.iter().map(|t| t * t).sum::<f64>() / tz.len() as f64).sqrt();
+        assert_eq!(
+            cell(&format!("twist-3-{state}-true-rms")),
+            format!("{rms:.3}")
+        );
+    }
+    let section: String = html
+        .select(&scraper::Selector::parse("#figure-5").expect("selector"))
+        .map(|e| e.text().collect::<String>())
+        .collect();
+    assert!(section.contains("No grasp benchmark stored"), "{section}");
+    assert!(
+        section.contains("softtouch grasp disturb, result 2"),
+        "{section}"
+    );
+}
+
+/// kill -9 of `grasp follow` in the moment between writing its CSVs and storing its
+/// result (the window a kill can split): every stored result has both its tables (the
+/// result and its tables are one transaction), and none is stored twice.
+fn a_kill_leaves_a_whole_result_or_none(d: &std::path::Path) {
+    use std::process::{Command, Stdio};
+    let follows = || -> Vec<String> {
+        ok(&softtouch(d, &["results"]))
+            .lines()
+            .filter(|l| l.contains("grasp follow"))
+            .filter_map(|l| l.split_whitespace().next().map(str::to_owned))
+            .collect()
+    };
+    let before = follows().len();
+    let mut finished = 0;
+    let marker = d.join("k/grasp-follow-metrics.csv");
+    for _ in 0..6 {
+        let _ = std::fs::remove_file(&marker);
+        let mut child = Command::new(env!("CARGO_BIN_EXE_softtouch"))
+            .args([
+                "grasp",
+                "follow",
+                "--model",
+                "air-svae",
+                "--targets",
+                "0.4",
+                "--fps",
+                "30",
+                "--hold-s",
+                "1",
+                "--out-dir",
+                "k",
+            ])
+            .current_dir(d)
+            .env_remove("SOFTTOUCH_DB")
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("spawn");
+        // Kill as soon as the tables are on disk: the result is being stored.
+        loop {
+            if child.try_wait().ok().flatten().is_some() {
+                finished += 1;
+                break;
+            }
+            if marker.exists() {
+                let _ = child.kill(); // SIGKILL
+                break;
+            }
+            std::thread::yield_now();
+        }
+        let _ = child.wait();
+    }
+    let after = follows();
+    assert!(
+        after.len() >= before + finished && after.len() <= before + 6,
+        "{before} → {}, {finished} finished",
+        after.len()
+    );
+    for id in &after {
+        let shown = ok(&softtouch(d, &["results", "show", id]));
+        assert!(
+            shown.contains("grasp-follow.csv (") && shown.contains("grasp-follow-metrics.csv ("),
+            "result {id}:\n{shown}"
+        );
+    }
 }

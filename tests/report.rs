@@ -126,12 +126,14 @@ fn the_page_parses_has_every_section_and_shows_the_databases_numbers() {
 
     let (text, html) = parse(&d.join("report.html"));
     for id in [
+        "summary",
         "runs",
         "datasets",
         "models",
         "sweeps",
         "land-to-water",
         "grasping",
+        "figure-5",
     ] {
         assert_eq!(
             select(&html, &format!("section#{id} > h2")).len(),
@@ -157,6 +159,21 @@ fn the_page_parses_has_every_section_and_shows_the_databases_numbers() {
     assert_eq!(value(&html, "run-1-events"), run[3].to_string());
     assert_eq!(value(&html, "run-1-seed"), "4");
     assert_eq!(run[4], 4);
+    // The summary: the accepted samples, the best model's R² as stored.
+    assert_eq!(value(&html, "summary-ok"), run[0].to_string());
+    let best: f64 = runtime().block_on(async {
+        let pool = SqlitePoolOptions::new()
+            .connect_with(SqliteConnectOptions::new().filename(&db).read_only(true))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        let v = sqlx::query_scalar("SELECT MAX(test_r2_mean) FROM models")
+            .fetch_one(&pool)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        pool.close().await;
+        v
+    });
+    assert_eq!(value(&html, "summary-best-r2"), format!("{best:.4}"));
 
     // Datasets: the splits as stored.
     let splits = ints(
@@ -293,6 +310,51 @@ fn names_with_markup_characters_are_escaped() {
 }
 
 #[test]
+fn stored_sweeps_show_without_their_csv_and_a_bad_stored_table_costs_only_its_part() {
+    let dir = tempdir();
+    let d = dir.path();
+    ok(&softtouch(d, &["db", "init"]));
+    let db = d.join("softtouch.db");
+    runtime().block_on(async {
+        let store = softtouch_store::Store::open(&db)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        for (verb, csv) in [
+            ("sweep alpha", SWEEP_CSV.to_owned()),
+            ("sweep latent", "label,model\nx,svae\n".to_owned()),
+        ] {
+            store
+                .insert_result(&softtouch_store::NewResult {
+                    verb: verb.into(),
+                    settings_json: "{}".into(),
+                    dataset: Some("air".into()),
+                    summary: "s".into(),
+                    tables: vec![(format!("{}.csv", verb.replace(' ', "-")), csv)],
+                    ..softtouch_store::NewResult::default()
+                })
+                .await
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        store.close().await;
+    });
+    ok(&softtouch(d, &["report", "--out", "s.html"]));
+    let (_, html) = parse(&d.join("s.html"));
+    assert_eq!(value(&html, "sweep-alpha-1-r2"), "99.80");
+    assert_eq!(value(&html, "sweep-alpha-1-mse"), "1.36e-2");
+    let sweeps = select(&html, "#sweeps").join("\n");
+    assert!(
+        sweeps.contains("result 1 (sweep-alpha.csv)")
+            && sweeps.contains("Could not read: result 2 (sweep-latent.csv):1: no column `alpha`"),
+        "{sweeps}"
+    );
+    let summary = select(&html, "#summary").join("\n");
+    assert!(
+        summary.contains("sweep alpha ×1, sweep latent ×1"),
+        "{summary}"
+    );
+}
+
+#[test]
 fn an_empty_database_gives_a_page_saying_which_verbs_to_run() {
     let dir = tempdir();
     let d = dir.path();
@@ -317,12 +379,26 @@ fn an_empty_database_gives_a_page_saying_which_verbs_to_run() {
     ] {
         assert!(todo.contains(verb), "`{verb}` in: {todo}");
     }
-    // The sections this report cannot show yet say so.
+    // The sections with nothing stored say so, and what to run.
+    for said in [
+        "No grasp sessions in this database yet",
+        "No force following stored",
+        "softtouch grasp follow --model",
+        "softtouch grasp disturb --model",
+        "softtouch grasp twist --model",
+        "No land-to-water comparison stored",
+        "No fine-tuning curve stored",
+        "No latent maps stored",
+    ] {
+        assert!(todo.contains(said), "`{said}` in: {todo}");
+    }
+    let summary = select(&html, "#summary").join("\n");
     assert!(
-        todo.contains("No grasp sessions in this database yet")
-            && todo.contains("does not show Figure 5")
-            && todo.contains("does not show the land-to-water comparison yet"),
-        "{todo}"
+        summary.contains("Collected: 0 accepted samples in 0 run(s)")
+            && summary.contains("No model that reads force yet")
+            && summary.contains("No grasp trials yet")
+            && summary.contains("Stored results: none yet"),
+        "{summary}"
     );
 }
 
@@ -437,7 +513,8 @@ fn the_grasping_section_shows_each_stored_session_and_draws_chosen_trials() {
     }
     // The viewer: one success (open, land) and the first slip and timeout, two
     // figures each; the refused trial has no trace and is not drawn.
-    assert_eq!(select(&html, "section#grasping svg").len(), 6, "{section}");
+    // Plus the success per object with its intervals (one σ: no σ figure).
+    assert_eq!(select(&html, "section#grasping svg").len(), 7, "{section}");
     assert!(
         text.contains("F_ref + δ"),
         "the closed loop's band is drawn"

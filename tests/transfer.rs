@@ -96,7 +96,11 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
         .unwrap_or(f64::NAN);
     assert!((0.0..=1.0).contains(&cka), "{out}");
     // The table as a plot: R² per axis of each model on each medium.
-    assert!(out.contains("wrote t.csv and t.png"), "{out}");
+    assert!(
+        out.contains("wrote t.csv, t-cosines.csv and t.png"),
+        "{out}"
+    );
+    assert!(out.contains("stored as result 1"), "{out}");
     let png = image::open(d.join("t.png")).expect("the transfer plot");
     assert_eq!((png.width(), png.height()), (1100, 520));
     let csv = std::fs::read_to_string(d.join("t.csv")).expect("t.csv");
@@ -114,6 +118,8 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
             .unwrap_or(f64::NAN);
         assert!(value.is_finite(), "{line}");
     }
+
+    stored_transfer_is_the_export_and_the_report_shows_it(d, &csv);
 
     // Split with another seed, the water test samples' partners are partly in the land
     // dataset's train and val splits: they are loaded too, and every test sample pairs.
@@ -356,6 +362,7 @@ fn fine_tuning_and_latent_figures_from_a_land_model() {
     assert_eq!(csv.lines().count(), 1 + 64 + 48, "{csv}");
     assert!(csv.contains("latent,z0,z0,1.000000"), "{csv}");
     assert!(csv.contains("wrench,z7,Tz,"), "{csv}");
+    the_report_shows_the_stored_curve_and_maps(d);
     fails_with(
         &softtouch(
             d,
@@ -381,5 +388,123 @@ fn assert_png(path: &Path) {
         bytes.starts_with(b"\x89PNG\r\n\x1a\n") && bytes.len() > 1000,
         "{} is no PNG",
         path.display()
+    );
+}
+
+/// The stored result's tables are the files byte for byte; the report's Land to water
+/// section shows the stored numbers.
+fn stored_transfer_is_the_export_and_the_report_shows_it(d: &Path, csv: &str) {
+    let listed = ok(&softtouch(d, &["results"]));
+    assert!(
+        listed.contains("transfer") && listed.contains("land-svae"),
+        "{listed}"
+    );
+    let stored = ok(&softtouch(d, &["results", "show", "1", "--table", "t.csv"]));
+    assert_eq!(stored, csv);
+    let cosines = std::fs::read_to_string(d.join("t-cosines.csv")).expect("cosines");
+    assert_eq!(
+        ok(&softtouch(
+            d,
+            &["results", "show", "1", "--table", "t-cosines.csv"]
+        )),
+        cosines
+    );
+    assert_eq!(cosines.lines().count(), 31, "a line per pair: {cosines}");
+    let shown = ok(&softtouch(d, &["results", "show", "1"]));
+    for needle in [
+        "result 1: transfer",
+        "model:     land-svae (artifact sha256 ",
+        "dataset:   land",
+        "\"permutations\":200",
+        "software:  softtouch ",
+    ] {
+        assert!(shown.contains(needle), "`{needle}` in:\n{shown}");
+    }
+    fails_with(
+        &softtouch(d, &["results", "show", "1", "--table", "nope.csv"]),
+        2,
+        "result 1 has no table `nope.csv`; it has: t-cosines.csv, t.csv",
+    );
+    fails_with(&softtouch(d, &["results", "show", "9"]), 2, "no result 9");
+
+    ok(&softtouch(d, &["report", "--out", "r.html"]));
+    let page = std::fs::read_to_string(d.join("r.html")).expect("page");
+    let html = scraper::Html::parse_document(&page);
+    assert!(html.errors.is_empty(), "{:?}", html.errors);
+    let cell = |key: &str| {
+        let sel = scraper::Selector::parse(&format!("[data-k=\"{key}\"]")).expect("selector");
+        let found: Vec<String> = html
+            .select(&sel)
+            .map(|e| e.text().collect::<String>().trim().to_owned())
+            .collect();
+        assert_eq!(found.len(), 1, "{key}: {found:?}");
+        found[0].clone()
+    };
+    let stored = |prefix: &str| -> f64 {
+        csv.lines()
+            .find(|l| l.starts_with(prefix))
+            .and_then(|l| l.rsplit(',').next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("{prefix} in {csv}"))
+    };
+    for (key, prefix) in [
+        ("transfer-1-land-fx", "accuracy,land-svae,land,fx,r2,"),
+        ("transfer-1-water-tz", "accuracy,land-svae,water,tz,r2,"),
+        ("transfer-1-cka", "latents,land-svae,paired,,cka,"),
+        ("transfer-1-mmd-p", "latents,land-svae,paired,,mmd_p,"),
+    ] {
+        assert_eq!(cell(key), format!("{:.4}", stored(prefix)), "{key}");
+    }
+}
+
+/// The report's fine-tuning table and latent maps are the stored ones.
+fn the_report_shows_the_stored_curve_and_maps(d: &Path) {
+    let listed = ok(&softtouch(d, &["results", "list"]));
+    assert!(
+        listed.contains("sweep finetune") && listed.contains("latent"),
+        "{listed}"
+    );
+    ok(&softtouch(d, &["report", "--out", "r.html"]));
+    let page = std::fs::read_to_string(d.join("r.html")).expect("page");
+    let html = scraper::Html::parse_document(&page);
+    assert!(html.errors.is_empty(), "{:?}", html.errors);
+    let finetune = std::fs::read_to_string(d.join("ft/finetune.csv")).expect("csv");
+    let header: Vec<&str> = finetune.lines().next().unwrap_or("").split(',').collect();
+    let col = header
+        .iter()
+        .position(|c| *c == "r2_mean")
+        .expect("r2_mean");
+    let sel = scraper::Selector::parse("[data-k^=\"finetune-\"]").expect("selector");
+    let shown: Vec<String> = html
+        .select(&sel)
+        .map(|e| e.text().collect::<String>().trim().to_owned())
+        .collect();
+    let stored: Vec<String> = finetune
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let v: f64 = l
+                .split(',')
+                .nth(col)
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(f64::NAN);
+            if v.is_finite() {
+                format!("{v:.4}")
+            } else {
+                "–".into()
+            }
+        })
+        .collect();
+    assert_eq!(shown, stored);
+    // The two maps of land-svae: 8 latent rows each, 8 and 6 columns.
+    let rows = scraper::Selector::parse("#land-to-water table.heat tr").expect("selector");
+    assert_eq!(html.select(&rows).count(), 2 * (1 + 8));
+    let text: String = html
+        .select(&scraper::Selector::parse("#land-to-water").expect("selector"))
+        .map(|e| e.text().collect::<String>())
+        .collect();
+    assert!(
+        text.contains("No land-to-water comparison stored"),
+        "{text}"
     );
 }

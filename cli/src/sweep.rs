@@ -177,8 +177,8 @@ pub async fn run_sweep(cmd: SweepCommand, db: &Path, out: &mut dyn Write) -> Res
             "rows",
             rows.iter().map(|r| r.label.clone()).collect::<Vec<_>>(),
         )
-        .setting("config", serde_json::to_value(&base).unwrap_or_default())
-        .setting("train", serde_json::to_value(&train).unwrap_or_default())
+        .setting("config", serde_json::to_value(base).unwrap_or_default())
+        .setting("train", serde_json::to_value(train).unwrap_or_default())
         .table(&csv)
         .store(
             db,

@@ -250,14 +250,14 @@ mod tests {
 
     #[tokio::test]
     async fn a_result_reads_back_whole_and_reruns_add_rows() {
-        let dir = tempfile::tempdir().unwrap();
-        let store = Store::open(&dir.path().join("r.db")).await.unwrap();
-        let a = store.insert_result(&result("grasp follow")).await.unwrap();
-        let b = store.insert_result(&result("grasp follow")).await.unwrap();
+        let dir = tempfile::tempdir().expect("test step");
+        let store = Store::open(&dir.path().join("r.db")).await.expect("test step");
+        let a = store.insert_result(&result("grasp follow")).await.expect("test step");
+        let b = store.insert_result(&result("grasp follow")).await.expect("test step");
         assert_ne!(a, b);
-        let listed = store.results().await.unwrap();
+        let listed = store.results().await.expect("test step");
         assert_eq!(listed.len(), 2);
-        let got = store.result(a).await.unwrap().unwrap();
+        let got = store.result(a).await.expect("test step").expect("test step");
         assert_eq!(got.row.verb, "grasp follow");
         assert_eq!(got.row.model.as_deref(), Some("land-svae"));
         assert_eq!(
@@ -266,14 +266,14 @@ mod tests {
         );
         assert_eq!(got.table("a.csv"), Some("x,y\n1,2\n"));
         assert_eq!(got.table("b.csv"), Some("z\n3\n"));
-        assert!(store.result(b + 1).await.unwrap().is_none());
+        assert!(store.result(b + 1).await.expect("test step").is_none());
         store.close().await;
     }
 
     #[tokio::test]
     async fn bad_results_store_nothing() {
-        let dir = tempfile::tempdir().unwrap();
-        let store = Store::open(&dir.path().join("r.db")).await.unwrap();
+        let dir = tempfile::tempdir().expect("test step");
+        let store = Store::open(&dir.path().join("r.db")).await.expect("test step");
         let mut empty_verb = result("x");
         empty_verb.verb = " ".into();
         let mut not_object = result("x");
@@ -283,14 +283,14 @@ mod tests {
         let mut twice = result("x");
         twice.tables.push(("a.csv".into(), String::new()));
         for bad in [empty_verb, not_object, not_json, twice] {
-            let e = store.insert_result(&bad).await.unwrap_err();
+            let e = store.insert_result(&bad).await.expect_err("must fail");
             assert!(matches!(e, StoreError::Invalid { .. }), "{e}");
         }
-        assert!(store.results().await.unwrap().is_empty());
+        assert!(store.results().await.expect("test step").is_empty());
         let n: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM result_tables")
             .fetch_one(store.pool())
             .await
-            .unwrap();
+            .expect("test step");
         assert_eq!(n, 0);
         store.close().await;
     }

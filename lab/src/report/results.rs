@@ -165,16 +165,16 @@ mod tests {
 
     #[test]
     fn columns_read_by_name_and_bad_tables_say_where() {
-        let t = Columns::parse("t".into(), "a,b\n1,\n2.5,x\n").unwrap();
+        let t = Columns::parse("t".into(), "a,b\n1,\n2.5,x\n").expect("test step");
         assert_eq!(t.len(), 2);
-        let a = t.num("a").unwrap();
+        let a = t.num("a").expect("test step");
         assert!((a[1] - 2.5).abs() < 1e-12);
-        assert_eq!(t.text("b").unwrap(), ["", "x"]);
-        let e = t.num("b").unwrap_err();
+        assert_eq!(t.text("b").expect("test step"), ["", "x"]);
+        let e = t.num("b").expect_err("must fail");
         assert!(e.contains("line 3") && e.contains("`b`"), "{e}");
-        assert!(t.num("c").unwrap_err().contains("no column `c`"));
+        assert!(t.num("c").expect_err("must fail").contains("no column `c`"));
         assert!(Columns::parse("t".into(), "").is_err());
-        let e = Columns::parse("t".into(), "a,b\n1\n").unwrap_err();
+        let e = Columns::parse("t".into(), "a,b\n1\n").expect_err("must fail");
         assert!(e.contains("line 2"), "{e}");
     }
 
