@@ -141,9 +141,12 @@ fn the_page_parses_has_every_section_and_shows_the_databases_numbers() {
             "section {id}"
         );
     }
-    // Self-contained: no scripts, no external resources.
-    assert!(select(&html, "script, link, img, iframe").is_empty());
-    assert!(!text.contains("src=") && !text.contains("href=\"http"));
+    // Self-contained: no scripts, no external resources (images inline only).
+    assert!(select(&html, "script, link, iframe").is_empty());
+    assert!(
+        text.matches("src=").count() == text.matches("src=\"data:image/png;base64,").count()
+            && !text.contains("href=\"http")
+    );
     assert!(select(&html, "svg").len() >= 12, "figures inline");
 
     // Runs: the counts as stored.
@@ -402,6 +405,15 @@ fn an_empty_database_gives_a_page_saying_which_verbs_to_run() {
     );
 }
 
+/// A 2×2 PNG.
+fn tiny_png() -> Vec<u8> {
+    let mut png = Vec::new();
+    image::RgbImage::from_pixel(2, 2, image::Rgb([200, 100, 0]))
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap_or_else(|e| panic!("{e}"));
+    png
+}
+
 /// A stored grasp session: 2 trials a mode of the cylinder on land (open: both held;
 /// closed: a slip and a timeout) and one refused, each with a short trace.
 async fn grasp_session(db: &Path) -> i64 {
@@ -459,6 +471,20 @@ async fn grasp_session(db: &Path) -> i64 {
             true_n: (0..n).map(|i| (i as f32 / 19.0).min(1.6)).collect(),
             measured_count: (0..n).map(|i| 100 + i as u8).collect(),
             request_count: (0..n).map(|i| 101 + i as u8).collect(),
+            // The held open trials' frames at contact and end: a 2×2 PNG each.
+            frames: if reason.is_none() {
+                ["contact", "end"]
+                    .iter()
+                    .enumerate()
+                    .map(|(i, m)| softtouch_store::TraceFrame {
+                        moment: (*m).into(),
+                        t_s: i as f64,
+                        png: tiny_png(),
+                    })
+                    .collect()
+            } else {
+                Vec::new()
+            },
         };
         store
             .append_grasp_trial(id, &row, &trace)
@@ -519,6 +545,20 @@ fn the_grasping_section_shows_each_stored_session_and_draws_chosen_trials() {
         text.contains("F_ref + δ"),
         "the closed loop's band is drawn"
     );
+    // The success drawn has its frames, inline, with their moments.
+    let srcs: Vec<String> = {
+        let sel = Selector::parse("section#grasping img").unwrap_or_else(|e| panic!("{e}"));
+        html.select(&sel)
+            .filter_map(|e| e.value().attr("src").map(str::to_owned))
+            .collect()
+    };
+    assert_eq!(srcs.len(), 2, "{srcs:?}");
+    assert!(
+        srcs.iter()
+            .all(|s| s.starts_with("data:image/png;base64,iVBORw0KGgo"))
+    );
+    let captions = select(&html, "section#grasping figcaption");
+    assert_eq!(captions, ["contact, 0.00 s", "end, 1.00 s"]);
 }
 
 #[test]

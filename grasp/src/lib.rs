@@ -59,10 +59,11 @@ pub use stiffness::{
     CalibrationEnd, CalibrationPoint, StiffnessCalibration, StiffnessConfig, calibrate_stiffness,
 };
 pub use trials::{
-    ArmLift, FailReason, Judge, KEEP_ALIVE, Lift, LiftPlan, Mode, ObjectState, Observation,
-    OperatorInput, OperatorJudge, RigJudge, SharedArm, TOUCH_N, TraceRow, TrialConfig,
-    TrialDevices, TrialResult, Verdict, Z_95, confirmed, operator_verdict, perturbation_m,
-    physics_verdict, run_trial, trial_seed, wilson_interval,
+    ArmLift, FailReason, Judge, KEEP_ALIVE, Lift, LiftPlan, Mode, Moment, ObjectState, Observation,
+    OperatorInput, OperatorJudge, RigJudge, SNAPSHOT_WIDTH_PX, SharedArm, SnapCamera, Snapshot,
+    TOUCH_N, TraceRow, TrialConfig, TrialDevices, TrialResult, Verdict, Z_95, confirmed,
+    operator_verdict, perturbation_m, physics_verdict, run_trial, thumbnail_png, trial_seed,
+    wilson_interval,
 };
 pub use wrist::{ArmWrist, Wrist, WristConfig, WristLoop, turned};
 

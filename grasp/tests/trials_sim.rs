@@ -5,9 +5,9 @@
 use softtouch_drivers::gripper::position_for_opening;
 use softtouch_drivers::{Clock, Frame, TokioClock};
 use softtouch_grasp::{
-    ControllerConfig, FailReason, ForceEstimator, GraspError, Judge, Lift, LiftPlan, Mode,
-    ObjectState, Observation, Projection, TrialConfig, TrialDevices, TrialResult, TrueForce,
-    Verdict, physics_verdict, run_trial,
+    ControllerConfig, FailReason, ForceEstimator, GraspError, Judge, Lift, LiftPlan, Mode, Moment,
+    ObjectState, Observation, Projection, SNAPSHOT_WIDTH_PX, TrialConfig, TrialDevices,
+    TrialResult, TrueForce, Verdict, physics_verdict, run_trial,
 };
 use softtouch_schemas::scene::ObjectProfile;
 use softtouch_schemas::{ArmPose, RodShape, TimestampNs, Wrench};
@@ -151,6 +151,36 @@ async fn a_closed_loop_grasp_holds_and_an_open_width_that_misses_is_a_miss() {
     assert_eq!(held.verdict, Verdict::Held, "{held:?}");
     assert!(held.confirmed_after_ns.is_some());
     assert!(held.peak_true_n.is_some_and(|f| f > 1.0));
+    // The finger's frames at each moment, in the order they happened, each a
+    // thumbnail of a frame the loop read.
+    let moments: Vec<Moment> = held.snapshots.iter().map(|s| s.moment).collect();
+    assert_eq!(
+        moments,
+        [
+            Moment::Contact,
+            Moment::Confirmed,
+            Moment::Lifted,
+            Moment::End
+        ]
+    );
+    assert!(held.snapshots.windows(2).all(|w| w[0].t <= w[1].t));
+    let trace_times: Vec<TimestampNs> = held.trace.iter().map(|r| r.t).collect();
+    for s in &held.snapshots {
+        assert!(
+            trace_times.contains(&s.t),
+            "{:?} at a cycle's frame",
+            s.moment
+        );
+        let img = image::load_from_memory(&s.png).unwrap_or_else(|e| panic!("{e}"));
+        assert!(img.width() <= SNAPSHOT_WIDTH_PX && img.width() > 0);
+    }
+    // Contact: the first cycle with a true force above 0.05 N.
+    let first_touch = held
+        .trace
+        .iter()
+        .find(|r| r.true_n.is_some_and(|f| f > 0.05))
+        .map(|r| r.t);
+    assert_eq!(Some(held.snapshots[0].t), first_touch);
     let wide = trial(cylinder(), Mode::Open, 45.0, 1.5).await;
     assert_eq!(
         wide.verdict,
@@ -159,6 +189,9 @@ async fn a_closed_loop_grasp_holds_and_an_open_width_that_misses_is_a_miss() {
         wide.verdict
     );
     assert!(!wide.trace.is_empty());
+    // An open loop that missed: lifted and ended, never confirmed (and never touched).
+    let moments: Vec<Moment> = wide.snapshots.iter().map(|s| s.moment).collect();
+    assert_eq!(moments, [Moment::Lifted, Moment::End]);
     let tight = trial(cylinder(), Mode::Open, 28.0, 1.5).await;
     assert!(tight.peak_true_n.is_some_and(|f| f > 0.02));
     // The same trial again gives the same record.

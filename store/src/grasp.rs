@@ -90,6 +90,19 @@ pub struct GraspTrace {
     pub measured_count: Vec<u8>,
     /// P_ref, counts.
     pub request_count: Vec<u8>,
+    /// The finger's frames at the trial's moments, in the order they happened.
+    pub frames: Vec<TraceFrame>,
+}
+
+/// A frame of a trial's moment, as stored with its trace.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TraceFrame {
+    /// `contact`, `confirmed`, `lifted` or `end`.
+    pub moment: String,
+    /// Exposure, s after the trial's start.
+    pub t_s: f64,
+    /// A PNG thumbnail.
+    pub png: Vec<u8>,
 }
 
 fn pack(values: &[f32]) -> Vec<u8> {
@@ -298,6 +311,18 @@ impl Store {
         .execute(&mut *tx)
         .await
         .map_err(query_err("writing a grasp trace"))?;
+        for f in &trace.frames {
+            sqlx::query(
+                "INSERT INTO grasp_trial_frames (trial_id, moment, t_s, png) VALUES (?, ?, ?, ?)",
+            )
+            .bind(trial_id)
+            .bind(&f.moment)
+            .bind(if f.t_s.is_finite() { f.t_s } else { 0.0 })
+            .bind(&f.png)
+            .execute(&mut *tx)
+            .await
+            .map_err(query_err("writing a grasp trial's frame"))?;
+        }
         tx.commit()
             .await
             .map_err(query_err("committing a grasp trial"))?;
@@ -437,7 +462,7 @@ pub(crate) async fn trace_of(
     key: &GraspTrialKey,
 ) -> Result<Option<GraspTrace>, StoreError> {
     let row = sqlx::query(
-        "SELECT c.encoding, c.t_s, c.estimate_n, c.true_n, c.measured_count, c.request_count \
+        "SELECT c.encoding, c.t_s, c.estimate_n, c.true_n, c.measured_count, c.request_count, c.trial_id \
          FROM grasp_traces c JOIN grasp_trials t ON t.trial_id = c.trial_id \
          WHERE t.session_id = ? AND t.sigma_index = ? AND t.scene_index = ? AND t.object = ? AND t.mode = ? AND t.trial = ?",
     )
@@ -458,12 +483,27 @@ pub(crate) async fn trace_of(
             why: format!("`{encoding}`: expected `{TRACE_ENCODING}`"),
         });
     }
+    let frames = sqlx::query(
+        "SELECT moment, t_s, png FROM grasp_trial_frames WHERE trial_id = ? ORDER BY t_s, moment",
+    )
+    .bind(r.get::<i64, _>(6))
+    .fetch_all(pool)
+    .await
+    .map_err(query_err("reading a grasp trial's frames"))?
+    .iter()
+    .map(|f| TraceFrame {
+        moment: f.get(0),
+        t_s: f.get(1),
+        png: f.get(2),
+    })
+    .collect();
     Ok(Some(GraspTrace {
         t_s: unpack_f32("grasp_traces.t_s", &r.get::<Vec<u8>, _>(1))?,
         estimate_n: unpack_f32("grasp_traces.estimate_n", &r.get::<Vec<u8>, _>(2))?,
         true_n: unpack_f32("grasp_traces.true_n", &r.get::<Vec<u8>, _>(3))?,
         measured_count: r.get(4),
         request_count: r.get(5),
+        frames,
     }))
 }
 
@@ -601,6 +641,18 @@ mod tests {
             true_n: vec![0.5, 1.0],
             measured_count: vec![100, 101],
             request_count: vec![101, 102],
+            frames: vec![
+                TraceFrame {
+                    moment: "contact".into(),
+                    t_s: 0.0,
+                    png: b"\x89PNG\r\n\x1a\n-contact".to_vec(),
+                },
+                TraceFrame {
+                    moment: "end".into(),
+                    t_s: 0.0083,
+                    png: b"\x89PNG\r\n\x1a\n-end".to_vec(),
+                },
+            ],
         };
         for _ in 0..2 {
             store
@@ -632,6 +684,26 @@ mod tests {
         assert!(back.estimate_n[0].is_nan());
         assert_eq!(back.estimate_n[1], 1.25);
         assert_eq!(back.measured_count, trace.measured_count);
+        // The frames come back in the order they happened, with the trace.
+        assert_eq!(back.frames, trace.frames);
+        // A moment the table does not know is refused, and the trial with it.
+        let mut odd = trace.clone();
+        odd.frames[0].moment = "lunch".into();
+        assert!(
+            store
+                .append_grasp_trial(id, &row(4, true), &odd)
+                .await
+                .is_err()
+        );
+        assert!(
+            store
+                .grasp_trace(id, &row(4, true).key)
+                .await
+                .ok()
+                .flatten()
+                .is_none()
+        );
+        assert_eq!(store.grasp_trials(id).await.map(|r| r.len()).ok(), Some(2));
         // Mismatched arrays are refused before anything is written.
         let bad = GraspTrace {
             t_s: vec![0.0],

@@ -22,7 +22,8 @@ pub mod report;
 mod results;
 pub use event::EventKind;
 pub use grasp::{
-    GraspSessionRow, GraspTrace, GraspTrialKey, GraspTrialRow, TRACE_ENCODING, unpack_f32,
+    GraspSessionRow, GraspTrace, GraspTrialKey, GraspTrialRow, TRACE_ENCODING, TraceFrame,
+    unpack_f32,
 };
 pub use grasp_calibration::GraspCalibrationRow;
 pub use results::{NewResult, ResultRow, StoredResult};

@@ -251,13 +251,25 @@ mod tests {
     #[tokio::test]
     async fn a_result_reads_back_whole_and_reruns_add_rows() {
         let dir = tempfile::tempdir().expect("test step");
-        let store = Store::open(&dir.path().join("r.db")).await.expect("test step");
-        let a = store.insert_result(&result("grasp follow")).await.expect("test step");
-        let b = store.insert_result(&result("grasp follow")).await.expect("test step");
+        let store = Store::open(&dir.path().join("r.db"))
+            .await
+            .expect("test step");
+        let a = store
+            .insert_result(&result("grasp follow"))
+            .await
+            .expect("test step");
+        let b = store
+            .insert_result(&result("grasp follow"))
+            .await
+            .expect("test step");
         assert_ne!(a, b);
         let listed = store.results().await.expect("test step");
         assert_eq!(listed.len(), 2);
-        let got = store.result(a).await.expect("test step").expect("test step");
+        let got = store
+            .result(a)
+            .await
+            .expect("test step")
+            .expect("test step");
         assert_eq!(got.row.verb, "grasp follow");
         assert_eq!(got.row.model.as_deref(), Some("land-svae"));
         assert_eq!(
@@ -273,7 +285,9 @@ mod tests {
     #[tokio::test]
     async fn bad_results_store_nothing() {
         let dir = tempfile::tempdir().expect("test step");
-        let store = Store::open(&dir.path().join("r.db")).await.expect("test step");
+        let store = Store::open(&dir.path().join("r.db"))
+            .await
+            .expect("test step");
         let mut empty_verb = result("x");
         empty_verb.verb = " ".into();
         let mut not_object = result("x");

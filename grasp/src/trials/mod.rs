@@ -44,6 +44,8 @@ use crate::estimator::ForceEstimator;
 
 mod run;
 pub use run::*;
+mod snapshots;
+pub use snapshots::{Moment, SNAPSHOT_WIDTH_PX, SnapCamera, Snapshot, thumbnail_png};
 
 /// z of the two-sided 95 % normal interval.
 pub const Z_95: f64 = 1.959_963_984_540_054;
@@ -479,6 +481,9 @@ pub struct TrialResult {
     pub confirmed_after_ns: Option<u64>,
     /// Every cycle.
     pub trace: Vec<TraceRow>,
+    /// The finger's frames at contact, confirmation, lift and end (those that
+    /// happened), as thumbnails.
+    pub snapshots: Vec<Snapshot>,
 }
 
 #[cfg(test)]

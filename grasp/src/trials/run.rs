@@ -77,6 +77,9 @@ where
         mut judge,
         clock,
     } = devices;
+    // The frames of the trial's moments, for its record.
+    let camera = super::snapshots::SnapCamera::new(camera);
+    let latest = camera.latest();
     let ctl = Controller::new(
         gripper,
         camera,
@@ -96,11 +99,16 @@ where
             Mode::Open => config.grasp_position,
             Mode::Closed => config.pregrasp_position,
         },
+        latest,
+        taken: Vec::new(),
+        first_estimate_n: None,
     };
     let outcome = match config.mode {
         Mode::Open => run.open_loop(ctl, &mut lift, &controller, config).await,
         Mode::Closed => run.closed_loop(ctl, &mut lift, config).await,
     };
+    run.snap(Moment::End);
+    let snapshots = run.thumbnails();
     let peak_estimate_n = run.trace.iter().fold(None, |m, r| fmax(m, r.estimate_n));
     let peak_true_n = run.trace.iter().fold(None, |m, r| fmax(m, r.true_n));
     let final_position = run.last_status.map_or(run.commanded, |s| s.position);
@@ -144,6 +152,7 @@ where
         peak_true_n,
         confirmed_after_ns: run.confirmed_after_ns,
         trace: run.trace,
+        snapshots,
     })
 }
 
@@ -156,11 +165,17 @@ pub(super) struct Run {
     pub(super) confirmed_after_ns: Option<u64>,
     pub(super) last_status: Option<GripperStatus>,
     pub(super) commanded: u8,
+    /// The newest frame the loop read ([`super::snapshots::SnapCamera`]).
+    pub(super) latest: Arc<std::sync::Mutex<Option<Frame>>>,
+    /// The frames of the moments seen so far.
+    pub(super) taken: Vec<(Moment, Frame)>,
+    /// The trial's first usable estimate, N (contact without a truth is 0.1 N above).
+    pub(super) first_estimate_n: Option<f64>,
 }
 
 impl Run {
     pub(super) fn record(&mut self, c: &crate::controller::Cycle) {
-        self.trace.push(TraceRow {
+        self.push(TraceRow {
             t: c.t,
             estimate_n: c.estimate_n,
             true_n: c.true_n,
@@ -168,6 +183,52 @@ impl Run {
             position_request: c.position_request,
         });
         self.commanded = c.position_request;
+    }
+
+    /// A cycle into the trace, and the contact's frame on the first cycle with contact.
+    pub(super) fn push(&mut self, row: TraceRow) {
+        if self.first_estimate_n.is_none() {
+            self.first_estimate_n = row.estimate_n;
+        }
+        let contact = match (row.true_n, row.estimate_n, self.first_estimate_n) {
+            (Some(t), ..) => t > 0.05,
+            (None, Some(e), Some(first)) => e > first + 0.1,
+            _ => false,
+        };
+        self.trace.push(row);
+        if contact {
+            self.snap(Moment::Contact);
+        }
+    }
+
+    /// Keeps the newest frame as `moment`'s, once.
+    pub(super) fn snap(&mut self, moment: Moment) {
+        if self.taken.iter().any(|(m, _)| *m == moment) {
+            return;
+        }
+        let frame = self
+            .latest
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone();
+        if let Some(frame) = frame {
+            self.taken.push((moment, frame));
+        }
+    }
+
+    /// The moments' frames as thumbnails (a frame that does not decode is left out:
+    /// the record is an aid, never a reason to lose the trial).
+    pub(super) fn thumbnails(&mut self) -> Vec<Snapshot> {
+        std::mem::take(&mut self.taken)
+            .into_iter()
+            .filter_map(|(moment, frame)| {
+                Some(Snapshot {
+                    moment,
+                    t: frame.meta.t,
+                    png: super::snapshots::thumbnail_png(&frame).ok()?,
+                })
+            })
+            .collect()
     }
 
     /// Close to the predefined width, lift, hold; watch the estimate all along.
@@ -228,7 +289,7 @@ impl Run {
                         ),
                     }));
                 }
-                self.trace.push(TraceRow {
+                self.push(TraceRow {
                     t: frame.meta.t,
                     estimate_n,
                     true_n,
@@ -238,6 +299,7 @@ impl Run {
                 if end.is_none() {
                     lift.start_lift(&trial.lift).await?;
                     self.lifted = true;
+                    self.snap(Moment::Lifted);
                     end = Some(
                         self.clock.now().0
                             + (trial.lift.duration_s() * 1e9) as u64
@@ -320,8 +382,10 @@ impl Run {
             }
         }
         self.confirmed_after_ns = Some(elapsed_ns(self.clock.as_ref(), self.start));
+        self.snap(Moment::Confirmed);
         lift.start_lift(&trial.lift).await?;
         self.lifted = true;
+        self.snap(Moment::Lifted);
         let hold = Duration::from_secs_f64(trial.lift.duration_s()) + trial.hold;
         let end = self.clock.now().0 + hold.as_nanos() as u64;
         let mut last = None;

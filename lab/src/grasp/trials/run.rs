@@ -19,7 +19,7 @@ use super::{Planned, Session, TrialsError, invalid, medium_name, objects_of};
 use crate::grasp::calibration::{Calibrated, calibration_for, top_for};
 use crate::grasp::sim::{SimJudge, SimLift, SimTruth, projection};
 use crate::grasp::soft::GraspRunError;
-use crate::store::{GraspTrace, GraspTrialRow, Store};
+use crate::store::{GraspTrace, GraspTrialRow, Store, TraceFrame};
 
 /// One trial, as it ends: its stored row and its timing.
 #[derive(Debug, Clone)]
@@ -364,6 +364,16 @@ pub fn pack_trace(r: &TrialResult) -> GraspTrace {
         true_n: r.trace.iter().map(|c| f(c.true_n)).collect(),
         measured_count: r.trace.iter().map(|c| c.measured_position).collect(),
         request_count: r.trace.iter().map(|c| c.position_request).collect(),
+        // On the trace's time axis (s after its first cycle).
+        frames: r
+            .snapshots
+            .iter()
+            .map(|s| TraceFrame {
+                moment: s.moment.as_str().to_owned(),
+                t_s: (s.t.0 as f64 - t0 as f64) * 1e-9,
+                png: s.png.clone(),
+            })
+            .collect(),
     }
 }
 

@@ -5,6 +5,7 @@
 use super::*;
 use crate::report::grasp::{GraspData, medium};
 use crate::store::GraspTrace;
+use base64::Engine as _;
 
 /// What "held" means and how the cells pool, said once above the tables.
 fn criterion() -> Markup {
@@ -93,8 +94,8 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
         (wall_time(g))
         @if !figures.is_empty() {
             p.note {
-                "Trials drawn: the first failure of each kind and the first success of each medium and mode. "
-                "The finger's frames are not stored with a trace, so none are shown."
+                "Trials drawn: the first failure of each kind and the first success of each medium and mode, "
+                "with the finger's camera frames at first contact, confirmation, lift and end (those that happened; thumbnails stored with the trace)."
             }
             div.figs { @for f in figures { (f) } }
         }
@@ -253,6 +254,28 @@ fn trial_figure(
         });
     }
     let end = f64::from(t.t_s.last().copied().unwrap_or(0.0));
+    // When the loop confirmed and the lift started: vertical marks from the frames'
+    // moments (a session stored before frames were kept has none).
+    let (lo, hi) = t
+        .estimate_n
+        .iter()
+        .chain(&t.true_n)
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold((0.0_f64, 0.0_f64), |(a, b), v| {
+            (a.min(f64::from(v)), b.max(f64::from(v)))
+        });
+    for f in t
+        .frames
+        .iter()
+        .filter(|f| f.moment == "confirmed" || f.moment == "lifted")
+    {
+        force.push(Series {
+            label: f.moment.clone(),
+            points: vec![(f.t_s, lo), (f.t_s, hi.max(lo + 0.1))],
+            style: SeriesStyle::Line,
+        });
+    }
     if let Some(p) = g.plan.as_ref().filter(|_| r.key.mode == "closed") {
         for (label, v) in [
             ("F_ref + δ", p.target_n + p.tolerance_n),
@@ -316,5 +339,20 @@ fn trial_figure(
         },
         (460, 280),
     )?;
-    Ok(html! { (figure(force_svg)) (figure(position_svg)) })
+    Ok(html! {
+        div.trial {
+            (figure(force_svg)) (figure(position_svg))
+            @if !t.frames.is_empty() {
+                div.frames {
+                    @for f in &t.frames {
+                        figure.frame {
+                            img src=(format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(&f.png)))
+                                alt=(format!("the finger's frame at {}", f.moment)) width="160";
+                            figcaption { (f.moment) ", " (format!("{:.2}", f.t_s)) " s" }
+                        }
+                    }
+                }
+            }
+        }
+    })
 }

@@ -67,6 +67,10 @@ td.l,th.l{text-align:left}
 td.nw{white-space:nowrap}
 .figs{display:flex;flex-wrap:wrap;gap:8px}
 .figs svg{background:#fff;border:1px solid #e3e3e3;max-width:100%;height:auto}
+.trial{display:flex;flex-wrap:wrap;gap:8px;align-items:flex-start}
+.frames{display:flex;flex-wrap:wrap;gap:6px;max-width:340px}
+.frames figure{margin:0;font-size:.8em;color:#444;text-align:center}
+.frames img{display:block;border:1px solid #ccc;image-rendering:auto}
 table.heat td{padding:2px 4px;font-size:.8em;text-align:center}
 table.heat caption{text-align:left;font-size:.9em;padding:2px 0}
 code{background:#f0f0f0;padding:0 3px}

@@ -690,5 +690,6 @@ fn empty_trace() -> GraspTrace {
         true_n: Vec::new(),
         measured_count: Vec::new(),
         request_count: Vec::new(),
+        frames: Vec::new(),
     }
 }
