@@ -507,4 +507,20 @@ fn the_report_shows_the_stored_curve_and_maps(d: &Path) {
         text.contains("No land-to-water comparison stored"),
         "{text}"
     );
+    // The traversal and the paired instances, stored byte for byte and shown inline.
+    let imgs = scraper::Selector::parse("#land-to-water figure.stored img").expect("selector");
+    assert_eq!(html.select(&imgs).count(), 2);
+    let id = listed
+        .lines()
+        .find(|l| l.contains(" latent "))
+        .and_then(|l| l.split_whitespace().next())
+        .expect("the latent result's id");
+    let shown = ok(&softtouch(d, &["results", "show", id]));
+    for png in ["land-svae-traversal.png", "land-svae-paired.png"] {
+        let bytes = std::fs::read(d.join("lat").join(png)).expect("png");
+        assert!(
+            shown.contains(&format!("figure {png}: {} bytes of PNG", bytes.len())),
+            "{shown}"
+        );
+    }
 }

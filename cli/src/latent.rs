@@ -80,6 +80,7 @@ pub async fn run_latent(args: LatentArgs, db: &Path, out: &mut dyn Write) -> Res
     // input; made again only when the next model reads another input.
     let mut loaded: Option<(Preprocess, TestSplit, Option<Pairs>)> = None;
     let mut tables = Vec::new();
+    let mut figures = Vec::new();
     for name in &args.models {
         let bytes = models::artifact(&store, name).await?;
         let artifact = ModelArtifact::from_bytes(&bytes, &device)?;
@@ -249,6 +250,13 @@ pub async fn run_latent(args: LatentArgs, db: &Path, out: &mut dyn Write) -> Res
         let csv_path = args.out.join(format!("{name}-latent.csv"));
         std::fs::write(&csv_path, csv)
             .map_err(|e| Failure::Runtime(anyhow!("cannot write {}: {e}", csv_path.display())))?;
+        // The images the maps' numbers cannot redraw go with the result too.
+        for png in written.iter().filter(|p| {
+            p.to_string_lossy().ends_with("-traversal.png")
+                || p.to_string_lossy().ends_with("-paired.png")
+        }) {
+            figures.push(png.clone());
+        }
         tables.push(csv_path.clone());
         written.push(csv_path);
         for p in written {
@@ -267,6 +275,9 @@ pub async fn run_latent(args: LatentArgs, db: &Path, out: &mut dyn Write) -> Res
         .setting("pairs", args.pairs);
     for t in &tables {
         recorder = recorder.table(t);
+    }
+    for f in &figures {
+        recorder = recorder.figure(f);
     }
     recorder
         .store(

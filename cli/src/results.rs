@@ -194,6 +194,9 @@ async fn show(
         dash(&row.software_commit)
     )
     .map_err(io_failure)?;
+    for (name, png) in &r.figures {
+        writeln!(out, "figure {name}: {} bytes of PNG", png.len()).map_err(io_failure)?;
+    }
     for (name, csv) in &r.tables {
         let lines = csv.lines().count().saturating_sub(1);
         writeln!(
@@ -285,6 +288,7 @@ pub(crate) struct Recorder {
     scene_hash: Option<String>,
     rig_hash: Option<String>,
     tables: Vec<PathBuf>,
+    figures: Vec<PathBuf>,
 }
 
 impl Recorder {
@@ -332,6 +336,12 @@ impl Recorder {
         self
     }
 
+    /// A PNG the verb wrote that its tables cannot redraw.
+    pub(crate) fn figure(mut self, png: &Path) -> Self {
+        self.figures.push(png.to_owned());
+        self
+    }
+
     /// Stores the result in one transaction and says so; returns its id.
     pub(crate) async fn store(
         self,
@@ -339,16 +349,25 @@ impl Recorder {
         summary: String,
         out: &mut dyn Write,
     ) -> Result<i64, Failure> {
+        let file_name = |path: &Path| {
+            path.file_name().map_or_else(
+                || path.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            )
+        };
+        let mut figures = Vec::with_capacity(self.figures.len());
+        for path in &self.figures {
+            let png = std::fs::read(path).map_err(|e| {
+                Failure::Runtime(anyhow!("cannot read back {}: {e}", path.display()))
+            })?;
+            figures.push((file_name(path), png));
+        }
         let mut tables = Vec::with_capacity(self.tables.len());
         for path in &self.tables {
             let csv = std::fs::read_to_string(path).map_err(|e| {
                 Failure::Runtime(anyhow!("cannot read back {}: {e}", path.display()))
             })?;
-            let name = path.file_name().map_or_else(
-                || path.display().to_string(),
-                |n| n.to_string_lossy().into_owned(),
-            );
-            tables.push((name, csv));
+            tables.push((file_name(path), csv));
         }
         // On a runtime of its own, in its own thread: the simulated grasp verbs leave
         // tokio's clock paused, under which the pool's timeouts fire at once.
@@ -363,6 +382,7 @@ impl Recorder {
             summary,
             software_commit: SOFTWARE_COMMIT.map(str::to_owned),
             tables,
+            figures,
         };
         let db = db.to_owned();
         let stored = std::thread::spawn(move || {

@@ -505,7 +505,14 @@ pub async fn results(db: &ReadOnly) -> Result<Vec<crate::StoredResult>, ReadErro
         let tables = crate::results::tables_of(&db.pool, row.result_id)
             .await
             .map_err(rows)?;
-        out.push(crate::StoredResult { row, tables });
+        let figures = crate::results::figures_of(&db.pool, row.result_id)
+            .await
+            .map_err(rows)?;
+        out.push(crate::StoredResult {
+            row,
+            tables,
+            figures,
+        });
     }
     Ok(out)
 }

@@ -29,6 +29,8 @@ pub struct NewResult {
     pub software_commit: Option<String>,
     /// `(file name, CSV text)` per table, as the verb writes them.
     pub tables: Vec<(String, String)>,
+    /// `(file name, PNG bytes)` per figure its tables cannot redraw.
+    pub figures: Vec<(String, Vec<u8>)>,
 }
 
 /// A stored result without its tables (the listing).
@@ -67,6 +69,8 @@ pub struct StoredResult {
     pub row: ResultRow,
     /// `(file name, CSV text)`, by name.
     pub tables: Vec<(String, String)>,
+    /// `(file name, PNG bytes)`, by name.
+    pub figures: Vec<(String, Vec<u8>)>,
 }
 
 impl StoredResult {
@@ -133,6 +137,20 @@ impl Store {
                 });
             }
         }
+        for (i, (name, png)) in r.figures.iter().enumerate() {
+            if name.is_empty() || r.figures[..i].iter().any(|(n, _)| n == name) {
+                return Err(StoreError::Invalid {
+                    what: "a result's figure name",
+                    why: format!("`{name}`: expected a unique, non-empty file name"),
+                });
+            }
+            if !png.starts_with(b"\x89PNG\r\n\x1a\n") {
+                return Err(StoreError::Invalid {
+                    what: "a result's figure",
+                    why: format!("`{name}` is not a PNG"),
+                });
+            }
+        }
         let mut tx = self
             .pool()
             .begin()
@@ -166,6 +184,15 @@ impl Store {
                 .await
                 .map_err(query_err("storing a result's table"))?;
         }
+        for (name, png) in &r.figures {
+            sqlx::query("INSERT INTO result_figures (result_id, name, png) VALUES (?, ?, ?)")
+                .bind(id)
+                .bind(name)
+                .bind(png)
+                .execute(&mut *tx)
+                .await
+                .map_err(query_err("storing a result's figure"))?;
+        }
         tx.commit()
             .await
             .map_err(query_err("committing a result"))?;
@@ -198,7 +225,12 @@ impl Store {
             return Ok(None);
         };
         let tables = tables_of(self.pool(), result_id).await?;
-        Ok(Some(StoredResult { row, tables }))
+        let figures = figures_of(self.pool(), result_id).await?;
+        Ok(Some(StoredResult {
+            row,
+            tables,
+            figures,
+        }))
     }
 }
 
@@ -228,6 +260,20 @@ pub(crate) async fn tables_of(
     Ok(rows.iter().map(|r| (r.get(0), r.get(1))).collect())
 }
 
+/// One result's figures, by name.
+pub(crate) async fn figures_of(
+    pool: &sqlx::SqlitePool,
+    result_id: i64,
+) -> Result<Vec<(String, Vec<u8>)>, StoreError> {
+    let rows =
+        sqlx::query("SELECT name, png FROM result_figures WHERE result_id = ? ORDER BY name")
+            .bind(result_id)
+            .fetch_all(pool)
+            .await
+            .map_err(query_err("reading a result's figures"))?;
+    Ok(rows.iter().map(|r| (r.get(0), r.get(1))).collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -244,6 +290,7 @@ mod tests {
                 ("a.csv".into(), "x,y\n1,2\n".into()),
                 ("b.csv".into(), "z\n3\n".into()),
             ],
+            figures: vec![("f.png".into(), b"\x89PNG\r\n\x1a\nrest".to_vec())],
             ..NewResult::default()
         }
     }
@@ -278,6 +325,7 @@ mod tests {
         );
         assert_eq!(got.table("a.csv"), Some("x,y\n1,2\n"));
         assert_eq!(got.table("b.csv"), Some("z\n3\n"));
+        assert_eq!(got.figures, result("x").figures);
         assert!(store.result(b + 1).await.expect("test step").is_none());
         store.close().await;
     }
@@ -296,7 +344,9 @@ mod tests {
         not_json.settings_json = "{".into();
         let mut twice = result("x");
         twice.tables.push(("a.csv".into(), String::new()));
-        for bad in [empty_verb, not_object, not_json, twice] {
+        let mut not_png = result("x");
+        not_png.figures[0].1 = b"GIF89a".to_vec();
+        for bad in [empty_verb, not_object, not_json, twice, not_png] {
             let e = store.insert_result(&bad).await.expect_err("must fail");
             assert!(matches!(e, StoreError::Invalid { .. }), "{e}");
         }

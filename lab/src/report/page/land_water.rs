@@ -6,6 +6,7 @@
 use super::*;
 use crate::report::results::{Columns, provenance};
 use crate::store::StoredResult;
+use base64::Engine as _;
 
 fn prov(r: &StoredResult) -> Markup {
     html! { p.prov { (provenance(&r.row)) } }
@@ -345,6 +346,17 @@ fn latent_part(r: &StoredResult) -> Markup {
     html! {
         (prov(r))
         @for p in parts { (p) }
-        p.note { "The decoder traversals and the paired instances are images: " code { "softtouch latent" } " writes them as PNGs beside its CSV (MODEL-traversal.png, MODEL-paired.png); they are not stored in the database." }
+        @if r.figures.is_empty() {
+            p.note { "This result stored no traversal or paired-instance images (a model without a decoder, or no --water)." }
+        } @else {
+            p.note { "Decoder traversals (one latent from −span to +span, the others at their test mean) and, with --water, the latent means of paired land and water instances, as " code { "softtouch latent" } " drew them:" }
+            @for (name, png) in &r.figures {
+                figure.stored {
+                    img src=(format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(png)))
+                        alt=(name) style="max-width:100%;height:auto";
+                    figcaption { (name) }
+                }
+            }
+        }
     }
 }
