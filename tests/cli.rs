@@ -102,6 +102,50 @@ fn a_scene_outside_the_rigs_workspace_exits_2() {
 }
 
 #[test]
+fn built_in_scenes_are_reachable_by_name_from_any_folder() {
+    // A folder with no scenes/ in it.
+    let dir = tempdir();
+    for (name, text_toml) in defaults::BUILTIN_SCENES {
+        let out = softtouch(dir.path(), &["config", "show", "scene", name]);
+        assert!(out.status.success(), "{name}: {}", text(&out.stderr));
+        assert_eq!(text(&out.stdout), text_toml, "{name} as shipped");
+        let out = softtouch(dir.path(), &["config", "check", "--scene", name]);
+        assert!(out.status.success(), "{name}: {}", text(&out.stderr));
+        assert!(
+            text(&out.stdout).contains(&format!("scene <embedded default {name}>")),
+            "{}",
+            text(&out.stdout)
+        );
+    }
+    let out = softtouch(dir.path(), &["config", "check", "--scene", "water"]);
+    assert!(
+        text(&out.stdout).contains("medium water"),
+        "{}",
+        text(&out.stdout)
+    );
+    // A file of that name wins over the built-in scene.
+    std::fs::write(dir.path().join("water"), "not = \"a scene\"\n").expect("write");
+    let out = softtouch(dir.path(), &["config", "check", "--scene", "water"]);
+    assert_eq!(out.status.code(), Some(2));
+    // Unknown names say which exist.
+    for args in [
+        &["config", "show", "scene", "sea"][..],
+        &["config", "check", "--scene", "sea"],
+    ] {
+        let out = softtouch(dir.path(), args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(
+            text(&out.stderr).contains("land, water, grasp, grasp-water"),
+            "{}",
+            text(&out.stderr)
+        );
+    }
+    let out = softtouch(dir.path(), &["config", "show", "rig", "water"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("only a scene is built in by name"));
+}
+
+#[test]
 fn a_missing_config_file_exits_2() {
     let dir = tempdir();
     let out = softtouch(dir.path(), &["config", "show", "--rig", "nope.toml"]);

@@ -23,11 +23,14 @@ pub enum ConfigCommand {
     /// Without files, prints the embedded defaults (an all-simulated rig and the
     /// paper's on-land scene) with their comments.
     #[command(
-        after_help = "Examples:\n  softtouch config show rig > rig.toml\n  softtouch config show scene > scene.toml\n  softtouch config show --rig rig.toml --scene water.toml"
+        after_help = "Examples:\n  softtouch config show rig > rig.toml\n  softtouch config show scene > scene.toml\n  softtouch config show scene grasp-water > my-tank.toml   # a built-in scene to edit\n  softtouch config show --rig rig.toml --scene water.toml\n\nBuilt-in scenes (also usable as --scene NAME from any folder): land, water, grasp, grasp-water."
     )]
     Show {
         /// Show only this one.
         which: Option<Which>,
+        /// With `scene`: the built-in scene of this name (land, water, grasp,
+        /// grasp-water), as shipped, comments included.
+        name: Option<String>,
         /// Rig config file (default: embedded all-simulated rig).
         #[arg(long)]
         rig: Option<PathBuf>,
@@ -52,7 +55,27 @@ pub enum ConfigCommand {
 
 pub fn run(cmd: ConfigCommand, out: &mut dyn Write) -> Result<(), Failure> {
     match cmd {
-        ConfigCommand::Show { which, rig, scene } => {
+        ConfigCommand::Show {
+            which,
+            name: Some(name),
+            ..
+        } => {
+            if which != Some(Which::Scene) {
+                return Err(Failure::BadInput(anyhow::anyhow!(
+                    "`{name}`: only a scene is built in by name (softtouch config show scene {name})"
+                )));
+            }
+            let (_, text) = defaults::builtin_scene(&name).ok_or_else(|| {
+                Failure::BadInput(anyhow::anyhow!(
+                    "no built-in scene `{name}`: expected one of {}",
+                    defaults::builtin_scene_names()
+                ))
+            })?;
+            out.write_all(text.as_bytes()).map_err(io_failure)
+        }
+        ConfigCommand::Show {
+            which, rig, scene, ..
+        } => {
             let resolved = configs::resolve(rig.as_deref(), scene.as_deref())?;
             // The embedded defaults are printed as written, comments included.
             let rig_text = if rig.is_some() {

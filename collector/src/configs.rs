@@ -1,7 +1,7 @@
 //! Resolving the rig config and the scene spec: a file when given, else the embedded
 //! default; each validated, and the scene validated against the rig.
 
-use softtouch_schemas::config::{Check, ConfigError, load_toml};
+use softtouch_schemas::config::{Check, ConfigError, load_toml, parse_toml};
 use softtouch_schemas::{ConfigSource, RigConfig, SceneSpec, defaults};
 use std::path::Path;
 
@@ -26,12 +26,31 @@ pub fn rig(path: Option<&Path>) -> Result<(RigConfig, ConfigSource), ConfigError
     }
 }
 
-/// Load the scene from `path`, or the embedded default.
+/// Load the scene from `path`, or the embedded default. A `path` that is no file but
+/// a built-in scene's name (`water`, `grasp-water`, …: [`defaults::BUILTIN_SCENES`])
+/// is that scene, from any folder; a file of that name wins.
 pub fn scene(path: Option<&Path>) -> Result<(SceneSpec, ConfigSource), ConfigError> {
-    match path {
-        Some(p) => Ok((load_toml(p)?, ConfigSource::File(p.to_owned()))),
-        None => Ok((defaults::scene(), ConfigSource::Embedded("scene"))),
+    let Some(p) = path else {
+        return Ok((defaults::scene(), ConfigSource::Embedded("scene")));
+    };
+    if !p.exists()
+        && let Some((name, text)) = p.to_str().and_then(defaults::builtin_scene)
+    {
+        let source = ConfigSource::Embedded(name);
+        return Ok((parse_toml(text, &source)?, source));
     }
+    let scene = load_toml::<SceneSpec>(p).map_err(|mut e| {
+        if !p.exists() {
+            for problem in &mut e.problems {
+                problem.message.push_str(&format!(
+                    " (nor is it a built-in scene: {})",
+                    defaults::builtin_scene_names()
+                ));
+            }
+        }
+        e
+    })?;
+    Ok((scene, ConfigSource::File(p.to_owned())))
 }
 
 /// Load both and check that the scene fits the rig.

@@ -10,6 +10,36 @@ pub const RIG_TOML: &str = include_str!("../defaults/rig.toml");
 /// The default scene, as TOML with comments.
 pub const SCENE_TOML: &str = include_str!("../defaults/scene.toml");
 
+/// The scenes built in, by name, as TOML with comments: what `--scene NAME` reads
+/// from any folder and `softtouch config show scene NAME` prints (`land` is the
+/// default; the others are the checkout's `scenes/` files, embedded at build time).
+pub const BUILTIN_SCENES: [(&str, &str); 4] = [
+    ("land", SCENE_TOML),
+    ("water", include_str!("../../scenes/water.toml")),
+    ("grasp", GRASP_SCENE_TOML),
+    ("grasp-water", GRASP_WATER_SCENE_TOML),
+];
+/// The grasp experiments' land scene (`scenes/grasp.toml`).
+pub const GRASP_SCENE_TOML: &str = include_str!("../../scenes/grasp.toml");
+/// The grasp experiments' water scene (`scenes/grasp-water.toml`).
+pub const GRASP_WATER_SCENE_TOML: &str = include_str!("../../scenes/grasp-water.toml");
+
+/// The built-in scene called `name`, as its name and TOML.
+#[must_use]
+pub fn builtin_scene(name: &str) -> Option<(&'static str, &'static str)> {
+    BUILTIN_SCENES.iter().copied().find(|(n, _)| *n == name)
+}
+
+/// The built-in scenes' names, comma-separated.
+#[must_use]
+pub fn builtin_scene_names() -> String {
+    BUILTIN_SCENES
+        .iter()
+        .map(|(n, _)| *n)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// The all-simulated rig.
 #[must_use]
 pub fn rig() -> RigConfig {
@@ -24,6 +54,21 @@ pub fn scene() -> SceneSpec {
     #[allow(clippy::expect_used)]
     parse_toml(SCENE_TOML, &ConfigSource::Embedded("scene"))
         .expect("embedded default scene is valid")
+}
+
+#[cfg(test)]
+mod builtin_tests {
+    use super::*;
+
+    #[test]
+    fn every_built_in_scene_parses_and_checks() {
+        for (name, text) in BUILTIN_SCENES {
+            let scene: Result<SceneSpec, _> = parse_toml(text, &ConfigSource::Embedded(name));
+            assert!(scene.is_ok(), "{name}: {scene:?}");
+        }
+        assert_eq!(builtin_scene("water").map(|s| s.0), Some("water"));
+        assert!(builtin_scene("sea").is_none());
+    }
 }
 
 #[cfg(test)]

@@ -104,8 +104,10 @@ pub enum ObjectProfile {
         /// Height, m.
         height_m: f64,
     },
-    /// A ball of diameter `width_m`: the fingers meet its chord at each height.
-    Sphere,
+    /// A ball of diameter `width_m`: the fingers meet its chord at each height. (A
+    /// struct variant, so that an unknown key beside `kind` is refused as for the
+    /// others: serde lets an internally tagged unit variant ignore them.)
+    Sphere {},
     /// The section scales linearly from `width_m` at the bottom to `top_width_m` at the
     /// top: a tapered bottle.
     Taper {
@@ -122,7 +124,7 @@ impl ObjectProfile {
     pub fn height_m(&self, width_m: f64) -> f64 {
         match *self {
             Self::Prism { height_m } | Self::Taper { height_m, .. } => height_m,
-            Self::Sphere => width_m,
+            Self::Sphere {} => width_m,
         }
     }
 
@@ -130,7 +132,7 @@ impl ObjectProfile {
     #[must_use]
     pub fn max_width_m(&self, width_m: f64) -> f64 {
         match *self {
-            Self::Prism { .. } | Self::Sphere => width_m,
+            Self::Prism { .. } | Self::Sphere {} => width_m,
             Self::Taper { top_width_m, .. } => width_m.max(top_width_m),
         }
     }
@@ -525,6 +527,27 @@ impl SceneSpec {
     }
 }
 
+/// Why a rod's or object's name cannot be used, if it cannot: the verbs take names
+/// comma-separated (`--objects a,b`) and print them in tables and CSV files.
+pub(crate) fn name_problem(name: &str) -> Option<String> {
+    if name.contains(',') {
+        return Some(format!(
+            "`{name}` contains a comma: names are given comma-separated (--objects), so this one could never be chosen"
+        ));
+    }
+    if let Some(ch) = name.chars().find(|ch| ch.is_control()) {
+        return Some(format!(
+            "{name:?} contains the control character {ch:?}: expected printable text"
+        ));
+    }
+    if name.trim() != name {
+        return Some(format!(
+            "{name:?} starts or ends with white space: expected the name as typed"
+        ));
+    }
+    None
+}
+
 impl Validate for SceneSpec {
     fn validate(&self, c: &mut Check) {
         if self.name.trim().is_empty() {
@@ -547,6 +570,9 @@ impl Validate for SceneSpec {
             if rod.name.trim().is_empty() {
                 c.fail(format!("rods[{i}].name"), "expected a non-empty name");
             }
+            if let Some(why) = name_problem(&rod.name) {
+                c.fail(format!("rods[{i}].name"), why);
+            }
             if !names.insert(rod.name.as_str()) {
                 c.fail(
                     format!("rods[{i}].name"),
@@ -567,6 +593,9 @@ impl Validate for SceneSpec {
             let f = |name: &str| format!("objects[{i}].{name}");
             if o.name.trim().is_empty() {
                 c.fail(f("name"), "expected a non-empty name");
+            }
+            if let Some(why) = name_problem(&o.name) {
+                c.fail(f("name"), why);
             }
             if !object_names.insert(o.name.as_str()) {
                 c.fail(f("name"), format!("object name `{}` is used twice", o.name));
@@ -609,11 +638,11 @@ impl Validate for SceneSpec {
                     c.within(&f("profile.height_m"), height_m, 0.005, 0.5, "m");
                     c.within(&f("profile.top_width_m"), top_width_m, 1e-3, 0.049, "m");
                 }
-                Some(ObjectProfile::Sphere) if o.shape != RodShape::Circle => c.fail(
+                Some(ObjectProfile::Sphere {}) if o.shape != RodShape::Circle => c.fail(
                     f("shape"),
                     "a sphere's section is a circle: expected shape = \"circle\"",
                 ),
-                Some(ObjectProfile::Sphere) | None => {}
+                Some(ObjectProfile::Sphere {}) | None => {}
             }
             if let Some(h) = o.grasp_height_m {
                 match o.profile {
@@ -651,5 +680,54 @@ impl Validate for SceneSpec {
             }
             e.validate(c, &at);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{ConfigSource, parse_toml};
+
+    fn scene_with_object(object: &str) -> Result<SceneSpec, String> {
+        let text = format!("{}\n[[objects]]\n{object}\n", crate::defaults::SCENE_TOML);
+        parse_toml::<SceneSpec>(&text, &ConfigSource::Embedded("test")).map_err(|e| e.to_string())
+    }
+
+    const BALL: &str = "shape = \"circle\"\nwidth_m = 0.04\nmass_kg = 0.05\nfriction = 0.5\n";
+
+    #[test]
+    fn an_unknown_key_inside_a_profile_is_refused_for_every_kind() {
+        let ok = scene_with_object(&format!(
+            "name = \"ball\"\n{BALL}profile = {{ kind = \"sphere\" }}"
+        ));
+        assert!(ok.is_ok(), "{ok:?}");
+        for profile in [
+            "{ kind = \"sphere\", height_m = 0.05 }",
+            "{ kind = \"prism\", height_m = 0.05, heigth_m = 0.05 }",
+            "{ kind = \"taper\", height_m = 0.05, top_width_m = 0.02, top = 1 }",
+        ] {
+            let e = scene_with_object(&format!("name = \"ball\"\n{BALL}profile = {profile}"))
+                .expect_err(profile);
+            assert!(e.contains("unknown field"), "{profile}: {e}");
+        }
+    }
+
+    #[test]
+    fn names_that_could_never_be_chosen_are_refused_by_field() {
+        for (name, says) in [
+            ("a,b", "contains a comma"),
+            ("tab\\tname", "control character"),
+            (" ball", "white space"),
+        ] {
+            let e = scene_with_object(&format!(
+                "name = \"{name}\"\n{BALL}profile = {{ kind = \"sphere\" }}"
+            ))
+            .expect_err(name);
+            assert!(
+                e.contains("objects[0].name") && e.contains(says),
+                "{name}: {e}"
+            );
+        }
+        assert_eq!(name_problem("oval-tube_2 (blue)"), None);
     }
 }

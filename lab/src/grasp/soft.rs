@@ -24,9 +24,9 @@ use super::calibration::Calibrated;
 use super::sim::{LoggedTruth, TruthSample};
 use crate::models::ModelError;
 
-/// The grasp scene shipped in `scenes/grasp.toml`: the default for `disturb` and
-/// `twist` (its oval tube and cylinder).
-const GRASP_SCENE_TOML: &str = include_str!("../../../scenes/grasp.toml");
+// The grasp scene shipped in `scenes/grasp.toml`: the default for `disturb` and
+// `twist` (its oval tube and cylinder).
+use softtouch_schemas::defaults::GRASP_SCENE_TOML;
 
 /// What can go wrong in a grasp experiment on the simulator.
 #[derive(Debug, thiserror::Error)]

@@ -113,6 +113,8 @@ impl GraspSetup {
             let field = |f: &str| format!("grasp.objects[{i}].{f}");
             if o.name.trim().is_empty() {
                 c.fail(field("name"), "expected a non-empty name");
+            } else if let Some(why) = crate::scene::name_problem(&o.name) {
+                c.fail(field("name"), why);
             } else if self.objects[..i].iter().any(|p| p.name == o.name) {
                 c.fail(
                     field("name"),

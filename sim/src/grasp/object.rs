@@ -169,7 +169,7 @@ impl GraspObject {
             Some(ObjectProfile::Prism { height_m }) => {
                 (unit_area * w * w * height_m, unit_area * w * w)
             }
-            Some(ObjectProfile::Sphere) => {
+            Some(ObjectProfile::Sphere {}) => {
                 let r = 0.5 * w;
                 (
                     4.0 / 3.0 * std::f64::consts::PI * r.powi(3),
@@ -337,7 +337,7 @@ impl GraspObject {
         }
         Some(match p {
             ObjectProfile::Prism { .. } => self.width_m,
-            ObjectProfile::Sphere => {
+            ObjectProfile::Sphere {} => {
                 let r = 0.5 * self.width_m;
                 2.0 * (r * r - (u - r) * (u - r)).max(0.0).sqrt()
             }

@@ -120,7 +120,13 @@ fn a_lying_cylinder_presses_like_the_rod_of_the_same_section() {
 #[test]
 fn profiles_give_the_width_at_each_height() {
     // A sphere's chord.
-    let ball = GraspObject::standing("ball", RodShape::Circle, 0.04, 1.0, ObjectProfile::Sphere);
+    let ball = GraspObject::standing(
+        "ball",
+        RodShape::Circle,
+        0.04,
+        1.0,
+        ObjectProfile::Sphere {},
+    );
     assert!((ball.grasp_height_m - 0.02).abs() < 1e-12);
     for q in [0.0, 0.01, -0.015, 0.0199] {
         let (r, y) = ball.half_width_at(q, 0.0, 0).expect("inside");

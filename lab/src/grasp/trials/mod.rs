@@ -30,8 +30,9 @@ use crate::store::{GraspTrialKey, Store, StoreError};
 use softtouch_collector::dataset::export::sha256_hex;
 
 /// The built-in scenes: on land and underwater, five objects each.
-const LAND_TOML: &str = include_str!("../../../../scenes/grasp.toml");
-const WATER_TOML: &str = include_str!("../../../../scenes/grasp-water.toml");
+use softtouch_schemas::defaults::{
+    GRASP_SCENE_TOML as LAND_TOML, GRASP_WATER_SCENE_TOML as WATER_TOML,
+};
 
 /// The paper's overall success rates (Figure 4): (medium, mode) → rate.
 #[must_use]
