@@ -516,6 +516,9 @@ fn the_grasping_section_shows_each_stored_session_and_draws_chosen_trials() {
         "the refused trial counts in no cell"
     );
     assert_eq!(value(&html, &format!("grasp-{id}-0-0-all-closed")), "0/2");
+    // Open held both, closed held neither: 2 discordant pairs one way, p = 2 · 2⁻² = 0.5
+    // (the refused closed trial 2 pairs with nothing).
+    assert_eq!(value(&html, &format!("grasp-{id}-0-0-mcnemar")), "0.5000");
     assert_eq!(
         value(&html, &format!("grasp-{id}-0-1-all-open")),
         "0/0",

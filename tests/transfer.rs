@@ -138,7 +138,7 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
             "--water",
             "water-b",
             "--out",
-            "b.csv",
+            "b/b.csv",
         ],
     ));
     assert!(out.contains("paired latents (30 pairs;"), "{out}");

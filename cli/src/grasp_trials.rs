@@ -12,7 +12,7 @@ use softtouch_grasp::Mode;
 use softtouch_schemas::Medium;
 
 use super::{Failure, io_failure, open_existing};
-use softtouch_lab::grasp::trials::table::{Cell, summarise, write_outputs};
+use softtouch_lab::grasp::trials::table::{Cell, Paired, paired, summarise, write_outputs};
 use softtouch_lab::grasp::trials::{
     TrialPlan, TrialTiming, TrialsError, load_scenes, medium_name, resume_session, run_trials,
     start_session,
@@ -362,6 +362,7 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
     let media: Vec<Medium> = session.scenes.iter().map(|s| s.medium).collect();
     let table = summarise(&session.plan, &media, &rows)?;
     print_table(&table, &session.plan, out)?;
+    print_paired(&paired(&session.plan, &media, &rows), &session.plan, out)?;
     let written = write_outputs(&args.out_dir, &table, &rows, &session.plan)?;
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     match names.as_slice() {
@@ -472,6 +473,11 @@ async fn run_on_rig(
     let rows = store.grasp_trials(session.id).await?;
     let table = summarise(&session.plan, &session.media(), &rows)?;
     print_table(&table, &session.plan, out)?;
+    print_paired(
+        &paired(&session.plan, &session.media(), &rows),
+        &session.plan,
+        out,
+    )?;
     let written = write_outputs(&args.out_dir, &table, &rows, &session.plan)?;
     for p in written {
         writeln!(out, "wrote {}", p.display()).map_err(w)?;
@@ -525,6 +531,36 @@ fn print_table(cells: &[Cell], plan: &TrialPlan, out: &mut dyn Write) -> Result<
             ),
             pct(c.paper()),
             failures.join(", ")
+        )
+        .map_err(w)?;
+    }
+    Ok(())
+}
+
+/// Open against closed on the same perturbations, with McNemar's exact test.
+fn print_paired(pairs: &[Paired], plan: &TrialPlan, out: &mut dyn Write) -> Result<(), Failure> {
+    if pairs.is_empty() {
+        return Ok(());
+    }
+    let w = io_failure;
+    writeln!(
+        out,
+        "\nopen against closed on the same perturbations (pairs by object and trial; McNemar's exact test):\n{:>6} {:<7} {:>6} {:>6} {:>10} {:>12} {:>8} {:>9}",
+        "σ mm", "medium", "pairs", "both", "open only", "closed only", "neither", "p"
+    )
+    .map_err(w)?;
+    for p in pairs {
+        writeln!(
+            out,
+            "{:>6} {:<7} {:>6} {:>6} {:>10} {:>12} {:>8} {:>9.4}",
+            plan.sigmas_mm[p.sigma_index as usize],
+            medium_name(p.medium),
+            p.pairs,
+            p.both,
+            p.open_only,
+            p.closed_only,
+            p.neither,
+            p.p
         )
         .map_err(w)?;
     }

@@ -281,6 +281,10 @@ pub async fn run_transfer(
         }
     }
     store.close().await;
+    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Failure::Runtime(anyhow!("cannot create {}: {e}", dir.display())))?;
+    }
     std::fs::write(&args.out, csv)
         .map_err(|e| Failure::Runtime(anyhow!("cannot write {}: {e}", args.out.display())))?;
     // The cosine of every pair, for its distribution (the report's histogram).

@@ -62,8 +62,8 @@ pub use trials::{
     ArmLift, FailReason, Judge, KEEP_ALIVE, Lift, LiftPlan, Mode, Moment, ObjectState, Observation,
     OperatorInput, OperatorJudge, RigJudge, SNAPSHOT_WIDTH_PX, SharedArm, SnapCamera, Snapshot,
     TOUCH_N, TraceRow, TrialConfig, TrialDevices, TrialResult, Verdict, Z_95, confirmed,
-    operator_verdict, perturbation_m, physics_verdict, run_trial, thumbnail_png, trial_seed,
-    wilson_interval,
+    mcnemar_exact_p, operator_verdict, perturbation_m, physics_verdict, run_trial, thumbnail_png,
+    trial_seed, wilson_interval,
 };
 pub use wrist::{ArmWrist, Wrist, WristConfig, WristLoop, turned};
 

@@ -47,6 +47,36 @@ pub use run::*;
 mod snapshots;
 pub use snapshots::{Moment, SNAPSHOT_WIDTH_PX, SnapCamera, Snapshot, thumbnail_png};
 
+/// McNemar's exact test of paired outcomes: the two-sided p-value that `b` pairs
+/// going one way (e.g. open held, closed failed) and `c` the other are as likely as
+/// a fair coin's split of `b + c` (the binomial test at ½; pairs that agree carry no
+/// information). 1 when `b + c = 0`.
+///
+/// Summed in log space, so any count gives a finite p in [0, 1]. (Written here rather
+/// than taken from `statrs`: it is one binomial tail, and `statrs` would bring
+/// `nalgebra`'s build into every crate that judges a trial.)
+#[must_use]
+pub fn mcnemar_exact_p(b: u64, c: u64) -> f64 {
+    let n = b + c;
+    if n == 0 {
+        return 1.0;
+    }
+    let k = b.min(c);
+    // ln C(n, i) · 2^-n for i = 0..=k, accumulated with log-sum-exp.
+    let ln_half_n = -(n as f64) * std::f64::consts::LN_2;
+    let mut ln_c = 0.0_f64;
+    let mut terms = Vec::with_capacity(k as usize + 1);
+    for i in 0..=k {
+        if i > 0 {
+            ln_c += ((n - i + 1) as f64).ln() - (i as f64).ln();
+        }
+        terms.push(ln_c + ln_half_n);
+    }
+    let top = terms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let tail = top.exp() * terms.iter().map(|t| (t - top).exp()).sum::<f64>();
+    (2.0 * tail).min(1.0)
+}
+
 /// z of the two-sided 95 % normal interval.
 pub const Z_95: f64 = 1.959_963_984_540_054;
 

@@ -107,3 +107,28 @@ fn lift_durations_are_trapezoids_or_triangles() {
         .is_err()
     );
 }
+
+#[test]
+fn mcnemar_exact_p_matches_the_binomial_tail_on_hard_cases() {
+    // No discordant pair: nothing to say.
+    assert_eq!(mcnemar_exact_p(0, 0), 1.0);
+    // All discordant pairs one way: 2 · 2^-n.
+    assert!(close(mcnemar_exact_p(0, 10), 2.0 / 1024.0, 1e-15));
+    assert!(close(mcnemar_exact_p(10, 0), 2.0 / 1024.0, 1e-15));
+    // 1 against 9: 2 · (1 + 10) / 1024.
+    assert!(close(mcnemar_exact_p(1, 9), 22.0 / 1024.0, 1e-15));
+    // An even split, and one short of it, give 1 (capped).
+    assert_eq!(mcnemar_exact_p(5, 5), 1.0);
+    assert!(close(mcnemar_exact_p(4, 5), 1.0, 1e-12));
+    // R's binom.test(3, 15)$p.value = 0.03515625.
+    assert!(close(mcnemar_exact_p(3, 12), 0.035_156_25, 1e-12));
+    // Large counts stay finite, in [0, 1], and symmetric (2^-3000 underflows a
+    // direct sum).
+    for (b, c) in [(0, 3000), (1400, 1600), (100_000, 100_000)] {
+        let p = mcnemar_exact_p(b, c);
+        assert!((0.0..=1.0).contains(&p), "{b} {c}: {p}");
+        assert_eq!(p, mcnemar_exact_p(c, b));
+    }
+    assert_eq!(mcnemar_exact_p(0, 3000), 0.0);
+    assert!(mcnemar_exact_p(1400, 1600) < 0.001);
+}

@@ -113,6 +113,83 @@ pub fn summarise(
     Ok(cells)
 }
 
+/// Open against closed loop on the same perturbations, per σ and medium: trials pair
+/// by (object, trial), which draw the same grasp-point offset in both modes. McNemar's
+/// exact test asks whether the discordant pairs lean one way more than chance would.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Paired {
+    /// Which σ of the plan.
+    pub sigma_index: u32,
+    /// Which scene of the session.
+    pub scene_index: u32,
+    /// The scene's medium.
+    pub medium: Medium,
+    /// Pairs with both modes stored (a refused trial pairs with nothing).
+    pub pairs: u64,
+    /// Held in both.
+    pub both: u64,
+    /// Held open loop only.
+    pub open_only: u64,
+    /// Held closed loop only.
+    pub closed_only: u64,
+    /// Held in neither.
+    pub neither: u64,
+    /// McNemar's exact two-sided p-value.
+    pub p: f64,
+}
+
+/// The paired comparison of `rows`, per σ and scene (empty unless both modes ran).
+#[must_use]
+pub fn paired(plan: &TrialPlan, media: &[Medium], rows: &[GraspTrialRow]) -> Vec<Paired> {
+    let refused = FailReason::Refused.as_str();
+    let usable = |r: &&GraspTrialRow| r.reason.as_deref() != Some(refused);
+    let mut out = Vec::new();
+    for si in 0..plan.sigmas_mm.len() as u32 {
+        for (ci, medium) in media.iter().enumerate() {
+            let ci = ci as u32;
+            let here = |mode: Mode| -> BTreeMap<(&str, u32), bool> {
+                rows.iter()
+                    .filter(usable)
+                    .filter(|r| {
+                        r.key.sigma_index == si
+                            && r.key.scene_index == ci
+                            && r.key.mode == mode.as_str()
+                    })
+                    .map(|r| ((r.key.object.as_str(), r.key.trial), r.success))
+                    .collect()
+            };
+            let (open, closed) = (here(Mode::Open), here(Mode::Closed));
+            if open.is_empty() || closed.is_empty() {
+                continue;
+            }
+            let mut p = Paired {
+                sigma_index: si,
+                scene_index: ci,
+                medium: *medium,
+                pairs: 0,
+                both: 0,
+                open_only: 0,
+                closed_only: 0,
+                neither: 0,
+                p: 1.0,
+            };
+            for (key, o) in &open {
+                let Some(c) = closed.get(key) else { continue };
+                p.pairs += 1;
+                match (o, c) {
+                    (true, true) => p.both += 1,
+                    (true, false) => p.open_only += 1,
+                    (false, true) => p.closed_only += 1,
+                    (false, false) => p.neither += 1,
+                }
+            }
+            p.p = softtouch_grasp::mcnemar_exact_p(p.open_only, p.closed_only);
+            out.push(p);
+        }
+    }
+    out
+}
+
 /// Writes the session's files into `dir` (created if need be): the summary and rows
 /// CSVs, Figure 4f and, for a σ sweep, success against σ. Returns their paths.
 ///
@@ -332,4 +409,72 @@ pub fn write_sweep(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), 
         (900, 520),
     )
     .map_err(|e| TrialsError::Failed(e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::GraspTrialKey;
+
+    fn row(object: &str, mode: &str, trial: u32, reason: Option<&str>) -> GraspTrialRow {
+        GraspTrialRow {
+            key: GraspTrialKey {
+                sigma_index: 0,
+                scene_index: 0,
+                object: object.into(),
+                mode: mode.into(),
+                trial,
+            },
+            medium: "land".into(),
+            sigma_m: 0.005,
+            offset_m: [0.0; 3],
+            commanded_width_m: 0.02,
+            final_width_m: 0.02,
+            peak_estimate_n: None,
+            peak_true_n: None,
+            success: reason.is_none(),
+            reason: reason.map(str::to_owned),
+            detail: None,
+            confirmed_after_s: None,
+            wall_s: 0.1,
+        }
+    }
+
+    #[test]
+    fn open_and_closed_pair_by_object_and_trial_and_refused_trials_pair_with_nothing() {
+        let plan = TrialPlan::default();
+        let rows = vec![
+            row("ball", "open", 0, None),
+            row("ball", "closed", 0, None),
+            row("ball", "open", 1, Some("slip")),
+            row("ball", "closed", 1, None),
+            row("cake", "open", 0, None),
+            row("cake", "closed", 0, Some("crush")),
+            row("cake", "open", 1, Some("miss")),
+            row("cake", "closed", 1, Some("miss")),
+            row("cake", "open", 2, Some("miss")),
+            row("cake", "closed", 2, None),
+            // Unpaired: no closed trial 3; a refused one.
+            row("cake", "open", 3, None),
+            row("cake", "open", 4, None),
+            row("cake", "closed", 4, Some("refused")),
+        ];
+        let p = paired(&plan, &[Medium::Air], &rows);
+        assert_eq!(p.len(), 1);
+        let p = &p[0];
+        assert_eq!(
+            (p.pairs, p.both, p.open_only, p.closed_only, p.neither),
+            (5, 1, 1, 2, 1)
+        );
+        assert_eq!(p.p, softtouch_grasp::mcnemar_exact_p(1, 2));
+        assert_eq!(p.p, 1.0);
+        // One mode only: nothing to pair.
+        let open_only: Vec<GraspTrialRow> = rows
+            .iter()
+            .filter(|r| r.key.mode == "open")
+            .cloned()
+            .collect();
+        assert!(paired(&plan, &[Medium::Air], &open_only).is_empty());
+        assert!(paired(&plan, &[Medium::Air], &[]).is_empty());
+    }
 }

@@ -90,6 +90,20 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
                 }
             }
         }
+        @let pairs = g.plan.as_ref().map(|p| crate::grasp::trials::table::paired(p, &g.media, &g.rows)).unwrap_or_default();
+        @if !pairs.is_empty() {
+            p.note { "Open against closed loop on the same perturbations: trials pair by object and trial number, which draw the same grasp-point offset in both modes; McNemar's exact test (two-sided) asks whether the pairs that differ lean one way more than chance." }
+            table {
+                tr { th { "σ mm" } th.l { "medium" } th { "pairs" } th { "held both" } th { "open only" } th { "closed only" } th { "neither" } th { "McNemar p" } }
+                @for p in &pairs {
+                    tr {
+                        td { (sigma(p.sigma_index)) } td.l { (medium(p.medium)) } td { (p.pairs) } td { (p.both) }
+                        td { (p.open_only) } td { (p.closed_only) } td { (p.neither) }
+                        td data-k=(format!("grasp-{id}-{}-{}-mcnemar", p.sigma_index, p.scene_index)) { (format!("{:.4}", p.p)) }
+                    }
+                }
+            }
+        }
         div.figs { (rates_figure(g, false)?) (rates_figure(g, true)?) }
         (wall_time(g))
         @if !figures.is_empty() {

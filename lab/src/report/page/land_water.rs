@@ -353,7 +353,7 @@ fn latent_part(r: &StoredResult) -> Markup {
             @for (name, png) in &r.figures {
                 figure.stored {
                     img src=(format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(png)))
-                        alt=(name) style="max-width:100%;height:auto";
+                        alt=(name) style="max-width:min(100%,760px);height:auto";
                     figcaption { (name) }
                 }
             }
