@@ -217,6 +217,46 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
         "SELECT COUNT(*) FROM grasp_traces c JOIN grasp_trials t USING (trial_id) WHERE t.session_id = 1 AND c.cycles > 0",
     ));
     assert_eq!(traces, 16, "every trial has its trace");
+    // Every trial that ran has its end frame, and those with a lift its lift frame.
+    let ends = rt.block_on(count(
+        &db,
+        "SELECT COUNT(*) FROM grasp_trial_frames f JOIN grasp_trials t USING (trial_id) WHERE t.session_id = 1 AND f.moment = 'end'",
+    ));
+    assert_eq!(ends, 16);
+    // Open against closed on the same perturbations, per medium.
+    let paired = out
+        .split("open against closed on the same perturbations")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no paired table in: {out}"));
+    let paired_rows: Vec<Vec<&str>> = paired
+        .lines()
+        .skip(2)
+        .take(2)
+        .map(|l| l.split_whitespace().collect())
+        .collect();
+    for (row, medium) in paired_rows.iter().zip(["land", "water"]) {
+        assert_eq!(row.len(), 8, "{row:?}");
+        assert_eq!((row[1], row[2]), (medium, "4"), "{out}");
+        let cells: u64 = row[3..7]
+            .iter()
+            .map(|v| v.parse::<u64>().expect("count"))
+            .sum();
+        assert_eq!(cells, 4, "{row:?}");
+        let p: f64 = row[7].parse().expect("p");
+        assert!((0.0..=1.0).contains(&p), "{row:?}");
+    }
+    // A trial's trace by its id, as CSV.
+    let trace = ok(&softtouch(d, &["results", "trace", "1"]));
+    assert!(
+        trace.starts_with("t_s,estimate_n,true_n,measured_count,request_count\n"),
+        "{trace}"
+    );
+    assert!(trace.lines().count() > 5, "{trace}");
+    fails_with(
+        &softtouch(d, &["results", "trace", "999"]),
+        2,
+        "no grasp trial 999",
+    );
 
     // Session 2, the same seed: the same perturbations and outcomes.
     let out = ok(&trials(d, &base));
@@ -474,5 +514,73 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
         rt.block_on(count(&db, "SELECT COUNT(*) FROM grasp_sessions")),
         7,
         "refused runs create no session"
+    );
+}
+
+#[test]
+fn several_models_run_the_same_trials_and_their_spread_is_printed() {
+    let dir = tempdir();
+    let d = dir.path();
+    tiny_model(d);
+    // The same training under another name (training is deterministic): the
+    // mechanics of the comparison, not a second seed's luck with a tiny model.
+    let mut args = vec!["train", "--dataset", "air", "--name", "air-b"];
+    args.extend(common::TINY);
+    if let Some(i) = args.iter().position(|a| *a == "--epochs") {
+        args[i + 1] = "30";
+    }
+    ok(&softtouch(d, &args));
+    let out = ok(&trials(
+        d,
+        &[
+            "--models",
+            "air-svae,air-b",
+            "--objects",
+            "cylinder",
+            "--trials",
+            "1",
+        ],
+    ));
+    assert!(out.contains("===== model air-svae ====="), "{out}");
+    assert!(out.contains("===== model air-b ====="), "{out}");
+    for file in ["g/air-svae/grasp-trials.csv", "g/air-b/grasp-trials.csv"] {
+        assert!(d.join(file).exists(), "{file}");
+    }
+    let spread = out
+        .split("across models")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no spread in: {out}"));
+    for key in [
+        "σ 5 mm land open",
+        "σ 5 mm land closed",
+        "σ 5 mm water open",
+        "σ 5 mm water closed",
+    ] {
+        let line = spread
+            .lines()
+            .find(|l| l.starts_with(key))
+            .unwrap_or_else(|| panic!("no `{key}` in: {spread}"));
+        assert!(
+            line.contains("air-svae ")
+                && line.contains("air-b ")
+                && line.replace(' ', "").contains("sd0%"),
+            "{line}"
+        );
+    }
+    // The same perturbations for both models: the sessions' offsets agree.
+    let rt = runtime();
+    let a = rt.block_on(session_rows(&d.join("softtouch.db"), 1));
+    let b = rt.block_on(session_rows(&d.join("softtouch.db"), 2));
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!(
+            (&x.1, &x.2, x.3, x.4, x.5, x.6),
+            (&y.1, &y.2, y.3, y.4, y.5, y.6)
+        );
+    }
+    fails_with(
+        &trials(d, &["--models", "air-svae,nope", "--trials", "1"]),
+        2,
+        "no model named `nope`",
     );
 }

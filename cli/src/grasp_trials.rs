@@ -19,11 +19,16 @@ use softtouch_lab::grasp::trials::{
 };
 
 /// Options of `grasp trials`.
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct TrialsArgs {
     /// Stored model whose estimate closes the loop (and is recorded in open loop).
-    #[arg(long, required_unless_present = "resume")]
+    #[arg(long, required_unless_present_any = ["resume", "models"])]
     pub model: Option<String>,
+    /// Several stored models (comma-separated, e.g. three training seeds): the same
+    /// trials (same plan, seed and perturbations) for each, one session each (its
+    /// files under --out-dir/MODEL), then the spread of the success rates across them.
+    #[arg(long, value_delimiter = ',', conflicts_with_all = ["model", "resume", "rig"])]
+    pub models: Vec<String>,
     /// Scene file, one per medium (repeat the flag); default: the built-in land and
     /// water scenes (`scenes/grasp.toml`, `scenes/grasp-water.toml`).
     #[arg(long)]
@@ -259,7 +264,163 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
     if let Some(rig) = args.rig.clone() {
         return run_on_rig(args, &rig, db, out).await;
     }
+    if !args.models.is_empty() {
+        return run_models(args, db, out).await;
+    }
+    run_sim(args, db, out).await.map(drop)
+}
+
+/// `grasp trials --models A,B,C`: the same trials for each model, then the spread.
+async fn run_models(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    let mut names: Vec<String> = Vec::new();
+    for m in &args.models {
+        if m.is_empty() {
+            return Err(super::grasp_loop::bad(
+                "--models: expected stored model names, comma-separated".into(),
+            ));
+        }
+        if !names.contains(m) {
+            names.push(m.clone());
+        }
+    }
+    // Every model is there before any trial runs.
+    {
+        let store = open_existing(db).await?;
+        for m in &names {
+            let found = softtouch_lab::models::force_artifact(&store, m).await;
+            if let Err(e) = found {
+                store.close().await;
+                return Err(e.into());
+            }
+        }
+        store.close().await;
+    }
+    let mut sessions = Vec::with_capacity(names.len());
+    for m in &names {
+        writeln!(out, "\n===== model {m} =====").map_err(io_failure)?;
+        let one = TrialsArgs {
+            model: Some(m.clone()),
+            models: Vec::new(),
+            out_dir: args.out_dir.join(m),
+            ..args.clone()
+        };
+        let (id, stopped) = run_sim(one, db, out).await?;
+        sessions.push((m.clone(), id));
+        if stopped {
+            writeln!(out, "stopped: the models after `{m}` are not run").map_err(io_failure)?;
+            break;
+        }
+    }
     let store = open_existing(db).await?;
+    let spread = model_spread(&store, &sessions).await;
+    store.close().await;
+    print_spread(&spread?, out)
+}
+
+/// A row of the spread: its σ, medium and mode, and each model's `(name, held, n)`.
+type SpreadRow = (String, Vec<(String, u64, u64)>);
+
+/// Per σ, medium and mode (all objects): each model's held/n, then the mean, sample
+/// standard deviation and range of their rates.
+async fn model_spread(
+    store: &softtouch_store::Store,
+    sessions: &[(String, i64)],
+) -> Result<Vec<SpreadRow>, Failure> {
+    let mut rows: Vec<SpreadRow> = Vec::new();
+    for (model, id) in sessions {
+        let session = store
+            .grasp_session(*id)
+            .await?
+            .ok_or_else(|| Failure::Runtime(anyhow::anyhow!("grasp session {id} vanished")))?;
+        let plan: TrialPlan = serde_json::from_str(&session.config_json)
+            .map_err(|e| Failure::Runtime(anyhow::anyhow!("session {id}'s settings: {e}")))?;
+        let scenes: Vec<softtouch_schemas::SceneSpec> = serde_json::from_str(&session.scenes_json)
+            .map_err(|e| Failure::Runtime(anyhow::anyhow!("session {id}'s scenes: {e}")))?;
+        let media: Vec<Medium> = scenes.iter().map(|s| s.medium).collect();
+        let trials = store.grasp_trials(*id).await?;
+        for c in summarise(&plan, &media, &trials)?
+            .iter()
+            .filter(|c| c.object.is_none())
+        {
+            let key = format!(
+                "σ {} mm {} {}",
+                plan.sigmas_mm[c.sigma_index as usize],
+                medium_name(c.medium),
+                c.mode.as_str()
+            );
+            let i = rows.iter().position(|r| r.0 == key).unwrap_or_else(|| {
+                rows.push((key, Vec::new()));
+                rows.len() - 1
+            });
+            rows[i].1.push((model.clone(), c.held, c.trials));
+        }
+    }
+    Ok(rows)
+}
+
+fn print_spread(rows: &[SpreadRow], out: &mut dyn Write) -> Result<(), Failure> {
+    let w = io_failure;
+    writeln!(
+        out,
+        "\nacross models (all objects; sd: sample standard deviation of the models' rates):"
+    )
+    .map_err(w)?;
+    for (key, per) in rows {
+        let rates: Vec<f64> = per
+            .iter()
+            .filter(|(_, _, n)| *n > 0)
+            .map(|(_, h, n)| *h as f64 / *n as f64)
+            .collect();
+        let mean = rates.iter().sum::<f64>() / rates.len().max(1) as f64;
+        let sd = if rates.len() > 1 {
+            (rates.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (rates.len() - 1) as f64)
+                .sqrt()
+        } else {
+            f64::NAN
+        };
+        let (lo, hi) = rates
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), r| {
+                (a.min(*r), b.max(*r))
+            });
+        let each: Vec<String> = per.iter().map(|(m, h, n)| format!("{m} {h}/{n}")).collect();
+        let p = |v: f64| {
+            if v.is_finite() {
+                format!("{:.0} %", 100.0 * v)
+            } else {
+                "–".into()
+            }
+        };
+        writeln!(
+            out,
+            "{key:<26} mean {:>5}  sd {:>5}  range {}–{}  {}",
+            p(mean),
+            p(sd),
+            p(lo),
+            p(hi),
+            each.join(", ")
+        )
+        .map_err(w)?;
+    }
+    Ok(())
+}
+
+/// One simulated session (new or resumed): returns its id and whether a stop request
+/// ended it early.
+async fn run_sim(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(i64, bool), Failure> {
+    let store = open_existing(db).await?;
+    // Closed (the log checkpointed into the file) on every path.
+    let ran = run_sim_on(&store, args, out).await;
+    store.close().await;
+    ran
+}
+
+async fn run_sim_on(
+    store: &softtouch_store::Store,
+    args: TrialsArgs,
+    out: &mut dyn Write,
+) -> Result<(i64, bool), Failure> {
+    let store = store.clone();
     let session = match args.resume {
         Some(id) => resume_session(&store, id, args.model.as_deref()).await?,
         None => {
@@ -333,6 +494,7 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
         }
         other => other?,
     };
+    let stopped = matches!(ran, softtouch_lab::grasp::trials::RunEnd::Stopped { .. });
     let todo = match ran {
         softtouch_lab::grasp::trials::RunEnd::Completed => &todo[..],
         softtouch_lab::grasp::trials::RunEnd::Stopped { ran } => {
@@ -374,7 +536,7 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
         }
         _ => writeln!(out, "wrote {}", names.join(", ")).map_err(w)?,
     }
-    Ok(())
+    Ok((session.id, stopped))
 }
 
 /// `grasp trials --rig FILE`: the rig's devices opened, then the trials of a new or
