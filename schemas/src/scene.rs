@@ -67,8 +67,17 @@ pub struct ObjectSpec {
     pub contact_z_m: f64,
     /// Mass, kg.
     pub mass_kg: f64,
-    /// Friction coefficient against the finger's skin.
+    /// Friction coefficient against the finger's skin, dry.
     pub friction: f64,
+    /// What its surface is (free text, with the source of its friction), for the
+    /// reader: the simulator reads the numbers only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface: Option<String>,
+    /// Friction coefficient against the finger's silicone in water; what the
+    /// simulator uses where the scene declares `wet_contact` (then every object
+    /// gives one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wet_friction: Option<f64>,
     /// Squeeze on one finger that crushes it, N; absent for a rigid object.
     #[serde(default)]
     pub crush_force_n: Option<f64>,
@@ -325,6 +334,11 @@ pub enum Effect {
         /// Typical period of the gusts, s.
         period_s: f64,
     },
+    /// Wet contact: each object grips the finger's silicone with its `wet_friction`
+    /// (measured in water against a silicone like the finger's) instead of its dry
+    /// `friction`. Declared per object, because water lubricates a hydrophilic surface
+    /// against silicone and barely a hydrophobic one.
+    WetContact {},
     /// Camera frames lost.
     FrameDrops {
         /// Probability each frame is dropped.
@@ -369,6 +383,7 @@ impl Effect {
             Self::ObjectBuoyancy { .. } => "object_buoyancy",
             Self::ObjectDrag { .. } => "object_drag",
             Self::ObjectFlow { .. } => "object_flow",
+            Self::WetContact {} => "wet_contact",
             Self::FrameDrops { .. } => "frame_drops",
             Self::FtPacketLoss { .. } => "ft_packet_loss",
             Self::Latency { .. } => "latency",
@@ -474,6 +489,7 @@ impl Effect {
                 c.within(&f("gust_m_s"), *gust_m_s, 0.0, 10.0, "m/s");
                 c.within(&f("period_s"), *period_s, 0.01, 1000.0, "s");
             }
+            Self::WetContact {} => {}
             Self::FrameDrops { probability }
             | Self::FtPacketLoss { probability }
             | Self::ArmReflex { probability } => {
@@ -624,6 +640,23 @@ impl Validate for SceneSpec {
             c.within(&f("contact_z_m"), o.contact_z_m, -0.05, 0.05, "m");
             c.within(&f("mass_kg"), o.mass_kg, 1e-4, 10.0, "kg");
             c.within(&f("friction"), o.friction, 0.0, 2.0, "");
+            if let Some(wet) = o.wet_friction {
+                c.within(&f("wet_friction"), wet, 0.0, 2.0, "");
+            } else if self
+                .effects
+                .iter()
+                .any(|e| matches!(e, Effect::WetContact {}))
+            {
+                c.fail(
+                    f("wet_friction"),
+                    "the scene declares wet_contact: expected this object's friction against the finger's silicone in water",
+                );
+            }
+            if let Some(surface) = &o.surface
+                && (surface.trim().is_empty() || surface.chars().any(char::is_control))
+            {
+                c.fail(f("surface"), "expected a description in printable text");
+            }
             if let Some(crush) = o.crush_force_n {
                 c.positive(&f("crush_force_n"), crush, "N");
             }
@@ -729,5 +762,35 @@ mod tests {
             );
         }
         assert_eq!(name_problem("oval-tube_2 (blue)"), None);
+    }
+
+    #[test]
+    fn wet_contact_needs_every_objects_wet_friction_and_takes_no_keys() {
+        let wet = |object: &str, effect: &str| {
+            let text = format!(
+                "{}\n[[effects]]\n{effect}\n\n[[objects]]\n{object}\n",
+                crate::defaults::SCENE_TOML
+            );
+            parse_toml::<SceneSpec>(&text, &ConfigSource::Embedded("test"))
+                .map_err(|e| e.to_string())
+        };
+        let ball = format!("name = \"ball\"\n{BALL}profile = {{ kind = \"sphere\" }}");
+        let e = wet(&ball, "kind = \"wet_contact\"").expect_err("no wet_friction");
+        assert!(
+            e.contains("objects[0].wet_friction") && e.contains("declares wet_contact"),
+            "{e}"
+        );
+        let with = format!("{ball}\nwet_friction = 0.05\nsurface = \"glass\"");
+        assert!(wet(&with, "kind = \"wet_contact\"").is_ok());
+        let e = wet(&with, "kind = \"wet_contact\"\nfactor = 0.1").expect_err("a key");
+        assert!(e.contains("unknown field"), "{e}");
+        let e = wet(
+            &format!("{ball}\nwet_friction = 3.0"),
+            "kind = \"wet_contact\"",
+        )
+        .expect_err("out of range");
+        assert!(e.contains("objects[0].wet_friction"), "{e}");
+        // Without the effect a wet friction is only read, never required.
+        assert!(scene_with_object(&ball).is_ok());
     }
 }

@@ -41,6 +41,8 @@ pub(crate) struct Effects {
     pub object_drag_kg_m3: Option<f64>,
     /// A current on a grasped object.
     pub object_flow: Option<Flow>,
+    /// Objects grip with their wet friction (`Effect::WetContact`).
+    pub wet_contact: bool,
 }
 
 /// A current along the gripping direction (`Effect::ObjectFlow`).
@@ -106,6 +108,7 @@ impl Effects {
                 Effect::ObjectDrag {
                     fluid_density_kg_m3,
                 } => e.object_drag_kg_m3 = Some(fluid_density_kg_m3),
+                Effect::WetContact {} => e.wet_contact = true,
                 Effect::ObjectFlow {
                     fluid_density_kg_m3,
                     mean_m_s,

@@ -20,8 +20,12 @@
 //! # Physics of the hold (per step of at most 2 ms on the injected clock)
 //!
 //! - A current (`object_flow`, only when the scene lists it) pushes the object along
-//!   x; it shifts until the two fingers' squeezes balance the push, so one finger is
+//!   x with ½·ρ·C_d·A·u·|u| on the outline it meets (its side, `flow_area_m2`); it
+//!   shifts until the two fingers' squeezes balance the push, so one finger is
 //!   squeezed harder than the other.
+//! - Wet contact (`wet_contact`, only when the scene lists it): the object grips the
+//!   silicone with its `wet_friction` in place of its dry `friction`, in the hold and
+//!   the twist alike.
 //! - A squeeze on either finger above the crush limit crushes the object: it gives way
 //!   and pushes back no more ([`HoldState::Crushed`]).
 //! - Before [`SoftGraspHandle::start_lift`] the object rests on its support, which
@@ -202,6 +206,16 @@ pub fn soft_grasp(
     // Finger 1's camera draws its own seeded streams.
     let first = Scene::new(&spec, seed, Arc::clone(&model));
     let effects = first.effects.clone();
+    // Wet contact: the object grips with its friction in water (and only then).
+    let mut object = object;
+    if effects.wet_contact {
+        object.friction = object.wet_friction.ok_or_else(|| {
+            SimError::InvalidParameter(format!(
+                "object `{}`: the scene declares wet_contact but the object has no wet_friction",
+                object.name
+            ))
+        })?;
+    }
     let second_spec = (spec, seed ^ 0x5eed_f1a6_e201_0001);
     let flow = effects.object_flow.map(|f| FlowSeries::new(f, seed));
     let period_ns = 1e9 / fps;

@@ -55,6 +55,12 @@ pub struct GraspObject {
     pub drag_coefficient: f64,
     /// Area the fluid's drag acts on, m².
     pub drag_area_m2: f64,
+    /// Area a current along the gripping direction (x) meets, m²: the object's
+    /// outline seen along x (its side, for a standing object), not its top.
+    pub flow_area_m2: f64,
+    /// Friction coefficient against the finger's silicone in water, where known (the
+    /// grasp uses it in place of `friction` when its scene declares `wet_contact`).
+    pub wet_friction: Option<f64>,
     /// Where the grasp point sits from where the fingers meet it, m, in G (see
     /// [`GraspObject::placed`]).
     pub offset_m: [f64; 3],
@@ -81,6 +87,8 @@ impl GraspObject {
             volume_m3: 0.0,
             drag_coefficient: 1.0,
             drag_area_m2: 0.0,
+            flow_area_m2: 0.0,
+            wet_friction: None,
             offset_m: [0.0; 3],
         };
         o.fill_defaults(None, None, None, None);
@@ -129,6 +137,8 @@ impl GraspObject {
             volume_m3: 0.0,
             drag_coefficient: spec.drag_coefficient.unwrap_or(1.0),
             drag_area_m2: 0.0,
+            flow_area_m2: 0.0,
+            wet_friction: spec.wet_friction,
             offset_m: [0.0; 3],
         };
         o.fill_defaults(
@@ -160,37 +170,44 @@ impl GraspObject {
         // Section area of a unit-width section (scaled by width² below).
         let unit_area = self.unit_section_area();
         let w = self.width_m;
-        let (volume, area) = match self.profile {
-            // Lying: the face's section, as long as it is wide.
+        // The section's depth across y, over its width across x.
+        let depth = self.section_aspect();
+        // (volume, area seen from above: the lift's drag, area seen along x: a
+        // current's along the gripping direction)
+        let (volume, area, side) = match self.profile {
+            // Lying: the face's section, as long as it is wide (along y).
             None => {
                 let face = unit_area * self.size_m * self.size_m;
-                (face * w, self.size_m * w)
+                (face * w, self.size_m * w, self.size_m * w)
             }
-            Some(ObjectProfile::Prism { height_m }) => {
-                (unit_area * w * w * height_m, unit_area * w * w)
-            }
+            Some(ObjectProfile::Prism { height_m }) => (
+                unit_area * w * w * height_m,
+                unit_area * w * w,
+                depth * w * height_m,
+            ),
             Some(ObjectProfile::Sphere {}) => {
                 let r = 0.5 * w;
-                (
-                    4.0 / 3.0 * std::f64::consts::PI * r.powi(3),
-                    std::f64::consts::PI * r * r,
-                )
+                let disc = std::f64::consts::PI * r * r;
+                (4.0 / 3.0 * std::f64::consts::PI * r.powi(3), disc, disc)
             }
             Some(ObjectProfile::Taper {
                 height_m,
                 top_width_m,
             }) => {
-                // A frustum of similar sections: area scales with width².
+                // A frustum of similar sections: area scales with width², its outline
+                // from the side is a trapezoid.
                 let k = top_width_m / w;
                 let bottom = unit_area * w * w;
                 (
                     bottom * height_m * (1.0 + k + k * k) / 3.0,
                     bottom * k.max(1.0).powi(2),
+                    depth * 0.5 * (w + top_width_m) * height_m,
                 )
             }
         };
         self.volume_m3 = volume_m3.unwrap_or(volume);
         self.drag_area_m2 = drag_area_m2.unwrap_or(area);
+        self.flow_area_m2 = side;
     }
 
     /// Area of the section at width 1 (depth `aspect`).
@@ -237,7 +254,9 @@ impl GraspObject {
             ("friction", self.friction),
             ("drag_coefficient", self.drag_coefficient),
             ("drag_area_m2", self.drag_area_m2),
+            ("flow_area_m2", self.flow_area_m2),
             ("grasp_width_m", self.grasp_width_m),
+            ("wet_friction", self.wet_friction.unwrap_or(0.0)),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(field, v, "a finite value ≥ 0");

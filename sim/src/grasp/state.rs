@@ -432,10 +432,11 @@ impl State {
         let t_s = t.0 as f64 * 1e-9;
         if let Some(series) = &self.flow {
             let u = series.speed_m_s(t_s);
+            // On the outline the current meets: the object's side, not its top.
             let push_n = 0.5
                 * series.flow.density_kg_m3
                 * obj.drag_coefficient
-                * obj.drag_area_m2
+                * obj.flow_area_m2
                 * u
                 * u.abs();
             self.shift_m = self.balance_shift(push_n)?;

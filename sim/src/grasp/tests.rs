@@ -401,6 +401,151 @@ async fn buoyancy_and_drag_change_the_outcome_only_when_declared() {
 }
 
 #[tokio::test(start_paused = true)]
+async fn wet_contact_grips_with_the_wet_friction_only_when_declared() {
+    let wet = with_effects(vec![Effect::WetContact {}]);
+    // Dry μ 0.6, wet a tenth of it (a hydrophilic surface).
+    let obj = GraspObject {
+        friction: 0.6,
+        wet_friction: Some(0.06),
+        ..cylinder_standing()
+    };
+    let (count, squeeze_n) = grip_for(&obj, 1.0);
+    // Light enough for the dry grip, too heavy for the wet one (slow lift, 0.5 m/s²).
+    let dry_capacity_n = 2.0 * 0.6 * squeeze_n;
+    let wet_capacity_n = 2.0 * 0.06 * squeeze_n;
+    let load = |m: f64| m * (G_M_S2 + 0.5);
+    let mass = 0.5 * (dry_capacity_n + wet_capacity_n) / (G_M_S2 + 0.5);
+    assert!(load(mass) < 0.9 * dry_capacity_n && load(mass) > 1.1 * wet_capacity_n);
+    let obj = GraspObject {
+        mass_kg: mass,
+        ..obj
+    };
+    let mut outcomes = Vec::new();
+    for scene in [land(), wet.clone()] {
+        let (_, h, clock) = grip_at(&scene, obj.clone(), count).await;
+        h.start_lift(clock.now(), 0.05, 0.05, 0.5).expect("lift");
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        outcomes.push(h.hold_state().expect("state"));
+    }
+    assert_eq!(outcomes[0], HoldState::Held, "dry: {outcomes:?}");
+    assert!(
+        matches!(outcomes[1], HoldState::Slipped { .. }),
+        "wet: {outcomes:?}"
+    );
+    // An object with a wet friction in a scene that declares no wet contact: exactly
+    // the object without one (the same truth at every instant).
+    let plain = GraspObject {
+        wet_friction: None,
+        ..obj.clone()
+    };
+    let (_, a, clock_a) = grip_at(&land(), obj.clone(), count).await;
+    let (_, b, clock_b) = grip_at(&land(), plain, count).await;
+    for i in 0..5 {
+        let ta = TimestampNs(clock_a.now().0 + i * 10_000_000);
+        let tb = TimestampNs(clock_b.now().0 + i * 10_000_000);
+        assert_eq!(
+            a.true_wrench_on(0, ta).expect("truth"),
+            b.true_wrench_on(0, tb).expect("truth")
+        );
+    }
+    // Declared, but an object without its wet friction: refused, by name.
+    let e = soft_grasp(
+        &wet,
+        GraspObject {
+            wet_friction: None,
+            ..obj
+        },
+        60.0,
+        1,
+        TokioClock::new(),
+    )
+    .err()
+    .expect("refused");
+    assert!(e.to_string().contains("no wet_friction"), "{e}");
+}
+
+#[test]
+fn a_current_meets_the_outline_it_sees_not_the_top() {
+    // A standing cylinder 30 mm across and 50 mm tall: 30 × 50 mm² from the side,
+    // π/4 · 30² mm² from above.
+    let tall = GraspObject::standing(
+        "tall",
+        RodShape::Circle,
+        0.03,
+        1.0,
+        ObjectProfile::Prism { height_m: 0.05 },
+    );
+    assert!((tall.flow_area_m2 - 0.03 * 0.05).abs() < 1e-12);
+    assert!((tall.drag_area_m2 - std::f64::consts::PI / 4.0 * 0.03 * 0.03).abs() < 1e-12);
+    // An oval 30 mm across the fingers and 18 mm deep shows the current 18 × 50 mm².
+    let oval = GraspObject::standing(
+        "oval",
+        RodShape::Oval,
+        0.03,
+        0.6,
+        ObjectProfile::Prism { height_m: 0.05 },
+    );
+    assert!((oval.flow_area_m2 - 0.018 * 0.05).abs() < 1e-12);
+    // A ball: its disc either way; a taper: the trapezoid of its side.
+    let ball = GraspObject::standing(
+        "ball",
+        RodShape::Circle,
+        0.04,
+        1.0,
+        ObjectProfile::Sphere {},
+    );
+    assert!((ball.flow_area_m2 - ball.drag_area_m2).abs() < 1e-15);
+    let bottle = GraspObject::standing(
+        "bottle",
+        RodShape::Circle,
+        0.04,
+        1.0,
+        ObjectProfile::Taper {
+            height_m: 0.08,
+            top_width_m: 0.025,
+        },
+    );
+    assert!((bottle.flow_area_m2 - 0.5 * (0.04 + 0.025) * 0.08).abs() < 1e-12);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_taller_object_is_pushed_harder_by_the_same_current() {
+    let flow = with_effects(vec![Effect::ObjectFlow {
+        fluid_density_kg_m3: 1000.0,
+        mean_m_s: 0.3,
+        gust_m_s: 0.0,
+        period_s: 0.5,
+    }]);
+    let spread_of = |height_m: f64| {
+        let flow = flow.clone();
+        async move {
+            let obj = GraspObject::standing(
+                "c",
+                RodShape::Circle,
+                0.03,
+                1.0,
+                ObjectProfile::Prism { height_m },
+            );
+            let obj = GraspObject {
+                grasp_height_m: 0.015,
+                ..obj
+            };
+            let (_, probe, _) = grip_at(&land(), obj.clone(), 0).await;
+            let count = count_for(&probe, 1.5);
+            let (_, h, clock) = grip_at(&flow, obj, count).await;
+            let t = clock.now();
+            let a = -h.true_wrench_on(0, t).expect("truth").force_n[0];
+            let b = -h.true_wrench_on(1, t).expect("truth").force_n[0];
+            b - a
+        }
+    };
+    let short = spread_of(0.03).await;
+    let tall = spread_of(0.06).await;
+    // Twice the side: twice the push for the fingers to balance.
+    assert!(short > 0.01 && tall > 1.5 * short, "{short} {tall}");
+}
+
+#[tokio::test(start_paused = true)]
 async fn a_declared_current_squeezes_one_finger_more_than_the_other() {
     let flow = with_effects(vec![Effect::ObjectFlow {
         fluid_density_kg_m3: 1000.0,
