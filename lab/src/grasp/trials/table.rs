@@ -10,9 +10,7 @@ use softtouch_schemas::Medium;
 
 use super::{TrialPlan, TrialsError, medium_name, paper_rate};
 use crate::store::GraspTrialRow;
-use softtouch_collector::plot::{
-    BarChart, BarSeries, Series, SeriesStyle, XyChart, bar_chart, xy_chart,
-};
+use softtouch_collector::plot::{BarChart, BarSeries, bar_chart};
 
 /// One cell of the table: an object (or all of them) × mode × medium × σ.
 #[derive(Debug, Clone, PartialEq)]
@@ -386,27 +384,44 @@ pub fn write_sweep(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), 
             keys.push((c.scene_index, c.medium, c.mode));
         }
     }
-    let series: Vec<Series> = keys
+    let groups: Vec<String> = plan.sigmas_mm.iter().map(|s| format!("σ {s} mm")).collect();
+    // One bar per medium and mode at each σ, with its Wilson interval and n.
+    let series: Vec<BarSeries> = keys
         .iter()
-        .map(|(si, medium, mode)| Series {
-            label: format!("{} {} loop", medium_name(*medium), mode.as_str()),
-            points: cells
-                .iter()
-                .filter(|c| c.object.is_none() && c.scene_index == *si && c.mode == *mode)
-                .filter_map(|c| Some((plan.sigmas_mm[c.sigma_index as usize], c.rate()?)))
-                .collect(),
-            style: SeriesStyle::LinePoints,
+        .map(|(si, medium, mode)| {
+            let cell = |sigma: usize| {
+                cells.iter().find(|c| {
+                    c.object.is_none()
+                        && c.scene_index == *si
+                        && c.mode == *mode
+                        && c.sigma_index as usize == sigma
+                })
+            };
+            BarSeries {
+                label: format!("{} {} loop", medium_name(*medium), mode.as_str()),
+                bars: (0..groups.len())
+                    .map(|i| cell(i).and_then(|c| Some((c.rate()?, c.interval[0], c.interval[1]))))
+                    .collect(),
+                reference: vec![None; groups.len()],
+                notes: (0..groups.len())
+                    .map(|i| cell(i).map(|c| format!("n={}", c.trials)))
+                    .collect(),
+            }
         })
         .collect();
-    xy_chart(
+    bar_chart(
         path,
-        &XyChart {
-            title: "Grasp success against the grasp point's perturbation",
-            x_label: "σ per axis (mm)",
-            y_label: "success rate (all objects)",
+        &BarChart {
+            title: "Grasp success against σ (all objects; Wilson 95 %)",
+            x_label: Some("σ per axis"),
+            y_label: "success rate (held/n)",
+            groups: &groups,
             series: &series,
+            // Headroom above 100 % for the legend, its ticks unlabelled.
+            y_range: (0.0, 1.3),
+            y_labels_up_to: Some(1.0),
         },
-        (900, 520),
+        ((60 * (groups.len() * keys.len().max(1)) as u32 + 240).clamp(720, 2400), 520),
     )
     .map_err(|e| TrialsError::Failed(e.to_string()))
 }
