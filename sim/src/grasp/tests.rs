@@ -449,7 +449,7 @@ async fn wet_contact_grips_with_the_wet_friction_only_when_declared() {
         );
     }
     // Declared, but an object without its wet friction: refused, by name.
-    let e = soft_grasp(
+    let Err(e) = soft_grasp(
         &wet,
         GraspObject {
             wet_friction: None,
@@ -458,9 +458,9 @@ async fn wet_contact_grips_with_the_wet_friction_only_when_declared() {
         60.0,
         1,
         TokioClock::new(),
-    )
-    .err()
-    .expect("refused");
+    ) else {
+        panic!("an object without its wet friction in a wet scene is refused")
+    };
     assert!(e.to_string().contains("no wet_friction"), "{e}");
 }
 

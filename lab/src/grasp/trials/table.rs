@@ -421,7 +421,10 @@ pub fn write_sweep(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), 
             y_range: (0.0, 1.3),
             y_labels_up_to: Some(1.0),
         },
-        ((60 * (groups.len() * keys.len().max(1)) as u32 + 240).clamp(720, 2400), 520),
+        (
+            (60 * (groups.len() * keys.len().max(1)) as u32 + 240).clamp(720, 2400),
+            520,
+        ),
     )
     .map_err(|e| TrialsError::Failed(e.to_string()))
 }
