@@ -309,19 +309,8 @@ fn stored_results_match_the_exports_and_the_report(d: &std::path::Path) {
         assert!(shown.contains(needle), "`{needle}` in:\n{shown}");
     }
 
-    ok(&softtouch(d, &["report", "--out", "r.html"]));
-    let page = std::fs::read_to_string(d.join("r.html")).expect("page");
-    let html = scraper::Html::parse_document(&page);
-    assert!(html.errors.is_empty(), "{:?}", html.errors);
-    let cell = |key: &str| {
-        let sel = scraper::Selector::parse(&format!("[data-k=\"{key}\"]")).expect("selector");
-        let found: Vec<String> = html
-            .select(&sel)
-            .map(|e| e.text().collect::<String>().trim().to_owned())
-            .collect();
-        assert_eq!(found.len(), 1, "{key}: {found:?}");
-        found[0].clone()
-    };
+    let html = common::report_page(d);
+    let cell = |key: &str| common::data_k(&html, key);
     // Following: the steady-state error per target, as stored.
     let metrics = std::fs::read_to_string(d.join("g/grasp-follow-metrics.csv")).expect("csv");
     for (i, line) in metrics.lines().skip(1).enumerate() {

@@ -427,19 +427,8 @@ fn stored_transfer_is_the_export_and_the_report_shows_it(d: &Path, csv: &str) {
     );
     fails_with(&softtouch(d, &["results", "show", "9"]), 2, "no result 9");
 
-    ok(&softtouch(d, &["report", "--out", "r.html"]));
-    let page = std::fs::read_to_string(d.join("r.html")).expect("page");
-    let html = scraper::Html::parse_document(&page);
-    assert!(html.errors.is_empty(), "{:?}", html.errors);
-    let cell = |key: &str| {
-        let sel = scraper::Selector::parse(&format!("[data-k=\"{key}\"]")).expect("selector");
-        let found: Vec<String> = html
-            .select(&sel)
-            .map(|e| e.text().collect::<String>().trim().to_owned())
-            .collect();
-        assert_eq!(found.len(), 1, "{key}: {found:?}");
-        found[0].clone()
-    };
+    let html = common::report_page(d);
+    let cell = |key: &str| common::data_k(&html, key);
     let stored = |prefix: &str| -> f64 {
         csv.lines()
             .find(|l| l.starts_with(prefix))
@@ -464,10 +453,7 @@ fn the_report_shows_the_stored_curve_and_maps(d: &Path) {
         listed.contains("sweep finetune") && listed.contains("latent"),
         "{listed}"
     );
-    ok(&softtouch(d, &["report", "--out", "r.html"]));
-    let page = std::fs::read_to_string(d.join("r.html")).expect("page");
-    let html = scraper::Html::parse_document(&page);
-    assert!(html.errors.is_empty(), "{:?}", html.errors);
+    let html = common::report_page(d);
     let finetune = std::fs::read_to_string(d.join("ft/finetune.csv")).expect("csv");
     let header: Vec<&str> = finetune.lines().next().unwrap_or("").split(',').collect();
     let col = header

@@ -355,15 +355,11 @@ pub(super) async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Re
         })
         .collect::<Vec<_>>()
         .join("; ");
-    super::grasp_loop::loop_recorder("grasp twist", c)
-        .setting("object", args.object.as_str())
-        .setting("target_n", args.target)
+    twist_recorder(&args)
         .setting("turn_deg", args.turn_deg)
         .setting("settle_s", args.settle_s)
         .setting("turn_s", args.turn_s)
         .setting("hold_s", args.hold_s)
-        .setting("wrist_gain_rad_per_nm_s", args.wrist_gain)
-        .setting("wrist_deadband_nmm", args.wrist_deadband_nmm)
         .setting("gain_n_per_mm", setup.gain)
         .setting("stopped_by", stopped)
         .scene_hash(super::grasp_loop::scene_hash(&scene, c))
@@ -482,16 +478,22 @@ async fn twist_rig(
     std::fs::write(&csv, rows)
         .map_err(|e| Failure::Runtime(anyhow::anyhow!("{}: {e}", csv.display())))?;
     writeln!(out, "wrote {}", csv.display()).map_err(w)?;
-    super::grasp_loop::loop_recorder("grasp twist", c)
-        .setting("object", args.object.as_str())
-        .setting("target_n", args.target)
+    twist_recorder(&args)
         .setting("duration_s", args.duration_s)
-        .setting("wrist_gain_rad_per_nm_s", args.wrist_gain)
-        .setting("wrist_deadband_nmm", args.wrist_deadband_nmm)
         .setting("rig", rig_path.display().to_string())
         .rig_hash(softtouch_lab::grasp::calibration::rig_setup_hash(&rig).ok())
         .table(&csv)
         .store(db, summary.join("; "), out)
         .await
         .map(drop)
+}
+
+/// What `grasp twist` stores on the simulator and on a rig alike: the loop's flags,
+/// the object, the force held and the wrist loop's settings.
+fn twist_recorder(args: &TwistArgs) -> super::results::Recorder {
+    super::grasp_loop::loop_recorder("grasp twist", &args.common)
+        .setting("object", args.object.as_str())
+        .setting("target_n", args.target)
+        .setting("wrist_gain_rad_per_nm_s", args.wrist_gain)
+        .setting("wrist_deadband_nmm", args.wrist_deadband_nmm)
 }

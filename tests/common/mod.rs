@@ -97,3 +97,25 @@ pub(crate) fn tiny_model(d: &Path) {
     }
     ok(&softtouch(d, &args));
 }
+
+/// `softtouch report --out r.html` in `d`, the page parsed (it must parse as HTML5
+/// without an error).
+pub(crate) fn report_page(d: &Path) -> scraper::Html {
+    ok(&softtouch(d, &["report", "--out", "r.html"]));
+    let page = std::fs::read_to_string(d.join("r.html")).unwrap_or_else(|e| panic!("{e}"));
+    let html = scraper::Html::parse_document(&page);
+    assert!(html.errors.is_empty(), "{:?}", html.errors);
+    html
+}
+
+/// The text of the one element with `data-k="key"`.
+pub(crate) fn data_k(html: &scraper::Html, key: &str) -> String {
+    let sel =
+        scraper::Selector::parse(&format!("[data-k=\"{key}\"]")).unwrap_or_else(|e| panic!("{e}"));
+    let found: Vec<String> = html
+        .select(&sel)
+        .map(|e| e.text().collect::<String>().trim().to_owned())
+        .collect();
+    assert_eq!(found.len(), 1, "one element with data-k={key}: {found:?}");
+    found[0].clone()
+}

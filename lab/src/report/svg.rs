@@ -146,19 +146,26 @@ pub(crate) fn bars(
             notes: notes.clone(),
         })
         .collect();
-    let chart = BarChart {
-        title,
-        x_label: Some(x_label),
-        y_label,
-        groups: categories,
-        series: &series,
-        y_range: (0.0, top),
-        y_labels_up_to: None,
-    };
+    draw_bar_chart(
+        &BarChart {
+            title,
+            x_label: Some(x_label),
+            y_label,
+            groups: categories,
+            series: &series,
+            y_range: (0.0, top),
+            y_labels_up_to: None,
+        },
+        size,
+    )
+}
+
+/// A bar chart in the page's look, as SVG.
+fn draw_bar_chart(chart: &BarChart<'_>, size: Size) -> Result<String, ReportError> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
-        draw_bars(&root, &chart, &BarLook::PAGE).map_err(draw_err(title))?;
+        draw_bars(&root, chart, &BarLook::PAGE).map_err(draw_err(chart.title))?;
     }
     Ok(svg)
 }
@@ -186,21 +193,18 @@ pub(crate) fn rate_bars(
             notes: notes.clone(),
         })
         .collect();
-    let chart = BarChart {
-        title,
-        x_label: Some(x_label),
-        y_label: "success rate (Wilson 95 %)",
-        groups: categories,
-        series: &series,
-        y_range: (0.0, 1.2 + 0.1 * series.len() as f64),
-        y_labels_up_to: Some(1.0),
-    };
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
-        draw_bars(&root, &chart, &BarLook::PAGE).map_err(draw_err(title))?;
-    }
-    Ok(svg)
+    draw_bar_chart(
+        &BarChart {
+            title,
+            x_label: Some(x_label),
+            y_label: "success rate (Wilson 95 %)",
+            groups: categories,
+            series: &series,
+            y_range: (0.0, 1.2 + 0.1 * series.len() as f64),
+            y_labels_up_to: Some(1.0),
+        },
+        size,
+    )
 }
 
 /// Events on the run clock: one row per kind, a mark per event coloured by level
