@@ -10,7 +10,9 @@
 //! `DATABASE_URL` needed to compile).
 //!
 //! Each table's INSERT is in `rows.rs`, shared with the dataset import; runs are in
-//! `runs.rs`, the writer thread in `sync/`.
+//! `runs.rs`, the writer thread in `sync/`; grasp sessions, trials, traces and trial
+//! frames in `grasp.rs`; the experiment verbs' results with their tables and figures
+//! in `results.rs` (the layout documented in their migrations).
 
 pub mod datasets;
 mod event;
