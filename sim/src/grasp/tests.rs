@@ -846,3 +846,154 @@ async fn a_loop_slower_than_the_camera_gets_the_newest_frame_not_the_next_queued
         .expect("frame");
     assert_eq!(next.meta.sequence, 7);
 }
+
+/// The objects the contact is tried on: the grasp scene's five shapes and a lying rod.
+fn contact_objects() -> Vec<GraspObject> {
+    vec![
+        GraspObject::cylinder("rod", 0.02),
+        cylinder_standing(),
+        GraspObject::standing(
+            "oval",
+            RodShape::Oval,
+            0.03,
+            0.6,
+            ObjectProfile::Prism { height_m: 0.05 },
+        ),
+        GraspObject::standing(
+            "ball",
+            RodShape::Circle,
+            0.04,
+            1.0,
+            ObjectProfile::Sphere {},
+        ),
+        GraspObject::standing(
+            "bottle",
+            RodShape::Circle,
+            0.04,
+            1.0,
+            ObjectProfile::Taper {
+                height_m: 0.08,
+                top_width_m: 0.025,
+            },
+        ),
+        GraspObject::standing(
+            "box",
+            RodShape::Square,
+            0.03,
+            1.0,
+            ObjectProfile::Prism { height_m: 0.03 },
+        ),
+    ]
+}
+
+fn contact(obj: &GraspObject, k: usize, grip: Grip) -> super::touch::FingerContact {
+    finger_contact(
+        &FingerGeometry::default(),
+        &ContactParams::default(),
+        obj,
+        k,
+        &grip,
+        [0.0; 2],
+    )
+    .expect("contact")
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig { cases: 200, .. proptest::prelude::ProptestConfig::default() })]
+
+    /// Over random objects, offsets (across and along the finger), turns, shifts and
+    /// openings: every force finite, the squeeze and the normal force never negative.
+    #[test]
+    fn the_grasp_contact_is_finite_and_never_pulls(
+        which in 0usize..6,
+        dy in -0.02..0.02f64,
+        dz in -0.02..0.02f64,
+        yaw in -1.6..1.6f64,
+        shift in -0.005..0.005f64,
+        opening in 0.0..0.05f64,
+        k in 0usize..2,
+    ) {
+        let mut obj = contact_objects()[which].clone();
+        obj.offset_m = [0.0, dy, dz];
+        let c = contact(&obj, k, Grip { opening_m: opening, shift_m: shift, yaw_rad: yaw });
+        let w = c.contact.wrench;
+        proptest::prop_assert!(w.is_finite(), "{w:?}");
+        proptest::prop_assert!(c.normal_n.is_finite() && c.normal_n >= 0.0, "{}", c.normal_n);
+        proptest::prop_assert!(c.squeeze_n() >= -1e-12, "pulls: {}", c.squeeze_n());
+        proptest::prop_assert!(w.force_norm_n() < 1e4);
+    }
+
+    /// A grazing contact: as the opening closes through the object's width the squeeze
+    /// rises from exactly 0 without a jump (penetration → 0⁺ gives force → 0⁺).
+    #[test]
+    #[allow(clippy::float_cmp)] // exactly no force outside the object
+    fn a_grazing_contact_starts_from_zero(which in 0usize..6, eps_um in 0.01..2.0f64) {
+        let obj = contact_objects()[which].clone();
+        // The widest opening with any contact, found by bisection on the squeeze.
+        let at = |opening: f64| contact(&obj, 0, Grip { opening_m: opening, ..Grip::default() }).squeeze_n();
+        let (mut lo, mut hi) = (0.0, 0.05);
+        proptest::prop_assume!(at(lo) > 0.0 && at(hi) == 0.0);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if at(mid) > 0.0 { lo = mid } else { hi = mid }
+        }
+        let eps = eps_um * 1e-6;
+        // Just outside: nothing; just inside: a force that shrinks with the depth.
+        proptest::prop_assert_eq!(at(hi + eps), 0.0);
+        let inside = at(lo - eps);
+        proptest::prop_assert!(inside > 0.0 && inside < 0.05, "{} µm in: {inside} N", eps_um);
+        proptest::prop_assert!(at(lo - 2.0 * eps) >= inside);
+    }
+}
+
+#[test]
+#[allow(clippy::float_cmp)] // exactly no force without contact
+fn a_contact_at_the_finger_edge_and_no_contact_at_all() {
+    let obj = cylinder_standing();
+    let grip = Grip {
+        opening_m: 0.026,
+        ..Grip::default()
+    };
+    let centred = contact(&obj, 0, grip);
+    assert!(centred.normal_n > 0.0);
+    // Moved across the finger's face to its edge (the face is 32 mm wide at its base)
+    // and beyond: less contact, then none; never a negative or non-finite force.
+    let mut last = centred.normal_n;
+    for dy_mm in [4.0, 8.0, 12.0, 16.0, 20.0, 30.0, 40.0] {
+        let mut o = obj.clone();
+        o.offset_m = [0.0, dy_mm / 1000.0, 0.0];
+        let c = contact(&o, 0, grip);
+        assert!(c.contact.wrench.is_finite(), "{dy_mm} mm");
+        assert!(
+            c.normal_n >= 0.0 && c.normal_n <= last + 1e-9,
+            "{dy_mm} mm: {} > {last}",
+            c.normal_n
+        );
+        last = c.normal_n;
+    }
+    assert_eq!(last, 0.0, "30 mm clear of the face's edge: no contact");
+    // Fingers wider than the object: no contact, a zero wrench.
+    let open = contact(
+        &obj,
+        1,
+        Grip {
+            opening_m: 0.045,
+            ..Grip::default()
+        },
+    );
+    assert_eq!(open.normal_n, 0.0);
+    assert_eq!(open.squeeze_n(), 0.0);
+}
+
+#[tokio::test(start_paused = true)]
+#[allow(clippy::float_cmp)] // exactly no force without contact
+async fn a_lift_with_no_contact_and_no_load_is_not_held() {
+    // The fingers left open: nothing touches the object, nothing carries it.
+    let (_, h, clock) = grip_at(&land(), cylinder_standing(), 0).await;
+    let t = clock.now();
+    assert_eq!(h.true_wrench_on(0, t).expect("truth").force_n, [0.0; 3]);
+    h.start_lift(t, 0.05, 0.1, 1.0).expect("lift");
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    let state = h.hold_state().expect("state");
+    assert!(!matches!(state, HoldState::Held), "{state:?}");
+}
