@@ -270,6 +270,14 @@ pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(),
     run_sim(args, db, out).await.map(drop)
 }
 
+/// What one simulated session ended with: whether a stop request cut it short, its
+/// σ list and the table it printed.
+struct SimRun {
+    stopped: bool,
+    sigmas_mm: Vec<f64>,
+    table: Vec<Cell>,
+}
+
 /// `grasp trials --models A,B,C`: the same trials for each model, then the spread.
 async fn run_models(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
     let mut names: Vec<String> = Vec::new();
@@ -295,7 +303,7 @@ async fn run_models(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<
         }
         store.close().await;
     }
-    let mut sessions = Vec::with_capacity(names.len());
+    let mut runs = Vec::with_capacity(names.len());
     for m in &names {
         writeln!(out, "\n===== model {m} =====").map_err(io_failure)?;
         let one = TrialsArgs {
@@ -304,47 +312,29 @@ async fn run_models(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<
             out_dir: args.out_dir.join(m),
             ..args.clone()
         };
-        let (id, stopped) = run_sim(one, db, out).await?;
-        sessions.push((m.clone(), id));
+        let run = run_sim(one, db, out).await?;
+        let stopped = run.stopped;
+        runs.push((m.clone(), run));
         if stopped {
             writeln!(out, "stopped: the models after `{m}` are not run").map_err(io_failure)?;
             break;
         }
     }
-    let store = open_existing(db).await?;
-    let spread = model_spread(&store, &sessions).await;
-    store.close().await;
-    print_spread(&spread?, out)
+    print_spread(&model_spread(&runs), out)
 }
 
 /// A row of the spread: its σ, medium and mode, and each model's `(name, held, n)`.
 type SpreadRow = (String, Vec<(String, u64, u64)>);
 
-/// Per σ, medium and mode (all objects): each model's held/n, then the mean, sample
-/// standard deviation and range of their rates.
-async fn model_spread(
-    store: &softtouch_store::Store,
-    sessions: &[(String, i64)],
-) -> Result<Vec<SpreadRow>, Failure> {
+/// Per σ, medium and mode (all objects): each model's held/n, from the tables its
+/// session printed.
+fn model_spread(runs: &[(String, SimRun)]) -> Vec<SpreadRow> {
     let mut rows: Vec<SpreadRow> = Vec::new();
-    for (model, id) in sessions {
-        let session = store
-            .grasp_session(*id)
-            .await?
-            .ok_or_else(|| Failure::Runtime(anyhow::anyhow!("grasp session {id} vanished")))?;
-        let plan: TrialPlan = serde_json::from_str(&session.config_json)
-            .map_err(|e| Failure::Runtime(anyhow::anyhow!("session {id}'s settings: {e}")))?;
-        let scenes: Vec<softtouch_schemas::SceneSpec> = serde_json::from_str(&session.scenes_json)
-            .map_err(|e| Failure::Runtime(anyhow::anyhow!("session {id}'s scenes: {e}")))?;
-        let media: Vec<Medium> = scenes.iter().map(|s| s.medium).collect();
-        let trials = store.grasp_trials(*id).await?;
-        for c in summarise(&plan, &media, &trials)?
-            .iter()
-            .filter(|c| c.object.is_none())
-        {
+    for (model, run) in runs {
+        for c in run.table.iter().filter(|c| c.object.is_none()) {
             let key = format!(
                 "σ {} mm {} {}",
-                plan.sigmas_mm[c.sigma_index as usize],
+                run.sigmas_mm[c.sigma_index as usize],
                 medium_name(c.medium),
                 c.mode.as_str()
             );
@@ -355,7 +345,7 @@ async fn model_spread(
             rows[i].1.push((model.clone(), c.held, c.trials));
         }
     }
-    Ok(rows)
+    rows
 }
 
 fn print_spread(rows: &[SpreadRow], out: &mut dyn Write) -> Result<(), Failure> {
@@ -405,9 +395,8 @@ fn print_spread(rows: &[SpreadRow], out: &mut dyn Write) -> Result<(), Failure> 
     Ok(())
 }
 
-/// One simulated session (new or resumed): returns its id and whether a stop request
-/// ended it early.
-async fn run_sim(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(i64, bool), Failure> {
+/// One simulated session (new or resumed): what it ended with.
+async fn run_sim(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<SimRun, Failure> {
     let store = open_existing(db).await?;
     // Closed (the log checkpointed into the file) on every path.
     let ran = run_sim_on(&store, args, out).await;
@@ -419,7 +408,7 @@ async fn run_sim_on(
     store: &softtouch_store::Store,
     args: TrialsArgs,
     out: &mut dyn Write,
-) -> Result<(i64, bool), Failure> {
+) -> Result<SimRun, Failure> {
     let store = store.clone();
     let session = match args.resume {
         Some(id) => resume_session(&store, id, args.model.as_deref()).await?,
@@ -536,7 +525,11 @@ async fn run_sim_on(
         }
         _ => writeln!(out, "wrote {}", names.join(", ")).map_err(w)?,
     }
-    Ok((session.id, stopped))
+    Ok(SimRun {
+        stopped,
+        sigmas_mm: session.plan.sigmas_mm.clone(),
+        table,
+    })
 }
 
 /// `grasp trials --rig FILE`: the rig's devices opened, then the trials of a new or

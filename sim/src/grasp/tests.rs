@@ -22,19 +22,14 @@ fn ms(t: u64) -> TimestampNs {
 }
 
 fn squeeze(obj: &GraspObject, k: usize, opening_m: f64) -> f64 {
-    let grip = Grip {
-        opening_m,
-        ..Grip::default()
-    };
-    finger_contact(
-        &FingerGeometry::default(),
-        &ContactParams::default(),
+    contact(
         obj,
         k,
-        &grip,
-        [0.0; 2],
+        Grip {
+            opening_m,
+            ..Grip::default()
+        },
     )
-    .expect("contact")
     .squeeze_n()
 }
 
