@@ -31,7 +31,7 @@ pub use rig::{
     ArmDevice, CameraDevice, ForceSensorDevice, GripperDevice, Payload, Realtime, RigConfig,
 };
 pub use sample::{FrameFormat, FrameMeta, Sample, SampleStatus};
-pub use scene::{Effect, Medium, RodShape, RodSpec, SceneSpec};
+pub use scene::{Effect, GustComponent, Medium, RodShape, RodSpec, SceneSpec};
 pub use time::{DurationNs, TimestampNs};
 pub use wrench::{Axis, DegenerateDirection, FtReading, FtStatus, Wrench};
 

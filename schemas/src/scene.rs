@@ -78,6 +78,10 @@ pub struct ObjectSpec {
     /// gives one).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wet_friction: Option<f64>,
+    /// Friction coefficient against its support, where it differs from the
+    /// `object_support` effect's (a ball rolls: its rolling resistance).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub support_friction: Option<f64>,
     /// Squeeze on one finger that crushes it, N; absent for a rigid object.
     #[serde(default)]
     pub crush_force_n: Option<f64>,
@@ -324,15 +328,40 @@ pub enum Effect {
     /// A current pushing on a grasped object along the gripping direction:
     /// ½·ρ·C_d·A·u·|u| with a seeded, time-varying speed u(t) = mean + gust·(a sum of
     /// three seeded sines around `period_s`), so the squeeze on the fingers changes.
+    ///
+    /// The gusts are declared either as `gust_m_s` around `period_s` (three seeded
+    /// sines of periods 0.5–2× `period_s`, weights summing to 1) or as a `spectrum`:
+    /// each component a sine of its own period and amplitude with a seeded phase. A
+    /// scene with neither has a steady current.
     ObjectFlow {
         /// Density of the fluid, kg/m³.
         fluid_density_kg_m3: f64,
         /// Mean flow speed along the gripping direction, m/s.
         mean_m_s: f64,
-        /// Amplitude of the gusts, m/s.
+        /// Amplitude of the gusts, m/s (0: none, or see `spectrum`).
+        #[serde(default)]
         gust_m_s: f64,
         /// Typical period of the gusts, s.
+        #[serde(default = "one")]
         period_s: f64,
+        /// The gusts as components (in place of `gust_m_s`/`period_s`).
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        spectrum: Vec<GustComponent>,
+    },
+    /// The object rests on a support (the floor, a tray): its weight less buoyancy
+    /// presses it down and the support's friction holds it, so a finger that touches
+    /// first pushes it along the closing direction and a current may drift it. Absent,
+    /// the support is frictionless and the object is still until both fingers grip it.
+    ObjectSupport {
+        /// Friction coefficient of the object on the support (one for every object).
+        friction: f64,
+    },
+    /// Added mass: an object accelerating in a fluid carries some of the fluid with
+    /// it, `C_a·ρ·V` more inertia (on the lift, and along the closing direction),
+    /// `C_a` from the object's equivalent spheroid.
+    ObjectAddedMass {
+        /// Density of the fluid, kg/m³.
+        fluid_density_kg_m3: f64,
     },
     /// Wet contact: each object grips the finger's silicone with its `wet_friction`
     /// (measured in water against a silicone like the finger's) instead of its dry
@@ -363,6 +392,17 @@ pub enum Effect {
     },
 }
 
+/// One component of a current's gusts: `amplitude_m_s · sin(2π·t / period_s + φ)`,
+/// the phase φ drawn from the scene's seed.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GustComponent {
+    /// Period, s.
+    pub period_s: f64,
+    /// Amplitude, m/s.
+    pub amplitude_m_s: f64,
+}
+
 impl Effect {
     /// The effect's `kind` as written in the scene file.
     #[must_use]
@@ -383,6 +423,8 @@ impl Effect {
             Self::ObjectBuoyancy { .. } => "object_buoyancy",
             Self::ObjectDrag { .. } => "object_drag",
             Self::ObjectFlow { .. } => "object_flow",
+            Self::ObjectSupport { .. } => "object_support",
+            Self::ObjectAddedMass { .. } => "object_added_mass",
             Self::WetContact {} => "wet_contact",
             Self::FrameDrops { .. } => "frame_drops",
             Self::FtPacketLoss { .. } => "ft_packet_loss",
@@ -465,6 +507,9 @@ impl Effect {
             }
             | Self::ObjectDrag {
                 fluid_density_kg_m3,
+            }
+            | Self::ObjectAddedMass {
+                fluid_density_kg_m3,
             } => c.within(
                 &f("fluid_density_kg_m3"),
                 *fluid_density_kg_m3,
@@ -477,6 +522,7 @@ impl Effect {
                 mean_m_s,
                 gust_m_s,
                 period_s,
+                spectrum,
             } => {
                 c.within(
                     &f("fluid_density_kg_m3"),
@@ -488,7 +534,36 @@ impl Effect {
                 c.within(&f("mean_m_s"), *mean_m_s, -10.0, 10.0, "m/s");
                 c.within(&f("gust_m_s"), *gust_m_s, 0.0, 10.0, "m/s");
                 c.within(&f("period_s"), *period_s, 0.01, 1000.0, "s");
+                if !spectrum.is_empty() && *gust_m_s != 0.0 {
+                    c.fail(
+                        f("spectrum"),
+                        "expected the gusts either as gust_m_s/period_s or as a spectrum, not both",
+                    );
+                }
+                if spectrum.len() > 64 {
+                    c.fail(
+                        f("spectrum"),
+                        format!("expected at most 64 components, found {}", spectrum.len()),
+                    );
+                }
+                for (i, g) in spectrum.iter().enumerate() {
+                    c.within(
+                        &f(&format!("spectrum[{i}].period_s")),
+                        g.period_s,
+                        0.01,
+                        1000.0,
+                        "s",
+                    );
+                    c.within(
+                        &f(&format!("spectrum[{i}].amplitude_m_s")),
+                        g.amplitude_m_s,
+                        0.0,
+                        10.0,
+                        "m/s",
+                    );
+                }
             }
+            Self::ObjectSupport { friction } => c.within(&f("friction"), *friction, 0.0, 2.0, ""),
             Self::WetContact {} => {}
             Self::FrameDrops { probability }
             | Self::FtPacketLoss { probability }
@@ -650,6 +725,9 @@ impl Validate for SceneSpec {
                     "the scene declares wet_contact: expected this object's friction against the finger's silicone in water",
                 );
             }
+            if let Some(mu) = o.support_friction {
+                c.within(&f("support_friction"), mu, 0.0, 2.0, "");
+            }
             if let Some(surface) = &o.surface
                 && (surface.trim().is_empty() || surface.chars().any(char::is_control))
             {
@@ -790,5 +868,109 @@ mod tests {
         assert!(e.contains("objects[0].wet_friction"), "{e}");
         // Without the effect a wet friction is only read, never required.
         assert!(scene_with_object(&ball).is_ok());
+    }
+
+    #[test]
+    fn support_added_mass_and_gust_spectra_are_checked_by_field() {
+        let scene = |object: &str, effect: &str| {
+            let text = format!(
+                "{}\n[[effects]]\n{effect}\n\n[[objects]]\n{object}\n",
+                crate::defaults::SCENE_TOML
+            );
+            parse_toml::<SceneSpec>(&text, &ConfigSource::Embedded("test"))
+                .map_err(|e| e.to_string())
+        };
+        let ball = format!("name = \"ball\"\n{BALL}profile = {{ kind = \"sphere\" }}");
+        let flow = "kind = \"object_flow\"\nfluid_density_kg_m3 = 1000.0\nmean_m_s = 0.05";
+        // Accepted: a support, a rolling ball's own value, added mass, a steady
+        // current, the three-sine gusts, a spectrum.
+        for (object, effect) in [
+            (
+                ball.clone(),
+                "kind = \"object_support\"\nfriction = 0.3".to_owned(),
+            ),
+            (
+                format!("{ball}\nsupport_friction = 0.02"),
+                "kind = \"object_support\"\nfriction = 0.3".to_owned(),
+            ),
+            (
+                ball.clone(),
+                "kind = \"object_added_mass\"\nfluid_density_kg_m3 = 1000.0".to_owned(),
+            ),
+            (ball.clone(), flow.to_owned()),
+            (
+                ball.clone(),
+                format!("{flow}\ngust_m_s = 0.1\nperiod_s = 1.5"),
+            ),
+            (
+                ball.clone(),
+                format!(
+                    "{flow}\nspectrum = [{{ period_s = 0.75, amplitude_m_s = 0.03 }}, {{ period_s = 3.0, amplitude_m_s = 0.02 }}]"
+                ),
+            ),
+        ] {
+            let parsed = scene(&object, &effect);
+            assert!(parsed.is_ok(), "{effect}: {parsed:?}");
+        }
+        // Refused, naming the field.
+        for (object, effect, field) in [
+            (
+                ball.clone(),
+                "kind = \"object_support\"\nfriction = -0.1".to_owned(),
+                ".friction",
+            ),
+            (
+                ball.clone(),
+                "kind = \"object_support\"".to_owned(),
+                "friction",
+            ),
+            (
+                ball.clone(),
+                "kind = \"object_support\"\nfriction = 0.3\nwet = 0.1".to_owned(),
+                "unknown field",
+            ),
+            (
+                format!("{ball}\nsupport_friction = nan"),
+                "kind = \"object_support\"\nfriction = 0.3".to_owned(),
+                "objects[0].support_friction",
+            ),
+            (
+                ball.clone(),
+                "kind = \"object_added_mass\"\nfluid_density_kg_m3 = -1.0".to_owned(),
+                "fluid_density_kg_m3",
+            ),
+            (
+                ball.clone(),
+                format!(
+                    "{flow}\ngust_m_s = 0.1\nspectrum = [{{ period_s = 1.0, amplitude_m_s = 0.1 }}]"
+                ),
+                "not both",
+            ),
+            (
+                ball.clone(),
+                format!("{flow}\nspectrum = [{{ period_s = 0.0, amplitude_m_s = 0.1 }}]"),
+                "spectrum[0].period_s",
+            ),
+            (
+                ball.clone(),
+                format!("{flow}\nspectrum = [{{ period_s = 1.0, amplitude_m_s = -0.1 }}]"),
+                "spectrum[0].amplitude_m_s",
+            ),
+            (
+                ball.clone(),
+                format!("{flow}\nspectrum = [{{ period_s = 1.0, amplitude = 0.1 }}]"),
+                "unknown field",
+            ),
+            (
+                ball.clone(),
+                format!("{flow}\nspectrum = {{ period_s = 1.0 }}"),
+                "expected a sequence",
+            ),
+        ] {
+            let Err(e) = scene(&object, &effect) else {
+                panic!("{effect}: accepted");
+            };
+            assert!(e.contains(field), "{effect}: {e}");
+        }
     }
 }

@@ -43,15 +43,21 @@ pub(crate) struct Effects {
     pub object_flow: Option<Flow>,
     /// Objects grip with their wet friction (`Effect::WetContact`).
     pub wet_contact: bool,
+    /// The support's friction under a resting object (`Effect::ObjectSupport`).
+    pub support_friction: Option<f64>,
+    /// Added mass of an accelerating object: the fluid's density, kg/m³.
+    pub object_added_mass_kg_m3: Option<f64>,
 }
 
 /// A current along the gripping direction (`Effect::ObjectFlow`).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Flow {
     pub density_kg_m3: f64,
     pub mean_m_s: f64,
     pub gust_m_s: f64,
     pub period_s: f64,
+    /// Declared gust components: (period s, amplitude m/s).
+    pub spectrum: Vec<(f64, f64)>,
 }
 
 impl Effects {
@@ -114,14 +120,23 @@ impl Effects {
                     mean_m_s,
                     gust_m_s,
                     period_s,
+                    ref spectrum,
                 } => {
                     e.object_flow = Some(Flow {
                         density_kg_m3: fluid_density_kg_m3,
                         mean_m_s,
                         gust_m_s,
                         period_s,
+                        spectrum: spectrum
+                            .iter()
+                            .map(|g| (g.period_s, g.amplitude_m_s))
+                            .collect(),
                     });
                 }
+                Effect::ObjectSupport { friction } => e.support_friction = Some(friction),
+                Effect::ObjectAddedMass {
+                    fluid_density_kg_m3,
+                } => e.object_added_mass_kg_m3 = Some(fluid_density_kg_m3),
             }
         }
         e

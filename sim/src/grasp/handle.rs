@@ -52,6 +52,8 @@ impl SoftGraspHandle {
         s.lift = None;
         s.stick_m = [0.0; 2];
         s.shear_n = [[0.0; 2]; 2];
+        s.shift_m = rest_shift_m(&s.effects, &s.template);
+        s.slide_m_s = 0.0;
         Ok(())
     }
 
@@ -64,6 +66,11 @@ impl SoftGraspHandle {
         let now = s.clock.now();
         s.advance(now)?;
         s.object = s.template.placed(offset_m);
+        s.shift_m = s
+            .object
+            .as_ref()
+            .map_or(0.0, |o| rest_shift_m(&s.effects, o));
+        s.slide_m_s = 0.0;
         s.last_contact = RefCell::default();
         s.strips = RefCell::default();
         s.hold = if s.object.is_some() {
@@ -249,7 +256,16 @@ impl SoftGraspHandle {
             return Ok(0.0);
         };
         let u = series.speed_m_s(t.0 as f64 * 1e-9);
-        Ok(0.5 * series.flow.density_kg_m3 * obj.drag_coefficient * obj.drag_area_m2 * u * u.abs())
+        Ok(0.5 * series.flow.density_kg_m3 * obj.drag_coefficient * obj.flow_area_m2 * u * u.abs())
+    }
+
+    /// The object's displacement along G's +x from where the fingers meet it, m, at
+    /// the clock's present (0 without an object).
+    pub fn object_x_m(&self) -> Result<f64, SimError> {
+        let mut s = self.lock()?;
+        let now = s.clock.now();
+        s.advance(now)?;
+        Ok(if s.object.is_some() { -s.shift_m } else { 0.0 })
     }
 
     /// The squeeze on one finger (−F_x in its sensor frame, N) at each gripper count

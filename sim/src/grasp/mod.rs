@@ -20,9 +20,22 @@
 //! # Physics of the hold (per step of at most 2 ms on the injected clock)
 //!
 //! - A current (`object_flow`, only when the scene lists it) pushes the object along
-//!   x with ½·ρ·C_d·A·u·|u| on the outline it meets (its side, `flow_area_m2`); it
-//!   shifts until the two fingers' squeezes balance the push, so one finger is
-//!   squeezed harder than the other.
+//!   x with ½·ρ·C_d·A·u·|u| on the outline it meets (its side, `flow_area_m2`); u is
+//!   the mean plus gusts (three seeded sines, or the scene's declared spectrum).
+//!   Held, it shifts until the two fingers' squeezes balance the push, so one finger
+//!   is squeezed harder than the other.
+//! - On its support (`object_support`, only when the scene lists it) the object
+//!   stays where it was put until the forces along x exceed what the support's
+//!   friction holds, `μ·(m·g − ρ·g·V)`; beyond, it slides (implicit Euler of
+//!   `m_eff·dv/dt` with the fingers' squeezes, the current's drag at the relative
+//!   speed and the sliding friction). So the first finger to touch pushes it until
+//!   the other meets it, a current drifts what the support cannot hold, and a
+//!   neutrally buoyant object sways with the gusts. Absent, the support is
+//!   frictionless and the object is still until both fingers grip it (and then
+//!   centred). Lifted, the support lets go.
+//! - Added mass (`object_added_mass`): `m_eff = m + C_a·ρ·V`, with `C_a` of the
+//!   object's equivalent spheroid ([`spheroid_added_mass`]), across it on the
+//!   support and along it on the lift.
 //! - Wet contact (`wet_contact`, only when the scene lists it): the object grips the
 //!   silicone with its `wet_friction` in place of its dry `friction`, in the hold and
 //!   the twist alike.
@@ -30,8 +43,8 @@
 //!   and pushes back no more ([`HoldState::Crushed`]).
 //! - Before [`SoftGraspHandle::start_lift`] the object rests on its support, which
 //!   carries its weight. From then on the fingers must carry, in friction, the load
-//!   `m·(g + a) − ρ·g·V + ½·ρ·C_d·A·v·|v|` (buoyancy and drag only when the scene lists
-//!   `object_buoyancy` / `object_drag`) against `μ·(N₀ + N₁)`, the friction of the
+//!   `m·(g + a) + m_a·a − ρ·g·V + ½·ρ·C_d·A·v·|v|` (added mass, buoyancy and drag only
+//!   when the scene lists `object_added_mass` / `object_buoyancy` / `object_drag`) against `μ·(N₀ + N₁)`, the friction of the
 //!   true normal forces on both fingers. A load beyond it is a slip: the object falls
 //!   ([`HoldState::Slipped`]) and the cameras show no contact. The load the fingers
 //!   carry shows on each as a shear along z.
@@ -50,7 +63,7 @@ mod object;
 mod tests;
 mod touch;
 
-pub use object::GraspObject;
+pub use object::{GraspObject, spheroid_added_mass};
 
 use super::SimError;
 use super::contact::{Contact, ContactParams, FingerGeometry};
@@ -184,6 +197,17 @@ pub struct SoftGraspHandle {
 /// from [`SoftGraspHandle::second_camera`]).
 pub type SoftGrasp = (SoftGripper, SoftFingerCamera, SoftGraspHandle);
 
+/// Where `obj` rests when put down, as a shift towards finger 0, m: where its offset
+/// puts it on a support with friction; in the middle on a frictionless one (the
+/// first finger slides it there).
+fn rest_shift_m(effects: &Effects, obj: &GraspObject) -> f64 {
+    if effects.support_friction.is_some() {
+        -obj.offset_m[0]
+    } else {
+        0.0
+    }
+}
+
 /// Builds a soft grasp of `object` in `scene` (its medium and effects), the cameras at
 /// `fps`, seeded by `seed`, on `clock`. The object starts between the open fingers,
 /// resting on its support.
@@ -217,8 +241,12 @@ pub fn soft_grasp(
         })?;
     }
     let second_spec = (spec, seed ^ 0x5eed_f1a6_e201_0001);
-    let flow = effects.object_flow.map(|f| FlowSeries::new(f, seed));
+    let flow = effects
+        .object_flow
+        .clone()
+        .map(|f| FlowSeries::new(f, seed));
     let period_ns = 1e9 / fps;
+    let shift_m = rest_shift_m(&effects, &object);
     let state = Arc::new(Mutex::new(State {
         finger: model.params.finger,
         contact: model.params.contact,
@@ -245,7 +273,8 @@ pub fn soft_grasp(
         flow,
         wrist_rad: 0.0,
         wrist_target_rad: 0.0,
-        shift_m: 0.0,
+        shift_m,
+        slide_m_s: 0.0,
         rel_yaw_rad: 0.0,
         stick_m: [0.0; 2],
         shear_n: [[0.0; 2]; 2],

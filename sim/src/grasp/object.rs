@@ -64,6 +64,12 @@ pub struct GraspObject {
     /// Where the grasp point sits from where the fingers meet it, m, in G (see
     /// [`GraspObject::placed`]).
     pub offset_m: [f64; 3],
+    /// Friction coefficient against its support where it differs from the scene's
+    /// `object_support` (a ball's rolling resistance).
+    pub support_friction: Option<f64>,
+    /// Added-mass coefficients `C_a` along G's x (the closing direction, a current)
+    /// and z (the lift): the fluid an accelerating object carries is `C_a·ρ·V`.
+    pub added_mass_xz: [f64; 2],
 }
 
 impl GraspObject {
@@ -90,6 +96,8 @@ impl GraspObject {
             flow_area_m2: 0.0,
             wet_friction: None,
             offset_m: [0.0; 3],
+            support_friction: None,
+            added_mass_xz: [0.5; 2],
         };
         o.fill_defaults(None, None, None, None);
         o
@@ -140,6 +148,8 @@ impl GraspObject {
             flow_area_m2: 0.0,
             wet_friction: spec.wet_friction,
             offset_m: [0.0; 3],
+            support_friction: spec.support_friction,
+            added_mass_xz: [0.5; 2],
         };
         o.fill_defaults(
             spec.grasp_height_m,
@@ -208,6 +218,19 @@ impl GraspObject {
         self.volume_m3 = volume_m3.unwrap_or(volume);
         self.drag_area_m2 = drag_area_m2.unwrap_or(area);
         self.flow_area_m2 = side;
+        // Added mass of the spheroid of the object's length and volume, its axis
+        // upright for a standing object (x is across it, z along it) and along y for a
+        // lying one (x and z both across it).
+        let length = match self.profile {
+            Some(p) => p.height_m(self.width_m),
+            None => w,
+        };
+        let diameter = (4.0 * self.volume_m3 / (std::f64::consts::PI * length)).sqrt();
+        let (along, across) = spheroid_added_mass(length / diameter);
+        self.added_mass_xz = match self.profile {
+            Some(_) => [across, along],
+            None => [across, across],
+        };
     }
 
     /// Area of the section at width 1 (depth `aspect`).
@@ -257,6 +280,7 @@ impl GraspObject {
             ("flow_area_m2", self.flow_area_m2),
             ("grasp_width_m", self.grasp_width_m),
             ("wet_friction", self.wet_friction.unwrap_or(0.0)),
+            ("support_friction", self.support_friction.unwrap_or(0.0)),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(field, v, "a finite value ≥ 0");
@@ -429,8 +453,10 @@ impl GraspObject {
     /// towards its tip), m. `None`: the fingers miss it — an open finger lands on it
     /// (`|x|` beyond the room the open stroke leaves), or the closed fingers would not
     /// touch it at all (off the fingers' faces across, above or below them along z).
-    /// Inside the stroke an x offset changes nothing once gripped: the first finger to
-    /// touch slides the object to the middle (its support is taken as frictionless).
+    /// Inside the stroke, on a frictionless support (the scene lists no
+    /// `object_support`), an x offset changes nothing once gripped: the first finger to
+    /// touch slides the object to the middle. On a support with friction the object
+    /// starts where the offset puts it and the physics moves it.
     #[must_use]
     pub fn placed(&self, offset_m: [f64; 3]) -> Option<GraspObject> {
         if offset_m.iter().any(|v| !v.is_finite()) {
@@ -462,6 +488,43 @@ impl GraspObject {
         let finger = super::super::FingerGeometry::default();
         super::touch::reaches_finger(&finger, self, k, grip)
     }
+}
+
+/// Added-mass coefficients `(along its axis, across it)` of a spheroid whose length
+/// along its axis over its diameter is `ratio`, in potential flow, as fractions of the
+/// displaced fluid's mass: Lamb, *Hydrodynamics* (6th ed., 1932) §373; Newman, *Marine
+/// Hydrodynamics* (1977) §4.15. A sphere's are both ½; a 2:1 prolate spheroid's
+/// 0.210 and 0.704. With `α₀ + 2β₀ = 2`, `C_a = α₀/(2 − α₀)` along the axis and
+/// `β₀/(2 − β₀)` across it. A ratio that is not finite and positive gives a sphere's.
+#[must_use]
+pub fn spheroid_added_mass(ratio: f64) -> (f64, f64) {
+    if !(ratio.is_finite() && ratio > 0.0) {
+        return (0.5, 0.5);
+    }
+    // A needle or a disc a million to one is as far as the closed forms stay finite.
+    let ratio = ratio.clamp(1e-6, 1e6);
+    // Eccentricity of the meridian ellipse; near a sphere the closed forms cancel.
+    let e2 = if ratio >= 1.0 {
+        1.0 - 1.0 / (ratio * ratio)
+    } else {
+        1.0 - ratio * ratio
+    };
+    if e2 < 1e-6 {
+        return (0.5, 0.5);
+    }
+    let e = e2.sqrt();
+    let (alpha, beta) = if ratio >= 1.0 {
+        // Prolate: the axis is the long one.
+        let log = ((1.0 + e) / (1.0 - e)).ln();
+        let alpha = 2.0 * (1.0 - e2) / (e2 * e) * (0.5 * log - e);
+        (alpha, 0.5 * (2.0 - alpha))
+    } else {
+        // Oblate: the axis is the short one.
+        let alpha = 2.0 / e2 * (1.0 - (1.0 - e2).sqrt() / e * e.asin());
+        (alpha, 0.5 * (2.0 - alpha))
+    };
+    let k = |c: f64| c / (2.0 - c).max(f64::MIN_POSITIVE);
+    (k(alpha), k(beta))
 }
 
 /// The side of an object facing one finger ([`GraspObject::facing`]).

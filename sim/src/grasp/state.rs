@@ -43,18 +43,34 @@ pub(super) struct YawMove {
     pub(super) to_rad: f64,
 }
 
-/// The current's speed over time: mean plus three seeded sines.
+/// The current's speed over time: the mean plus the gusts, either three seeded sines
+/// around the declared period or the declared spectrum with seeded phases.
 #[derive(Debug, Clone, PartialEq)]
 pub(super) struct FlowSeries {
     pub(super) flow: Flow,
-    /// (angular frequency rad/s, phase rad, weight).
-    pub(super) waves: [(f64, f64, f64); 3],
+    /// (angular frequency rad/s, phase rad, weight): times `gust_m_s` for the three
+    /// seeded sines, or each component's amplitude in m/s for a spectrum.
+    pub(super) waves: Vec<(f64, f64, f64)>,
 }
 
 impl FlowSeries {
     pub(super) fn new(flow: Flow, seed: u64) -> Self {
         let mut rng = crate::rng::stream(seed, "object-flow");
-        let mut waves = [(0.0, 0.0, 0.0); 3];
+        if !flow.spectrum.is_empty() {
+            let waves = flow
+                .spectrum
+                .iter()
+                .map(|&(period_s, amplitude_m_s)| {
+                    (
+                        std::f64::consts::TAU / period_s,
+                        rng.random_range(0.0..std::f64::consts::TAU),
+                        amplitude_m_s,
+                    )
+                })
+                .collect();
+            return Self { flow, waves };
+        }
+        let mut waves = vec![(0.0, 0.0, 0.0); 3];
         for w in &mut waves {
             let period = flow.period_s * rng.random_range(0.5..2.0);
             *w = (
@@ -77,6 +93,9 @@ impl FlowSeries {
             .iter()
             .map(|(omega, phase, weight)| weight * (omega * t_s + phase).sin())
             .sum();
+        if !self.flow.spectrum.is_empty() {
+            return self.flow.mean_m_s + gust;
+        }
         self.flow.mean_m_s + self.flow.gust_m_s * gust
     }
 }
@@ -123,6 +142,8 @@ pub(super) struct State {
     pub(super) wrist_target_rad: f64,
     /// The object's shift towards finger 0, m.
     pub(super) shift_m: f64,
+    /// The shift's rate on the support, m/s (`Effect::ObjectSupport`; 0 otherwise).
+    pub(super) slide_m_s: f64,
     /// The object's turn against the fingers at the last step, rad.
     pub(super) rel_yaw_rad: f64,
     /// Each finger's stuck tangential displacement along its y, m.
@@ -299,16 +320,13 @@ impl State {
         Ok(())
     }
 
-    /// The object's shift that balances a push along G's +x, m: the squeeze on finger
-    /// 0 less that on finger 1 equals −push.
-    pub(super) fn balance_shift(&mut self, push_n: f64) -> Result<f64, SimError> {
-        let last_m = self.shift_m;
-        self.shift_m = 0.0;
-        let Some(obj) = &self.object else {
-            return Ok(0.0);
-        };
-        // Only the shift changes in here: each finger's squeeze is worked out along it
-        // (the same bits as its whole contact, at a fraction of the cost).
+    /// Each finger's squeeze along the object's shift at the present opening, turn and
+    /// shear (the same bits as its whole contact, at a fraction of the cost); `None`
+    /// where it is not finite and the whole contact raised no error either.
+    fn squeezes_along(
+        &self,
+        obj: &GraspObject,
+    ) -> Result<Option<[SqueezeAlongShift; 2]>, SimError> {
         let squeezes = [0, 1].map(|k| {
             SqueezeAlongShift::new(
                 self.strips_of(k, obj),
@@ -322,21 +340,162 @@ impl State {
             // The whole contact says what is not finite.
             self.finger_at(0, self.opening_mm)?;
             self.finger_at(1, self.opening_mm)?;
+            return Ok(None);
+        };
+        Ok(Some([along_0, along_1]))
+    }
+
+    /// The normal force and squeeze of finger `k` at `shift` (N): where they are not
+    /// finite, the whole contact's error.
+    fn probe(
+        &mut self,
+        along: &[SqueezeAlongShift; 2],
+        k: usize,
+        shift: f64,
+    ) -> Result<(f64, f64), SimError> {
+        match along[k.min(1)].at(shift) {
+            Some(v) => Ok(v),
+            None => {
+                self.shift_m = shift;
+                Ok(self
+                    .finger_at(k, self.opening_mm)?
+                    .map_or((0.0, 0.0), |c| (c.normal_n, c.squeeze_n())))
+            }
+        }
+    }
+
+    /// One step of an object resting on a support with friction coefficient `mu`,
+    /// along the closing direction (`Effect::ObjectSupport`): implicit Euler of
+    /// `m_eff·dv/dt = F_fingers + F_current + F_friction`, where the friction holds
+    /// the object up to `μ·(m·g − ρ·g·V)` and opposes its sliding beyond. So a finger
+    /// that touches first pushes the object ahead of it until the other finger meets
+    /// it, a current drifts an object its friction cannot hold, and one the fluid
+    /// carries (neutrally buoyant) sways with the gusts. Implicit, because the soft
+    /// fingers are stiff against a light object at the 2 ms step.
+    pub(super) fn slide_on_support(
+        &mut self,
+        mu: f64,
+        u_m_s: f64,
+        dt_s: f64,
+    ) -> Result<(), SimError> {
+        let Some(obj) = self.object.clone() else {
+            return Ok(());
+        };
+        let (s0, w0) = (self.shift_m, self.slide_m_s);
+        let buoyancy_n = self
+            .effects
+            .object_buoyancy_kg_m3
+            .map_or(0.0, |rho| rho * G_M_S2 * obj.volume_m3);
+        let mu = obj.support_friction.unwrap_or(mu);
+        let hold_n = mu * (obj.mass_kg * G_M_S2 - buoyancy_n).max(0.0);
+        let mass_kg = obj.mass_kg
+            + self
+                .effects
+                .object_added_mass_kg_m3
+                .map_or(0.0, |rho| rho * obj.added_mass_xz[0] * obj.volume_m3);
+        // ½·ρ·C_d·A on the side the current meets.
+        let drag = self.flow.as_ref().map_or(0.0, |f| {
+            0.5 * f.flow.density_kg_m3 * obj.drag_coefficient * obj.flow_area_m2
+        });
+        let Some(along) = self.squeezes_along(&obj)? else {
+            return Ok(());
+        };
+        // The shift grows towards finger 0 (G's −x): the object's velocity along +x is
+        // −w, the current meets it at u + w. H(s) is the inertia less the forces
+        // along +shift; the step lands where H equals the friction, which only grows
+        // with s (finger 0 presses harder, finger 1 less, the drag grows).
+        let h = |st: &mut Self, s1: f64| -> Result<f64, SimError> {
+            let w1 = (s1 - s0) / dt_s;
+            let a = st.probe(&along, 0, s1)?.1;
+            let b = st.probe(&along, 1, s1)?.1;
+            let rel = u_m_s + w1;
+            Ok(mass_kg * (w1 - w0) / dt_s + a - b + drag * rel * rel.abs())
+        };
+        let h0 = h(self, s0)?;
+        if !h0.is_finite() {
+            return Err(SimError::InvalidParameter(format!(
+                "object `{}` on its support: the forces along the closing direction are not finite ({h0})",
+                obj.name
+            )));
+        }
+        if h0.abs() <= hold_n {
+            // The friction holds it.
+            self.shift_m = s0;
+            self.slide_m_s = 0.0;
+            return Ok(());
+        }
+        // It slides towards growing s where H < −friction, and the friction opposes it.
+        let dir = if h0 < 0.0 { 1.0 } else { -1.0 };
+        let target = -dir * hold_n;
+        let f = |st: &mut Self, s1: f64| -> Result<f64, SimError> { Ok(h(st, s1)? - target) };
+        let (mut lo, mut f_lo) = (s0, h0 - target);
+        let mut step = (2.0 * w0.abs() * dt_s).max(1e-7);
+        let (mut hi, mut f_hi);
+        let mut tries = 0;
+        loop {
+            hi = s0 + dir * step;
+            f_hi = f(self, hi)?;
+            tries += 1;
+            if f_hi * dir >= 0.0 || tries >= 64 {
+                break;
+            }
+            (lo, f_lo) = (hi, f_hi);
+            step *= 2.0;
+        }
+        if f_hi * dir < 0.0 {
+            return Err(SimError::InvalidParameter(format!(
+                "object `{}` on its support: no balance within {step} m",
+                obj.name
+            )));
+        }
+        // Illinois false position on [lo, hi] (either order), as the balance does.
+        let mut last_side = 0;
+        let mut x = hi;
+        for _ in 0..60 {
+            x = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
+            if !x.is_finite() {
+                x = 0.5 * (lo + hi);
+            }
+            let fx = f(self, x)?;
+            if fx.abs() <= 1e-7 || (hi - lo).abs() <= 1e-12 {
+                break;
+            }
+            if fx * f_hi > 0.0 {
+                (hi, f_hi) = (x, fx);
+                if last_side == 1 {
+                    f_lo *= 0.5;
+                }
+                last_side = 1;
+            } else {
+                (lo, f_lo) = (x, fx);
+                if last_side == -1 {
+                    f_hi *= 0.5;
+                }
+                last_side = -1;
+            }
+        }
+        self.shift_m = x;
+        self.slide_m_s = (x - s0) / dt_s;
+        // Pushed or drifted beyond the open stroke: out of the fingers' reach.
+        if x.abs() * 1000.0 > STROKE_MM {
+            return self.lose(HoldState::Absent);
+        }
+        Ok(())
+    }
+
+    /// The object's shift that balances a push along G's +x, m: the squeeze on finger
+    /// 0 less that on finger 1 equals −push.
+    pub(super) fn balance_shift(&mut self, push_n: f64) -> Result<f64, SimError> {
+        let last_m = self.shift_m;
+        self.shift_m = 0.0;
+        let Some(obj) = &self.object else {
             return Ok(0.0);
         };
-        // The normal force and squeeze of finger `k` at `shift`: where they are not
-        // finite, the whole contact's error.
-        let at = |s: &mut Self, k: usize, shift: f64| -> Result<(f64, f64), SimError> {
-            let along = if k == 0 { &along_0 } else { &along_1 };
-            match along.at(shift) {
-                Some(v) => Ok(v),
-                None => {
-                    s.shift_m = shift;
-                    Ok(s.finger_at(k, s.opening_mm)?
-                        .map_or((0.0, 0.0), |c| (c.normal_n, c.squeeze_n())))
-                }
-            }
+        let obj = obj.clone();
+        let Some(along) = self.squeezes_along(&obj)? else {
+            return Ok(0.0);
         };
+        let at = |s: &mut Self, k: usize, shift: f64| s.probe(&along, k, shift);
         // Not gripped by both fingers: the support keeps it where it is.
         for k in 0..2 {
             if at(self, k, 0.0)?.0 <= 0.0 {
@@ -430,16 +589,29 @@ impl State {
             return Ok(());
         };
         let t_s = t.0 as f64 * 1e-9;
-        if let Some(series) = &self.flow {
-            let u = series.speed_m_s(t_s);
-            // On the outline the current meets: the object's side, not its top.
-            let push_n = 0.5
-                * series.flow.density_kg_m3
-                * obj.drag_coefficient
-                * obj.flow_area_m2
-                * u
-                * u.abs();
-            self.shift_m = self.balance_shift(push_n)?;
+        let u = self.flow.as_ref().map_or(0.0, |f| f.speed_m_s(t_s));
+        let lifted = self.lift.is_some_and(|l| t >= l.t0);
+        match self.effects.support_friction {
+            // On its support: friction and inertia decide where it goes.
+            Some(mu) if !lifted => {
+                self.slide_on_support(mu, u, dt_s)?;
+                if self.object.is_none() {
+                    return Ok(());
+                }
+            }
+            _ if self.flow.is_some() || self.effects.support_friction.is_some() => {
+                self.slide_m_s = 0.0;
+                // On the outline the current meets: the object's side, not its top.
+                let push_n = self.flow.as_ref().map_or(0.0, |f| {
+                    0.5 * f.flow.density_kg_m3
+                        * obj.drag_coefficient
+                        * obj.flow_area_m2
+                        * u
+                        * u.abs()
+                });
+                self.shift_m = self.balance_shift(push_n)?;
+            }
+            _ => {}
         }
         let mut contacts = Vec::with_capacity(2);
         for k in 0..2 {
@@ -467,7 +639,12 @@ impl State {
             let drag_n = self.effects.object_drag_kg_m3.map_or(0.0, |rho| {
                 0.5 * rho * obj.drag_coefficient * obj.drag_area_m2 * v * v.abs()
             });
-            let load = obj.mass_kg * (G_M_S2 + a) - buoyancy_n + drag_n;
+            // The fluid the object carries along adds to the inertia, not the weight.
+            let added_kg = self
+                .effects
+                .object_added_mass_kg_m3
+                .map_or(0.0, |rho| rho * obj.added_mass_xz[1] * obj.volume_m3);
+            let load = obj.mass_kg * (G_M_S2 + a) + added_kg * a - buoyancy_n + drag_n;
             if load.is_nan() || load.abs() > capacity_n {
                 return self.lose(HoldState::Slipped { t });
             }
@@ -506,6 +683,7 @@ impl State {
         self.shear_n = [[0.0; 2]; 2];
         self.stick_m = [0.0; 2];
         self.shift_m = 0.0;
+        self.slide_m_s = 0.0;
         Ok(())
     }
 }

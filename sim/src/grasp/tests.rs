@@ -510,6 +510,7 @@ async fn a_taller_object_is_pushed_harder_by_the_same_current() {
         mean_m_s: 0.3,
         gust_m_s: 0.0,
         period_s: 0.5,
+        spectrum: Vec::new(),
     }]);
     let spread_of = |height_m: f64| {
         let flow = flow.clone();
@@ -547,6 +548,7 @@ async fn a_declared_current_squeezes_one_finger_more_than_the_other() {
         mean_m_s: 0.3,
         gust_m_s: 0.2,
         period_s: 0.5,
+        spectrum: Vec::new(),
     }]);
     let obj = cylinder_standing();
     let (_, probe, _) = grip_at(&land(), obj.clone(), 0).await;
@@ -991,4 +993,303 @@ async fn a_lift_with_no_contact_and_no_load_is_not_held() {
     tokio::time::sleep(Duration::from_secs(1)).await;
     let state = h.hold_state().expect("state");
     assert!(!matches!(state, HoldState::Held), "{state:?}");
+}
+
+#[test]
+fn the_added_mass_of_a_spheroid_follows_lambs_table() {
+    // A sphere's ½ both ways; Lamb's (1932, §373) prolate values at 2:1 and 3:1.
+    let close = |a: f64, b: f64, tol: f64| (a - b).abs() < tol;
+    assert_eq!(spheroid_added_mass(1.0), (0.5, 0.5));
+    let (along, across) = spheroid_added_mass(2.0);
+    assert!(
+        close(along, 0.210, 5e-4) && close(across, 0.704, 5e-4),
+        "{along} {across}"
+    );
+    let (along, across) = spheroid_added_mass(3.0);
+    assert!(
+        close(along, 0.122, 5e-4) && close(across, 0.804, 5e-4),
+        "{along} {across}"
+    );
+    // α₀ + 2β₀ = 2 for every spheroid, prolate and oblate, and continuous through 1.
+    for ratio in [
+        1e-3,
+        0.1,
+        0.5,
+        0.999,
+        0.999_999_9,
+        1.000_000_1,
+        1.001,
+        1.7,
+        10.0,
+        1e3,
+    ] {
+        let (along, across) = spheroid_added_mass(ratio);
+        let alpha = 2.0 * along / (1.0 + along);
+        let beta = 2.0 * across / (1.0 + across);
+        assert!(
+            close(alpha + 2.0 * beta, 2.0, 1e-9),
+            "{ratio}: {along} {across}"
+        );
+        if (ratio - 1.0).abs() < 1e-2 {
+            assert!(
+                close(along, 0.5, 1e-2) && close(across, 0.5, 1e-2),
+                "{ratio}"
+            );
+        }
+    }
+    // Longer: less fluid to push ahead along the axis, more across it.
+    assert!(spheroid_added_mass(4.0).0 < spheroid_added_mass(2.0).0);
+    assert!(spheroid_added_mass(0.5).0 > 0.5 && spheroid_added_mass(0.5).1 < 0.5);
+    // Needles, discs and what is not a ratio: finite.
+    for ratio in [0.0, -1.0, 1e-300, 1e300, f64::NAN, f64::INFINITY] {
+        let (along, across) = spheroid_added_mass(ratio);
+        assert!(
+            along.is_finite() && across.is_finite() && along >= 0.0,
+            "{ratio}"
+        );
+    }
+}
+
+/// The land scene with the object on a support of friction `mu`, plus `more`.
+fn on_support(mu: f64, more: Vec<Effect>) -> SceneSpec {
+    let mut effects = vec![Effect::ObjectSupport { friction: mu }];
+    effects.extend(more);
+    with_effects(effects)
+}
+
+fn buoyancy() -> Effect {
+    Effect::ObjectBuoyancy {
+        fluid_density_kg_m3: 1000.0,
+    }
+}
+
+/// Places `obj` `offset_x_m` along +x in `scene`, closes the fingers at the slowest
+/// speed to `count` and waits 2 s: (the object's x before and after, m, the squeeze
+/// on finger 0 and on finger 1 at the end, N).
+async fn push_by_closing(
+    scene: &SceneSpec,
+    obj: GraspObject,
+    offset_x_m: f64,
+    count: u8,
+) -> (f64, f64, [f64; 2]) {
+    let clock = TokioClock::new();
+    let (mut g, _, h) = soft_grasp(scene, obj, 60.0, 1, clock).expect("builds");
+    assert!(h.place_object([offset_x_m, 0.0, 0.0]).expect("placed"));
+    let before = h.object_x_m().expect("x");
+    g.activate().await.expect("activates");
+    g.command(GripperCommand {
+        position: count,
+        speed: 0,
+        force: 255,
+    })
+    .await
+    .expect("sent");
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let after = h.object_x_m().expect("x");
+    let t = clock.now();
+    let squeeze = [0, 1].map(|k| -h.true_wrench_on(k, t).expect("truth").force_n[0]);
+    (before, after, squeeze)
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_first_finger_pushes_a_light_wet_object_further_than_a_heavy_dry_one() {
+    let light = GraspObject {
+        mass_kg: 0.03,
+        ..cylinder_standing()
+    };
+    let heavy = GraspObject {
+        mass_kg: 0.3,
+        ..cylinder_standing()
+    };
+    let (_, probe, _) = grip_at(&land(), light.clone(), 0).await;
+    let count = count_for(&probe, 1.5);
+    // 4 mm towards finger 1: finger 1 touches first and pushes it along −x.
+    let offset = 0.004;
+    let mu = 0.4;
+    let water = on_support(mu, vec![buoyancy()]);
+    let (b0, light_x, light_sq) = push_by_closing(&water, light.clone(), offset, count).await;
+    let (_, heavy_x, heavy_sq) =
+        push_by_closing(&on_support(mu, vec![]), heavy.clone(), offset, count).await;
+    assert!((b0 - offset).abs() < 1e-12, "placed at {b0}");
+    let pushed_light = offset - light_x;
+    let pushed_heavy = offset - heavy_x;
+    assert!(
+        pushed_light > pushed_heavy + 1e-4 && pushed_heavy > 0.0,
+        "light {pushed_light} m, heavy {pushed_heavy} m"
+    );
+    // The light one slid until the other finger met it: the fingers' difference is
+    // what its support holds, μ·(m·g − ρ·g·V). The heavy one ends held by static
+    // friction: a difference within what its support holds, and most of it.
+    let hold =
+        |o: &GraspObject, rho: f64| mu * (o.mass_kg * G_M_S2 - rho * G_M_S2 * o.volume_m3).max(0.0);
+    let diff_light = light_sq[1] - light_sq[0];
+    let diff_heavy = heavy_sq[1] - heavy_sq[0];
+    let (hold_light, hold_heavy) = (hold(&light, 1000.0), hold(&heavy, 0.0));
+    assert!(
+        (diff_light - hold_light).abs() < 0.01,
+        "{diff_light} vs {hold_light}"
+    );
+    assert!(
+        diff_heavy <= hold_heavy + 1e-6 && diff_heavy > 0.5 * hold_heavy,
+        "{diff_heavy} vs {hold_heavy}"
+    );
+    assert!(pushed_light > 0.9 * offset, "{pushed_light}");
+    // A frictionless support (the effect absent): centred, no difference.
+    let (_, x, sq) = push_by_closing(&land(), heavy, offset, count).await;
+    assert!(
+        x.abs() < 1e-12 && (sq[0] - sq[1]).abs() < 1e-9,
+        "{x} {sq:?}"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_current_sways_a_floating_object_by_what_its_drag_and_added_mass_predict() {
+    // Neutrally buoyant (ρ·V = m), so its support holds nothing; a steady current
+    // u along +x starts it from rest. m_eff·dv/dt = k·(u − v)² with k = ½·ρ·C_d·A:
+    // x(t) = u·t − (m_eff/k)·ln(1 + k·u·t/m_eff), until it meets finger 1.
+    let u = 0.05;
+    let obj = cylinder_standing();
+    let obj = GraspObject {
+        mass_kg: 1000.0 * obj.volume_m3,
+        ..obj
+    };
+    let flow = Effect::ObjectFlow {
+        fluid_density_kg_m3: 1000.0,
+        mean_m_s: u,
+        gust_m_s: 0.0,
+        period_s: 1.0,
+        spectrum: Vec::new(),
+    };
+    let added = Effect::ObjectAddedMass {
+        fluid_density_kg_m3: 1000.0,
+    };
+    let k = 0.5 * 1000.0 * obj.drag_coefficient * obj.flow_area_m2;
+    let predicted = |m_eff: f64, t: f64| u * t - m_eff / k * (1.0 + k * u * t / m_eff).ln();
+    for (more, m_eff) in [
+        (vec![], obj.mass_kg),
+        (vec![added], obj.mass_kg * (1.0 + obj.added_mass_xz[0])),
+    ] {
+        let mut effects = vec![buoyancy(), flow.clone()];
+        effects.extend(more);
+        let scene = on_support(0.5, effects);
+        let clock = TokioClock::new();
+        let (_, _, h) = soft_grasp(&scene, obj.clone(), 60.0, 1, clock).expect("builds");
+        for t_ms in [100, 200, 300] {
+            tokio::time::sleep_until(tokio::time::Instant::now() + Duration::from_millis(100))
+                .await;
+            let x = h.object_x_m().expect("x");
+            let want = predicted(m_eff, t_ms as f64 * 1e-3);
+            assert!(
+                (x - want).abs() < 0.03 * want,
+                "m_eff {m_eff} kg at {t_ms} ms: {x} m, predicted {want} m"
+            );
+        }
+    }
+    // On a support with friction, a heavier object the current cannot move stays put.
+    let heavy = GraspObject {
+        mass_kg: 0.2,
+        ..cylinder_standing()
+    };
+    let scene = on_support(0.5, vec![buoyancy(), flow]);
+    let (_, _, h) = soft_grasp(&scene, heavy, 60.0, 1, TokioClock::new()).expect("builds");
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert!(h.object_x_m().expect("x").abs() < 1e-15);
+}
+
+/// The largest lift acceleration (m/s², to 0.1) the grip holds `obj` through.
+async fn largest_held_accel(scene: &SceneSpec, obj: &GraspObject, count: u8) -> f64 {
+    let (mut lo, mut hi) = (0.1, 100.0);
+    while hi - lo > 0.1 {
+        let a = 0.5 * (lo + hi);
+        let (_, h, clock) = grip_at(scene, obj.clone(), count).await;
+        h.start_lift(clock.now(), 0.01, 0.5, a).expect("lift");
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        if matches!(h.hold_state().expect("state"), HoldState::Held) {
+            lo = a;
+        } else {
+            hi = a;
+        }
+    }
+    lo
+}
+
+#[tokio::test(start_paused = true)]
+async fn added_mass_lowers_the_lift_acceleration_the_grip_holds_in_proportion() {
+    // The grip's friction carries m·(g + a) + m_a·a − ρ·g·V: the acceleration at the
+    // edge of a slip scales by m / (m + m_a) once the weight less buoyancy is taken out.
+    let obj = GraspObject {
+        mass_kg: 0.03,
+        ..cylinder_standing()
+    };
+    let (_, probe, _) = grip_at(&land(), obj.clone(), 0).await;
+    let count = count_for(&probe, 0.6);
+    let without = largest_held_accel(&with_effects(vec![buoyancy()]), &obj, count).await;
+    let with = largest_held_accel(
+        &with_effects(vec![
+            buoyancy(),
+            Effect::ObjectAddedMass {
+                fluid_density_kg_m3: 1000.0,
+            },
+        ]),
+        &obj,
+        count,
+    )
+    .await;
+    let m_a = 1000.0 * obj.added_mass_xz[1] * obj.volume_m3;
+    let ratio = with / without;
+    let want = obj.mass_kg / (obj.mass_kg + m_a);
+    assert!(
+        without > 1.0 && (ratio - want).abs() < 0.03,
+        "{without} → {with}: {ratio} vs {want}"
+    );
+}
+
+#[test]
+#[allow(
+    clippy::float_cmp,
+    reason = "the seed moves only the phases: the periods and amplitudes are the declared bits"
+)]
+fn a_declared_gust_spectrum_is_its_components() {
+    let flow = |spectrum: Vec<(f64, f64)>| Flow {
+        density_kg_m3: 1000.0,
+        mean_m_s: 0.05,
+        gust_m_s: 0.0,
+        period_s: 1.0,
+        spectrum,
+    };
+    // One component: periodic with its period, between mean ± amplitude.
+    let one = FlowSeries::new(flow(vec![(0.8, 0.1)]), 3);
+    let speeds: Vec<f64> = (0..800)
+        .map(|i| one.speed_m_s(f64::from(i) * 1e-3))
+        .collect();
+    for (i, v) in speeds.iter().enumerate() {
+        let later = one.speed_m_s(i as f64 * 1e-3 + 0.8);
+        assert!((v - later).abs() < 1e-12);
+    }
+    let (lo, hi) = speeds
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(l, h), v| (l.min(*v), h.max(*v)));
+    assert!(
+        (hi - 0.15).abs() < 1e-4 && (lo + 0.05).abs() < 1e-4,
+        "{lo} {hi}"
+    );
+    // Two: the mean over a common period is the mean; the seed moves only the phases.
+    let two = FlowSeries::new(flow(vec![(0.5, 0.03), (2.0, 0.02)]), 3);
+    let mean = (0..2000)
+        .map(|i| two.speed_m_s(f64::from(i) * 1e-3))
+        .sum::<f64>()
+        / 2000.0;
+    assert!((mean - 0.05).abs() < 1e-9, "{mean}");
+    let other = FlowSeries::new(flow(vec![(0.5, 0.03), (2.0, 0.02)]), 4);
+    assert!(
+        other
+            .waves
+            .iter()
+            .zip(&two.waves)
+            .all(|(a, b)| a.0 == b.0 && a.2 == b.2)
+    );
+    assert!(other.waves[0].1 != two.waves[0].1);
+    // None at all: a steady current.
+    let steady = FlowSeries::new(flow(Vec::new()), 3);
+    assert!((steady.speed_m_s(12.3) - 0.05).abs() < 1e-15);
 }
