@@ -1,4 +1,4 @@
-//! `softtouch bench collection|ingest|model`.
+//! `softtouch bench collection|ingest|model|train` (`grasp`: `bench_grasp`).
 
 use super::train::{ModelArgs, load};
 use super::{Failure, io_failure};
@@ -34,6 +34,18 @@ pub enum BenchCommand {
   softtouch bench model --dataset air
   softtouch bench model --dataset air --sizes 32,64 --widths 8,16 --latents 32 --epochs 10")]
     Model(BenchModelArgs),
+    /// Training throughput: images/s of the SVAE's training step (batch, forward and
+    /// loss, backward, Adam) at each input size and width, where the step's time goes,
+    /// the GFLOP/s and the cores kept busy; with `--torch PYTHON`, the PyTorch peer's
+    /// same step run interleaved, and softtouch's images/s over PyTorch's.
+    #[command(after_help = "Examples:
+  softtouch bench train
+  softtouch bench train --sizes 32 --widths 16 --steps 30 --repeats 1
+  softtouch bench train --torch .venv-torch/bin/python --repeats 5
+
+The PyTorch peer is ../shared/peers/torch_light_bench.py (its README says how to
+install PyTorch); --torch-script points elsewhere. CI does not run PyTorch.")]
+    Train(super::bench_train::BenchTrainArgs),
     /// Accuracy costs time: sweep settle time and force/torque window on the simulated
     /// scene (whose true wrench is known); print label error against samples per hour,
     /// and write a CSV and PNG plots. Also reports where a sample's time goes.
@@ -96,6 +108,7 @@ pub async fn run(cmd: BenchCommand, db: &Path, out: &mut dyn Write) -> Result<()
     match cmd {
         BenchCommand::Grasp(args) => super::bench_grasp::run(args, db, out).await,
         BenchCommand::Model(args) => run_bench_model(args, db, out).await,
+        BenchCommand::Train(args) => super::bench_train::run(args, db, out).await,
         BenchCommand::Collection {
             samples,
             settle,

@@ -75,7 +75,7 @@ pub async fn run_eval(args: EvalArgs, db: &Path, out: &mut dyn Write) -> Result<
         )));
     }
     let h = &artifact.header;
-    let (metrics, predictions) = evaluate(&artifact.net, &h.config, &h.norm, &examples, &device);
+    let (metrics, predictions) = evaluate(&artifact.net, &h.config, &h.norm, &examples, &device)?;
     writeln!(
         out,
         "model {} ({} width {} latent {} input {}×{}), {dataset} {} split",

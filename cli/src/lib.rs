@@ -7,6 +7,7 @@
 
 pub mod bench;
 pub mod bench_grasp;
+pub mod bench_train;
 pub mod collect;
 pub mod config;
 pub mod dataset;

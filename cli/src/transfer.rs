@@ -76,9 +76,9 @@ fn score(
     artifact: &ModelArtifact,
     examples: &[Example],
     device: &burn::prelude::Device,
-) -> Metrics {
+) -> Result<Metrics, Failure> {
     let h = &artifact.header;
-    evaluate(&artifact.net, &h.config, &h.norm, examples, device).0
+    Ok(evaluate(&artifact.net, &h.config, &h.norm, examples, device)?.0)
 }
 
 pub async fn run_transfer(
@@ -112,8 +112,8 @@ pub async fn run_transfer(
     let w = |e| io_failure(e);
 
     // 1. The same model on both media.
-    let on_land = score(&artifact, &land.examples, &device);
-    let on_water = score(&artifact, &water.examples, &device);
+    let on_land = score(&artifact, &land.examples, &device)?;
+    let on_water = score(&artifact, &water.examples, &device)?;
     writeln!(
         out,
         "model {} on land `{}` ({} test samples) and water `{}` ({} test samples)",
@@ -229,8 +229,8 @@ pub async fn run_transfer(
         let other = load_model(&store, name, &device).await?;
         let (l, wa) = if other.header.config.preprocess == *preprocess {
             (
-                score(&other, &land.examples, &device),
-                score(&other, &water.examples, &device),
+                score(&other, &land.examples, &device)?,
+                score(&other, &water.examples, &device)?,
             )
         } else {
             // Another input size or threshold: its own preprocessing of the same splits.
@@ -238,8 +238,8 @@ pub async fn run_transfer(
             let l = test_split(&store, &args.land, &t).await?;
             let wa = test_split(&store, &args.water, &t).await?;
             (
-                score(&other, &l.examples, &device),
-                score(&other, &wa.examples, &device),
+                score(&other, &l.examples, &device)?,
+                score(&other, &wa.examples, &device)?,
             )
         };
         scored.push(Scored {

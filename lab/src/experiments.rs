@@ -437,7 +437,7 @@ mod tests {
         let row = Row {
             label: "x".into(),
             config: ModelConfig::default(),
-            test: Metrics::compute(None, &[], None),
+            test: Metrics::compute(None, &[], None).expect("no predictions"),
             epochs: 2,
             seconds_per_epoch: 1.5,
             images_per_s: 100.0,

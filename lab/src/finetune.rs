@@ -145,7 +145,7 @@ pub fn untouched_row(
 ) -> Result<FinetuneRow, ExperimentError> {
     let h = &artifact.header;
     let device = softtouch_trainer::backend::device()?;
-    let (test, _) = evaluate(&artifact.net, &h.config, &h.norm, &splits.test, &device);
+    let (test, _) = evaluate(&artifact.net, &h.config, &h.norm, &splits.test, &device)?;
     Ok(FinetuneRow {
         samples: 0,
         val_samples: 0,

@@ -190,7 +190,7 @@ mod tests {
         let mut artifact = ModelArtifact::untrained(&ModelConfig::default(), 1).expect("model");
         let t = [[0.0f32; 6], [1.0; 6]];
         let p = [[f32::INFINITY; 6], [f32::NAN; 6]];
-        let mut test = Metrics::compute(Some(&p), &t, Some(f64::NAN));
+        let mut test = Metrics::compute(Some(&p), &t, Some(f64::NAN)).expect("pairs");
         if let Some(r2) = test.r2.as_mut() {
             r2[0].r2 = f64::NAN;
         }

@@ -17,6 +17,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::TrainError;
 use crate::labels::{AXES, WrenchLabel, is_constant_axis};
 
 /// Reads `null` (how serde_json writes NaN and infinity) back as NaN.
@@ -54,11 +55,33 @@ pub struct AxisR2 {
     pub constant_target: bool,
 }
 
-/// R² per axis of `predictions` against `targets` (same length). Empty sets give
-/// R² = 0 on every axis, flagged constant.
-pub fn r2_per_axis(predictions: &[WrenchLabel], targets: &[WrenchLabel]) -> [AxisR2; 6] {
-    let n = predictions.len().min(targets.len());
-    std::array::from_fn(|axis| {
+/// Predictions and targets must pair one to one: anything else is an error naming
+/// both counts (a silent truncation would score a different set).
+fn check_pairs(predictions: &[WrenchLabel], targets: &[WrenchLabel]) -> Result<(), TrainError> {
+    if predictions.len() == targets.len() {
+        return Ok(());
+    }
+    Err(TrainError::Input(format!(
+        "{} predictions for {} targets: expected one per target",
+        predictions.len(),
+        targets.len()
+    )))
+}
+
+/// R² per axis of `predictions` against `targets` (one each). Empty sets give R² = 0
+/// on every axis, flagged constant. An axis whose residuals are not finite (an
+/// infinite or NaN prediction, or a target that is not finite) is infinitely wrong:
+/// `f64::MIN`, finite and below every real R².
+///
+/// # Errors
+/// The two lists differ in length.
+pub fn r2_per_axis(
+    predictions: &[WrenchLabel],
+    targets: &[WrenchLabel],
+) -> Result<[AxisR2; 6], TrainError> {
+    check_pairs(predictions, targets)?;
+    let n = targets.len();
+    Ok(std::array::from_fn(|axis| {
         if n == 0 {
             return AxisR2 {
                 r2: 0.0,
@@ -73,6 +96,13 @@ pub fn r2_per_axis(predictions: &[WrenchLabel], targets: &[WrenchLabel]) -> [Axi
             ss_tot += (t - mean).powi(2);
         }
         let n = n as f64;
+        if !mean.is_finite() {
+            // A target that is not finite: no R² can be taken about its mean.
+            return AxisR2 {
+                r2: f64::MIN,
+                constant_target: false,
+            };
+        }
         if is_constant_axis((ss_tot / n).sqrt(), mean) {
             AxisR2 {
                 r2: if is_constant_axis((ss_res / n).sqrt(), mean) {
@@ -94,7 +124,20 @@ pub fn r2_per_axis(predictions: &[WrenchLabel], targets: &[WrenchLabel]) -> [Axi
                 constant_target: false,
             }
         }
-    })
+    }))
+}
+
+/// The mean of six R². Where their sum overflows (two or more axes at `f64::MIN`) it
+/// is taken as a sum of sixths, so six such axes give `f64::MIN` rather than −∞
+/// (which JSON would store as null).
+#[must_use]
+pub fn mean_r2(r2: &[AxisR2; 6]) -> f64 {
+    let sum: f64 = r2.iter().map(|a| a.r2).sum();
+    if sum.is_finite() {
+        sum / 6.0
+    } else {
+        r2.iter().map(|a| a.r2 / 6.0).sum()
+    }
 }
 
 /// Standard deviation of the error in one label range.
@@ -114,13 +157,17 @@ pub struct RangeError {
 }
 
 /// The error spread per range of |target|, pooled over axes `axes` (0..3 for forces,
-/// 3..6 for torques), with `edges` the upper edges of the ranges.
+/// 3..6 for torques), with `edges` the upper edges of the ranges, and how many labels
+/// fell in no range because the target is not finite (so the ranges and that count
+/// add up to the labels). A finite target with a prediction that is not finite stays
+/// in its range, whose spread then is not finite either (stored as null, read as NaN).
 pub fn error_by_range(
     predictions: &[WrenchLabel],
     targets: &[WrenchLabel],
     axes: std::ops::Range<usize>,
     edges: &[f64],
-) -> Vec<RangeError> {
+) -> (Vec<RangeError>, usize) {
+    let mut not_finite = 0;
     let mut bins: Vec<(f64, f64, Vec<f64>)> = Vec::with_capacity(edges.len() + 1);
     let mut lower = 0.0;
     for &upper in edges {
@@ -132,12 +179,15 @@ pub fn error_by_range(
         for axis in axes.clone() {
             let (p, t) = (f64::from(p[axis]), f64::from(t[axis]));
             let magnitude = t.abs();
-            if let Some(bin) = bins.iter_mut().find(|b| magnitude < b.1) {
-                bin.2.push(p - t);
+            match bins.iter_mut().find(|b| magnitude < b.1) {
+                Some(bin) => bin.2.push(p - t),
+                // NaN compares below nothing; ∞ is below no edge, the overflow's too.
+                None => not_finite += 1,
             }
         }
     }
-    bins.into_iter()
+    let bins = bins
+        .into_iter()
         .map(|(lower, upper, errors)| {
             let count = errors.len();
             let mean = if count > 0 {
@@ -158,7 +208,8 @@ pub fn error_by_range(
                 error_mean: mean,
             }
         })
-        .collect()
+        .collect();
+    (bins, not_finite)
 }
 
 /// Everything `softtouch eval` reports about a model on one split.
@@ -176,18 +227,25 @@ pub struct Metrics {
     /// Root-mean-square error per axis, in the axis' unit.
     #[serde(default, deserialize_with = "null_as_nan_6::deserialize")]
     pub rmse: Option<[f64; 6]>,
+    /// Labels (target values, pooled over the six axes) that are not finite: they fall
+    /// in no error range.
+    #[serde(default)]
+    pub targets_not_finite: usize,
 }
 
 impl Metrics {
     /// Computes the wrench metrics (when `predictions` is given) and carries the
     /// image MSE.
+    ///
+    /// # Errors
+    /// Predictions and targets differ in number.
     pub fn compute(
         predictions: Option<&[WrenchLabel]>,
         targets: &[WrenchLabel],
         image_mse: Option<f64>,
-    ) -> Self {
+    ) -> Result<Self, TrainError> {
         let Some(predictions) = predictions else {
-            return Self {
+            return Ok(Self {
                 samples: targets.len(),
                 r2: None,
                 r2_mean: None,
@@ -195,11 +253,12 @@ impl Metrics {
                 force_error_by_range: Vec::new(),
                 torque_error_by_range: Vec::new(),
                 rmse: None,
-            };
+                targets_not_finite: 0,
+            });
         };
-        let r2 = r2_per_axis(predictions, targets);
-        let r2_mean = r2.iter().map(|a| a.r2).sum::<f64>() / 6.0;
-        let n = predictions.len().min(targets.len()).max(1) as f64;
+        let r2 = r2_per_axis(predictions, targets)?;
+        let r2_mean = mean_r2(&r2);
+        let n = targets.len().max(1) as f64;
         let rmse = std::array::from_fn(|axis| {
             (predictions
                 .iter()
@@ -209,20 +268,20 @@ impl Metrics {
                 / n)
                 .sqrt()
         });
-        Self {
+        let (force, force_not_finite) =
+            error_by_range(predictions, targets, 0..3, &FORCE_BIN_EDGES_N);
+        let (torque, torque_not_finite) =
+            error_by_range(predictions, targets, 3..6, &TORQUE_BIN_EDGES_NMM);
+        Ok(Self {
             samples: targets.len(),
             r2: Some(r2),
             r2_mean: Some(r2_mean),
             image_mse,
-            force_error_by_range: error_by_range(predictions, targets, 0..3, &FORCE_BIN_EDGES_N),
-            torque_error_by_range: error_by_range(
-                predictions,
-                targets,
-                3..6,
-                &TORQUE_BIN_EDGES_NMM,
-            ),
+            force_error_by_range: force,
+            torque_error_by_range: torque,
             rmse: Some(rmse),
-        }
+            targets_not_finite: force_not_finite + torque_not_finite,
+        })
     }
 
     /// The lowest per-axis R², if there is one.
@@ -270,6 +329,13 @@ impl Metrics {
                 }
             }
         }
+        if self.targets_not_finite > 0 {
+            let _ = writeln!(
+                s,
+                "{} label values are not finite: they are in no range above",
+                self.targets_not_finite
+            );
+        }
         if let Some(mse) = self.image_mse {
             let _ = writeln!(s, "image MSE: {mse:.3e}");
         }
@@ -292,13 +358,13 @@ mod tests {
     #[test]
     fn perfect_and_mean_predictions() {
         let t = labels(&[[1.0; 6], [2.0; 6], [3.0; 6]]);
-        let r = r2_per_axis(&t, &t);
+        let r = r2_per_axis(&t, &t).expect("pairs");
         assert!(
             r.iter()
                 .all(|a| (a.r2 - 1.0).abs() < 1e-12 && !a.constant_target)
         );
         let mean = labels(&[[2.0; 6]; 3]);
-        let r = r2_per_axis(&mean, &t);
+        let r = r2_per_axis(&mean, &t).expect("pairs");
         assert!(r.iter().all(|a| a.r2.abs() < 1e-12));
     }
 
@@ -309,26 +375,31 @@ mod tests {
         // hugely negative value instead.
         let t = labels(&[[0.0; 6], [10.0; 6]]);
         let p = labels(&[[4.9; 6], [5.1; 6]]);
-        let r = r2_per_axis(&p, &t);
+        let r = r2_per_axis(&p, &t).expect("pairs");
         assert!((r[0].r2 - (1.0 - (4.9f64.powi(2) * 2.0) / 50.0)).abs() < 1e-4);
-        let swapped = r2_per_axis(&t, &p);
+        let swapped = r2_per_axis(&t, &p).expect("pairs");
         assert!(swapped[0].r2 < -100.0);
     }
 
     #[test]
     fn constant_empty_and_infinite_cases_stay_finite() {
         let t = labels(&[[5.0; 6]; 4]);
-        let r = r2_per_axis(&t, &t);
+        let r = r2_per_axis(&t, &t).expect("pairs");
         assert!(r.iter().all(|a| a.constant_target && a.r2 == 1.0));
         let off = labels(&[[6.0; 6]; 4]);
-        let r = r2_per_axis(&off, &t);
+        let r = r2_per_axis(&off, &t).expect("pairs");
         assert!(r.iter().all(|a| a.constant_target && a.r2 == 0.0));
-        let r = r2_per_axis(&[], &[]);
+        let r = r2_per_axis(&[], &[]).expect("pairs");
         assert!(r.iter().all(|a| a.r2.is_finite()));
         let t = labels(&[[0.0; 6], [1.0; 6]]);
         let inf = labels(&[[f32::INFINITY; 6], [0.0; 6]]);
-        assert!(r2_per_axis(&inf, &t).iter().all(|a| a.r2.is_finite()));
-        let m = Metrics::compute(Some(&[]), &[], Some(0.0));
+        assert!(
+            r2_per_axis(&inf, &t)
+                .expect("pairs")
+                .iter()
+                .all(|a| a.r2.is_finite())
+        );
+        let m = Metrics::compute(Some(&[]), &[], Some(0.0)).expect("pairs");
         assert!(m.r2_mean.is_some_and(f64::is_finite));
         assert!(m.render().contains("samples: 0"));
     }
@@ -343,15 +414,116 @@ mod tests {
             [1.1, -3.2, 0.5, 101.0, -128.0, 690.0],
             [1.3, 3.7, 12.0, 10.0, 0.0, 5.0],
         ]);
-        let force = error_by_range(&p, &t, 0..3, &FORCE_BIN_EDGES_N);
+        let (force, skipped) = error_by_range(&p, &t, 0..3, &FORCE_BIN_EDGES_N);
+        assert_eq!(skipped, 0);
         assert_eq!(force.len(), 6);
         assert_eq!(force[0].count, 3, "1.0, 0.5, 1.5");
         assert_eq!(force[1].count, 2, "|−3|, 3.5");
         assert_eq!(force[5].count, 1, "11 N overflows");
         assert!(force[5].upper.is_none());
         assert!(force.iter().all(|b| b.error_std.is_finite()));
-        let torque = error_by_range(&p, &t, 3..6, &TORQUE_BIN_EDGES_NMM);
+        let (torque, _) = error_by_range(&p, &t, 3..6, &TORQUE_BIN_EDGES_NMM);
         assert_eq!(torque[0].count, 4);
         assert_eq!(torque[1].count, 1);
+    }
+
+    #[test]
+    fn infinite_predictions_on_any_number_of_axes_keep_the_mean_finite() {
+        let t = labels(&[[0.0; 6], [1.0; 6], [2.0; 6]]);
+        for bad_axes in 0..=6 {
+            let mut p = t.clone();
+            for (axis, v) in p[1].iter_mut().enumerate().take(bad_axes) {
+                *v = if axis % 2 == 0 {
+                    f32::INFINITY
+                } else {
+                    f32::NAN
+                };
+            }
+            let m = Metrics::compute(Some(&p), &t, None).expect("pairs");
+            let mean = m.r2_mean.expect("a mean");
+            assert!(mean.is_finite(), "{bad_axes} axes: {mean}");
+            if bad_axes == 0 {
+                assert_eq!(mean, 1.0);
+            } else {
+                // Below every real R², and the worst axis says which.
+                assert!(
+                    mean < -1e300 && m.r2_min() == Some(f64::MIN),
+                    "{bad_axes}: {mean}"
+                );
+            }
+            // And it survives JSON (no null for a finite value; serde_json reads the
+            // last bit of a double back only to its fast parser's precision).
+            let back: Metrics = serde_json::from_str(&serde_json::to_string(&m).expect("json"))
+                .expect("reads back");
+            let read = back.r2_mean.expect("a mean");
+            assert!(
+                read.is_finite() && (read - mean).abs() <= 1e-15 * mean.abs(),
+                "{read} vs {mean}"
+            );
+        }
+        assert_eq!(
+            mean_r2(
+                &[AxisR2 {
+                    r2: f64::MIN,
+                    constant_target: false
+                }; 6]
+            ),
+            f64::MIN
+        );
+    }
+
+    #[test]
+    fn targets_that_are_not_finite_are_counted_not_lost() {
+        let t = labels(&[
+            [1.0, f32::NAN, 0.5, 10.0, f32::INFINITY, 5.0],
+            [1.5, 3.5, f32::NEG_INFINITY, 10.0, 0.0, f32::NAN],
+        ]);
+        let p = labels(&[[1.0; 6], [1.0; 6]]);
+        let m = Metrics::compute(Some(&p), &t, None).expect("pairs");
+        assert_eq!(m.targets_not_finite, 4);
+        let binned: usize = m
+            .force_error_by_range
+            .iter()
+            .chain(&m.torque_error_by_range)
+            .map(|b| b.count)
+            .sum();
+        assert_eq!(
+            binned + m.targets_not_finite,
+            2 * 6,
+            "every label accounted for"
+        );
+        assert!(m.render().contains("4 label values are not finite"));
+        // R² of an axis with a target that is not finite: infinitely wrong, finite.
+        let r2 = m.r2.expect("r2");
+        assert_eq!(r2[1].r2, f64::MIN);
+        assert_eq!(r2[2].r2, f64::MIN);
+        assert!(r2[0].r2.is_finite() && r2[0].r2 > f64::MIN);
+        // An infinite prediction of a finite target stays in its range, not finite.
+        let (bins, skipped) = error_by_range(
+            &labels(&[[f32::INFINITY; 6], [0.0; 6]]),
+            &labels(&[[1.0; 6], [1.0; 6]]),
+            0..3,
+            &FORCE_BIN_EDGES_N,
+        );
+        assert_eq!((skipped, bins[0].count), (0, 6));
+        assert!(!bins[0].error_std.is_finite());
+    }
+
+    #[test]
+    fn predictions_and_targets_must_pair_one_to_one() {
+        let t = labels(&[[0.0; 6], [1.0; 6], [2.0; 6]]);
+        for p in [&t[..2], &[][..]] {
+            let Err(e) = r2_per_axis(p, &t) else {
+                panic!("{} for 3 accepted", p.len());
+            };
+            assert!(
+                e.to_string()
+                    .contains(&format!("{} predictions for 3 targets", p.len())),
+                "{e}"
+            );
+            assert!(Metrics::compute(Some(p), &t, None).is_err());
+        }
+        // No predictions at all (the VAE) is not a mismatch.
+        assert!(Metrics::compute(None, &t, None).is_ok());
     }
 }

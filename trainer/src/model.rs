@@ -139,6 +139,51 @@ impl ModelConfig {
         (0..=stages).map(|i| self.width << i.min(3)).collect()
     }
 
+    /// Multiply–adds of one image through the training graph's convolutions and
+    /// linear layers, and those of the stem alone. Counted as the PyTorch peer counts
+    /// them: a convolution's output elements × inputs per output, a transposed one's
+    /// input elements × outputs per input.
+    pub fn forward_macs_per_image(&self) -> (u64, u64) {
+        let ch = self.stage_channels();
+        let c_in = self.preprocess.channels as u64;
+        let latent = self.latent as u64;
+        let mut n = (self.preprocess.size_px / 2) as u64;
+        let c0 = ch[0] as u64;
+        let stem = n * n * c0 * c_in * 9;
+        let mut total = stem;
+        for w in ch.windows(2) {
+            let (a, b) = (w[0] as u64, w[1] as u64);
+            n /= 2;
+            // conv1, conv2 and the 1×1 skip.
+            total += n * n * b * (a * 9 + b * 9 + a);
+        }
+        let features = ch.last().map_or(0, |c| *c as u64 * 16);
+        total += features * latent;
+        if self.kind != ModelKind::Convnet {
+            total += features * latent;
+        }
+        if self.kind.predicts_wrench() {
+            total += latent * 6;
+        }
+        if self.kind.has_decoder() {
+            total += latent * features;
+            let mut n = 4u64;
+            for w in ch.windows(2).rev() {
+                total += n * n * w[1] as u64 * w[0] as u64 * 16;
+                n *= 2;
+            }
+            total += n * n * c0 * c_in * 16;
+        }
+        (total, stem)
+    }
+
+    /// GFLOP of one image's training step: 2 per multiply–add, the backward pass
+    /// twice the forward less the stem's input gradient (the PyTorch peer's count).
+    pub fn train_gflop_per_image(&self) -> f64 {
+        let (forward, stem) = self.forward_macs_per_image();
+        2.0 * (3 * forward - stem) as f64 / 1e9
+    }
+
     /// Weights of the three loss terms `(recon, pred, kl)`.
     pub fn loss_weights(&self) -> (f64, f64, f64) {
         match self.kind {
@@ -512,6 +557,40 @@ impl InferenceNet {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn the_training_graph_s_work_is_counted_as_the_pytorch_peer_counts_it() {
+        // torch_light_bench.py's fwd_macs_train_graph_per_img and stem_macs_per_img.
+        for (size_px, width, forward, stem) in [
+            (32, 16, 3_084_480, 36_864),
+            (32, 8, 821_440, 18_432),
+            (64, 16, 17_907_904, 147_456),
+            (64, 8, 4_628_672, 73_728),
+        ] {
+            let config = ModelConfig {
+                width,
+                preprocess: Preprocess {
+                    size_px,
+                    ..Preprocess::default()
+                },
+                ..ModelConfig::default()
+            };
+            assert_eq!(
+                config.forward_macs_per_image(),
+                (forward, stem),
+                "{size_px}/{width}"
+            );
+        }
+        // No decoder, no head: less work.
+        let convnet = ModelConfig {
+            kind: ModelKind::Convnet,
+            ..ModelConfig::default()
+        };
+        assert!(
+            convnet.forward_macs_per_image().0 < ModelConfig::default().forward_macs_per_image().0
+        );
+    }
+
     use super::*;
 
     #[test]

@@ -95,7 +95,13 @@ pub(crate) async fn predict(
     if examples.is_empty() {
         return Ok(None);
     }
-    let (_, predicted) = evaluate(&artifact.net, &h.config, &h.norm, examples, &device);
+    let (_, predicted) =
+        evaluate(&artifact.net, &h.config, &h.norm, examples, &device).map_err(|e| {
+            ReportError::Model {
+                model_id,
+                why: e.to_string(),
+            }
+        })?;
     let Some(predicted) = predicted else {
         return Ok(None);
     };

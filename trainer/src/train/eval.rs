@@ -4,13 +4,16 @@ use super::*;
 
 /// Runs a model (in evaluation mode) over `examples`: wrench predictions in label
 /// units (if it predicts any) and the image MSE (if it reconstructs).
+///
+/// # Errors
+/// The model returned other than one prediction per example.
 pub fn evaluate(
     net: &Net,
     config: &ModelConfig,
     norm: &LabelNorm,
     examples: &[Example],
     device: &Device,
-) -> (Metrics, Option<Vec<WrenchLabel>>) {
+) -> Result<(Metrics, Option<Vec<WrenchLabel>>), TrainError> {
     let net = net.valid();
     let mut predictions = config.kind.predicts_wrench().then(Vec::new);
     let mut sq_err_sum = 0.0f64;
@@ -37,8 +40,8 @@ pub fn evaluate(
         .kind
         .has_decoder()
         .then(|| sq_err_sum / examples.len().max(1) as f64);
-    let metrics = Metrics::compute(predictions.as_deref(), &targets, image_mse);
-    (metrics, predictions)
+    let metrics = Metrics::compute(predictions.as_deref(), &targets, image_mse)?;
+    Ok((metrics, predictions))
 }
 
 /// The latent mean μ of every example (evaluation mode, batches of 64), one row per

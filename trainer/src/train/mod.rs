@@ -16,7 +16,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
@@ -37,6 +37,8 @@ mod checkpoint;
 pub use checkpoint::*;
 mod eval;
 pub use eval::*;
+mod bench;
+pub use bench::*;
 
 /// One preprocessed image and its label.
 #[derive(Debug, Clone, PartialEq)]
@@ -282,6 +284,80 @@ pub(crate) fn batch_tensors(
     (images, labels)
 }
 
+/// The latent noise of step `step` of `epoch` (`None` for a model without a decoder):
+/// drawn from `(seed, epoch, step)` so a resumed training draws the same.
+pub(crate) fn batch_noise(
+    config: &ModelConfig,
+    batch: usize,
+    seed: u64,
+    epoch: usize,
+    step: usize,
+    device: &Device,
+) -> Option<Tensor<2>> {
+    config.kind.has_decoder().then(|| {
+        let mut rng = ChaCha8Rng::seed_from_u64(mix(seed, epoch as u64, step as u64 + 1));
+        let values: Vec<f32> = (0..batch * config.latent)
+            .map(|_| StandardNormal.sample(&mut rng))
+            .collect();
+        Tensor::<2>::from_data(TensorData::new(values, [batch, config.latent]), device)
+    })
+}
+
+/// A step's loss terms as numbers (read back from the backend).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct StepLoss {
+    pub total: f64,
+    pub recon: Option<f64>,
+    pub pred: Option<f64>,
+    pub kl: Option<f64>,
+}
+
+/// The forward half of a training step: the net on a batch, its loss terms (the graph
+/// to differentiate) and their values.
+pub(crate) fn forward_loss(
+    net: &Net,
+    config: &ModelConfig,
+    images: Tensor<4>,
+    targets: Tensor<2>,
+    noise: Option<Tensor<2>>,
+    device: &Device,
+) -> (crate::loss::LossTerms, StepLoss) {
+    let out = net.forward(images.clone(), noise);
+    let recon = out.image.map(|img| mse(img, images));
+    let pred = out.wrench.map(|w| mse(w, targets));
+    let kl = match (config.kind.has_decoder(), out.log_var) {
+        (true, Some(lv)) => Some(kl_mean(out.mean, lv)),
+        _ => None,
+    };
+    let terms = combine(config.loss_weights(), recon, pred, kl, device);
+    let value = |t: &Option<Tensor<1>>| {
+        t.as_ref()
+            .map(|t| f64::from(t.clone().into_scalar::<f32>()))
+    };
+    let loss = StepLoss {
+        total: f64::from(terms.total.clone().into_scalar::<f32>()),
+        recon: value(&terms.recon),
+        pred: value(&terms.pred),
+        kl: value(&terms.kl),
+    };
+    (terms, loss)
+}
+
+/// The backward half: gradients of `total` and one Adam update at `lr`, with the
+/// time each took.
+pub(crate) fn backward_step(
+    net: Net,
+    optimizer: &mut ModuleOptimizer,
+    total: Tensor<1>,
+    lr: f64,
+) -> (Net, Duration, Duration) {
+    let t0 = Instant::now();
+    let grads = GradientsParams::from_grads(total.backward(), &net);
+    let t1 = Instant::now();
+    let net = optimizer.step(lr, net, grads);
+    (net, t1 - t0, t1.elapsed())
+}
+
 fn to_vec(t: Tensor<2>) -> Vec<f32> {
     let data = t.into_data();
     data.as_slice::<f32>()
@@ -420,7 +496,6 @@ pub fn train_from(
         }
     }
 
-    let (w_recon, w_pred, w_kl) = config.loss_weights();
     let batch = train_config.batch_size;
     let n_train = splits.train.len();
     let steps = n_train.div_ceil(batch);
@@ -451,34 +526,9 @@ pub fn train_from(
                 continue;
             }
             let (images, targets) = batch_tensors(&splits.train, chunk, config, &norm, &device);
-            let noise = config.kind.has_decoder().then(|| {
-                let mut rng = ChaCha8Rng::seed_from_u64(mix(
-                    train_config.seed,
-                    epoch as u64,
-                    step as u64 + 1,
-                ));
-                let values: Vec<f32> = (0..chunk.len() * config.latent)
-                    .map(|_| StandardNormal.sample(&mut rng))
-                    .collect();
-                Tensor::<2>::from_data(
-                    TensorData::new(values, [chunk.len(), config.latent]),
-                    &device,
-                )
-            });
-            let out = net.forward(images.clone(), noise);
-            let recon = out.image.map(|img| mse(img, images));
-            let pred = out.wrench.map(|w| mse(w, targets));
-            let kl = match (config.kind.has_decoder(), out.log_var) {
-                (true, Some(lv)) => Some(kl_mean(out.mean, lv)),
-                _ => None,
-            };
-            let terms = combine((w_recon, w_pred, w_kl), recon, pred, kl, &device);
-            let value = |t: &Option<Tensor<1>>| {
-                t.as_ref()
-                    .map(|t| f64::from(t.clone().into_scalar::<f32>()))
-            };
-            let total = f64::from(terms.total.clone().into_scalar::<f32>());
-            let (r, p, k) = (value(&terms.recon), value(&terms.pred), value(&terms.kl));
+            let noise = batch_noise(config, chunk.len(), train_config.seed, epoch, step, &device);
+            let (terms, loss) = forward_loss(&net, config, images, targets, noise, &device);
+            let (total, r, p, k) = (loss.total, loss.recon, loss.pred, loss.kl);
             if !total.is_finite() {
                 return Err(TrainError::NonFinite {
                     epoch: epoch + 1,
@@ -488,8 +538,7 @@ pub fn train_from(
                     ),
                 });
             }
-            let grads = GradientsParams::from_grads(terms.total.backward(), &net);
-            net = optimizer.step(lr, net, grads);
+            net = backward_step(net, &mut optimizer, terms.total, lr).0;
             let n = chunk.len() as f64;
             sum_total += total * n;
             sum_recon += r.unwrap_or(0.0) * n;
@@ -499,7 +548,7 @@ pub fn train_from(
             observer.batch(epoch + 1, step + 1, steps);
         }
         let train_seconds = epoch_started.elapsed().as_secs_f64();
-        let (val, _) = evaluate(&net, config, &norm, &splits.val, &plain);
+        let (val, _) = evaluate(&net, config, &norm, &splits.val, &plain)?;
         let val_score = score(config, &val);
         let best = val_score > best_score;
         if best {
@@ -555,8 +604,8 @@ pub fn train_from(
         Some(bytes) => load_net(bytes, config, &plain)?,
         None => net.valid(),
     };
-    let (val, _) = evaluate(&best_net, config, &norm, &splits.val, &plain);
-    let (test, _) = evaluate(&best_net, config, &norm, &splits.test, &plain);
+    let (val, _) = evaluate(&best_net, config, &norm, &splits.val, &plain)?;
+    let (test, _) = evaluate(&best_net, config, &norm, &splits.test, &plain)?;
     let epochs_run = history.len();
     let train_rate = {
         let total_seconds: f64 = history.iter().map(|h| h.seconds).sum();
