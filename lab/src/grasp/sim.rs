@@ -134,7 +134,13 @@ impl Judge for SimJudge {
             HoldState::Slipped { .. } => ObjectState::Slipped,
             HoldState::Resting => ObjectState::Resting,
         };
-        Ok(physics_verdict(state, seen))
+        // Touched means gripped, by both fingers at once: the frames the loop saw show
+        // one finger, and an object that moves may rest against either one alone.
+        let seen = Observation {
+            peak_true_n: Some(self.0.peak_grip_n().map_err(sim_err)?),
+            ..*seen
+        };
+        Ok(physics_verdict(state, &seen))
     }
 }
 

@@ -54,6 +54,7 @@ impl SoftGraspHandle {
         s.shear_n = [[0.0; 2]; 2];
         s.shift_m = rest_shift_m(&s.effects, &s.template);
         s.slide_m_s = 0.0;
+        s.peak_grip_n = 0.0;
         Ok(())
     }
 
@@ -71,6 +72,7 @@ impl SoftGraspHandle {
             .as_ref()
             .map_or(0.0, |o| rest_shift_m(&s.effects, o));
         s.slide_m_s = 0.0;
+        s.peak_grip_n = 0.0;
         s.last_contact = RefCell::default();
         s.strips = RefCell::default();
         s.hold = if s.object.is_some() {
@@ -257,6 +259,17 @@ impl SoftGraspHandle {
         };
         let u = series.speed_m_s(t.0 as f64 * 1e-9);
         Ok(0.5 * series.flow.density_kg_m3 * obj.drag_coefficient * obj.flow_area_m2 * u * u.abs())
+    }
+
+    /// The largest squeeze both fingers have had on the object at once (the smaller of
+    /// the two) since it was put in place, N, advanced to the clock's present: whether
+    /// the fingers gripped it at all. The loop watches one finger, and an object that
+    /// moves may rest against either one alone.
+    pub fn peak_grip_n(&self) -> Result<f64, SimError> {
+        let mut s = self.lock()?;
+        let now = s.clock.now();
+        s.advance(now)?;
+        Ok(s.peak_grip_n)
     }
 
     /// The object's displacement along G's +x from where the fingers meet it, m, at

@@ -275,6 +275,7 @@ pub fn soft_grasp(
         wrist_target_rad: 0.0,
         shift_m,
         slide_m_s: 0.0,
+        peak_grip_n: 0.0,
         rel_yaw_rad: 0.0,
         stick_m: [0.0; 2],
         shear_n: [[0.0; 2]; 2],

@@ -144,6 +144,11 @@ pub(super) struct State {
     pub(super) shift_m: f64,
     /// The shift's rate on the support, m/s (`Effect::ObjectSupport`; 0 otherwise).
     pub(super) slide_m_s: f64,
+    /// The largest squeeze both fingers had on the object at once (the smaller of the
+    /// two) since it was put in place, N: whether the fingers ever gripped it, which
+    /// the watched finger alone cannot say (an object on a tray or in a current may
+    /// rest against one finger only).
+    pub(super) peak_grip_n: f64,
     /// The object's turn against the fingers at the last step, rad.
     pub(super) rel_yaw_rad: f64,
     /// Each finger's stuck tangential displacement along its y, m.
@@ -619,6 +624,7 @@ impl State {
         }
         let normal = |k: usize| contacts[k].as_ref().map_or(0.0, |c| c.normal_n);
         let squeeze = |k: usize| contacts[k].as_ref().map_or(0.0, |c| c.squeeze_n());
+        self.peak_grip_n = self.peak_grip_n.max(squeeze(0).min(squeeze(1)));
         if let Some(limit) = obj.crush_force_n
             && squeeze(0).max(squeeze(1)) > limit
         {

@@ -1293,3 +1293,46 @@ fn a_declared_gust_spectrum_is_its_components() {
     let steady = FlowSeries::new(flow(Vec::new()), 3);
     assert!((steady.speed_m_s(12.3) - 0.05).abs() < 1e-15);
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_grip_needs_both_fingers_whichever_one_the_loop_watches() {
+    // On a tray, 4 mm towards finger 1: closing to a width that finger 1 reaches and
+    // finger 0 does not, finger 1 pushes the object and finger 0 never feels it: no
+    // grip. Closing on, both fingers press it: a grip, the smaller squeeze of the two.
+    let scene = on_support(0.4, vec![]);
+    let obj = GraspObject {
+        mass_kg: 0.3,
+        ..cylinder_standing()
+    };
+    let clock = TokioClock::new();
+    let (mut g, _, h) = soft_grasp(&scene, obj, 60.0, 1, clock).expect("builds");
+    assert!(h.place_object([0.004, 0.0, 0.0]).expect("placed"));
+    g.activate().await.expect("activates");
+    let mut squeezes = Vec::new();
+    for opening_mm in [36.0, 28.0] {
+        g.command(GripperCommand {
+            position: softtouch_drivers::gripper::position_for_opening(opening_mm),
+            speed: 0,
+            force: 255,
+        })
+        .await
+        .expect("sent");
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        let t = clock.now();
+        let sq = [0, 1].map(|k| -h.true_wrench_on(k, t).expect("truth").force_n[0]);
+        squeezes.push((sq, h.peak_grip_n().expect("peak")));
+    }
+    let ([watched, other], grip) = squeezes[0];
+    assert!(
+        watched.abs() < 1e-12 && other > 0.05 && grip.abs() < 1e-12,
+        "{squeezes:?}"
+    );
+    let ([a, b], grip) = squeezes[1];
+    assert!(
+        a > 0.05 && b > 0.05 && grip >= a.min(b) - 1e-12,
+        "{squeezes:?}"
+    );
+    // A fresh placement starts ungripped again.
+    assert!(h.place_object([0.0; 3]).expect("placed"));
+    assert!(h.peak_grip_n().expect("peak").abs() < 1e-12);
+}
