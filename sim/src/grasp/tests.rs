@@ -1336,3 +1336,40 @@ async fn a_grip_needs_both_fingers_whichever_one_the_loop_watches() {
     assert!(h.place_object([0.0; 3]).expect("placed"));
     assert!(h.peak_grip_n().expect("peak").abs() < 1e-12);
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig { cases: 48, .. proptest::prelude::ProptestConfig::default() })]
+
+    /// The support's law on its hard cases: frictionless to μ = 2, a 0.1 g to 10 kg
+    /// object, currents to ±10 m/s either way, steps from 1 ns to 2 ms, fingers apart or
+    /// pressing, any start inside the stroke moving at up to ±1 m/s: every step ends
+    /// with a finite shift and speed inside the stroke, or the object out of reach.
+    #[test]
+    fn the_support_law_stays_finite_on_its_hard_cases(
+        mu in 0.0..2.0f64,
+        mass_kg in 1e-4..10.0f64,
+        u in -10.0..10.0f64,
+        dt_exp in -9.0..-2.7f64,
+        opening_mm in 20.0..50.0f64,
+        shift in -0.01..0.01f64,
+        speed in -1.0..1.0f64,
+    ) {
+        let scene = on_support(mu, vec![buoyancy(), Effect::ObjectAddedMass { fluid_density_kg_m3: 1000.0 }]);
+        let obj = GraspObject { mass_kg, ..cylinder_standing() };
+        let (_, _, h) = soft_grasp(&scene, obj, 60.0, 1, TokioClock::new()).expect("builds");
+        let mut s = h.state.lock().expect("state");
+        s.opening_mm = opening_mm;
+        s.shift_m = shift;
+        s.slide_m_s = speed;
+        let dt_s = 10f64.powf(dt_exp);
+        for _ in 0..5 {
+            s.slide_on_support(mu, u, dt_s).expect("a step");
+            if s.object.is_none() {
+                proptest::prop_assert!(matches!(s.hold, HoldState::Absent));
+                break;
+            }
+            proptest::prop_assert!(s.shift_m.is_finite() && s.shift_m.abs() * 1000.0 <= STROKE_MM, "{}", s.shift_m);
+            proptest::prop_assert!(s.slide_m_s.is_finite(), "{}", s.slide_m_s);
+        }
+    }
+}
