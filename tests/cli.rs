@@ -379,3 +379,90 @@ fn collect_says_the_disk_it_needs_status_the_size_per_sample_and_the_db_file_alo
     let status = common::ok(&softtouch(d, &["--db", "backup.db", "status"]));
     assert!(status.contains(", 5 samples, "), "{status}");
 }
+
+#[test]
+fn bench_train_times_a_tiny_net_beside_a_peer_and_names_what_it_cannot_run() {
+    let dir = tempdir();
+    let d = dir.path();
+    let tiny = [
+        "bench",
+        "train",
+        "--sizes",
+        "16",
+        "--widths",
+        "4",
+        "--steps",
+        "2",
+        "--warmup",
+        "0",
+        "--repeats",
+        "1",
+        "--batch",
+        "8",
+        "--out",
+        "o",
+    ];
+    let out = softtouch(d, &tiny);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("16×16/4"),
+        "{}",
+        text(&out.stdout)
+    );
+    let csv = std::fs::read_to_string(d.join("o/bench-train.csv")).expect("csv");
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 2, "{csv}");
+    assert!(lines[0].starts_with("size_px,width,images_per_s") && lines[1].starts_with("16,4,"));
+    // A stand-in for the PyTorch peer: any program that prints its JSON line.
+    let peer = d.join("peer.sh");
+    std::fs::write(
+        &peer,
+        "#!/bin/sh\necho '{\"train_img_per_s_total\": 1000.0, \"train_cores_used\": 2.0}'\n",
+    )
+    .expect("peer");
+    let failing = d.join("failing.sh");
+    std::fs::write(&failing, "#!/bin/sh\necho 'no torch here' >&2\nexit 1\n").expect("peer");
+    for p in [&peer, &failing] {
+        let mut perms = std::fs::metadata(p).expect("meta").permissions();
+        std::os::unix::fs::PermissionsExt::set_mode(&mut perms, 0o755);
+        std::fs::set_permissions(p, perms).expect("chmod");
+    }
+    std::fs::write(d.join("script.py"), "").expect("script");
+    let with = |python: &str, script: &str| {
+        let mut args = tiny.to_vec();
+        args.extend(["--torch", python, "--torch-script", script]);
+        softtouch(d, &args)
+    };
+    let out = with(&peer.display().to_string(), "script.py");
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let csv = std::fs::read_to_string(d.join("o/bench-train.csv")).expect("csv");
+    let row: Vec<&str> = csv.lines().nth(1).expect("row").split(',').collect();
+    let ours: f64 = row[2].parse().expect("ours");
+    let ratio: f64 = row[11].parse().expect("ratio");
+    assert!(
+        (row[9] == "1000") && (ratio - ours / 1000.0).abs() < 1e-9,
+        "{csv}"
+    );
+    // What cannot run is named: no script (2), no interpreter (2), a peer that fails (1).
+    let out = with(&peer.display().to_string(), "missing.py");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("missing.py"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = with("/nonexistent/python", "script.py");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("/nonexistent/python"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = with(&failing.display().to_string(), "script.py");
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        text(&out.stderr).contains("no torch here"),
+        "{}",
+        text(&out.stderr)
+    );
+}
