@@ -258,7 +258,7 @@ impl SoftGraspHandle {
             return Ok(0.0);
         };
         let u = series.speed_m_s(t.0 as f64 * 1e-9);
-        Ok(0.5 * series.flow.density_kg_m3 * obj.drag_coefficient * obj.flow_area_m2 * u * u.abs())
+        Ok(series.side_drag(obj) * u * u.abs())
     }
 
     /// The largest squeeze both fingers have had on the object at once (the smaller of

@@ -86,6 +86,12 @@ impl FlowSeries {
         Self { flow, waves }
     }
 
+    /// `½·ρ·C_d·A` of `obj` on the outline the current meets (its side, not its top),
+    /// N·s²/m²: the push is this × u·|u|.
+    pub(super) fn side_drag(&self, obj: &GraspObject) -> f64 {
+        0.5 * self.flow.density_kg_m3 * obj.drag_coefficient * obj.flow_area_m2
+    }
+
     /// Speed along G's +x at `t_s`, m/s.
     pub(super) fn speed_m_s(&self, t_s: f64) -> f64 {
         let gust: f64 = self
@@ -325,6 +331,22 @@ impl State {
         Ok(())
     }
 
+    /// What the fluid carries of `obj`'s weight, N (0 unless the scene lists
+    /// `object_buoyancy`).
+    fn buoyancy_n(&self, obj: &GraspObject) -> f64 {
+        self.effects
+            .object_buoyancy_kg_m3
+            .map_or(0.0, |rho| rho * G_M_S2 * obj.volume_m3)
+    }
+
+    /// The fluid `obj` carries along as it accelerates along G's x (`axis` 0) or z
+    /// (1), kg (0 unless the scene lists `object_added_mass`).
+    fn added_mass_kg(&self, obj: &GraspObject, axis: usize) -> f64 {
+        self.effects.object_added_mass_kg_m3.map_or(0.0, |rho| {
+            rho * obj.added_mass_xz[axis.min(1)] * obj.volume_m3
+        })
+    }
+
     /// Each finger's squeeze along the object's shift at the present opening, turn and
     /// shear (the same bits as its whole contact, at a fraction of the cost); `None`
     /// where it is not finite and the whole contact raised no error either.
@@ -387,21 +409,10 @@ impl State {
             return Ok(());
         };
         let (s0, w0) = (self.shift_m, self.slide_m_s);
-        let buoyancy_n = self
-            .effects
-            .object_buoyancy_kg_m3
-            .map_or(0.0, |rho| rho * G_M_S2 * obj.volume_m3);
         let mu = obj.support_friction.unwrap_or(mu);
-        let hold_n = mu * (obj.mass_kg * G_M_S2 - buoyancy_n).max(0.0);
-        let mass_kg = obj.mass_kg
-            + self
-                .effects
-                .object_added_mass_kg_m3
-                .map_or(0.0, |rho| rho * obj.added_mass_xz[0] * obj.volume_m3);
-        // ½·ρ·C_d·A on the side the current meets.
-        let drag = self.flow.as_ref().map_or(0.0, |f| {
-            0.5 * f.flow.density_kg_m3 * obj.drag_coefficient * obj.flow_area_m2
-        });
+        let hold_n = mu * (obj.mass_kg * G_M_S2 - self.buoyancy_n(&obj)).max(0.0);
+        let mass_kg = obj.mass_kg + self.added_mass_kg(&obj, 0);
+        let drag = self.flow.as_ref().map_or(0.0, |f| f.side_drag(&obj));
         let Some(along) = self.squeezes_along(&obj)? else {
             return Ok(());
         };
@@ -453,32 +464,13 @@ impl State {
                 obj.name
             )));
         }
-        // Illinois false position on [lo, hi] (either order), as the balance does.
-        let mut last_side = 0;
-        let mut x = hi;
-        for _ in 0..60 {
-            x = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
-            if !x.is_finite() {
-                x = 0.5 * (lo + hi);
-            }
-            let fx = f(self, x)?;
-            if fx.abs() <= 1e-7 || (hi - lo).abs() <= 1e-12 {
-                break;
-            }
-            if fx * f_hi > 0.0 {
-                (hi, f_hi) = (x, fx);
-                if last_side == 1 {
-                    f_lo *= 0.5;
-                }
-                last_side = 1;
-            } else {
-                (lo, f_lo) = (x, fx);
-                if last_side == -1 {
-                    f_hi *= 0.5;
-                }
-                last_side = -1;
-            }
-        }
+        // H only grows with s: the bracket's lower end is where f is below 0.
+        let (left, right) = if dir > 0.0 {
+            ((lo, f_lo), (hi, f_hi))
+        } else {
+            ((hi, f_hi), (lo, f_lo))
+        };
+        let x = self.illinois(left, right, f)?;
         self.shift_m = x;
         self.slide_m_s = (x - s0) / dt_s;
         // Pushed or drifted beyond the open stroke: out of the fingers' reach.
@@ -548,8 +540,18 @@ impl State {
             }
             half_m *= 8.0;
         }
-        // Illinois false position: the imbalance grows smoothly with the shift, so a
-        // few steps reach 0.1 µN (30 bisections cost 60 contacts a step).
+        self.illinois((lo, f_lo), (hi, f_hi), imbalance)
+    }
+
+    /// Illinois false position for the root of `f` between `lo` (where it is below 0)
+    /// and `hi` (above), `f` growing smoothly: a few steps reach 0.1 µN, where 30
+    /// bisections would cost 60 contacts. At most 60 steps, or a bracket of 1 pm.
+    fn illinois(
+        &mut self,
+        (mut lo, mut f_lo): (f64, f64),
+        (mut hi, mut f_hi): (f64, f64),
+        f: impl Fn(&mut Self, f64) -> Result<f64, SimError>,
+    ) -> Result<f64, SimError> {
         let mut last_side = 0;
         let mut x = 0.0;
         for _ in 0..60 {
@@ -557,18 +559,18 @@ impl State {
             if !x.is_finite() {
                 x = 0.5 * (lo + hi);
             }
-            let f = imbalance(self, x)?;
-            if f.abs() <= 1e-7 || hi - lo <= 1e-12 {
+            let fx = f(self, x)?;
+            if fx.abs() <= 1e-7 || hi - lo <= 1e-12 {
                 break;
             }
-            if f > 0.0 {
-                (hi, f_hi) = (x, f);
+            if fx > 0.0 {
+                (hi, f_hi) = (x, fx);
                 if last_side == 1 {
                     f_lo *= 0.5;
                 }
                 last_side = 1;
             } else {
-                (lo, f_lo) = (x, f);
+                (lo, f_lo) = (x, fx);
                 if last_side == -1 {
                     f_hi *= 0.5;
                 }
@@ -607,13 +609,10 @@ impl State {
             _ if self.flow.is_some() || self.effects.support_friction.is_some() => {
                 self.slide_m_s = 0.0;
                 // On the outline the current meets: the object's side, not its top.
-                let push_n = self.flow.as_ref().map_or(0.0, |f| {
-                    0.5 * f.flow.density_kg_m3
-                        * obj.drag_coefficient
-                        * obj.flow_area_m2
-                        * u
-                        * u.abs()
-                });
+                let push_n = self
+                    .flow
+                    .as_ref()
+                    .map_or(0.0, |f| f.side_drag(&obj) * u * u.abs());
                 self.shift_m = self.balance_shift(push_n)?;
             }
             _ => {}
@@ -637,19 +636,13 @@ impl State {
             && t >= lift.t0
         {
             let (v, a) = lift.motion((t.0 - lift.t0.0) as f64 * 1e-9);
-            let buoyancy_n = self
-                .effects
-                .object_buoyancy_kg_m3
-                .map_or(0.0, |rho| rho * G_M_S2 * obj.volume_m3);
+            let buoyancy_n = self.buoyancy_n(&obj);
             // Drag opposes the motion: a rising object is pulled down.
             let drag_n = self.effects.object_drag_kg_m3.map_or(0.0, |rho| {
                 0.5 * rho * obj.drag_coefficient * obj.drag_area_m2 * v * v.abs()
             });
             // The fluid the object carries along adds to the inertia, not the weight.
-            let added_kg = self
-                .effects
-                .object_added_mass_kg_m3
-                .map_or(0.0, |rho| rho * obj.added_mass_xz[1] * obj.volume_m3);
+            let added_kg = self.added_mass_kg(&obj, 1);
             let load = obj.mass_kg * (G_M_S2 + a) + added_kg * a - buoyancy_n + drag_n;
             if load.is_nan() || load.abs() > capacity_n {
                 return self.lose(HoldState::Slipped { t });

@@ -33,6 +33,18 @@ fn squeeze(obj: &GraspObject, k: usize, opening_m: f64) -> f64 {
     .squeeze_n()
 }
 
+/// Commands the fingers to `position` at `speed` with full force and waits `wait_s`.
+async fn close_to(g: &mut SoftGripper, position: u8, speed: u8, wait_s: u64) {
+    g.command(GripperCommand {
+        position,
+        speed,
+        force: 255,
+    })
+    .await
+    .expect("sent");
+    tokio::time::sleep(Duration::from_secs(wait_s)).await;
+}
+
 /// Activates, closes to `count` at full speed and waits 1 s.
 async fn grip_at(
     scene: &SceneSpec,
@@ -42,14 +54,7 @@ async fn grip_at(
     let clock = TokioClock::new();
     let (mut g, _, h) = soft_grasp(scene, obj, 60.0, 1, clock).expect("builds");
     g.activate().await.expect("activates");
-    g.command(GripperCommand {
-        position: count,
-        speed: 255,
-        force: 255,
-    })
-    .await
-    .expect("sent");
-    tokio::time::sleep(Duration::from_secs(1)).await;
+    close_to(&mut g, count, 255, 1).await;
     g.status().await.expect("status");
     (g, h, clock)
 }
@@ -1077,14 +1082,7 @@ async fn push_by_closing(
     assert!(h.place_object([offset_x_m, 0.0, 0.0]).expect("placed"));
     let before = h.object_x_m().expect("x");
     g.activate().await.expect("activates");
-    g.command(GripperCommand {
-        position: count,
-        speed: 0,
-        force: 255,
-    })
-    .await
-    .expect("sent");
-    tokio::time::sleep(Duration::from_secs(2)).await;
+    close_to(&mut g, count, 0, 2).await;
     let after = h.object_x_m().expect("x");
     let t = clock.now();
     let squeeze = [0, 1].map(|k| -h.true_wrench_on(k, t).expect("truth").force_n[0]);
@@ -1310,14 +1308,8 @@ async fn a_grip_needs_both_fingers_whichever_one_the_loop_watches() {
     g.activate().await.expect("activates");
     let mut squeezes = Vec::new();
     for opening_mm in [36.0, 28.0] {
-        g.command(GripperCommand {
-            position: softtouch_drivers::gripper::position_for_opening(opening_mm),
-            speed: 0,
-            force: 255,
-        })
-        .await
-        .expect("sent");
-        tokio::time::sleep(Duration::from_secs(2)).await;
+        let position = softtouch_drivers::gripper::position_for_opening(opening_mm);
+        close_to(&mut g, position, 0, 2).await;
         let t = clock.now();
         let sq = [0, 1].map(|k| -h.true_wrench_on(k, t).expect("truth").force_n[0]);
         squeezes.push((sq, h.peak_grip_n().expect("peak")));

@@ -136,7 +136,7 @@ pub fn bench_train(
     let mut phases = PhaseMs::default();
     let mut step_ms = Vec::with_capacity(bench.steps);
     let (mut loss_first, mut loss_last) = (f64::NAN, f64::NAN);
-    let (mut wall_s, mut cpu_start) = (0.0, None);
+    let mut cpu_start = None;
     let mut timed_from = Instant::now();
     for k in 0..bench.warmup + bench.steps {
         if k == bench.warmup {
@@ -172,7 +172,7 @@ pub fn bench_train(
             loss_last = loss.total;
         }
     }
-    wall_s += timed_from.elapsed().as_secs_f64();
+    let wall_s = timed_from.elapsed().as_secs_f64();
     let cores_used = match (cpu_start, process_cpu_s()) {
         (Some(a), Some(b)) if wall_s > 0.0 => Some((b - a) / wall_s),
         _ => None,
