@@ -9,15 +9,17 @@ use softtouch_collector::store::{Store, decode_window};
 use softtouch_schemas::defaults;
 use sqlx::Row as _;
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 
 async fn open(db: &Path) -> Store {
-    Store::open(db).await.unwrap_or_else(|e| panic!("{e}"))
+    Store::open(common::target_of(db))
+        .await
+        .unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Every sample's commanded pose, by index.
 async fn poses(store: &Store, run: i64) -> Vec<(i64, f64, f64, f64)> {
-    sqlx::query("SELECT sample_index, cmd_x_m, cmd_z_m, cmd_theta_rad FROM samples WHERE run_id = ? ORDER BY sample_index")
+    sqlx::query(store.dialect().sql("SELECT sample_index, cmd_x_m, cmd_z_m, cmd_theta_rad FROM samples WHERE run_id = ? ORDER BY sample_index"))
         .bind(run)
         .fetch_all(store.pool())
         .await
@@ -48,12 +50,12 @@ fn a_simulated_run_stores_every_sample_with_its_frame_and_window() {
         let counts = store.row_counts(1).await.unwrap_or_else(|e| panic!("{e}"));
         assert_eq!((counts.samples, counts.frames, counts.windows), (240, 240, 240));
 
-        let rows = sqlx::query(
+        let rows = sqlx::query(store.dialect().sql(
             "SELECT s.sample_index, s.frame_t_ns, s.window_start_ns, s.window_end_ns, s.reading_count,
                     w.reading_count, w.data, f.format, f.width, f.height, s.status, s.rod,
                     s.cmd_x_m, s.cmd_z_m, s.cmd_theta_rad, s.fx_n
              FROM samples s JOIN frames f USING (run_id, sample_index) JOIN ft_windows w USING (run_id, sample_index)
-             WHERE s.run_id = 1 ORDER BY s.sample_index",
+             WHERE s.run_id = 1 ORDER BY s.sample_index"),
         )
         .fetch_all(store.pool())
         .await
@@ -94,16 +96,7 @@ fn a_simulated_run_stores_every_sample_with_its_frame_and_window() {
 
 /// Samples of run 1 so far, read without migrating (the child owns the database).
 async fn stored_samples(db: &Path) -> i64 {
-    let options = sqlx::sqlite::SqliteConnectOptions::new()
-        .filename(db)
-        .read_only(true);
-    let Ok(mut conn) = sqlx::ConnectOptions::connect(&options).await else {
-        return 0;
-    };
-    sqlx::query_scalar("SELECT COUNT(*) FROM samples WHERE run_id = 1")
-        .fetch_one(&mut conn)
-        .await
-        .unwrap_or(0)
+    common::samples_in(db, 1).await
 }
 
 #[test]
@@ -129,9 +122,8 @@ fn a_run_killed_at_random_points_resumes_to_exactly_the_planned_samples() {
                 .collect()
         };
         first = false;
-        let mut child = Command::new(env!("CARGO_BIN_EXE_softtouch"))
+        let mut child = common::command(dir.path())
             .args(&args)
-            .current_dir(dir.path())
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
@@ -171,9 +163,9 @@ fn a_run_killed_at_random_points_resumes_to_exactly_the_planned_samples() {
         let indices: Vec<i64> = resumed.iter().map(|p| p.0).collect();
         assert_eq!(indices, (0..planned).collect::<Vec<_>>(), "no gap, no duplicate");
         assert_eq!(resumed, poses(&store, 2).await, "the resumed run took the same poses");
-        let orphans: i64 = sqlx::query_scalar(
+        let orphans: i64 = sqlx::query_scalar(store.dialect().sql(
             "SELECT (SELECT COUNT(*) FROM frames f WHERE NOT EXISTS (SELECT 1 FROM samples s WHERE s.run_id = f.run_id AND s.sample_index = f.sample_index))
-                  + (SELECT COUNT(*) FROM ft_windows w WHERE NOT EXISTS (SELECT 1 FROM samples s WHERE s.run_id = w.run_id AND s.sample_index = w.sample_index))",
+                  + (SELECT COUNT(*) FROM ft_windows w WHERE NOT EXISTS (SELECT 1 FROM samples s WHERE s.run_id = w.run_id AND s.sample_index = w.sample_index))"),
         )
         .fetch_one(store.pool())
         .await
@@ -215,8 +207,9 @@ fn a_scene_with_packet_loss_frame_drops_and_reflexes_completes_and_logs_every_fa
         let store = open(&dir.path().join("softtouch.db")).await;
         let count = |kind: &'static str| {
             let pool = store.pool().clone();
+            let d = store.dialect();
             async move {
-                sqlx::query_scalar::<_, i64>("SELECT COUNT(*) FROM events WHERE kind = ?")
+                sqlx::query_scalar::<_, i64>(d.sql("SELECT COUNT(*) FROM events WHERE kind = ?"))
                     .bind(kind)
                     .fetch_one(&pool)
                     .await
@@ -226,17 +219,17 @@ fn a_scene_with_packet_loss_frame_drops_and_reflexes_completes_and_logs_every_fa
         assert!(count("arm_fault").await > 0, "reflexes were injected and logged");
         assert_eq!(count("arm_fault").await, count("arm_recovered").await, "each reflex recovered");
         assert!(count("missing_readings").await > 0, "lost packets showed as gaps");
-        let drops: String = sqlx::query_scalar("SELECT message FROM events WHERE kind = 'stream_counts'")
+        let drops: String = sqlx::query_scalar(store.dialect().sql("SELECT message FROM events WHERE kind = 'stream_counts'"))
             .fetch_one(store.pool())
             .await
             .unwrap_or_default();
         assert!(!drops.contains(" 0 frames dropped") && !drops.contains(" 0 lost on the link"), "{drops}");
 
         // Every extra attempt of a sample has a warning event naming that sample.
-        let rows = sqlx::query(
+        let rows = sqlx::query(store.dialect().sql(
             "SELECT s.sample_index, s.attempts,
                     (SELECT COUNT(*) FROM events e WHERE e.run_id = s.run_id AND e.sample_index = s.sample_index AND e.level = 'warn')
-             FROM samples s WHERE s.run_id = 1",
+             FROM samples s WHERE s.run_id = 1"),
         )
         .fetch_all(store.pool())
         .await
@@ -362,14 +355,18 @@ fn a_collection_writes_its_log_beside_the_database() {
 
 /// Every sample's rod, by index.
 async fn sample_rods(store: &Store, run: i64) -> Vec<(i64, String)> {
-    sqlx::query("SELECT sample_index, rod FROM samples WHERE run_id = ? ORDER BY sample_index")
-        .bind(run)
-        .fetch_all(store.pool())
-        .await
-        .unwrap_or_else(|e| panic!("{e}"))
-        .iter()
-        .map(|r| (r.get(0), r.get(1)))
-        .collect()
+    sqlx::query(
+        store
+            .dialect()
+            .sql("SELECT sample_index, rod FROM samples WHERE run_id = ? ORDER BY sample_index"),
+    )
+    .bind(run)
+    .fetch_all(store.pool())
+    .await
+    .unwrap_or_else(|e| panic!("{e}"))
+    .iter()
+    .map(|r| (r.get(0), r.get(1)))
+    .collect()
 }
 
 /// Forget samples from `from` on and mark the run stopped: what a run stopped early
@@ -379,7 +376,7 @@ async fn cut_run(store: &Store, run: i64, from: i64) {
         "DELETE FROM samples WHERE run_id = ?1 AND sample_index >= ?2",
         "UPDATE runs SET status = 'stopped' WHERE run_id = ?1 AND ?2 = ?2",
     ] {
-        sqlx::query(sql)
+        sqlx::query(store.dialect().sql(sql))
             .bind(run)
             .bind(from)
             .execute(store.pool())
@@ -458,7 +455,7 @@ fn a_comma_joined_rod_schedule_of_an_old_database_is_migrated_and_reads_back() {
             "UPDATE runs SET rod_schedule = 'circle-10,square-10,,oval-12' WHERE run_id = 1",
             "DELETE FROM _sqlx_migrations WHERE version = 20261124120000",
         ] {
-            sqlx::query(sql)
+            sqlx::query(store.dialect().sql(sql))
                 .execute(store.pool())
                 .await
                 .unwrap_or_else(|e| panic!("{e}"));
@@ -472,16 +469,24 @@ fn a_comma_joined_rod_schedule_of_an_old_database_is_migrated_and_reads_back() {
             record.rod_schedule,
             ["circle-10", "square-10", "", "oval-12"]
         );
-        let stored: String = sqlx::query_scalar("SELECT rod_schedule FROM runs WHERE run_id = 1")
-            .fetch_one(store.pool())
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let stored: String = sqlx::query_scalar(
+            store
+                .dialect()
+                .sql("SELECT rod_schedule FROM runs WHERE run_id = 1"),
+        )
+        .fetch_one(store.pool())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(stored, r#"["circle-10","square-10","","oval-12"]"#);
         // Damaged text is refused with what was found, never split or guessed.
-        sqlx::query("UPDATE runs SET rod_schedule = 'circle-10,square-10' WHERE run_id = 1")
-            .execute(store.pool())
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        sqlx::query(
+            store
+                .dialect()
+                .sql("UPDATE runs SET rod_schedule = 'circle-10,square-10' WHERE run_id = 1"),
+        )
+        .execute(store.pool())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"));
         let status = ok(&softtouch(dir.path(), &["status", "1"]));
         assert!(
             status.contains(
@@ -496,7 +501,9 @@ fn a_comma_joined_rod_schedule_of_an_old_database_is_migrated_and_reads_back() {
             "{e}"
         );
         sqlx::query(
-            r#"UPDATE runs SET rod_schedule = '["circle-10","square-10"]' WHERE run_id = 1"#,
+            store.dialect().sql(
+                r#"UPDATE runs SET rod_schedule = '["circle-10","square-10"]' WHERE run_id = 1"#,
+            ),
         )
         .execute(store.pool())
         .await
@@ -647,11 +654,15 @@ fn a_resume_checks_the_stored_scene_against_the_rig_again() {
         cut_run(&store, 1, 1).await;
         // A scene whose poses the rig cannot reach (stored by an older build, say).
         let scene = defaults::SCENE_TOML.replace("x_m = [0.0, 0.05]", "x_m = [0.0, 0.09]");
-        sqlx::query("UPDATE runs SET scene_toml = ? WHERE run_id = 1")
-            .bind(scene)
-            .execute(store.pool())
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        sqlx::query(
+            store
+                .dialect()
+                .sql("UPDATE runs SET scene_toml = ? WHERE run_id = 1"),
+        )
+        .bind(scene)
+        .execute(store.pool())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"));
         store.close().await;
     });
     let out = softtouch(dir.path(), &["collect", "--resume", "1"]);
@@ -713,9 +724,9 @@ fn a_water_run_with_poses_from_a_land_run_repeats_its_poses_and_rods_pose_by_pos
         assert_eq!(sample_rods(&store, 1).await, sample_rods(&store, 2).await);
         assert_eq!(store.check_paired_poses(2, 1).await.ok(), Some(12));
         // A pose changed behind the pairing's back is found, naming the sample.
-        sqlx::query(
+        sqlx::query(store.dialect().sql(
             "UPDATE samples SET cmd_x_m = cmd_x_m + 1e-12 WHERE run_id = 2 AND sample_index = 7",
-        )
+        ))
         .execute(store.pool())
         .await
         .unwrap_or_else(|e| panic!("{e}"));
@@ -790,7 +801,7 @@ fn a_water_run_with_poses_from_a_land_run_repeats_its_poses_and_rods_pose_by_pos
     );
     runtime().block_on(async {
         let store = open(&dir.path().join("softtouch.db")).await;
-        let runs: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM runs")
+        let runs: i64 = sqlx::query_scalar(store.dialect().sql("SELECT COUNT(*) FROM runs"))
             .fetch_one(store.pool())
             .await
             .unwrap_or_else(|e| panic!("{e}"));

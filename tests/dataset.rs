@@ -13,7 +13,7 @@ use common::{fails_with, ok, softtouch, tempdir, text};
 use softtouch_collector::dataset::export::sha256_hex;
 use softtouch_collector::dataset::{self, Filters, NewDataset, SplitRatio};
 use softtouch_collector::store::{RunStatus, Store};
-use softtouch_collector::testing::{RunPlan, block_on, frame, seeded_run, temp_store};
+use softtouch_collector::testing::{RunPlan, block_on, frame, seeded_run};
 use softtouch_schemas::sample::RejectReason;
 use softtouch_schemas::{FrameFormat, Medium, SampleStatus};
 use std::collections::BTreeMap;
@@ -95,7 +95,10 @@ async fn make_run(store: &Store, spec: &RunSpec, width: u32, height: u32) -> i64
 /// and JPEG frames, three rods.
 fn lab() -> (tempfile::TempDir, PathBuf) {
     block_on(async {
-        let (dir, store) = temp_store("lab.db").await;
+        let dir = softtouch_collector::testing::tempdir();
+        let store = Store::open(common::target_of(&dir.path().join("lab.db")))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
         let air = RunSpec {
             medium: Medium::Air,
             samples: 120,
@@ -118,7 +121,7 @@ fn lab() -> (tempfile::TempDir, PathBuf) {
         };
         assert_eq!(make_run(&store, &air, 32, 24).await, 1);
         assert_eq!(make_run(&store, &water, 32, 24).await, 2);
-        let db = store.path().to_owned();
+        let db = dir.path().join("lab.db");
         store.close().await;
         (dir, db)
     })
@@ -131,11 +134,13 @@ const RUN2_OK: usize = 53;
 
 fn members(db: &Path, name: &str) -> Vec<(i64, i64, i64, String)> {
     block_on(async {
-        let store = Store::open(db).await.unwrap_or_else(|e| panic!("{e}"));
-        let rows: Vec<(i64, i64, i64, String)> = sqlx::query_as(
+        let store = Store::open(common::target_of(db))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        let rows: Vec<(i64, i64, i64, String)> = sqlx::query_as(store.dialect().sql(
             "SELECT m.position, m.run_id, m.sample_index, m.split FROM dataset_members m
              JOIN datasets d ON d.dataset_id = m.dataset_id WHERE d.name = ? ORDER BY m.position",
-        )
+        ))
         .bind(name)
         .fetch_all(store.pool())
         .await
@@ -153,8 +158,10 @@ fn count_rows(db: &Path, table: &'static str) -> i64 {
         _ => panic!("{table}"),
     };
     block_on(async {
-        let store = Store::open(db).await.unwrap_or_else(|e| panic!("{e}"));
-        let n: i64 = sqlx::query_scalar(sql)
+        let store = Store::open(common::target_of(db))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        let n: i64 = sqlx::query_scalar(store.dialect().sql(sql))
             .fetch_one(store.pool())
             .await
             .unwrap_or_else(|e| panic!("{e}"));
@@ -329,7 +336,9 @@ type MemberRow = (
 fn filters_select_what_they_say() {
     let (_dir, db) = lab();
     let counts = block_on(async {
-        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
+        let store = Store::open(common::target_of(&db))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
         let mut out = BTreeMap::new();
         let cases: Vec<(&str, Filters)> = vec![
             ("default", Filters::default()),
@@ -405,11 +414,11 @@ fn filters_select_what_they_say() {
             .unwrap_or_else(|e| panic!("{name}: {e}"));
             // Check each member against the filter from the stored sample.
             let rows: Vec<MemberRow> =
-                sqlx::query_as(
+                sqlx::query_as(store.dialect().sql(
                     "SELECT s.status, s.medium, s.rod, s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
                             s.sync_skew_ns, s.reading_count
                      FROM dataset_members m JOIN samples s USING (run_id, sample_index)
-                     WHERE m.dataset_id = ?",
+                     WHERE m.dataset_id = ?"),
                 )
                 .bind(info.dataset_id)
                 .fetch_all(store.pool())
@@ -570,9 +579,11 @@ fn export_writes_images_labels_and_a_manifest_with_checksums() {
     );
 
     let stored: BTreeMap<(i64, i64), (String, Vec<u8>, f64)> = block_on(async {
-        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
-        let rows: Vec<(i64, i64, String, Vec<u8>, f64)> = sqlx::query_as(
-            "SELECT f.run_id, f.sample_index, f.format, f.data, s.tx_nm FROM frames f JOIN samples s USING (run_id, sample_index)",
+        let store = Store::open(common::target_of(&db))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        let rows: Vec<(i64, i64, String, Vec<u8>, f64)> = sqlx::query_as(store.dialect().sql(
+            "SELECT f.run_id, f.sample_index, f.format, f.data, s.tx_nm FROM frames f JOIN samples s USING (run_id, sample_index)"),
         )
         .fetch_all(store.pool())
         .await

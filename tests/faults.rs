@@ -350,7 +350,9 @@ impl Ended {
 fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
     if !faults.sql.is_empty() {
         runtime().block_on(async {
-            let store = Store::open(db).await.unwrap_or_else(|e| panic!("{e}"));
+            let store = Store::open(common::target_of(db))
+                .await
+                .unwrap_or_else(|e| panic!("{e}"));
             sqlx::raw_sql(sqlx::AssertSqlSafe(faults.sql))
                 .execute(store.pool())
                 .await
@@ -358,7 +360,7 @@ fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
             store.close().await;
         });
     }
-    let store = SyncStore::open(db).unwrap_or_else(|e| panic!("{e}"));
+    let store = SyncStore::open(common::target_of(db)).unwrap_or_else(|e| panic!("{e}"));
     let request = NewRunRequest {
         samples,
         seed: Some(3),
@@ -466,7 +468,9 @@ impl Stored {
 
 fn stored(db: &Path, run: i64) -> Stored {
     runtime().block_on(async {
-        let store = Store::open(db).await.unwrap_or_else(|e| panic!("{e}"));
+        let store = Store::open(common::target_of(db))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
         let status = store
             .run_record(run)
             .await
@@ -479,10 +483,10 @@ fn stored(db: &Path, run: i64) -> Stored {
             .into_iter()
             .map(|e| (e.kind, e.message))
             .collect();
-        let samples = sqlx::query(
+        let samples = sqlx::query(store.dialect().sql(
             "SELECT sample_index, status, reject_reason, attempts FROM samples
              WHERE run_id = ? ORDER BY sample_index",
-        )
+        ))
         .bind(run)
         .fetch_all(store.pool())
         .await
@@ -745,11 +749,17 @@ fn non_finite_readings_reject_the_window_and_never_reach_a_label_column() {
     assert_eq!(s.kinds("non_finite").len(), 3);
     assert!(s.samples[1..].iter().all(|x| x.1 == "ok"));
     runtime().block_on(async {
-        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
-        let fx: f64 = sqlx::query_scalar("SELECT fx_n FROM samples WHERE sample_index = 0")
-            .fetch_one(store.pool())
+        let store = Store::open(common::target_of(&db))
             .await
             .unwrap_or_else(|e| panic!("{e}"));
+        let fx: f64 = sqlx::query_scalar(
+            store
+                .dialect()
+                .sql("SELECT fx_n FROM samples WHERE sample_index = 0"),
+        )
+        .fetch_one(store.pool())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"));
         assert!(fx.is_finite());
         store.close().await;
     });
@@ -859,8 +869,10 @@ fn a_store_that_fails_mid_run_ends_in_a_safe_stop_and_resume_fills_the_gap() {
 
     // The disk is freed; a resume takes every missing index.
     runtime().block_on(async {
-        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
-        sqlx::query("DROP TRIGGER injected_full")
+        let store = Store::open(common::target_of(&db))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        sqlx::query(store.dialect().sql("DROP TRIGGER injected_full"))
             .execute(store.pool())
             .await
             .unwrap_or_else(|e| panic!("{e}"));
@@ -887,14 +899,20 @@ fn a_run_whose_store_holds_a_gap_is_not_completed_until_the_gap_is_filled() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     // A hole below the highest index (as a write lost mid-run leaves).
     runtime().block_on(async {
-        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
-        sqlx::query("DELETE FROM samples WHERE sample_index IN (1, 3)")
-            .execute(store.pool())
+        let store = Store::open(common::target_of(&db))
             .await
             .unwrap_or_else(|e| panic!("{e}"));
+        sqlx::query(
+            store
+                .dialect()
+                .sql("DELETE FROM samples WHERE sample_index IN (1, 3)"),
+        )
+        .execute(store.pool())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"));
         store.close().await;
     });
-    let store = SyncStore::open(&db).unwrap_or_else(|e| panic!("{e}"));
+    let store = SyncStore::open(common::target_of(&db)).unwrap_or_else(|e| panic!("{e}"));
     let Resumed::Plan(plan) = CollectPlan::resume(&store, 1).unwrap_or_else(|e| panic!("{e}"))
     else {
         panic!("a run with gaps is not complete")
@@ -911,9 +929,11 @@ fn a_run_whose_store_holds_a_gap_is_not_completed_until_the_gap_is_filled() {
         &format!("being collected by process {}", std::process::id()),
     );
     runtime().block_on(async {
-        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
+        let store = Store::open(common::target_of(&db))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
         // Given back, as the job would at its end.
-        sqlx::query("DELETE FROM run_leases")
+        sqlx::query(store.dialect().sql("DELETE FROM run_leases"))
             .execute(store.pool())
             .await
             .unwrap_or_else(|e| panic!("{e}"));
@@ -977,19 +997,7 @@ fn a_failed_start_leaves_no_running_run() {
 
 /// Samples of `run` so far, read without migrating (a child owns the database).
 fn count_samples(db: &Path, run: i64) -> i64 {
-    runtime().block_on(async {
-        let options = sqlx::sqlite::SqliteConnectOptions::new()
-            .filename(db)
-            .read_only(true);
-        let Ok(mut conn) = sqlx::ConnectOptions::connect(&options).await else {
-            return 0;
-        };
-        sqlx::query_scalar("SELECT COUNT(*) FROM samples WHERE run_id = ?")
-            .bind(run)
-            .fetch_one(&mut conn)
-            .await
-            .unwrap_or(0)
-    })
+    runtime().block_on(async { common::samples_in(db, run).await })
 }
 
 /// Samples planned for a run that is stopped long before it ends: far more than the
@@ -1000,10 +1008,8 @@ const LONG_RUN: &str = "5000";
 
 /// Start `softtouch collect ARGS` in `dir` and wait until `run` has `at_least` samples.
 fn collect_until(dir: &Path, args: &[&str], at_least: i64) -> std::process::Child {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_softtouch"))
+    let mut child = common::command(dir)
         .args(args)
-        .current_dir(dir)
-        .env_remove("SOFTTOUCH_DB")
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -1091,12 +1097,18 @@ fn a_second_process_is_refused_a_leased_run_and_takes_it_over_once_the_holder_is
     // Shrink the run so that the takeover finishes quickly.
     let planned = committed.len() as i64 + 3;
     runtime().block_on(async {
-        let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
-        sqlx::query("UPDATE runs SET samples_planned = ? WHERE run_id = 1")
-            .bind(planned)
-            .execute(store.pool())
+        let store = Store::open(common::target_of(&db))
             .await
             .unwrap_or_else(|e| panic!("{e}"));
+        sqlx::query(
+            store
+                .dialect()
+                .sql("UPDATE runs SET samples_planned = ? WHERE run_id = 1"),
+        )
+        .bind(planned)
+        .execute(store.pool())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"));
         store.close().await;
     });
     let out = softtouch(dir.path(), &["collect", "--resume", "1"]);
@@ -1120,7 +1132,8 @@ fn a_second_process_is_refused_a_leased_run_and_takes_it_over_once_the_holder_is
 #[test]
 fn a_live_lease_refuses_a_resume_in_the_same_api() {
     let dir = tempdir();
-    let store = SyncStore::open(&dir.path().join("t.db")).unwrap_or_else(|e| panic!("{e}"));
+    let store = SyncStore::open(common::target_of(&dir.path().join("t.db")))
+        .unwrap_or_else(|e| panic!("{e}"));
     let plan = CollectPlan::new_run(
         &store,
         &NewRunRequest {
@@ -1151,16 +1164,16 @@ fn a_lease_from_another_host_is_taken_over_only_once_its_heartbeat_is_stale() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     let lease = |age_s: u32| {
         runtime().block_on(async {
-            let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
-            sqlx::query("UPDATE runs SET status = 'stopped', samples_planned = 3 WHERE run_id = 1")
+            let store = Store::open(common::target_of(&db)).await.unwrap_or_else(|e| panic!("{e}"));
+            sqlx::query(store.dialect().sql("UPDATE runs SET status = 'stopped', samples_planned = 3 WHERE run_id = 1"))
                 .execute(store.pool())
                 .await
                 .unwrap_or_else(|e| panic!("{e}"));
-            sqlx::query(
+            sqlx::query(store.dialect().sql(
                 "INSERT OR REPLACE INTO run_leases (run_id, holder, pid, host, acquired_at, heartbeat_at)
                  VALUES (1, 'elsewhere', 4242, 'another-host',
                          strftime('%Y-%m-%dT%H:%M:%fZ', 'now', ?1),
-                         strftime('%Y-%m-%dT%H:%M:%fZ', 'now', ?1))",
+                         strftime('%Y-%m-%dT%H:%M:%fZ', 'now', ?1))"),
             )
             .bind(format!("-{age_s} seconds"))
             .execute(store.pool())

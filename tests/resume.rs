@@ -18,7 +18,7 @@ use softtouch_collector::collect::{
 use softtouch_collector::store::{Store, SyncStore};
 use sqlx::{Column as _, Row as _, TypeInfo as _, ValueRef as _};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use tokio::sync::watch;
 
 /// One stored value, compared exactly (floats by their bits).
@@ -34,7 +34,7 @@ enum Cell {
 /// Every column but `run_id` of every row of `table` for `run`, by sample index, named.
 async fn rows(store: &Store, table: &str, run: i64) -> Vec<Vec<(String, Cell)>> {
     let sql = format!("SELECT * FROM {table} WHERE run_id = ? ORDER BY sample_index");
-    sqlx::query(sqlx::AssertSqlSafe(sql))
+    sqlx::query(store.dialect().sql_owned(sql))
         .bind(run)
         .fetch_all(store.pool())
         .await
@@ -51,8 +51,8 @@ async fn rows(store: &Store, table: &str, run: i64) -> Vec<Vec<(String, Cell)>> 
                         Cell::Null
                     } else {
                         match raw.type_info().name() {
-                            "INTEGER" => Cell::Int(row.get(i)),
-                            "REAL" => Cell::Real(row.get::<f64, _>(i).to_bits()),
+                            "INTEGER" | "BIGINT" | "INT" | "SMALLINT" => Cell::Int(row.get(i)),
+                            "REAL" | "DOUBLE" => Cell::Real(row.get::<f64, _>(i).to_bits()),
                             "TEXT" => Cell::Text(row.get(i)),
                             "BLOB" => Cell::Blob(row.get(i)),
                             other => panic!("{table}.{}: unexpected type {other}", c.name()),
@@ -76,12 +76,18 @@ struct Snapshot {
 
 fn snapshot(db: &Path, run: i64) -> Snapshot {
     runtime().block_on(async {
-        let store = Store::open(db).await.unwrap_or_else(|e| panic!("{e}"));
-        let status: String = sqlx::query_scalar("SELECT status FROM runs WHERE run_id = ?")
-            .bind(run)
-            .fetch_one(store.pool())
+        let store = Store::open(common::target_of(db))
             .await
             .unwrap_or_else(|e| panic!("{e}"));
+        let status: String = sqlx::query_scalar(
+            store
+                .dialect()
+                .sql("SELECT status FROM runs WHERE run_id = ?"),
+        )
+        .bind(run)
+        .fetch_one(store.pool())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"));
         let s = Snapshot {
             samples: rows(&store, "samples", run).await,
             frames: rows(&store, "frames", run).await,
@@ -197,7 +203,7 @@ fn collect_in_process(store: &SyncStore, plan: &CollectPlan, stop_after: u64) ->
 fn stopped_and_resumed(scene: Option<&Path>, samples: u64, seed: u64, stops: &[u64]) {
     let dir = tempdir();
     let db = dir.path().join("softtouch.db");
-    let store = SyncStore::open(&db).unwrap_or_else(|e| panic!("{e}"));
+    let store = SyncStore::open(common::target_of(&db)).unwrap_or_else(|e| panic!("{e}"));
     let request = NewRunRequest {
         scene: scene.map(Path::to_path_buf),
         samples,
@@ -257,7 +263,9 @@ fn failed_and_resumed(scene: Option<&Path>, samples: u64, seed: u64) {
     ok(&softtouch(dir.path(), &["db", "init"]));
     let sql = |sql: &'static str| {
         runtime().block_on(async {
-            let store = Store::open(&db).await.unwrap_or_else(|e| panic!("{e}"));
+            let store = Store::open(common::target_of(&db))
+                .await
+                .unwrap_or_else(|e| panic!("{e}"));
             sqlx::raw_sql(sqlx::AssertSqlSafe(sql))
                 .execute(store.pool())
                 .await
@@ -298,27 +306,14 @@ fn a_run_failed_by_its_store_and_resumed_equals_an_uninterrupted_one_underwater(
 
 /// Samples of run 1 so far, read without migrating (the child owns the database).
 fn count_samples(db: &Path) -> i64 {
-    runtime().block_on(async {
-        let options = sqlx::sqlite::SqliteConnectOptions::new()
-            .filename(db)
-            .read_only(true);
-        let Ok(mut conn) = sqlx::ConnectOptions::connect(&options).await else {
-            return 0;
-        };
-        sqlx::query_scalar("SELECT COUNT(*) FROM samples WHERE run_id = 1")
-            .fetch_one(&mut conn)
-            .await
-            .unwrap_or(0)
-    })
+    runtime().block_on(async { common::samples_in(db, 1).await })
 }
 
 /// Runs `args` and kills it (SIGKILL) once run 1 holds `at_least` samples; returns
 /// whether it was killed before it ended by itself.
 fn kill_after(dir: &Path, args: &[String], at_least: i64) -> bool {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_softtouch"))
+    let mut child = common::command(dir)
         .args(args)
-        .current_dir(dir)
-        .env_remove("SOFTTOUCH_DB")
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()

@@ -104,7 +104,11 @@ fn scratch_db(out: &Path) -> Result<PathBuf, Failure> {
     Ok(db)
 }
 
-pub async fn run(cmd: BenchCommand, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run(
+    cmd: BenchCommand,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     match cmd {
         BenchCommand::Grasp(args) => super::bench_grasp::run(args, db, out).await,
         BenchCommand::Model(args) => run_bench_model(args, db, out).await,
@@ -223,7 +227,7 @@ pub struct BenchModelArgs {
 /// `softtouch bench model`: train each point of the grid, then time it on one core.
 async fn run_bench_model(
     args: BenchModelArgs,
-    db: &Path,
+    db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
     let (base, train) = args.model.configs()?;

@@ -3,7 +3,7 @@
 //! `grasp-bench.csv` and `grasp-bench.png` (the true force over time for each K).
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::anyhow;
 use clap::Args;
@@ -86,7 +86,11 @@ fn check(args: &BenchGraspArgs) -> Result<(), Failure> {
 }
 
 /// Run `bench grasp`.
-pub async fn run(args: BenchGraspArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run(
+    args: BenchGraspArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     check(&args)?;
     let resolved = softtouch_collector::configs::resolve(None, args.scene.as_deref())?;
     let scene = resolved.scene;

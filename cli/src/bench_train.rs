@@ -136,7 +136,11 @@ fn run_torch(
         .map_err(|e| Failure::Runtime(anyhow!("the PyTorch peer at {size}×{size}/{width}: {e}")))
 }
 
-pub async fn run(args: BenchTrainArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run(
+    args: BenchTrainArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     if args.sizes.is_empty() || args.widths.is_empty() || args.repeats == 0 {
         return Err(Failure::BadInput(anyhow!(
             "--sizes, --widths and --repeats: expected at least one of each"

@@ -9,7 +9,7 @@ use softtouch_collector::collect::{
 };
 use softtouch_store::SyncStore;
 use std::io::{IsTerminal as _, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Arguments of `softtouch collect`.
@@ -142,8 +142,12 @@ fn progress_reporter(total: u64) -> Box<dyn Progress> {
     }
 }
 
-pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
-    if args.resume.is_some() && !db.exists() {
+pub async fn run_collect(
+    args: CollectArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    if args.resume.is_some() && db.file().is_some_and(|path| !path.exists()) {
         // A mistyped --db would otherwise become a new, empty database.
         return Err(Failure::BadInput(anyhow!(
             "--resume: no database at {} (check --db; only a new run creates one)",
@@ -252,8 +256,10 @@ pub async fn run_collect(args: CollectArgs, db: &Path, out: &mut dyn Write) -> R
 }
 
 /// Samples the database at `db` holds (0 when there is no database yet).
-async fn stored_samples(db: &Path) -> Result<u64, Failure> {
-    if softtouch_store::file::inspect(db)? != softtouch_store::file::DbFile::Sqlite {
+async fn stored_samples(db: &softtouch_store::DbTarget) -> Result<u64, Failure> {
+    if let Some(path) = db.file()
+        && softtouch_store::file::inspect(path)? != softtouch_store::file::DbFile::Sqlite
+    {
         return Ok(0);
     }
     let store = softtouch_store::Store::open_existing(db).await?;
@@ -263,8 +269,22 @@ async fn stored_samples(db: &Path) -> Result<u64, Failure> {
 }
 
 /// Says what the run will take on disk and refuses one that would not fit.
-fn check_disk(db: &Path, stored: u64, samples: u64, out: &mut dyn Write) -> Result<(), Failure> {
-    let disk = softtouch_collector::collect::disk::plan(db, stored, samples)?;
+fn check_disk(
+    db: &softtouch_store::DbTarget,
+    stored: u64,
+    samples: u64,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    let Some(path) = db.file() else {
+        // The server's disk is not this machine's to measure: its administrator's.
+        return writeln!(
+            out,
+            "disk: on the PostgreSQL server {} (not checked from here)",
+            db.display()
+        )
+        .map_err(io_failure);
+    };
+    let disk = softtouch_collector::collect::disk::plan(path, stored, samples)?;
     if !disk.fits() {
         return Err(Failure::Runtime(anyhow!(
             "not enough disk for {samples} samples beside {}: {}; free some space, collect fewer (--samples) or use a database elsewhere (--db)",
@@ -285,19 +305,34 @@ fn check_pairing(store: &SyncStore, run_id: i64) -> Result<Option<(i64, u64)>, F
     Ok(Some((source, store.check_paired_poses(run_id, source)?)))
 }
 
-pub async fn run_status(db: &Path, run: Option<i64>, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run_status(
+    db: &softtouch_store::DbTarget,
+    run: Option<i64>,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     let store = open_existing(db).await?;
     let runs = store.runs().await?;
     let stored = store.stored_samples().await?;
-    let size = softtouch_store::file::db_size(db);
     let human = softtouch_collector::collect::disk::human_bytes;
+    let (total, parts) = match db.file() {
+        Some(path) => {
+            let size = softtouch_store::file::db_size(path);
+            (
+                size.total(),
+                format!(
+                    " ({} file + {} write-ahead log)",
+                    human(size.file_bytes),
+                    human(size.wal_bytes)
+                ),
+            )
+        }
+        None => (store.database_bytes().await?, " on the server".to_owned()),
+    };
     let mut text = format!(
-        "database {}: {} ({} file + {} write-ahead log), {stored} samples{}\n",
+        "database {}: {}{parts}, {stored} samples{}\n",
         db.display(),
-        human(size.total()),
-        human(size.file_bytes),
-        human(size.wal_bytes),
-        softtouch_collector::collect::disk::bytes_per_sample(size.total(), stored)
+        human(total),
+        softtouch_collector::collect::disk::bytes_per_sample(total, stored)
             .map_or_else(String::new, |b| format!(", {} a sample", human(b)))
     );
     let mut any = false;

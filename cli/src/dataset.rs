@@ -7,7 +7,7 @@ use softtouch_collector::dataset::{self, DatasetError, Filters, NewDataset, Spli
 use softtouch_schemas::Medium;
 use softtouch_store::Store;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 impl From<DatasetError> for Failure {
     fn from(e: DatasetError) -> Self {
@@ -146,7 +146,11 @@ fn parse_medium(s: &str) -> Result<Medium, String> {
 }
 
 /// Run a `dataset` verb.
-pub async fn run(cmd: DatasetCommand, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run(
+    cmd: DatasetCommand,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     // Import may fill a new database; every other verb needs an existing one.
     let store = if matches!(cmd, DatasetCommand::Import(_)) {
         Store::open(db).await?

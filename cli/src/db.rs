@@ -1,19 +1,40 @@
-//! `softtouch db init`.
+//! `softtouch db init`, `softtouch db copy`.
 
 use super::{Failure, io_failure};
 use clap::Subcommand;
-use softtouch_store::Store;
+use softtouch_store::{DbTarget, Store};
 use std::io::Write;
-use std::path::Path;
 
 #[derive(Debug, Subcommand)]
 pub enum DbCommand {
-    /// Create the database (or bring an existing one to this version's schema).
-    #[command(after_help = "Examples:\n  softtouch db init\n  softtouch --db /data/lab.db db init")]
+    /// Create the database (or bring an existing one to this version's schema). A
+    /// PostgreSQL database must exist on its server (`createdb softtouch`); this sets up
+    /// its tables.
+    #[command(
+        after_help = "Examples:\n  softtouch db init\n  softtouch --db /data/lab.db db init\n  softtouch --db postgres://rig@db.lab/softtouch db init"
+    )]
     Init,
+    /// Copy runs, datasets, models, grasp sessions, calibrations and results from one
+    /// store into another (SQLite or PostgreSQL, either way). Every object is checked
+    /// row for row by sha256 after it is written; running it again copies only what is
+    /// new (a run still being collected gets its new samples). Ids are the destination's
+    /// own; a dataset or model whose name the destination already uses is skipped and
+    /// said.
+    #[command(
+        after_help = "Examples:\n  softtouch db copy --from rig2.db --to postgres://lab@db.lab/softtouch\n  softtouch db copy --from postgres://lab@db.lab/softtouch --to backup.db"
+    )]
+    Copy {
+        /// The store to read (a path or postgres:// URL); never written to except its
+        /// identity, made once.
+        #[arg(long)]
+        from: DbTarget,
+        /// The store to write (created and migrated if it is a new file).
+        #[arg(long)]
+        to: DbTarget,
+    },
 }
 
-pub async fn run(cmd: DbCommand, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run(cmd: DbCommand, db: &DbTarget, out: &mut dyn Write) -> Result<(), Failure> {
     match cmd {
         DbCommand::Init => {
             let store = Store::open(db).await?;
@@ -27,5 +48,55 @@ pub async fn run(cmd: DbCommand, db: &Path, out: &mut dyn Write) -> Result<(), F
             )
             .map_err(io_failure)
         }
+        DbCommand::Copy { from, to } => copy(&from, &to, out).await,
     }
+}
+
+async fn copy(from: &DbTarget, to: &DbTarget, out: &mut dyn Write) -> Result<(), Failure> {
+    let started = std::time::Instant::now();
+    let source = Store::open_existing(from).await?;
+    let dest = match Store::open(to).await {
+        Ok(dest) => dest,
+        Err(e) => {
+            source.close().await;
+            return Err(e.into());
+        }
+    };
+    let mut lines = Vec::new();
+    let result = source
+        .copy_into(&dest, &mut |line: &str| {
+            eprintln!("{line}");
+            lines.push(line.to_owned());
+        })
+        .await;
+    source.close().await;
+    dest.close().await;
+    let report = result?;
+    let list = |items: &[(String, u64)]| {
+        if items.is_empty() {
+            "nothing".to_owned()
+        } else {
+            items
+                .iter()
+                .map(|(k, n)| format!("{n} {k}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    };
+    writeln!(
+        out,
+        "copied {} → {} in {:.1} s\n  new: {}\n  already there: {}\n  rows written: {}\n  rows checked by sha256: {}",
+        from.display(),
+        to.display(),
+        started.elapsed().as_secs_f64(),
+        list(&report.new),
+        list(&report.already),
+        list(&report.rows),
+        list(&report.checked),
+    )
+    .map_err(io_failure)?;
+    for why in &report.skipped {
+        writeln!(out, "  skipped: {why}").map_err(io_failure)?;
+    }
+    Ok(())
 }

@@ -25,7 +25,11 @@ pub struct EvalArgs {
     pub out: std::path::PathBuf,
 }
 
-pub async fn run_eval(args: EvalArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run_eval(
+    args: EvalArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     let store = open_existing(db).await?;
     let device = burn_device()?;
     let (artifact, trained_on) = match models::find(&store, &args.model).await? {
@@ -143,7 +147,10 @@ fn burn_device() -> Result<burn::prelude::Device, Failure> {
 }
 
 /// `softtouch models`.
-pub async fn run_models(db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run_models(
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     let store = open_existing(db).await?;
     let list = models::list(&store).await?;
     if list.is_empty() {

@@ -107,7 +107,11 @@ pub struct FollowArgs {
 }
 
 /// Run a grasp verb.
-pub async fn run(cmd: GraspCommand, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run(
+    cmd: GraspCommand,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     match cmd {
         GraspCommand::Follow(args) => follow(args, db, out).await,
         GraspCommand::Disturb(args) => super::grasp_turns::disturb(args, db, out).await,
@@ -117,7 +121,11 @@ pub async fn run(cmd: GraspCommand, db: &Path, out: &mut dyn Write) -> Result<()
     }
 }
 
-async fn follow(args: FollowArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+async fn follow(
+    args: FollowArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     let c = &args.common;
     if args.targets.is_empty() {
         return Err(bad("--targets: expected at least one force in N".into()));
@@ -188,7 +196,7 @@ fn follow_recorder(
 async fn follow_on_rig(
     args: &FollowArgs,
     rig: &softtouch_schemas::RigConfig,
-    db: &Path,
+    db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
     let c = &args.common;

@@ -4,7 +4,7 @@
 //! pre-grasp opening from it.
 
 use std::io::{BufRead, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use clap::Args;
 use softtouch_collector::dataset::export::sha256_hex;
@@ -45,7 +45,11 @@ pub struct CalibrateArgs {
 }
 
 /// Run `grasp calibrate`.
-pub async fn run(args: CalibrateArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run(
+    args: CalibrateArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     softtouch_lab::grasp::settings::FPS_HZ.check("--fps", args.fps)?;
     if !(args.target.is_finite() && args.target > 0.0 && args.target <= 20.0) {
         return Err(bad(format!(

@@ -107,7 +107,7 @@ pub(super) fn scene_for(
 /// pool's timeouts need real time).
 pub(super) async fn load_model_calibrate_and_pause(
     c: &LoopArgs,
-    db: &Path,
+    db: &softtouch_store::DbTarget,
     scene: &softtouch_schemas::SceneSpec,
     object: &softtouch_sim::GraspObject,
     largest_target_n: f64,

@@ -260,7 +260,11 @@ pub(super) fn terminal_operator(
 }
 
 /// Run `grasp trials`.
-pub async fn run(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run(
+    args: TrialsArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     if let Some(rig) = args.rig.clone() {
         return run_on_rig(args, &rig, db, out).await;
     }
@@ -279,7 +283,11 @@ struct SimRun {
 }
 
 /// `grasp trials --models A,B,C`: the same trials for each model, then the spread.
-async fn run_models(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+async fn run_models(
+    args: TrialsArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     let mut names: Vec<String> = Vec::new();
     for m in &args.models {
         if m.is_empty() {
@@ -396,7 +404,11 @@ fn print_spread(rows: &[SpreadRow], out: &mut dyn Write) -> Result<(), Failure> 
 }
 
 /// One simulated session (new or resumed): what it ended with.
-async fn run_sim(args: TrialsArgs, db: &Path, out: &mut dyn Write) -> Result<SimRun, Failure> {
+async fn run_sim(
+    args: TrialsArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<SimRun, Failure> {
     let store = open_existing(db).await?;
     // Closed (the log checkpointed into the file) on every path.
     let ran = run_sim_on(&store, args, out).await;
@@ -538,7 +550,7 @@ async fn run_sim_on(
 async fn run_on_rig(
     args: TrialsArgs,
     rig_path: &Path,
-    db: &Path,
+    db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
     use softtouch_lab::grasp::trials::rig::{

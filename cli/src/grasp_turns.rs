@@ -100,7 +100,7 @@ pub struct TwistArgs {
 
 pub(super) async fn disturb(
     args: DisturbArgs,
-    db: &Path,
+    db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
     let c = &args.common;
@@ -253,7 +253,11 @@ pub(super) async fn disturb(
         .map(drop)
 }
 
-pub(super) async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub(super) async fn twist(
+    args: TwistArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     if let Some(rig) = args.rig.clone() {
         return twist_rig(args, &rig, db, out).await;
     }
@@ -375,7 +379,7 @@ pub(super) async fn twist(args: TwistArgs, db: &Path, out: &mut dyn Write) -> Re
 async fn twist_rig(
     args: TwistArgs,
     rig_path: &Path,
-    db: &Path,
+    db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
     use softtouch_lab::grasp::trials::rig::object_setup_on_rig;

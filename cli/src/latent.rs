@@ -15,7 +15,7 @@ use softtouch_schemas::wrench::AXES;
 use softtouch_trainer::similarity::{cosine_similarities, cross_correlation};
 use softtouch_trainer::{FingerTable, ModelArtifact, Preprocess, latent_means};
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// `softtouch latent`.
 #[derive(Debug, Args)]
@@ -70,7 +70,11 @@ fn check(args: &LatentArgs) -> Result<(), Failure> {
     }
 }
 
-pub async fn run_latent(args: LatentArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run_latent(
+    args: LatentArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     check(&args)?;
     let store = open_existing(db).await?;
     let device = softtouch_trainer::backend::device()?;

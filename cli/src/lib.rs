@@ -31,7 +31,6 @@ pub mod train;
 pub mod transfer;
 
 use clap::{Parser, Subcommand};
-use std::path::PathBuf;
 
 /// Exit code for success.
 pub const EXIT_OK: u8 = 0;
@@ -53,14 +52,15 @@ const EXIT_CODES: &str = "Exit codes: 0 success, 1 runtime failure (device, data
     after_help = EXIT_CODES
 )]
 pub struct Cli {
-    /// The SQLite database.
+    /// The database: a SQLite file (the default), or a PostgreSQL server as
+    /// postgres://USER[:PASSWORD]@HOST[:PORT]/DATABASE[?sslmode=...] (see the README).
     #[arg(
         long,
         global = true,
         default_value = "softtouch.db",
         env = "SOFTTOUCH_DB"
     )]
-    pub db: PathBuf,
+    pub db: softtouch_store::DbTarget,
 
     /// What to do.
     #[command(subcommand)]
@@ -325,7 +325,7 @@ pub async fn run(cli: Cli, out: &mut dyn std::io::Write) -> Result<(), Failure> 
 /// Open an existing database (never creates one: a typo in `--db` should not leave an
 /// empty database behind; an empty file or one that is not a database is refused).
 pub(crate) async fn open_existing(
-    path: &std::path::Path,
+    path: &softtouch_store::DbTarget,
 ) -> Result<softtouch_store::Store, Failure> {
     Ok(softtouch_store::Store::open_existing(path).await?)
 }

@@ -55,7 +55,11 @@ pub struct LiveArgs {
 }
 
 /// Run `softtouch live`.
-pub async fn run(args: LiveArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run(
+    args: LiveArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     let bad = |m: String| Failure::BadInput(anyhow!(m));
     if let Some(d) = args.duration_s
         && !(d.is_finite() && d > 0.0 && d <= 3600.0)

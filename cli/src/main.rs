@@ -10,7 +10,7 @@
 use clap::Parser as _;
 use softtouch_cli::{self as cli, Cli, Command};
 use std::ffi::OsString;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use tracing_subscriber::layer::SubscriberExt as _;
 use tracing_subscriber::util::SubscriberInitExt as _;
@@ -31,9 +31,13 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 const STDERR_FILTER: &str = "warn,sqlx::query=error,softtouch::event=off";
 const FILE_FILTER: &str = "info,sqlx::query=error";
 
-/// The log file of a database: its path with `.log` appended.
-fn log_path(db: &Path) -> PathBuf {
-    let mut p = OsString::from(db.as_os_str());
+/// The log file of a database: its path with `.log` appended; for a PostgreSQL
+/// server, `softtouch.log` in the working folder (each rig keeps its own).
+fn log_path(db: &softtouch_store::DbTarget) -> PathBuf {
+    let Some(path) = db.file() else {
+        return PathBuf::from("softtouch.log");
+    };
+    let mut p = OsString::from(path.as_os_str());
     p.push(".log");
     PathBuf::from(p)
 }
@@ -43,10 +47,13 @@ fn log_path(db: &Path) -> PathBuf {
 fn wants_log_file(cli: &Cli) -> bool {
     let parent_exists = cli
         .db
-        .parent()
+        .file()
+        .and_then(std::path::Path::parent)
         .is_none_or(|d| d.as_os_str().is_empty() || d.is_dir());
     match &cli.command {
-        Command::Collect(args) if args.resume.is_some() => cli.db.is_file(),
+        Command::Collect(args) if args.resume.is_some() => {
+            cli.db.file().is_none_or(std::path::Path::is_file)
+        }
         Command::Collect(_) | Command::Train(_) | Command::Sweep(_) => parent_exists,
         _ => false,
     }
@@ -147,8 +154,11 @@ fn main() -> ExitCode {
 /// when no other process has the database open, removed (on a fresh runtime: the
 /// verb's clock may have been paused). A live collection's log stays; it is folded in
 /// when that one closes.
-fn fold_write_ahead_log(db: &Path) {
-    if softtouch_store::file::db_size(db).wal_bytes == 0 {
+fn fold_write_ahead_log(db: &softtouch_store::DbTarget) {
+    let Some(path) = db.file() else {
+        return;
+    };
+    if softtouch_store::file::db_size(path).wal_bytes == 0 {
         return;
     }
     let Ok(rt) = tokio::runtime::Builder::new_current_thread()
@@ -158,7 +168,7 @@ fn fold_write_ahead_log(db: &Path) {
         return;
     };
     let wait = std::time::Duration::from_millis(200);
-    match rt.block_on(softtouch_store::file::checkpoint(db, wait)) {
+    match rt.block_on(softtouch_store::file::checkpoint(path, wait)) {
         Ok(c) if !c.complete => tracing::info!(
             "{}: another process is writing the database; its write-ahead log stays until that one closes",
             db.display()
@@ -174,10 +184,19 @@ mod tests {
 
     #[test]
     fn the_log_sits_beside_the_database() {
+        use softtouch_store::DbTarget;
+        use std::path::Path;
         assert_eq!(
-            log_path(Path::new("runs/softtouch.db")),
+            log_path(&DbTarget::File("runs/softtouch.db".into())),
             Path::new("runs/softtouch.db.log")
         );
-        assert_eq!(log_path(Path::new("lab")), Path::new("lab.log"));
+        assert_eq!(
+            log_path(&DbTarget::File("lab".into())),
+            Path::new("lab.log")
+        );
+        assert_eq!(
+            log_path(&DbTarget::Postgres("postgres://rig@db/softtouch".into())),
+            Path::new("softtouch.log")
+        );
     }
 }

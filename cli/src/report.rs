@@ -43,8 +43,12 @@ impl From<ReportError> for Failure {
 }
 
 /// `softtouch report`.
-pub async fn run_report(args: ReportArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
-    if same_file(&args.out, db) {
+pub async fn run_report(
+    args: ReportArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    if db.file().is_some_and(|path| same_file(&args.out, path)) {
         return Err(Failure::BadInput(anyhow!(
             "--out {} is the database itself: name another file",
             args.out.display()

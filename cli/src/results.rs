@@ -46,7 +46,7 @@ pub enum ResultsCommand {
 /// Run `softtouch results`.
 pub async fn run(
     cmd: Option<ResultsCommand>,
-    db: &Path,
+    db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
     let store = open_existing(db).await?;
@@ -345,7 +345,7 @@ impl Recorder {
     /// Stores the result in one transaction and says so; returns its id.
     pub(crate) async fn store(
         self,
-        db: &Path,
+        db: &softtouch_store::DbTarget,
         summary: String,
         out: &mut dyn Write,
     ) -> Result<i64, Failure> {
@@ -401,7 +401,7 @@ impl Recorder {
 }
 
 /// Opens the store, fills in the model's sha256 and inserts.
-async fn insert(db: &Path, mut new: NewResult) -> Result<i64, Failure> {
+async fn insert(db: &softtouch_store::DbTarget, mut new: NewResult) -> Result<i64, Failure> {
     let store = open_existing(db).await?;
     let stored = async {
         // A stored model by name, else an artifact file (`eval model.stm`).

@@ -2,9 +2,8 @@
 
 use super::{Failure, io_failure, open_existing};
 use std::io::Write;
-use std::path::Path;
 
-pub async fn run(db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run(db: &softtouch_store::DbTarget, out: &mut dyn Write) -> Result<(), Failure> {
     let store = open_existing(db).await?;
     let runs = store.runs().await?;
     store.close().await;

@@ -114,7 +114,11 @@ pub struct SweepArgs {
 }
 
 /// `softtouch sweep`.
-pub async fn run_sweep(cmd: SweepCommand, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run_sweep(
+    cmd: SweepCommand,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     let (sweep, common, rows_wanted): (Sweep, SweepArgs, Vec<(String, ModelConfig)>) = match cmd {
         SweepCommand::Finetune(args) => return run_finetune(args, db, out).await,
         SweepCommand::Alpha { common, alphas } => {
@@ -236,7 +240,11 @@ fn latent_traversal(
     Ok(drawn.map(|_| png))
 }
 
-async fn run_finetune(args: FinetuneArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+async fn run_finetune(
+    args: FinetuneArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     let train = TrainConfig {
         epochs: args.epochs,
         batch_size: args.batch,

@@ -11,7 +11,7 @@ use softtouch_trainer::{
     InitFrom, ModelConfig, ModelKind, Preprocess, Splits, TrainConfig, Trained,
 };
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// The model and optimisation settings every training verb takes.
@@ -175,15 +175,19 @@ pub(crate) async fn load(
     Ok(splits)
 }
 
-fn default_checkpoints(db: &Path) -> PathBuf {
-    match db.parent() {
+fn default_checkpoints(db: &softtouch_store::DbTarget) -> PathBuf {
+    match db.file().and_then(std::path::Path::parent) {
         Some(p) if !p.as_os_str().is_empty() => p.join("checkpoints"),
         _ => PathBuf::from("checkpoints"),
     }
 }
 
 /// `softtouch train`.
-pub async fn run_train(args: TrainArgs, db: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+pub async fn run_train(
+    args: TrainArgs,
+    db: &softtouch_store::DbTarget,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
     let store = open_existing(db).await?;
     let init = match &args.init {
         Some(init_name) => {

@@ -83,7 +83,7 @@ fn score(
 
 pub async fn run_transfer(
     args: TransferArgs,
-    db: &Path,
+    db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
     let started = Instant::now();

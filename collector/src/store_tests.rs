@@ -48,6 +48,19 @@ async fn new_run(store: &Store) -> RunId {
 #[tokio::test]
 async fn a_new_database_is_migrated_in_wal_mode_with_foreign_keys_on() -> Result<(), StoreError> {
     let (_dir, store) = temp_store("test.db").await;
+    if store.dialect() == softtouch_store::Dialect::Postgres {
+        // PostgreSQL has no journal mode to choose, and its foreign keys are always
+        // on: a sample of a run that is not there is refused.
+        let orphan = store
+            .append_sample(424_242, &sample(0), None, &window())
+            .await;
+        assert!(
+            matches!(orphan, Err(StoreError::Query { .. })),
+            "{orphan:?}"
+        );
+        assert_eq!(store.integrity_check().await?, "ok");
+        return Ok(());
+    }
     let mode: String = sqlx::query_scalar("PRAGMA journal_mode")
         .fetch_one(store.pool())
         .await
@@ -250,7 +263,7 @@ async fn runs_list_counts_ok_rejected_retries_and_faults() -> Result<(), StoreEr
 #[tokio::test]
 async fn a_store_dropped_without_closing_reopens_intact() -> Result<(), StoreError> {
     let (_dir, store) = temp_store("test.db").await;
-    let path = store.path().to_owned();
+    let target = store.target().clone();
     let run = new_run(&store).await;
     for i in 0..20 {
         store
@@ -266,7 +279,7 @@ async fn a_store_dropped_without_closing_reopens_intact() -> Result<(), StoreErr
             .await?;
     }
     drop(store); // without close(): the WAL is not checkpointed
-    let store = Store::open(&path).await?;
+    let store = Store::open(&target).await?;
     assert_eq!(store.integrity_check().await?, "ok");
     assert_eq!(
         store.row_counts(run).await?,
@@ -319,6 +332,18 @@ fn stored_statuses_parse_back_or_fail_clearly() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn two_processes_opening_a_new_database_at_once_both_succeed() -> Result<(), StoreError> {
     let dir = tempdir();
+    if crate::testing::on_postgres() {
+        // Both migrate one new database at once: sqlx's advisory lock lets one in.
+        for _ in 0..3 {
+            let target = crate::testing::fresh_target(dir.path(), "fresh.db").await;
+            let (a, b) = tokio::join!(Store::open(&target), Store::open(&target));
+            let (a, b) = (a?, b?);
+            assert_eq!(a.integrity_check().await?, "ok");
+            a.close().await;
+            b.close().await;
+        }
+        return Ok(());
+    }
     let path = dir.path().join("fresh.db");
     for _ in 0..5 {
         let _ = std::fs::remove_file(&path);

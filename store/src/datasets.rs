@@ -2,11 +2,12 @@
 //! also used by the import inside its transaction) and the reads of a dataset's
 //! members that selection, statistics and export stream.
 
+use crate::Dialect;
 use crate::WrenchColumns;
 use crate::{Store, StoreError, now_sql, query_err, rows::seed_to_sql};
 use futures_util::TryStreamExt as _;
 use futures_util::stream::BoxStream;
-use sqlx::{FromRow, Row as _, SqliteConnection};
+use sqlx::{AnyConnection, FromRow, Row as _};
 
 /// A sample with its label and what the dataset filters look at.
 #[derive(Debug, FromRow)]
@@ -116,20 +117,20 @@ pub struct NewDataset<'a> {
 /// # Errors
 /// A query failure, or more members than an SQLite integer counts.
 pub async fn insert_dataset(
-    conn: &mut SqliteConnection,
+    conn: &mut AnyConnection,
     d: &NewDataset<'_>,
 ) -> Result<Option<i64>, StoreError> {
     let count = i64::try_from(d.members.len()).map_err(|_| StoreError::Invalid {
         what: "dataset",
         why: "too many samples".into(),
     })?;
-    let inserted = sqlx::query(concat!(
+    let inserted: Option<i64> = sqlx::query_scalar(Dialect::of(&conn).sql(concat!(
         "INSERT INTO datasets (name, definition_json, seed, split_ratio, sample_count,
                                software_version, schema_version, created_at)
          VALUES (?, ?, ?, ?, ?, ?, ?, ",
         now_sql!(),
-        ") ON CONFLICT (name) DO NOTHING"
-    ))
+        ") ON CONFLICT (name) DO NOTHING RETURNING dataset_id"
+    )))
     .bind(d.name)
     .bind(d.definition_json)
     .bind(seed_to_sql(d.seed))
@@ -137,18 +138,17 @@ pub async fn insert_dataset(
     .bind(count)
     .bind(softtouch_schemas::SOFTWARE_VERSION)
     .bind(Store::schema_version())
-    .execute(&mut *conn)
+    .fetch_optional(&mut *conn)
     .await
     .map_err(query_err("inserting a dataset"))?;
-    if inserted.rows_affected() == 0 {
+    let Some(dataset_id) = inserted else {
         return Ok(None);
-    }
-    let dataset_id = inserted.last_insert_rowid();
+    };
     for (position, &(run, index, split)) in d.members.iter().enumerate() {
-        sqlx::query(
+        sqlx::query(Dialect::of(&conn).sql(
             "INSERT INTO dataset_members (dataset_id, position, run_id, sample_index, split)
              VALUES (?, ?, ?, ?, ?)",
-        )
+        ))
         .bind(dataset_id)
         .bind(i64::try_from(position).unwrap_or(i64::MAX))
         .bind(run)
@@ -167,11 +167,12 @@ impl Store {
     /// # Errors
     /// A query failure.
     pub async fn run_exists(&self, run: i64) -> Result<bool, StoreError> {
-        let found: Option<i64> = sqlx::query_scalar("SELECT run_id FROM runs WHERE run_id = ?")
-            .bind(run)
-            .fetch_optional(self.pool())
-            .await
-            .map_err(query_err("looking up a run"))?;
+        let found: Option<i64> =
+            sqlx::query_scalar(self.dialect.sql("SELECT run_id FROM runs WHERE run_id = ?"))
+                .bind(run)
+                .fetch_optional(self.pool())
+                .await
+                .map_err(query_err("looking up a run"))?;
         Ok(found.is_some())
     }
 
@@ -179,14 +180,14 @@ impl Store {
     /// filters look at.
     pub fn candidates(&self, run: i64) -> BoxStream<'_, Result<Candidate, StoreError>> {
         Box::pin(
-            sqlx::query_as::<_, Candidate>(
+            sqlx::query_as::<_, Candidate>(self.dialect.sql(
                 "SELECT s.run_id, s.sample_index, s.rod, s.medium, s.status,
                         s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm, s.sync_skew_ns, s.reading_count
                  FROM samples s
                  WHERE s.run_id = ?
                    AND EXISTS (SELECT 1 FROM frames f
                                WHERE f.run_id = s.run_id AND f.sample_index = s.sample_index)
-                 ORDER BY s.sample_index",
+                 ORDER BY s.sample_index"),
             )
             .bind(run)
             .fetch(self.pool())
@@ -199,13 +200,13 @@ impl Store {
     /// # Errors
     /// A query failure.
     pub async fn dataset(&self, name: &str) -> Result<Option<DatasetRow>, StoreError> {
-        let row = sqlx::query(
+        let row = sqlx::query(self.dialect.sql(
             "SELECT d.dataset_id, d.name, d.definition_json, d.sample_count, d.software_version,
                     d.schema_version, d.created_at,
                     (SELECT COUNT(*) FROM dataset_members m WHERE m.dataset_id = d.dataset_id AND m.split = 'train'),
                     (SELECT COUNT(*) FROM dataset_members m WHERE m.dataset_id = d.dataset_id AND m.split = 'val'),
                     (SELECT COUNT(*) FROM dataset_members m WHERE m.dataset_id = d.dataset_id AND m.split = 'test')
-             FROM datasets d WHERE d.name = ?",
+             FROM datasets d WHERE d.name = ?"),
         )
         .bind(name)
         .fetch_optional(self.pool())
@@ -228,10 +229,13 @@ impl Store {
     /// # Errors
     /// A query failure.
     pub async fn dataset_names(&self) -> Result<Vec<String>, StoreError> {
-        sqlx::query_scalar("SELECT name FROM datasets ORDER BY dataset_id")
-            .fetch_all(self.pool())
-            .await
-            .map_err(query_err("listing datasets"))
+        sqlx::query_scalar(
+            self.dialect
+                .sql("SELECT name FROM datasets ORDER BY dataset_id"),
+        )
+        .fetch_all(self.pool())
+        .await
+        .map_err(query_err("listing datasets"))
     }
 
     /// The runs dataset `dataset_id` draws on, with their import provenance.
@@ -239,14 +243,14 @@ impl Store {
     /// # Errors
     /// A query failure.
     pub async fn dataset_runs(&self, dataset_id: i64) -> Result<Vec<ExportRun>, StoreError> {
-        sqlx::query_as::<_, ExportRun>(
+        sqlx::query_as::<_, ExportRun>(self.dialect.sql(
             "SELECT r.run_id, r.seed, r.status, r.scene_name, r.medium, r.rig_toml, r.scene_toml,
                     r.software_version, r.schema_version, r.created_at,
                     i.origin_run_id, i.layout, i.source_path, i.provenance
              FROM runs r LEFT JOIN run_imports i ON i.run_id = r.run_id
              WHERE r.run_id IN (SELECT DISTINCT run_id FROM dataset_members WHERE dataset_id = ?)
              ORDER BY r.run_id",
-        )
+        ))
         .bind(dataset_id)
         .fetch_all(self.pool())
         .await
@@ -259,7 +263,7 @@ impl Store {
         dataset_id: i64,
     ) -> BoxStream<'_, Result<ExportSample, StoreError>> {
         Box::pin(
-            sqlx::query_as::<_, ExportSample>(
+            sqlx::query_as::<_, ExportSample>(self.dialect.sql(
                 "SELECT m.position, m.split, m.run_id, m.sample_index, s.rod, s.medium,
                         s.cmd_x_m, s.cmd_z_m, s.cmd_theta_rad,
                         s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
@@ -268,7 +272,7 @@ impl Store {
                  JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
                  JOIN frames f ON f.run_id = m.run_id AND f.sample_index = m.sample_index
                  WHERE m.dataset_id = ? ORDER BY m.position",
-            )
+            ))
             .bind(dataset_id)
             .fetch(self.pool())
             .map_err(|e| query_err("reading dataset samples")(e)),
@@ -278,12 +282,12 @@ impl Store {
     /// Dataset `dataset_id`'s members' splits, rods, media and labels, in order.
     pub fn dataset_labels(&self, dataset_id: i64) -> BoxStream<'_, Result<LabelRow, StoreError>> {
         Box::pin(
-            sqlx::query_as::<_, LabelRow>(
+            sqlx::query_as::<_, LabelRow>(self.dialect.sql(
                 "SELECT m.split, s.rod, s.medium, s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm
                  FROM dataset_members m
                  JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
                  WHERE m.dataset_id = ? ORDER BY m.position",
-            )
+            ))
             .bind(dataset_id)
             .fetch(self.pool())
             .map_err(|e| query_err("reading dataset samples")(e)),
@@ -295,7 +299,7 @@ impl Store {
     /// # Errors
     /// A query failure.
     pub async fn now(&self) -> Result<String, StoreError> {
-        sqlx::query_scalar(concat!("SELECT ", now_sql!()))
+        sqlx::query_scalar(self.dialect.sql(concat!("SELECT ", now_sql!())))
             .fetch_one(self.pool())
             .await
             .map_err(query_err("reading the clock"))

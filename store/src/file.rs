@@ -84,6 +84,27 @@ pub struct Checkpoint {
     pub log_pages: i64,
 }
 
+/// The URL sqlx's `Any` driver opens the SQLite file at `path` by: the path
+/// percent-encoded where a URL would misread it (`%`, `?`, `#`), and SQLite's open
+/// `mode`: `rwc` (create a missing file), `rw` or `ro`. The path is made absolute first: a URL would read `a.db` in
+/// `sqlite://a.db` as a host name.
+#[must_use]
+pub fn sqlite_url(path: &Path, mode: &str) -> String {
+    let path = std::path::absolute(path).unwrap_or_else(|_| path.to_owned());
+    let mut url = String::from("sqlite://");
+    for c in path.to_string_lossy().chars() {
+        match c {
+            '%' => url.push_str("%25"),
+            '?' => url.push_str("%3F"),
+            '#' => url.push_str("%23"),
+            c => url.push(c),
+        }
+    }
+    url.push_str("?mode=");
+    url.push_str(mode);
+    url
+}
+
 /// `NAME-wal` beside the database `NAME`.
 #[must_use]
 pub fn wal_path(db: &Path) -> PathBuf {
@@ -112,7 +133,7 @@ pub async fn checkpoint(path: &Path, wait: Duration) -> Result<Checkpoint, Store
         DbFile::NotSqlite { starts_with } => return Err(not_a_database(path, starts_with)),
     }
     let open = |source| StoreError::Open {
-        path: path.to_owned(),
+        db: path.display().to_string(),
         source,
     };
     let mut conn = SqliteConnectOptions::new()
@@ -122,18 +143,29 @@ pub async fn checkpoint(path: &Path, wait: Duration) -> Result<Checkpoint, Store
         .connect()
         .await
         .map_err(open)?;
-    let done = checkpoint_on(&mut conn).await;
+    let done = checkpoint_with(&mut conn).await;
     // Closing the last connection of a WAL database also checkpoints; a close error
     // leaves the committed data where it was.
     let _ = sqlx::Connection::close(conn).await;
     done
 }
 
-/// The checkpoint on a connection the caller holds (a store's pool, before it closes).
-pub(crate) async fn checkpoint_on<'c, E>(conn: E) -> Result<Checkpoint, StoreError>
-where
-    E: sqlx::Executor<'c, Database = sqlx::Sqlite>,
-{
+/// The checkpoint on a pool the caller holds (a SQLite store's, before it closes).
+pub(crate) async fn checkpoint_on(pool: &sqlx::AnyPool) -> Result<Checkpoint, StoreError> {
+    let (busy, log, checkpointed): (i64, i64, i64) =
+        sqlx::query_as("PRAGMA wal_checkpoint(PASSIVE)")
+            .fetch_one(pool)
+            .await
+            .map_err(crate::query_err("checkpointing the write-ahead log"))?;
+    Ok(Checkpoint {
+        // (0, -1, -1) for a database not in WAL mode: nothing to fold.
+        complete: busy == 0 && (log <= 0 || checkpointed == log),
+        log_pages: log.max(0),
+    })
+}
+
+/// [`checkpoint_on`] on a connection of SQLite's own driver.
+async fn checkpoint_with(conn: &mut sqlx::SqliteConnection) -> Result<Checkpoint, StoreError> {
     let (busy, log, checkpointed): (i64, i64, i64) =
         sqlx::query_as("PRAGMA wal_checkpoint(PASSIVE)")
             .fetch_one(conn)

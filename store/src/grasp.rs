@@ -5,6 +5,7 @@
 
 use super::rows::{now_sql, seed_from_sql, seed_to_sql};
 use super::{Appended, Store, StoreError, query_err};
+use crate::Dialect;
 use sqlx::Row;
 use std::collections::HashSet;
 
@@ -141,7 +142,7 @@ macro_rules! session_columns {
 }
 
 /// A session row as [`session_columns`] selects it.
-fn session_row(r: &sqlx::sqlite::SqliteRow) -> GraspSessionRow {
+fn session_row(r: &sqlx::any::AnyRow) -> GraspSessionRow {
     GraspSessionRow {
         session_id: r.get(0),
         created_at: r.get(1),
@@ -166,11 +167,11 @@ impl Store {
         scenes_json: &str,
         config_json: &str,
     ) -> Result<i64, StoreError> {
-        let row = sqlx::query(concat!(
+        let row = sqlx::query(self.dialect.sql(concat!(
             "INSERT INTO grasp_sessions (created_at, model, model_sha256, seed, scenes_json, config_json, software_version) VALUES (",
             now_sql!(),
             ", ?, ?, ?, ?, ?, ?) RETURNING session_id"
-        ))
+        )))
         .bind(model)
         .bind(model_sha256)
         .bind(seed_to_sql(seed))
@@ -191,11 +192,11 @@ impl Store {
         &self,
         session_id: i64,
     ) -> Result<Option<GraspSessionRow>, StoreError> {
-        let row = sqlx::query(concat!(
+        let row = sqlx::query(self.dialect.sql(concat!(
             "SELECT ",
             session_columns!(),
             " FROM grasp_sessions WHERE session_id = ?"
-        ))
+        )))
         .bind(session_id)
         .fetch_optional(self.pool())
         .await
@@ -211,8 +212,8 @@ impl Store {
         &self,
         session_id: i64,
     ) -> Result<HashSet<GraspTrialKey>, StoreError> {
-        let rows = sqlx::query(
-            "SELECT sigma_index, scene_index, object, mode, trial FROM grasp_trials WHERE session_id = ?",
+        let rows = sqlx::query(self.dialect.sql(
+            "SELECT sigma_index, scene_index, object, mode, trial FROM grasp_trials WHERE session_id = ?"),
         )
         .bind(session_id)
         .fetch_all(self.pool())
@@ -263,13 +264,13 @@ impl Store {
             .await
             .map_err(query_err("starting a grasp trial transaction"))?;
         let k = &trial.key;
-        let inserted = sqlx::query(concat!(
+        let inserted = sqlx::query(Dialect::of(&tx).sql(concat!(
             "INSERT INTO grasp_trials (session_id, sigma_index, scene_index, object, mode, trial, medium, sigma_m, dx_m, dy_m, dz_m, ",
             "commanded_width_m, final_width_m, peak_estimate_n, peak_true_n, success, reason, detail, confirmed_after_s, wall_s, created_at) ",
             "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ",
             now_sql!(),
             ") ON CONFLICT (session_id, sigma_index, scene_index, object, mode, trial) DO NOTHING RETURNING trial_id"
-        ))
+        )))
         .bind(session_id)
         .bind(i64::from(k.sigma_index))
         .bind(i64::from(k.scene_index))
@@ -297,8 +298,8 @@ impl Store {
             return Ok(Appended::AlreadyPresent);
         };
         let trial_id: i64 = row.get(0);
-        sqlx::query(
-            "INSERT INTO grasp_traces (trial_id, cycles, encoding, t_s, estimate_n, true_n, measured_count, request_count) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+        sqlx::query(Dialect::of(&tx).sql(
+            "INSERT INTO grasp_traces (trial_id, cycles, encoding, t_s, estimate_n, true_n, measured_count, request_count) VALUES (?, ?, ?, ?, ?, ?, ?, ?)"),
         )
         .bind(trial_id)
         .bind(n as i64)
@@ -312,9 +313,9 @@ impl Store {
         .await
         .map_err(query_err("writing a grasp trace"))?;
         for f in &trace.frames {
-            sqlx::query(
+            sqlx::query(Dialect::of(&tx).sql(
                 "INSERT INTO grasp_trial_frames (trial_id, moment, t_s, png) VALUES (?, ?, ?, ?)",
-            )
+            ))
             .bind(trial_id)
             .bind(&f.moment)
             .bind(if f.t_s.is_finite() { f.t_s } else { 0.0 })
@@ -334,7 +335,7 @@ impl Store {
     /// # Errors
     /// The query failed or a row does not read back.
     pub async fn grasp_trials(&self, session_id: i64) -> Result<Vec<GraspTrialRow>, StoreError> {
-        trials_of(self.pool(), session_id).await
+        trials_of(self.pool(), self.dialect, session_id).await
     }
 
     /// The trace of a session's trial, if stored.
@@ -346,7 +347,7 @@ impl Store {
         session_id: i64,
         key: &GraspTrialKey,
     ) -> Result<Option<GraspTrace>, StoreError> {
-        trace_of(self.pool(), session_id, key).await
+        trace_of(self.pool(), self.dialect, session_id, key).await
     }
 
     /// Every grasp session, oldest first.
@@ -354,7 +355,7 @@ impl Store {
     /// # Errors
     /// The query failed.
     pub async fn grasp_sessions(&self) -> Result<Vec<GraspSessionRow>, StoreError> {
-        sessions_of(self.pool()).await
+        sessions_of(self.pool(), self.dialect).await
     }
 
     /// The ids of a session's first and last stored trials (`None`: none stored), for
@@ -367,7 +368,8 @@ impl Store {
         session_id: i64,
     ) -> Result<Option<(i64, i64)>, StoreError> {
         let r = sqlx::query(
-            "SELECT MIN(trial_id), MAX(trial_id) FROM grasp_trials WHERE session_id = ?",
+            self.dialect
+                .sql("SELECT MIN(trial_id), MAX(trial_id) FROM grasp_trials WHERE session_id = ?"),
         )
         .bind(session_id)
         .fetch_one(self.pool())
@@ -384,23 +386,26 @@ impl Store {
         &self,
         trial_id: i64,
     ) -> Result<Option<(i64, GraspTrialRow, Option<GraspTrace>)>, StoreError> {
-        let session: Option<i64> =
-            sqlx::query_scalar("SELECT session_id FROM grasp_trials WHERE trial_id = ?")
-                .bind(trial_id)
-                .fetch_optional(self.pool())
-                .await
-                .map_err(query_err("finding a grasp trial"))?;
+        let session: Option<i64> = sqlx::query_scalar(
+            self.dialect
+                .sql("SELECT session_id FROM grasp_trials WHERE trial_id = ?"),
+        )
+        .bind(trial_id)
+        .fetch_optional(self.pool())
+        .await
+        .map_err(query_err("finding a grasp trial"))?;
         let Some(session_id) = session else {
             return Ok(None);
         };
         let ids: Vec<i64> = sqlx::query_scalar(
-            "SELECT trial_id FROM grasp_trials WHERE session_id = ? ORDER BY trial_id",
+            self.dialect
+                .sql("SELECT trial_id FROM grasp_trials WHERE session_id = ? ORDER BY trial_id"),
         )
         .bind(session_id)
         .fetch_all(self.pool())
         .await
         .map_err(query_err("finding a grasp trial"))?;
-        let trials = trials_of(self.pool(), session_id).await?;
+        let trials = trials_of(self.pool(), self.dialect, session_id).await?;
         let Some(row) = ids
             .iter()
             .position(|id| *id == trial_id)
@@ -408,7 +413,7 @@ impl Store {
         else {
             return Ok(None);
         };
-        let trace = trace_of(self.pool(), session_id, &row.key).await?;
+        let trace = trace_of(self.pool(), self.dialect, session_id, &row.key).await?;
         Ok(Some((session_id, row, trace)))
     }
 }
@@ -416,13 +421,14 @@ impl Store {
 /// A session's trials in the order they were stored (the store's and the report's
 /// reader).
 pub(crate) async fn trials_of(
-    pool: &sqlx::SqlitePool,
+    pool: &sqlx::AnyPool,
+    d: Dialect,
     session_id: i64,
 ) -> Result<Vec<GraspTrialRow>, StoreError> {
-    let rows = sqlx::query(
+    let rows = sqlx::query(d.sql(
         "SELECT sigma_index, scene_index, object, mode, trial, medium, sigma_m, dx_m, dy_m, dz_m, commanded_width_m, final_width_m, \
          peak_estimate_n, peak_true_n, success, reason, detail, confirmed_after_s, wall_s \
-         FROM grasp_trials WHERE session_id = ? ORDER BY trial_id",
+         FROM grasp_trials WHERE session_id = ? ORDER BY trial_id"),
     )
     .bind(session_id)
     .fetch_all(pool)
@@ -457,14 +463,15 @@ pub(crate) async fn trials_of(
 
 /// A session's trial's trace, if stored (the store's and the report's reader).
 pub(crate) async fn trace_of(
-    pool: &sqlx::SqlitePool,
+    pool: &sqlx::AnyPool,
+    d: Dialect,
     session_id: i64,
     key: &GraspTrialKey,
 ) -> Result<Option<GraspTrace>, StoreError> {
-    let row = sqlx::query(
+    let row = sqlx::query(d.sql(
         "SELECT c.encoding, c.t_s, c.estimate_n, c.true_n, c.measured_count, c.request_count, c.trial_id \
          FROM grasp_traces c JOIN grasp_trials t ON t.trial_id = c.trial_id \
-         WHERE t.session_id = ? AND t.sigma_index = ? AND t.scene_index = ? AND t.object = ? AND t.mode = ? AND t.trial = ?",
+         WHERE t.session_id = ? AND t.sigma_index = ? AND t.scene_index = ? AND t.object = ? AND t.mode = ? AND t.trial = ?"),
     )
     .bind(session_id)
     .bind(i64::from(key.sigma_index))
@@ -483,9 +490,9 @@ pub(crate) async fn trace_of(
             why: format!("`{encoding}`: expected `{TRACE_ENCODING}`"),
         });
     }
-    let frames = sqlx::query(
+    let frames = sqlx::query(d.sql(
         "SELECT moment, t_s, png FROM grasp_trial_frames WHERE trial_id = ? ORDER BY t_s, moment",
-    )
+    ))
     .bind(r.get::<i64, _>(6))
     .fetch_all(pool)
     .await
@@ -509,13 +516,14 @@ pub(crate) async fn trace_of(
 
 /// Every grasp session, oldest first (the report's reader).
 pub(crate) async fn sessions_of(
-    pool: &sqlx::SqlitePool,
+    pool: &sqlx::AnyPool,
+    d: Dialect,
 ) -> Result<Vec<GraspSessionRow>, StoreError> {
-    let rows = sqlx::query(concat!(
+    let rows = sqlx::query(d.sql(concat!(
         "SELECT ",
         session_columns!(),
         " FROM grasp_sessions ORDER BY session_id"
-    ))
+    )))
     .fetch_all(pool)
     .await
     .map_err(query_err("reading grasp sessions"))?;

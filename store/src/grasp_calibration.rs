@@ -58,7 +58,7 @@ fn count(what: &'static str, v: i64) -> Result<u8, StoreError> {
     })
 }
 
-fn from_row(r: &sqlx::sqlite::SqliteRow) -> Result<GraspCalibrationRow, StoreError> {
+fn from_row(r: &sqlx::any::AnyRow) -> Result<GraspCalibrationRow, StoreError> {
     Ok(GraspCalibrationRow {
         calibration_id: r.get(0),
         created_at: r.get(1),
@@ -104,11 +104,11 @@ impl Store {
                 });
             }
         }
-        let r = sqlx::query(concat!(
+        let r = sqlx::query(self.dialect.sql(concat!(
             "INSERT INTO grasp_calibrations (created_at, setup_kind, setup_hash, model, model_sha256, object, touch_count, lambda_max_n_per_mm, lambda_iqr_lo_n_per_mm, lambda_iqr_hi_n_per_mm, counts_spanned, baseline_n, mm_per_count, ended, points_json, lambda_json, true_lambda_max_n_per_mm, software_version) VALUES (",
             now_sql!(),
             ", ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING calibration_id"
-        ))
+        )))
         .bind(&row.setup_kind)
         .bind(&row.setup_hash)
         .bind(&row.model)
@@ -143,11 +143,11 @@ impl Store {
         model_sha256: &str,
         object: &str,
     ) -> Result<Option<GraspCalibrationRow>, StoreError> {
-        let row = sqlx::query(concat!(
+        let row = sqlx::query(self.dialect.sql(concat!(
             "SELECT ",
             columns!(),
             " FROM grasp_calibrations WHERE setup_hash = ? AND model_sha256 = ? AND object = ? ORDER BY calibration_id DESC LIMIT 1"
-        ))
+        )))
             .bind(setup_hash)
             .bind(model_sha256)
             .bind(object)
@@ -162,11 +162,11 @@ impl Store {
     /// # Errors
     /// The query failed, or a row does not read back.
     pub async fn grasp_calibrations(&self) -> Result<Vec<GraspCalibrationRow>, StoreError> {
-        let rows = sqlx::query(concat!(
+        let rows = sqlx::query(self.dialect.sql(concat!(
             "SELECT ",
             columns!(),
             " FROM grasp_calibrations ORDER BY calibration_id DESC"
-        ))
+        )))
         .fetch_all(self.pool())
         .await
         .map_err(query_err("listing grasp calibrations"))?;

@@ -1,8 +1,18 @@
 //! The database: one writer per table, typed rows for every reader, migrations
 //! applied; the only crate with SQL, and it must depend on no model, simulator or CLI.
 //!
-//! The store: SQLite through sqlx, WAL, foreign keys on, migrations embedded from the
-//! workspace's `migrations/`.
+//! The store: SQLite (the embedded default: one file, WAL, foreign keys on) or
+//! PostgreSQL (the fleet database: several rigs, one server), through sqlx's `Any`
+//! driver, with one set of migrations per engine embedded from the workspace's
+//! `migrations/sqlite` and `migrations/postgres`.
+//!
+//! Why `Any` and one text per query (rather than a trait with an implementation per
+//! engine, or generics over sqlx's `Database`): the store's ~100 queries mean the same
+//! on both engines, so one text each keeps one place to review them, and the few
+//! spellings that differ are rewritten in one tested function ([`dialect`]). Generics
+//! over `Database` would have put sqlx's trait bounds on every caller; two
+//! implementations would have doubled every query. `Any` costs one copy of each value
+//! read (a frame's bytes are copied once more), far below a PNG's decoding.
 //!
 //! A sample, its frame and its force/torque window are written in one transaction,
 //! idempotent on `(run, index)`: they are all there or all absent, and writing a sample
@@ -14,7 +24,9 @@
 //! frames in `grasp.rs`; the experiment verbs' results with their tables and figures
 //! in `results.rs` (the layout documented in their migrations).
 
+pub mod copy;
 pub mod datasets;
+pub mod dialect;
 mod event;
 pub mod file;
 mod grasp;
@@ -32,7 +44,10 @@ pub use results::{NewResult, ResultRow, StoredResult};
 pub mod rows;
 mod runs;
 mod sync;
+pub mod target;
 mod window;
+pub use dialect::Dialect;
+pub use target::DbTarget;
 
 pub use runs::{
     LEASE_STALE_S, LeaseHolder, LeaseRow, LeaseTaken, NewRun, RunRecord, RunStatus, RunSummary,
@@ -98,13 +113,17 @@ pub struct MemberRow {
 }
 
 use softtouch_schemas::{FrameMeta, FtReading, Sample, SampleStatus};
-use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
-use sqlx::{FromRow, Row, SqlitePool};
-use std::path::{Path, PathBuf};
+use sqlx::AnyPool;
+use sqlx::any::AnyPoolOptions;
+use sqlx::{Executor as _, FromRow, Row};
+use std::path::PathBuf;
 use std::time::Duration;
 
-/// The migrations, embedded at build time.
-pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("../migrations");
+/// SQLite's migrations, embedded at build time.
+pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("../migrations/sqlite");
+
+/// PostgreSQL's migrations: the same tables, owners and versions in PostgreSQL's types.
+pub static PG_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("../migrations/postgres");
 
 /// Identifies a run.
 pub type RunId = i64;
@@ -141,19 +160,28 @@ pub enum StoreError {
         why: String,
     },
     /// Opening or migrating the database failed.
-    #[error("cannot open database {path}: {source}")]
+    #[error("cannot open database {db}: {source}")]
     Open {
-        /// The database file.
-        path: PathBuf,
+        /// The database, as shown (a URL without its password).
+        db: String,
         /// Why.
         #[source]
         source: sqlx::Error,
     },
+    /// The server refused the URL: a wrong user or password, a database that is not
+    /// there, a malformed option.
+    #[error("{db}: {why}")]
+    Refused {
+        /// The database, as shown (a URL without its password).
+        db: String,
+        /// The server's words.
+        why: String,
+    },
     /// Migrating the database failed.
-    #[error("cannot migrate database {path}: {source}")]
+    #[error("cannot migrate database {db}: {source}")]
     Migrate {
-        /// The database file.
-        path: PathBuf,
+        /// The database, as shown.
+        db: String,
         /// Why.
         #[source]
         source: sqlx::migrate::MigrateError,
@@ -233,6 +261,7 @@ impl StoreError {
                 | Self::NoDatabase(_)
                 | Self::EmptyFile { .. }
                 | Self::NotADatabase { .. }
+                | Self::Refused { .. }
         )
     }
 }
@@ -307,8 +336,9 @@ pub struct EventRow {
 /// The store.
 #[derive(Debug, Clone)]
 pub struct Store {
-    pool: SqlitePool,
-    path: PathBuf,
+    pool: AnyPool,
+    dialect: Dialect,
+    target: DbTarget,
 }
 
 fn to_i64(what: &'static str, v: u64) -> Result<i64, StoreError> {
@@ -319,13 +349,17 @@ fn to_i64(what: &'static str, v: u64) -> Result<i64, StoreError> {
 }
 
 impl Store {
-    /// Open (creating if missing) and migrate the database at `path`. An empty file
-    /// is set up as a new database, with a warning saying so; a file that is not a
-    /// database is refused.
+    /// Open (creating if missing) and migrate the database at `target` (a path, or a
+    /// PostgreSQL URL: see [`DbTarget`]). An empty file is set up as a new database,
+    /// with a warning saying so; a file that is not a database is refused.
     ///
     /// # Errors
-    /// [`StoreError::NotADatabase`], or SQLite's refusal to open or migrate it.
-    pub async fn open(path: &Path) -> Result<Self, StoreError> {
+    /// [`StoreError::NotADatabase`], or the engine's refusal to open or migrate it.
+    pub async fn open(target: impl Into<DbTarget>) -> Result<Self, StoreError> {
+        let target = target.into();
+        let DbTarget::File(path) = &target else {
+            return Self::connect(target).await;
+        };
         match file::inspect(path)? {
             file::DbFile::NotSqlite { starts_with } => {
                 return Err(file::not_a_database(path, starts_with));
@@ -336,61 +370,60 @@ impl Store {
             ),
             file::DbFile::Missing | file::DbFile::Sqlite => {}
         }
-        Self::connect(path).await
+        Self::connect(target).await
     }
 
-    /// Open and migrate the database that must already be at `path`: a missing or empty
-    /// file is an error (a mistyped `--db` leaves no new database behind).
+    /// Open and migrate the database that must already be at `target`: a missing or
+    /// empty file is an error (a mistyped `--db` leaves no new database behind). A
+    /// PostgreSQL database must exist on its server (this never creates one).
     ///
     /// # Errors
     /// [`StoreError::NoDatabase`], [`StoreError::EmptyFile`],
-    /// [`StoreError::NotADatabase`], or SQLite's refusal.
-    pub async fn open_existing(path: &Path) -> Result<Self, StoreError> {
+    /// [`StoreError::NotADatabase`], or the engine's refusal.
+    pub async fn open_existing(target: impl Into<DbTarget>) -> Result<Self, StoreError> {
+        let target = target.into();
+        let DbTarget::File(path) = &target else {
+            return Self::connect(target).await;
+        };
         match file::inspect(path)? {
-            file::DbFile::Sqlite => Self::connect(path).await,
-            file::DbFile::Missing => Err(StoreError::NoDatabase(path.to_owned())),
-            file::DbFile::Empty => Err(StoreError::EmptyFile {
-                path: path.to_owned(),
-            }),
+            file::DbFile::Sqlite => Self::connect(target).await,
+            file::DbFile::Missing => Err(StoreError::NoDatabase(path.clone())),
+            file::DbFile::Empty => Err(StoreError::EmptyFile { path: path.clone() }),
             file::DbFile::NotSqlite { starts_with } => Err(file::not_a_database(path, starts_with)),
         }
     }
 
-    async fn connect(path: &Path) -> Result<Self, StoreError> {
-        let options = SqliteConnectOptions::new()
-            .filename(path)
-            .create_if_missing(true)
-            .journal_mode(SqliteJournalMode::Wal)
-            // NORMAL in WAL mode: a killed process loses nothing committed; a power cut
-            // may lose the last commits but never corrupts the file.
-            .synchronous(SqliteSynchronous::Normal)
-            .foreign_keys(true)
-            .busy_timeout(Duration::from_secs(10));
-        // Two processes opening a new database at once race: switching the new file to
-        // WAL can find it locked, and both try the first migration (the loser fails on
-        // a table that now exists). Once the winner is done, a second look succeeds.
+    async fn connect(target: DbTarget) -> Result<Self, StoreError> {
+        sqlx::any::install_default_drivers();
+        let shown = target.display().to_string();
+        let (url, dialect) = match &target {
+            DbTarget::File(path) => (file::sqlite_url(path, "rwc"), Dialect::Sqlite),
+            DbTarget::Postgres(url) => (url.clone(), Dialect::Postgres),
+        };
+        let migrator = match dialect {
+            Dialect::Sqlite => &MIGRATOR,
+            Dialect::Postgres => &PG_MIGRATOR,
+        };
+        // Two processes opening a new database at once race: switching a new SQLite file
+        // to WAL can find it locked, and both try the first migration (the loser fails on
+        // a table that now exists; on PostgreSQL sqlx's advisory lock serialises them).
+        // Once the winner is done, a second look succeeds.
         let mut attempt = 0u64;
         let pool = loop {
             attempt += 1;
-            let result = match SqlitePoolOptions::new()
-                .max_connections(4)
-                .connect_with(options.clone())
-                .await
-            {
-                Ok(pool) => match MIGRATOR.run(&pool).await {
+            let result = match pool_options(dialect).connect(&url).await {
+                Ok(pool) => match migrator.run(&pool).await {
                     Ok(()) => Ok(pool),
                     Err(source) => Err(StoreError::Migrate {
-                        path: path.to_owned(),
+                        db: shown.clone(),
                         source,
                     }),
                 },
-                Err(source) => Err(StoreError::Open {
-                    path: path.to_owned(),
-                    source,
-                }),
+                Err(source) => Err(connect_error(&shown, source)),
             };
             match result {
                 Ok(pool) => break pool,
+                Err(e @ StoreError::Refused { .. }) => return Err(e),
                 Err(_) if attempt < 5 => {
                     tokio::time::sleep(Duration::from_millis(40 * attempt)).await
                 }
@@ -399,14 +432,55 @@ impl Store {
         };
         Ok(Self {
             pool,
-            path: path.to_owned(),
+            dialect,
+            target,
         })
     }
 
-    /// The database file.
+    /// Create the database `name` on the PostgreSQL server of `server_url` (a URL of
+    /// any database there the user may connect to, usually `postgres`); the new
+    /// database's URL. The user needs `CREATEDB`. What a lab runs once per server (and
+    /// what the tests run for each test).
+    ///
+    /// # Errors
+    /// The server refuses (the name is taken, no right to create), or cannot be reached.
+    pub async fn create_postgres_database(
+        server_url: &str,
+        name: &str,
+    ) -> Result<DbTarget, StoreError> {
+        use sqlx::Connection as _;
+        let shown = target::redact(server_url);
+        if name.is_empty()
+            || !name
+                .chars()
+                .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
+        {
+            return Err(StoreError::Invalid {
+                what: "database name",
+                why: format!("`{name}`: use lower-case letters, digits and _"),
+            });
+        }
+        let mut conn = sqlx::PgConnection::connect(server_url)
+            .await
+            .map_err(|source| connect_error(&shown, source))?;
+        sqlx::raw_sql(sqlx::AssertSqlSafe(format!("CREATE DATABASE {name}")))
+            .execute(&mut conn)
+            .await
+            .map_err(query_err("creating a database"))?;
+        let _ = conn.close().await;
+        Ok(DbTarget::Postgres(target::with_database(server_url, name)))
+    }
+
+    /// Where the database is.
     #[must_use]
-    pub fn path(&self) -> &Path {
-        &self.path
+    pub fn target(&self) -> &DbTarget {
+        &self.target
+    }
+
+    /// The engine's spelling of the store's queries.
+    #[must_use]
+    pub const fn dialect(&self) -> Dialect {
+        self.dialect
     }
 
     /// The schema version this build writes (the newest migration).
@@ -417,18 +491,39 @@ impl Store {
 
     /// The underlying pool, for crate-internal queries and tests.
     #[must_use]
-    pub fn pool(&self) -> &SqlitePool {
+    pub fn pool(&self) -> &AnyPool {
         &self.pool
     }
 
-    /// Close the pool after copying the write-ahead log into the database file
-    /// ([`file::checkpoint`]), so that the `.db` file alone holds everything committed
-    /// (what another process is still writing stays in the log until it closes).
+    /// Close the pool. On SQLite, first copy the write-ahead log into the database
+    /// file ([`file::checkpoint`]), so that the `.db` file alone holds everything
+    /// committed (what another process is still writing stays in the log until it
+    /// closes); PostgreSQL's commits are the server's from the start.
     pub async fn close(self) {
-        if let Err(e) = file::checkpoint_on(&self.pool).await {
-            tracing::debug!("checkpoint on close of {}: {e}", self.path.display());
+        if self.dialect == Dialect::Sqlite
+            && let Err(e) = file::checkpoint_on(&self.pool).await
+        {
+            tracing::debug!("checkpoint on close of {}: {e}", self.target.display());
         }
         self.pool.close().await;
+    }
+
+    /// The database's bytes on disk: the file and its write-ahead log (SQLite), or the
+    /// database's size on its server (PostgreSQL's `pg_database_size`).
+    ///
+    /// # Errors
+    /// The query fails.
+    pub async fn database_bytes(&self) -> Result<u64, StoreError> {
+        match &self.target {
+            DbTarget::File(path) => Ok(file::db_size(path).total()),
+            DbTarget::Postgres(_) => {
+                let n: i64 = sqlx::query_scalar("SELECT pg_database_size(current_database())")
+                    .fetch_one(&self.pool)
+                    .await
+                    .map_err(query_err("measuring the database"))?;
+                Ok(u64::try_from(n).unwrap_or(0))
+            }
+        }
     }
 
     /// How many samples the database holds, over every run.
@@ -436,7 +531,7 @@ impl Store {
     /// # Errors
     /// The query fails.
     pub async fn stored_samples(&self) -> Result<u64, StoreError> {
-        let n: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM samples")
+        let n: i64 = sqlx::query_scalar(self.dialect.sql("SELECT COUNT(*) FROM samples"))
             .fetch_one(&self.pool)
             .await
             .map_err(query_err("counting samples"))?;
@@ -487,11 +582,11 @@ impl Store {
             rows::insert_frame(&mut tx, run_id, sample.index, frame).await?;
         }
         rows::insert_ft_window(&mut tx, run_id, sample.index, window).await?;
-        sqlx::query(concat!(
+        sqlx::query(Dialect::of(&tx).sql(concat!(
             "UPDATE runs SET updated_at = ",
             now_sql!(),
             ", time_base_ns = COALESCE(?, time_base_ns) WHERE run_id = ?"
-        ))
+        )))
         .bind(time_base_ns)
         .bind(run_id)
         .execute(&mut *tx)
@@ -523,10 +618,10 @@ impl Store {
 
     /// The last `limit` events of a run, oldest first.
     pub async fn events(&self, run_id: RunId, limit: u32) -> Result<Vec<EventRow>, StoreError> {
-        let mut rows = sqlx::query_as::<_, EventRow>(
+        let mut rows = sqlx::query_as::<_, EventRow>(self.dialect.sql(
             "SELECT event_id, run_id, sample_index, t_ns, created_at, level, kind, message
              FROM events WHERE run_id = ? ORDER BY event_id DESC LIMIT ?",
-        )
+        ))
         .bind(run_id)
         .bind(i64::from(limit))
         .fetch_all(&self.pool)
@@ -538,11 +633,11 @@ impl Store {
 
     /// Counts of samples, frames and windows stored for a run (a consistency check).
     pub async fn row_counts(&self, run_id: RunId) -> Result<RowCounts, StoreError> {
-        let row = sqlx::query(
+        let row = sqlx::query(self.dialect.sql(
             "SELECT (SELECT COUNT(*) FROM samples WHERE run_id = ?1),
                     (SELECT COUNT(*) FROM frames WHERE run_id = ?1),
                     (SELECT COUNT(*) FROM ft_windows WHERE run_id = ?1)",
-        )
+        ))
         .bind(run_id)
         .fetch_one(&self.pool)
         .await
@@ -556,22 +651,88 @@ impl Store {
 
     /// The next sample index to take in a run (one past the highest stored), for resume.
     pub async fn next_index(&self, run_id: RunId) -> Result<u64, StoreError> {
-        let max: Option<i64> =
-            sqlx::query_scalar("SELECT MAX(sample_index) FROM samples WHERE run_id = ?")
-                .bind(run_id)
-                .fetch_one(&self.pool)
-                .await
-                .map_err(query_err("finding the next sample index"))?;
+        let max: Option<i64> = sqlx::query_scalar(
+            self.dialect
+                .sql("SELECT MAX(sample_index) FROM samples WHERE run_id = ?"),
+        )
+        .bind(run_id)
+        .fetch_one(&self.pool)
+        .await
+        .map_err(query_err("finding the next sample index"))?;
         Ok(max.map_or(0, |m| u64::try_from(m).unwrap_or(0) + 1))
     }
 
-    /// `PRAGMA integrity_check`: `ok` or the problems SQLite found.
+    /// SQLite's `PRAGMA integrity_check`: `ok` or the problems SQLite found. On
+    /// PostgreSQL (whose server checks its own pages) `ok` once the server answers.
     pub async fn integrity_check(&self) -> Result<String, StoreError> {
+        if self.dialect == Dialect::Postgres {
+            sqlx::query("SELECT 1")
+                .fetch_one(&self.pool)
+                .await
+                .map_err(query_err("checking integrity"))?;
+            return Ok("ok".to_owned());
+        }
         let rows: Vec<String> = sqlx::query_scalar("PRAGMA integrity_check")
             .fetch_all(&self.pool)
             .await
             .map_err(query_err("checking integrity"))?;
         Ok(rows.join("; "))
+    }
+}
+
+/// The pool's settings per engine. SQLite: WAL, NORMAL sync, foreign keys, a 10 s busy
+/// wait, on every connection. PostgreSQL: the URL's settings; up to 4 connections per
+/// process (a collector writes from one thread), 10 s to get one.
+fn pool_options(dialect: Dialect) -> AnyPoolOptions {
+    let options = AnyPoolOptions::new()
+        .max_connections(4)
+        .acquire_timeout(Duration::from_secs(10));
+    match dialect {
+        Dialect::Postgres => options,
+        Dialect::Sqlite => options.after_connect(|conn, _meta| {
+            Box::pin(async move {
+                // NORMAL in WAL mode: a killed process loses nothing committed; a power
+                // cut may lose the last commits but never corrupts the file.
+                conn.execute(
+                    "PRAGMA busy_timeout = 10000; PRAGMA journal_mode = WAL; \
+                     PRAGMA synchronous = NORMAL; PRAGMA foreign_keys = ON;",
+                )
+                .await?;
+                Ok(())
+            })
+        }),
+    }
+}
+
+/// A failed connection as the user should read it: a wrong password, an unknown user
+/// or database, a malformed URL is bad input ([`StoreError::Refused`]); a server that
+/// does not answer is a runtime failure ([`StoreError::Open`]).
+fn connect_error(shown: &str, source: sqlx::Error) -> StoreError {
+    let refused = match &source {
+        sqlx::Error::Configuration(e) => Some(format!("bad connection settings: {e}")),
+        sqlx::Error::Database(e) => match e.code().as_deref() {
+            // invalid_password, invalid_authorization_specification
+            Some("28P01" | "28000") => {
+                Some(format!("the server refused the login: {}", e.message()))
+            }
+            // invalid_catalog_name
+            Some("3D000") => Some(format!(
+                "{} (create it on the server first: `createdb NAME`)",
+                e.message()
+            )),
+            _ => None,
+        },
+        _ => None,
+    };
+    match refused {
+        Some(why) => StoreError::Refused {
+            db: shown.to_owned(),
+            why,
+        },
+        None => StoreError::Open {
+            db: shown.to_owned(),
+            source,
+        },
     }
 }
 

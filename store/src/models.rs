@@ -110,14 +110,14 @@ impl Store {
     /// # Errors
     /// A query failure (a taken name among them: callers check first).
     pub async fn insert_model(&self, m: &NewModel<'_>) -> Result<i64, StoreError> {
-        let result = sqlx::query(concat!(
+        let model_id: i64 = sqlx::query_scalar(self.dialect.sql(concat!(
             "INSERT INTO models (name, dataset_id, dataset_name, kind, config_json, train_json,
                                  metrics_json, history_json, test_r2_mean, test_image_mse, artifact,
                                  software_version, created_at)
              VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ",
             now_sql!(),
-            ")"
-        ))
+            ") RETURNING model_id"
+        )))
         .bind(m.name)
         .bind(m.dataset_id)
         .bind(m.dataset_name)
@@ -130,10 +130,10 @@ impl Store {
         .bind(m.test_image_mse)
         .bind(m.artifact)
         .bind(m.software_version)
-        .execute(self.pool())
+        .fetch_one(self.pool())
         .await
         .map_err(query_err("recording the model"))?;
-        Ok(result.last_insert_rowid())
+        Ok(model_id)
     }
 
     /// The model called `name`, if any.
@@ -141,7 +141,7 @@ impl Store {
     /// # Errors
     /// A query failure.
     pub async fn model(&self, name: &str) -> Result<Option<ModelInfo>, StoreError> {
-        sqlx::query_as::<_, ModelInfo>(info_select!("WHERE name = ?"))
+        sqlx::query_as::<_, ModelInfo>(self.dialect.sql(info_select!("WHERE name = ?")))
             .bind(name)
             .fetch_optional(self.pool())
             .await
@@ -153,7 +153,7 @@ impl Store {
     /// # Errors
     /// A query failure.
     pub async fn models(&self) -> Result<Vec<ModelInfo>, StoreError> {
-        sqlx::query_as::<_, ModelInfo>(info_select!("ORDER BY model_id"))
+        sqlx::query_as::<_, ModelInfo>(self.dialect.sql(info_select!("ORDER BY model_id")))
             .fetch_all(self.pool())
             .await
             .map_err(query_err("listing models"))
@@ -167,11 +167,14 @@ impl Store {
         &self,
         name: &str,
     ) -> Result<Option<(Vec<u8>, String)>, StoreError> {
-        sqlx::query_as("SELECT artifact, kind FROM models WHERE name = ?")
-            .bind(name)
-            .fetch_optional(self.pool())
-            .await
-            .map_err(query_err("reading a model"))
+        sqlx::query_as(
+            self.dialect
+                .sql("SELECT artifact, kind FROM models WHERE name = ?"),
+        )
+        .bind(name)
+        .fetch_optional(self.pool())
+        .await
+        .map_err(query_err("reading a model"))
     }
 
     /// Dataset `dataset_id`'s members with labels and frames, in dataset order, as a
@@ -195,7 +198,7 @@ impl Store {
             }
         };
         Box::pin(
-            sqlx::query_as::<_, MemberRow>(sql)
+            sqlx::query_as::<_, MemberRow>(self.dialect.sql(sql))
                 .bind(dataset_id)
                 .fetch(self.pool())
                 .map_err(|e| query_err("reading the dataset's frames")(e)),
@@ -213,7 +216,7 @@ impl Store {
         land_id: i64,
         water_id: i64,
     ) -> Result<Vec<PairKey>, StoreError> {
-        sqlx::query_as(
+        sqlx::query_as(self.dialect.sql(
             "SELECT w.run_id AS water_run, w.sample_index, r.poses_from_run_id AS land_run
              FROM dataset_members w
              JOIN runs r ON r.run_id = w.run_id
@@ -221,7 +224,7 @@ impl Store {
                                    AND l.sample_index = w.sample_index
              WHERE w.dataset_id = ?2 AND w.split = 'test'
              ORDER BY w.position",
-        )
+        ))
         .bind(land_id)
         .bind(water_id)
         .fetch_all(self.pool())
@@ -238,10 +241,10 @@ impl Store {
         &self,
         dataset_id: i64,
     ) -> Result<Option<MemberRow>, StoreError> {
-        sqlx::query_as::<_, MemberRow>(concat!(
+        sqlx::query_as::<_, MemberRow>(self.dialect.sql(concat!(
             member_rows_sql!(),
             " ORDER BY m.split = 'test' DESC, m.position LIMIT 1"
-        ))
+        )))
         .bind(dataset_id)
         .fetch_optional(self.pool())
         .await

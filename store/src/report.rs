@@ -5,9 +5,11 @@
 //! even a bug here cannot change it. No migration runs either; a database older
 //! than this build is refused with the command that migrates it.
 
+use crate::DbTarget;
+use crate::Dialect;
 use crate::{MemberRow, RunSummary, Store, StoreError, run_counts_columns, run_counts_from};
-use sqlx::sqlite::{SqliteConnectOptions, SqlitePool, SqlitePoolOptions};
-use sqlx::{FromRow, Row as _};
+use sqlx::any::AnyPoolOptions;
+use sqlx::{AnyPool, Executor as _, FromRow, Row as _};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -22,22 +24,21 @@ pub enum ReadError {
     #[error(transparent)]
     NotADatabase(Box<StoreError>),
     /// The database cannot be opened.
-    #[error("cannot open database {} read-only: {source}", path.display())]
+    #[error("cannot open database {db} read-only: {source}")]
     Open {
-        /// The file.
-        path: PathBuf,
+        /// The database as shown (a URL without its password).
+        db: String,
         /// Why.
         #[source]
         source: sqlx::Error,
     },
     /// The database's schema is older than this build's (or it is not a softtouch one).
     #[error(
-        "database {} is at schema {found}, this build reads schema {expected}: migrate it with `softtouch --db {} db init` (the report itself never writes)",
-        path.display(), path.display()
+        "database {db} is at schema {found}, this build reads schema {expected}: migrate it with `softtouch --db {db} db init` (the report itself never writes)"
     )]
     Schema {
-        /// The file.
-        path: PathBuf,
+        /// The database as shown.
+        db: String,
         /// Its newest migration (0: none).
         found: i64,
         /// This build's newest migration.
@@ -85,7 +86,8 @@ fn query(doing: &'static str) -> impl FnOnce(sqlx::Error) -> ReadError {
 /// A database opened read-only, for readers that must never write (the report).
 #[derive(Debug, Clone)]
 pub struct ReadOnly {
-    pool: SqlitePool,
+    pool: AnyPool,
+    dialect: Dialect,
 }
 
 impl ReadOnly {
@@ -95,35 +97,54 @@ impl ReadOnly {
     }
 }
 
-/// Opens `path` read-only and checks that its schema is this build's.
+/// What must be at a SQLite path before a reader opens it.
+fn check_file(path: &Path) -> Result<(), ReadError> {
+    match crate::file::inspect(path).map_err(|e| ReadError::NotADatabase(Box::new(e)))? {
+        crate::file::DbFile::Sqlite => Ok(()),
+        crate::file::DbFile::Missing => Err(ReadError::NoDatabase(path.to_owned())),
+        crate::file::DbFile::Empty => {
+            Err(ReadError::NotADatabase(Box::new(StoreError::EmptyFile {
+                path: path.to_owned(),
+            })))
+        }
+        crate::file::DbFile::NotSqlite { starts_with } => Err(ReadError::NotADatabase(Box::new(
+            crate::file::not_a_database(path, starts_with),
+        ))),
+    }
+}
+
+/// Opens `target` read-only and checks that its schema is this build's. On PostgreSQL
+/// every transaction of its connections is read-only (`default_transaction_read_only`).
 ///
 /// # Errors
 /// No file, a file that does not open, an older schema.
-pub async fn open_read_only(path: &Path) -> Result<ReadOnly, ReadError> {
-    match crate::file::inspect(path).map_err(|e| ReadError::NotADatabase(Box::new(e)))? {
-        crate::file::DbFile::Sqlite => {}
-        crate::file::DbFile::Missing => return Err(ReadError::NoDatabase(path.to_owned())),
-        crate::file::DbFile::Empty => {
-            return Err(ReadError::NotADatabase(Box::new(StoreError::EmptyFile {
-                path: path.to_owned(),
-            })));
+pub async fn open_read_only(target: &DbTarget) -> Result<ReadOnly, ReadError> {
+    sqlx::any::install_default_drivers();
+    let shown = target.display().to_string();
+    let (url, dialect) = match target {
+        DbTarget::File(path) => {
+            check_file(path)?;
+            (crate::file::sqlite_url(path, "ro"), Dialect::Sqlite)
         }
-        crate::file::DbFile::NotSqlite { starts_with } => {
-            return Err(ReadError::NotADatabase(Box::new(
-                crate::file::not_a_database(path, starts_with),
-            )));
-        }
-    }
-    let options = SqliteConnectOptions::new()
-        .filename(path)
-        .read_only(true)
-        .busy_timeout(Duration::from_secs(10));
-    let pool = SqlitePoolOptions::new()
+        DbTarget::Postgres(url) => (url.clone(), Dialect::Postgres),
+    };
+    let pool = AnyPoolOptions::new()
         .max_connections(2)
-        .connect_with(options)
+        .acquire_timeout(Duration::from_secs(10))
+        .after_connect(move |conn, _meta| {
+            Box::pin(async move {
+                let read_only = match dialect {
+                    Dialect::Sqlite => "PRAGMA busy_timeout = 10000; PRAGMA query_only = ON;",
+                    Dialect::Postgres => "SET default_transaction_read_only = on;",
+                };
+                conn.execute(read_only).await?;
+                Ok(())
+            })
+        })
+        .connect(&url)
         .await
         .map_err(|source| ReadError::Open {
-            path: path.to_owned(),
+            db: shown.clone(),
             source,
         })?;
     let applied: Result<Option<i64>, _> =
@@ -132,14 +153,14 @@ pub async fn open_read_only(path: &Path) -> Result<ReadOnly, ReadError> {
             .await;
     let expected = Store::schema_version();
     match applied {
-        Ok(Some(v)) if v >= expected => Ok(ReadOnly { pool }),
+        Ok(Some(v)) if v >= expected => Ok(ReadOnly { pool, dialect }),
         Ok(found) => Err(ReadError::Schema {
-            path: path.to_owned(),
+            db: shown,
             found: found.unwrap_or(0),
             expected,
         }),
         Err(_) => Err(ReadError::Schema {
-            path: path.to_owned(),
+            db: shown,
             found: 0,
             expected,
         }),
@@ -189,13 +210,13 @@ pub const LATEST_EVENTS: i64 = 12;
 
 /// The runs (all, or those listed), oldest first.
 pub async fn runs(db: &ReadOnly, only: Option<&[i64]>) -> Result<Vec<RunData>, ReadError> {
-    let rows = sqlx::query_as::<_, RunRow>(concat!(
+    let rows = sqlx::query_as::<_, RunRow>(db.dialect.sql(concat!(
         "SELECT ",
         run_counts_columns!(),
         ", r.software_version, r.rig_toml, r.scene_toml, s.first_t_ns, s.last_t_ns",
         run_counts_from!(),
         " ORDER BY r.run_id"
-    ))
+    )))
     .fetch_all(&db.pool)
     .await
     .map_err(query("listing runs"))?;
@@ -218,43 +239,46 @@ pub async fn runs(db: &ReadOnly, only: Option<&[i64]>) -> Result<Vec<RunData>, R
 
 async fn run_data(db: &ReadOnly, row: RunRow) -> Result<RunData, ReadError> {
     let id = row.counts.run_id;
-    let rejects: Vec<(String, i64)> = sqlx::query_as(
+    let rejects: Vec<(String, i64)> = sqlx::query_as(db.dialect.sql(
         "SELECT COALESCE(reject_reason, '?'), COUNT(*) FROM samples
          WHERE run_id = ? AND status = 'rejected' GROUP BY 1 ORDER BY 2 DESC, 1",
-    )
+    ))
     .bind(id)
     .fetch_all(&db.pool)
     .await
     .map_err(query("counting rejects"))?;
-    let counts: Vec<(String, String, i64)> =
-        sqlx::query_as("SELECT kind, level, COUNT(*) FROM events WHERE run_id = ? GROUP BY 1, 2")
-            .bind(id)
-            .fetch_all(&db.pool)
-            .await
-            .map_err(query("counting events"))?;
-    let timeline: Vec<(i64, String, String)> = sqlx::query_as(
+    let counts: Vec<(String, String, i64)> = sqlx::query_as(
+        db.dialect
+            .sql("SELECT kind, level, COUNT(*) FROM events WHERE run_id = ? GROUP BY 1, 2"),
+    )
+    .bind(id)
+    .fetch_all(&db.pool)
+    .await
+    .map_err(query("counting events"))?;
+    let timeline: Vec<(i64, String, String)> = sqlx::query_as(db.dialect.sql(
         "SELECT t_ns, kind, level FROM events WHERE run_id = ? AND t_ns IS NOT NULL
          ORDER BY event_id LIMIT ?",
-    )
+    ))
     .bind(id)
     .bind(MAX_TIMELINE)
     .fetch_all(&db.pool)
     .await
     .map_err(query("reading events"))?;
-    let mut latest: Vec<(Option<i64>, String, String, String, String)> = sqlx::query_as(
-        "SELECT sample_index, created_at, level, kind, message FROM events
+    let mut latest: Vec<(Option<i64>, String, String, String, String)> =
+        sqlx::query_as(db.dialect.sql(
+            "SELECT sample_index, created_at, level, kind, message FROM events
          WHERE run_id = ? ORDER BY event_id DESC LIMIT ?",
-    )
-    .bind(id)
-    .bind(LATEST_EVENTS)
-    .fetch_all(&db.pool)
-    .await
-    .map_err(query("reading events"))?;
+        ))
+        .bind(id)
+        .bind(LATEST_EVENTS)
+        .fetch_all(&db.pool)
+        .await
+        .map_err(query("reading events"))?;
     latest.reverse();
     // Samples in the order they were taken, cumulated, then thinned for the figure.
-    let statuses: Vec<(i64, String)> = sqlx::query_as(
+    let statuses: Vec<(i64, String)> = sqlx::query_as(db.dialect.sql(
         "SELECT frame_t_ns, status FROM samples WHERE run_id = ? ORDER BY frame_t_ns, sample_index",
-    )
+    ))
     .bind(id)
     .fetch_all(&db.pool)
     .await
@@ -300,19 +324,19 @@ pub struct DatasetData {
 
 /// The datasets (all, or those drawing on one of `runs`), oldest first.
 pub async fn datasets(db: &ReadOnly, runs: Option<&[i64]>) -> Result<Vec<DatasetData>, ReadError> {
-    let rows = sqlx::query(
+    let rows = sqlx::query(db.dialect.sql(
         "SELECT dataset_id, name, definition_json, seed, split_ratio, sample_count,
                 software_version, created_at FROM datasets ORDER BY dataset_id",
-    )
+    ))
     .fetch_all(&db.pool)
     .await
     .map_err(query("listing datasets"))?;
     let mut out = Vec::new();
     for r in rows {
         let dataset_id: i64 = r.get(0);
-        let member_runs: Vec<i64> = sqlx::query_scalar(
+        let member_runs: Vec<i64> = sqlx::query_scalar(db.dialect.sql(
             "SELECT DISTINCT run_id FROM dataset_members WHERE dataset_id = ? ORDER BY run_id",
-        )
+        ))
         .bind(dataset_id)
         .fetch_all(&db.pool)
         .await
@@ -320,9 +344,9 @@ pub async fn datasets(db: &ReadOnly, runs: Option<&[i64]>) -> Result<Vec<Dataset
         if runs.is_some_and(|wanted| !member_runs.iter().any(|id| wanted.contains(id))) {
             continue;
         }
-        let split_rows: Vec<(String, i64)> = sqlx::query_as(
+        let split_rows: Vec<(String, i64)> = sqlx::query_as(db.dialect.sql(
             "SELECT split, COUNT(*) FROM dataset_members WHERE dataset_id = ? GROUP BY split",
-        )
+        ))
         .bind(dataset_id)
         .fetch_all(&db.pool)
         .await
@@ -336,12 +360,12 @@ pub async fn datasets(db: &ReadOnly, runs: Option<&[i64]>) -> Result<Vec<Dataset
             };
             splits[i] += n;
         }
-        let labels: Vec<(f64, f64, f64, f64, f64, f64)> = sqlx::query_as(
+        let labels: Vec<(f64, f64, f64, f64, f64, f64)> = sqlx::query_as(db.dialect.sql(
             "SELECT s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm
              FROM dataset_members m
              JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
              WHERE m.dataset_id = ? ORDER BY m.position",
-        )
+        ))
         .bind(dataset_id)
         .fetch_all(&db.pool)
         .await
@@ -393,12 +417,12 @@ pub struct ModelRow {
 
 /// The models (all, or those named), oldest first.
 pub async fn models(db: &ReadOnly, only: Option<&[String]>) -> Result<Vec<ModelRow>, ReadError> {
-    let rows = sqlx::query_as::<_, ModelRow>(
+    let rows = sqlx::query_as::<_, ModelRow>(db.dialect.sql(
         "SELECT model_id, name, dataset_id, dataset_name, kind, config_json, train_json,
                 metrics_json, history_json, test_r2_mean, test_image_mse, software_version,
                 created_at
          FROM models ORDER BY model_id",
-    )
+    ))
     .fetch_all(&db.pool)
     .await
     .map_err(query("listing models"))?;
@@ -416,19 +440,22 @@ pub async fn models(db: &ReadOnly, only: Option<&[String]>) -> Result<Vec<ModelR
 
 /// A model's artifact bytes.
 pub async fn artifact(db: &ReadOnly, model_id: i64) -> Result<Vec<u8>, ReadError> {
-    sqlx::query_scalar("SELECT artifact FROM models WHERE model_id = ?")
-        .bind(model_id)
-        .fetch_one(&db.pool)
-        .await
-        .map_err(query("reading a model's artifact"))
+    sqlx::query_scalar(
+        db.dialect
+            .sql("SELECT artifact FROM models WHERE model_id = ?"),
+    )
+    .bind(model_id)
+    .fetch_one(&db.pool)
+    .await
+    .map_err(query("reading a model's artifact"))
 }
 
 /// The test members of a dataset, in dataset order: `(run, sample)`.
 pub async fn test_members(db: &ReadOnly, dataset_id: i64) -> Result<Vec<(i64, i64)>, ReadError> {
-    sqlx::query_as(
+    sqlx::query_as(db.dialect.sql(
         "SELECT run_id, sample_index FROM dataset_members
          WHERE dataset_id = ? AND split = 'test' ORDER BY position",
-    )
+    ))
     .bind(dataset_id)
     .fetch_all(&db.pool)
     .await
@@ -440,13 +467,13 @@ pub async fn frame(
     db: &ReadOnly,
     (run, index): (i64, i64),
 ) -> Result<Option<MemberRow>, ReadError> {
-    sqlx::query_as::<_, MemberRow>(
+    sqlx::query_as::<_, MemberRow>(db.dialect.sql(
         "SELECT 'test' AS split, s.run_id, s.sample_index,
                 s.fx_n, s.fy_n, s.fz_n, s.tx_nm, s.ty_nm, s.tz_nm,
                 f.format, f.width, f.height, f.data
          FROM samples s JOIN frames f ON f.run_id = s.run_id AND f.sample_index = s.sample_index
          WHERE s.run_id = ? AND s.sample_index = ?",
-    )
+    ))
     .bind(run)
     .bind(index)
     .fetch_optional(&db.pool)
@@ -456,10 +483,13 @@ pub async fn frame(
 
 /// The database's clock, as the page's date (UTC).
 pub async fn now(db: &ReadOnly) -> Result<String, ReadError> {
-    sqlx::query_scalar("SELECT strftime('%Y-%m-%d %H:%M:%SZ', 'now')")
-        .fetch_one(&db.pool)
-        .await
-        .map_err(query("reading the clock"))
+    sqlx::query_scalar(
+        db.dialect
+            .sql("SELECT strftime('%Y-%m-%d %H:%M:%SZ', 'now')"),
+    )
+    .fetch_one(&db.pool)
+    .await
+    .map_err(query("reading the clock"))
 }
 
 /// Every grasp session with its trials, oldest first.
@@ -471,8 +501,11 @@ pub async fn grasp_sessions(
 ) -> Result<Vec<(crate::GraspSessionRow, Vec<crate::GraspTrialRow>)>, ReadError> {
     let rows = |e: StoreError| ReadError::Rows(Box::new(e));
     let mut out = Vec::new();
-    for session in crate::grasp::sessions_of(&db.pool).await.map_err(rows)? {
-        let trials = crate::grasp::trials_of(&db.pool, session.session_id)
+    for session in crate::grasp::sessions_of(&db.pool, db.dialect)
+        .await
+        .map_err(rows)?
+    {
+        let trials = crate::grasp::trials_of(&db.pool, db.dialect, session.session_id)
             .await
             .map_err(rows)?;
         out.push((session, trials));
@@ -489,7 +522,7 @@ pub async fn grasp_trace(
     session_id: i64,
     key: &crate::GraspTrialKey,
 ) -> Result<Option<crate::GraspTrace>, ReadError> {
-    crate::grasp::trace_of(&db.pool, session_id, key)
+    crate::grasp::trace_of(&db.pool, db.dialect, session_id, key)
         .await
         .map_err(|e| ReadError::Rows(Box::new(e)))
 }
@@ -501,11 +534,14 @@ pub async fn grasp_trace(
 pub async fn results(db: &ReadOnly) -> Result<Vec<crate::StoredResult>, ReadError> {
     let rows = |e: StoreError| ReadError::Rows(Box::new(e));
     let mut out = Vec::new();
-    for row in crate::results::results_of(&db.pool).await.map_err(rows)? {
-        let tables = crate::results::tables_of(&db.pool, row.result_id)
+    for row in crate::results::results_of(&db.pool, db.dialect)
+        .await
+        .map_err(rows)?
+    {
+        let tables = crate::results::tables_of(&db.pool, db.dialect, row.result_id)
             .await
             .map_err(rows)?;
-        let figures = crate::results::figures_of(&db.pool, row.result_id)
+        let figures = crate::results::figures_of(&db.pool, db.dialect, row.result_id)
             .await
             .map_err(rows)?;
         out.push(crate::StoredResult {

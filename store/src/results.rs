@@ -4,6 +4,7 @@
 
 use super::rows::now_sql;
 use super::{Store, StoreError, query_err};
+use crate::Dialect;
 use sqlx::Row;
 
 /// A result to store.
@@ -90,7 +91,7 @@ macro_rules! result_columns {
     };
 }
 
-fn result_row(r: &sqlx::sqlite::SqliteRow) -> ResultRow {
+fn result_row(r: &sqlx::any::AnyRow) -> ResultRow {
     ResultRow {
         result_id: r.get(0),
         created_at: r.get(1),
@@ -156,11 +157,11 @@ impl Store {
             .begin()
             .await
             .map_err(query_err("starting a result's transaction"))?;
-        let id: i64 = sqlx::query(concat!(
+        let id: i64 = sqlx::query(Dialect::of(&tx).sql(concat!(
             "INSERT INTO results (created_at, verb, settings_json, model, model_sha256, dataset, scene_hash, rig_hash, summary, software_version, software_commit) VALUES (",
             now_sql!(),
             ", ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING result_id"
-        ))
+        )))
         .bind(&r.verb)
         .bind(&r.settings_json)
         .bind(&r.model)
@@ -176,22 +177,28 @@ impl Store {
         .map_err(query_err("storing a result"))?
         .get(0);
         for (name, csv) in &r.tables {
-            sqlx::query("INSERT INTO result_tables (result_id, name, csv) VALUES (?, ?, ?)")
-                .bind(id)
-                .bind(name)
-                .bind(csv)
-                .execute(&mut *tx)
-                .await
-                .map_err(query_err("storing a result's table"))?;
+            sqlx::query(
+                Dialect::of(&tx)
+                    .sql("INSERT INTO result_tables (result_id, name, csv) VALUES (?, ?, ?)"),
+            )
+            .bind(id)
+            .bind(name)
+            .bind(csv)
+            .execute(&mut *tx)
+            .await
+            .map_err(query_err("storing a result's table"))?;
         }
         for (name, png) in &r.figures {
-            sqlx::query("INSERT INTO result_figures (result_id, name, png) VALUES (?, ?, ?)")
-                .bind(id)
-                .bind(name)
-                .bind(png)
-                .execute(&mut *tx)
-                .await
-                .map_err(query_err("storing a result's figure"))?;
+            sqlx::query(
+                Dialect::of(&tx)
+                    .sql("INSERT INTO result_figures (result_id, name, png) VALUES (?, ?, ?)"),
+            )
+            .bind(id)
+            .bind(name)
+            .bind(png)
+            .execute(&mut *tx)
+            .await
+            .map_err(query_err("storing a result's figure"))?;
         }
         tx.commit()
             .await
@@ -204,7 +211,7 @@ impl Store {
     /// # Errors
     /// The query failed.
     pub async fn results(&self) -> Result<Vec<ResultRow>, StoreError> {
-        results_of(self.pool()).await
+        results_of(self.pool(), self.dialect).await
     }
 
     /// One result with its tables, if it exists.
@@ -212,11 +219,11 @@ impl Store {
     /// # Errors
     /// The query failed.
     pub async fn result(&self, result_id: i64) -> Result<Option<StoredResult>, StoreError> {
-        let row = sqlx::query(concat!(
+        let row = sqlx::query(self.dialect.sql(concat!(
             "SELECT ",
             result_columns!(),
             " FROM results WHERE result_id = ?"
-        ))
+        )))
         .bind(result_id)
         .fetch_optional(self.pool())
         .await
@@ -224,8 +231,8 @@ impl Store {
         let Some(row) = row.as_ref().map(result_row) else {
             return Ok(None);
         };
-        let tables = tables_of(self.pool(), result_id).await?;
-        let figures = figures_of(self.pool(), result_id).await?;
+        let tables = tables_of(self.pool(), self.dialect, result_id).await?;
+        let figures = figures_of(self.pool(), self.dialect, result_id).await?;
         Ok(Some(StoredResult {
             row,
             tables,
@@ -235,12 +242,15 @@ impl Store {
 }
 
 /// Every result, oldest first.
-pub(crate) async fn results_of(pool: &sqlx::SqlitePool) -> Result<Vec<ResultRow>, StoreError> {
-    let rows = sqlx::query(concat!(
+pub(crate) async fn results_of(
+    pool: &sqlx::AnyPool,
+    d: Dialect,
+) -> Result<Vec<ResultRow>, StoreError> {
+    let rows = sqlx::query(d.sql(concat!(
         "SELECT ",
         result_columns!(),
         " FROM results ORDER BY result_id"
-    ))
+    )))
     .fetch_all(pool)
     .await
     .map_err(query_err("reading results"))?;
@@ -249,28 +259,32 @@ pub(crate) async fn results_of(pool: &sqlx::SqlitePool) -> Result<Vec<ResultRow>
 
 /// One result's tables, by name.
 pub(crate) async fn tables_of(
-    pool: &sqlx::SqlitePool,
+    pool: &sqlx::AnyPool,
+    d: Dialect,
     result_id: i64,
 ) -> Result<Vec<(String, String)>, StoreError> {
-    let rows = sqlx::query("SELECT name, csv FROM result_tables WHERE result_id = ? ORDER BY name")
-        .bind(result_id)
-        .fetch_all(pool)
-        .await
-        .map_err(query_err("reading a result's tables"))?;
+    let rows =
+        sqlx::query(d.sql("SELECT name, csv FROM result_tables WHERE result_id = ? ORDER BY name"))
+            .bind(result_id)
+            .fetch_all(pool)
+            .await
+            .map_err(query_err("reading a result's tables"))?;
     Ok(rows.iter().map(|r| (r.get(0), r.get(1))).collect())
 }
 
 /// One result's figures, by name.
 pub(crate) async fn figures_of(
-    pool: &sqlx::SqlitePool,
+    pool: &sqlx::AnyPool,
+    d: Dialect,
     result_id: i64,
 ) -> Result<Vec<(String, Vec<u8>)>, StoreError> {
-    let rows =
-        sqlx::query("SELECT name, png FROM result_figures WHERE result_id = ? ORDER BY name")
-            .bind(result_id)
-            .fetch_all(pool)
-            .await
-            .map_err(query_err("reading a result's figures"))?;
+    let rows = sqlx::query(
+        d.sql("SELECT name, png FROM result_figures WHERE result_id = ? ORDER BY name"),
+    )
+    .bind(result_id)
+    .fetch_all(pool)
+    .await
+    .map_err(query_err("reading a result's figures"))?;
     Ok(rows.iter().map(|r| (r.get(0), r.get(1))).collect())
 }
 
@@ -351,7 +365,7 @@ mod tests {
             assert!(matches!(e, StoreError::Invalid { .. }), "{e}");
         }
         assert!(store.results().await.expect("test step").is_empty());
-        let n: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM result_tables")
+        let n: i64 = sqlx::query_scalar(store.dialect().sql("SELECT COUNT(*) FROM result_tables"))
             .fetch_one(store.pool())
             .await
             .expect("test step");

@@ -7,9 +7,10 @@
 
 use super::{EventLevel, FrameRecord, RunId, RunStatus, StoreError, WINDOW_ENCODING};
 use super::{encode_window, query_err, to_i64};
+use crate::Dialect;
 use softtouch_schemas::sample::RejectReason;
 use softtouch_schemas::{FtReading, Medium, Sample, TimestampNs};
-use sqlx::SqliteConnection;
+use sqlx::AnyConnection;
 
 /// Wall-clock "now" in SQL, ISO-8601 UTC with milliseconds. A macro, not a const, so
 /// queries can `concat!` it and stay `&'static str` (sqlx refuses run-time strings).
@@ -73,10 +74,7 @@ pub struct RunRow<'a> {
 }
 
 /// Insert a run; its new id.
-pub async fn insert_run(
-    conn: &mut SqliteConnection,
-    run: &RunRow<'_>,
-) -> Result<RunId, StoreError> {
+pub async fn insert_run(conn: &mut AnyConnection, run: &RunRow<'_>) -> Result<RunId, StoreError> {
     let sql = concat!(
         "INSERT INTO runs (status, seed, samples_planned, rod_schedule, rod_block, scene_name,
                            medium, rig_toml, scene_toml, software_version, schema_version,
@@ -87,9 +85,9 @@ pub async fn insert_run(
         now_sql!(),
         ", CASE WHEN ?1 = 'running' THEN NULL ELSE ",
         now_sql!(),
-        " END)"
+        " END) RETURNING run_id"
     );
-    let result = sqlx::query(sql)
+    let run_id: i64 = sqlx::query_scalar(Dialect::of(&conn).sql(sql))
         .bind(run.status.as_str())
         .bind(seed_to_sql(run.seed))
         .bind(to_i64("samples_planned", run.samples_planned)?)
@@ -103,27 +101,27 @@ pub async fn insert_run(
         .bind(run.schema_version)
         .bind(run.created_at)
         .bind(run.poses_from)
-        .execute(&mut *conn)
+        .fetch_one(&mut *conn)
         .await
         .map_err(query_err("creating a run"))?;
-    Ok(result.last_insert_rowid())
+    Ok(run_id)
 }
 
 /// Record where an imported run came from (`provenance` is JSON text).
 pub async fn insert_run_import(
-    conn: &mut SqliteConnection,
+    conn: &mut AnyConnection,
     run_id: RunId,
     layout: &str,
     source_path: &str,
     origin_run_id: Option<i64>,
     provenance: &str,
 ) -> Result<(), StoreError> {
-    sqlx::query(concat!(
+    sqlx::query(Dialect::of(&conn).sql(concat!(
         "INSERT INTO run_imports (run_id, layout, source_path, origin_run_id, provenance, imported_at)
          VALUES (?, ?, ?, ?, ?, ",
         now_sql!(),
         ")"
-    ))
+    )))
     .bind(run_id)
     .bind(layout)
     .bind(source_path)
@@ -137,14 +135,14 @@ pub async fn insert_run_import(
 
 /// Insert a sample; `false` (and nothing written) if `(run, index)` is already there.
 pub async fn insert_sample(
-    conn: &mut SqliteConnection,
+    conn: &mut AnyConnection,
     run_id: RunId,
     sample: &Sample,
 ) -> Result<bool, StoreError> {
     let m = sample.wrench_mean_in_sensor.to_array();
     let s = sample.wrench_std_in_sensor.to_array();
     let measured = sample.measured;
-    let inserted = sqlx::query(
+    let inserted = sqlx::query(Dialect::of(&conn).sql(
         "INSERT INTO samples (run_id, sample_index, rod, medium,
              cmd_x_m, cmd_z_m, cmd_theta_rad, meas_x_m, meas_z_m, meas_theta_rad,
              fx_n, fy_n, fz_n, tx_nm, ty_nm, tz_nm,
@@ -152,7 +150,7 @@ pub async fn insert_sample(
              reading_count, frame_t_ns, window_start_ns, window_end_ns, sync_skew_ns,
              status, reject_reason, attempts)
          VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)
-         ON CONFLICT (run_id, sample_index) DO NOTHING",
+         ON CONFLICT (run_id, sample_index) DO NOTHING"),
     )
     .bind(run_id)
     .bind(to_i64("sample index", sample.index)?)
@@ -192,15 +190,15 @@ pub async fn insert_sample(
 
 /// Insert a sample's frame (the sample must be there).
 pub async fn insert_frame(
-    conn: &mut SqliteConnection,
+    conn: &mut AnyConnection,
     run_id: RunId,
     sample_index: u64,
     frame: FrameRecord<'_>,
 ) -> Result<(), StoreError> {
-    sqlx::query(
+    sqlx::query(Dialect::of(&conn).sql(
         "INSERT INTO frames (run_id, sample_index, format, width, height, sequence, t_ns, data)
          VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-    )
+    ))
     .bind(run_id)
     .bind(to_i64("sample index", sample_index)?)
     .bind(frame.meta.format.as_str())
@@ -217,7 +215,7 @@ pub async fn insert_frame(
 
 /// Insert a sample's raw force/torque window, packed as [`WINDOW_ENCODING`].
 pub async fn insert_ft_window(
-    conn: &mut SqliteConnection,
+    conn: &mut AnyConnection,
     run_id: RunId,
     sample_index: u64,
     window: &[FtReading],
@@ -226,8 +224,8 @@ pub async fn insert_ft_window(
         what: "window",
         why: "too many readings".into(),
     })?;
-    sqlx::query(
-        "INSERT INTO ft_windows (run_id, sample_index, encoding, reading_count, data) VALUES (?, ?, ?, ?, ?)",
+    sqlx::query(Dialect::of(&conn).sql(
+        "INSERT INTO ft_windows (run_id, sample_index, encoding, reading_count, data) VALUES (?, ?, ?, ?, ?)"),
     )
     .bind(run_id)
     .bind(to_i64("sample index", sample_index)?)
@@ -242,7 +240,7 @@ pub async fn insert_ft_window(
 
 /// Insert an event, stamped now.
 pub async fn insert_event(
-    conn: &mut SqliteConnection,
+    conn: &mut AnyConnection,
     run_id: RunId,
     sample_index: Option<u64>,
     t: Option<TimestampNs>,
@@ -250,12 +248,12 @@ pub async fn insert_event(
     kind: &str,
     message: &str,
 ) -> Result<(), StoreError> {
-    sqlx::query(concat!(
+    sqlx::query(Dialect::of(&conn).sql(concat!(
         "INSERT INTO events (run_id, sample_index, t_ns, created_at, level, kind, message)
          VALUES (?, ?, ?, ",
         now_sql!(),
         ", ?, ?, ?)"
-    ))
+    )))
     .bind(run_id)
     .bind(
         sample_index

@@ -2,6 +2,7 @@
 
 use super::rows::{self, RunRow, now_sql, seed_from_sql};
 use super::{RunId, Store, StoreError, query_err};
+use crate::Dialect;
 use softtouch_schemas::Medium;
 use sqlx::FromRow;
 
@@ -76,12 +77,14 @@ macro_rules! run_counts_from {
     () => {
         " FROM runs r
          LEFT JOIN (SELECT run_id,
-                           SUM(status = 'ok') AS ok,
-                           SUM(status = 'rejected') AS rejected,
-                           SUM(attempts - 1) AS retried,
+                           CAST(SUM(CASE WHEN status = 'ok' THEN 1 ELSE 0 END) AS BIGINT) AS ok,
+                           CAST(SUM(CASE WHEN status = 'rejected' THEN 1 ELSE 0 END) AS BIGINT)
+                               AS rejected,
+                           CAST(SUM(attempts - 1) AS BIGINT) AS retried,
                            MIN(frame_t_ns) AS first_t_ns, MAX(frame_t_ns) AS last_t_ns
                     FROM samples GROUP BY run_id) s ON s.run_id = r.run_id
-         LEFT JOIN (SELECT run_id, COUNT(*) AS events, SUM(level <> 'info') AS faults
+         LEFT JOIN (SELECT run_id, COUNT(*) AS events,
+                           CAST(SUM(CASE WHEN level <> 'info' THEN 1 ELSE 0 END) AS BIGINT) AS faults
                     FROM events GROUP BY run_id) e ON e.run_id = r.run_id"
     };
 }
@@ -213,7 +216,7 @@ impl Store {
             now_sql!(),
             " END WHERE run_id = ?2"
         );
-        let result = sqlx::query(sql)
+        let result = sqlx::query(self.dialect.sql(sql))
             .bind(status.as_str())
             .bind(run_id)
             .execute(&self.pool)
@@ -227,12 +230,12 @@ impl Store {
 
     /// Every run with its counts, oldest first.
     pub async fn runs(&self) -> Result<Vec<RunSummary>, StoreError> {
-        sqlx::query_as::<_, RunSummary>(concat!(
+        sqlx::query_as::<_, RunSummary>(self.dialect.sql(concat!(
             "SELECT ",
             run_counts_columns!(),
             run_counts_from!(),
             " ORDER BY r.run_id"
-        ))
+        )))
         .fetch_all(&self.pool)
         .await
         .map_err(query_err("listing runs"))
@@ -240,10 +243,10 @@ impl Store {
 
     /// The run's provenance, for resume.
     pub async fn run_record(&self, run_id: RunId) -> Result<RunRecord, StoreError> {
-        let row = sqlx::query_as::<_, RunRecordRow>(
+        let row = sqlx::query_as::<_, RunRecordRow>(self.dialect.sql(
             "SELECT run_id, status, seed, samples_planned, rod_schedule, rod_block, rig_toml, scene_toml,
                     poses_from_run_id
-             FROM runs WHERE run_id = ?",
+             FROM runs WHERE run_id = ?"),
         )
         .bind(run_id)
         .fetch_optional(&self.pool)
@@ -274,13 +277,13 @@ impl Store {
         run_id: RunId,
         source: RunId,
     ) -> Result<u64, StoreError> {
-        let rows: Vec<PairRow> = sqlx::query_as(
+        let rows: Vec<PairRow> = sqlx::query_as(self.dialect.sql(
             "SELECT a.sample_index, a.rod AS rod_a, a.cmd_x_m AS x_a, a.cmd_z_m AS z_a,
                     a.cmd_theta_rad AS theta_a, b.rod AS rod_b, b.cmd_x_m AS x_b,
                     b.cmd_z_m AS z_b, b.cmd_theta_rad AS theta_b
              FROM samples a JOIN samples b ON b.run_id = ?2 AND b.sample_index = a.sample_index
              WHERE a.run_id = ?1 ORDER BY a.sample_index",
-        )
+        ))
         .bind(run_id)
         .bind(source)
         .fetch_all(&self.pool)
@@ -312,11 +315,11 @@ impl Store {
     /// Replace the rig stored with run `run_id` (a resume on a rig whose devices are
     /// reached elsewhere; see `CollectPlan::resume_with_rig`).
     pub async fn set_run_rig(&self, run_id: RunId, rig_toml: &str) -> Result<(), StoreError> {
-        let result = sqlx::query(concat!(
+        let result = sqlx::query(self.dialect.sql(concat!(
             "UPDATE runs SET rig_toml = ?, updated_at = ",
             now_sql!(),
             " WHERE run_id = ?"
-        ))
+        )))
         .bind(rig_toml)
         .bind(run_id)
         .execute(&self.pool)
@@ -459,7 +462,7 @@ impl Store {
             .begin_with("BEGIN IMMEDIATE")
             .await
             .map_err(query_err("locking the run's lease"))?;
-        let existing = sqlx::query_as::<_, LeaseRow>(LEASE_SELECT)
+        let existing = sqlx::query_as::<_, LeaseRow>(Dialect::of(&tx).sql(LEASE_SELECT))
             .bind(run_id)
             .fetch_optional(&mut *tx)
             .await
@@ -482,7 +485,7 @@ impl Store {
                host = excluded.host, acquired_at = excluded.acquired_at,
                heartbeat_at = excluded.heartbeat_at"
         );
-        sqlx::query(sql)
+        sqlx::query(Dialect::of(&tx).sql(sql))
             .bind(run_id)
             .bind(&me.token)
             .bind(i64::from(me.pid))
@@ -504,7 +507,7 @@ impl Store {
             now_sql!(),
             " WHERE run_id = ? AND holder = ?"
         );
-        let done = sqlx::query(sql)
+        let done = sqlx::query(self.dialect.sql(sql))
             .bind(run_id)
             .bind(&me.token)
             .execute(&self.pool)
@@ -518,18 +521,21 @@ impl Store {
 
     /// Give `me`'s lease on `run_id` back (nothing if it is not ours).
     pub async fn release_lease(&self, run_id: RunId, me: &LeaseHolder) -> Result<(), StoreError> {
-        sqlx::query("DELETE FROM run_leases WHERE run_id = ? AND holder = ?")
-            .bind(run_id)
-            .bind(&me.token)
-            .execute(&self.pool)
-            .await
-            .map_err(query_err("releasing the run's lease"))?;
+        sqlx::query(
+            self.dialect
+                .sql("DELETE FROM run_leases WHERE run_id = ? AND holder = ?"),
+        )
+        .bind(run_id)
+        .bind(&me.token)
+        .execute(&self.pool)
+        .await
+        .map_err(query_err("releasing the run's lease"))?;
         Ok(())
     }
 
     /// The lease on `run_id`, if any.
     pub async fn lease(&self, run_id: RunId) -> Result<Option<LeaseRow>, StoreError> {
-        sqlx::query_as::<_, LeaseRow>(LEASE_SELECT)
+        sqlx::query_as::<_, LeaseRow>(self.dialect.sql(LEASE_SELECT))
             .bind(run_id)
             .fetch_optional(&self.pool)
             .await
@@ -543,10 +549,10 @@ impl Store {
         run_id: RunId,
         planned: u64,
     ) -> Result<Vec<u64>, StoreError> {
-        let stored: Vec<i64> = sqlx::query_scalar(
+        let stored: Vec<i64> = sqlx::query_scalar(self.dialect.sql(
             "SELECT sample_index FROM samples WHERE run_id = ? AND sample_index < ?
              ORDER BY sample_index",
-        )
+        ))
         .bind(run_id)
         .bind(super::to_i64("samples_planned", planned)?)
         .fetch_all(&self.pool)
@@ -573,12 +579,13 @@ impl Store {
         &self,
         run_id: RunId,
     ) -> Result<Option<softtouch_schemas::TimestampNs>, StoreError> {
-        let row: Option<(Option<i64>, Option<i64>)> = sqlx::query_as(
+        let row: Option<(Option<i64>, Option<i64>)> = sqlx::query_as(self.dialect.sql(
             "SELECT r.time_base_ns,
-                    (SELECT MAX(MAX(s.window_end_ns, s.frame_t_ns)) FROM samples s
+                    (SELECT MAX(CASE WHEN s.window_end_ns > s.frame_t_ns
+                                     THEN s.window_end_ns ELSE s.frame_t_ns END) FROM samples s
                      WHERE s.run_id = r.run_id)
              FROM runs r WHERE r.run_id = ?",
-        )
+        ))
         .bind(run_id)
         .fetch_optional(&self.pool)
         .await

@@ -2,16 +2,113 @@
 //! its own subset of these).
 #![allow(dead_code)]
 
-use std::path::Path;
+use softtouch_collector::store::DbTarget;
+use std::path::{Path, PathBuf};
 use std::process::Output;
 
-/// Run the `softtouch` binary in `dir` with `args`, with no `SOFTTOUCH_DB` from the
-/// environment.
+/// Whether this run of the tests is against PostgreSQL (`SOFTTOUCH_TEST_POSTGRES`, see
+/// TESTING.md): every database path a test names stands for a database of its own on
+/// that server.
+pub(crate) fn on_postgres() -> bool {
+    softtouch_collector::testing::on_postgres()
+}
+
+/// The database the path `db` stands for: the file itself, or (on PostgreSQL) a
+/// database of its own on the test server, created on first use.
+pub(crate) fn target_of(db: &Path) -> DbTarget {
+    use std::collections::HashMap;
+    use std::sync::{Mutex, OnceLock};
+    if !on_postgres() {
+        return DbTarget::File(db.to_owned());
+    }
+    static MADE: OnceLock<Mutex<HashMap<PathBuf, DbTarget>>> = OnceLock::new();
+    let key = std::path::absolute(db).unwrap_or_else(|_| db.to_owned());
+    let made = MADE.get_or_init(Mutex::default);
+    let mut made = made
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    made.entry(key.clone())
+        .or_insert_with(|| {
+            let dir = key.parent().unwrap_or(Path::new(".")).to_owned();
+            // Its own thread: a test inside a runtime may ask.
+            std::thread::spawn(move || {
+                softtouch_collector::testing::block_on(softtouch_collector::testing::fresh_target(
+                    &dir,
+                    "softtouch.db",
+                ))
+            })
+            .join()
+            .unwrap_or_else(|_| panic!("cannot create a test database"))
+        })
+        .clone()
+}
+
+/// Samples of run `run` in the database `db` stands for, read from outside while a
+/// collector writes it (0 while there is no database or no schema yet; nothing is
+/// created).
+pub(crate) async fn samples_in(db: &Path, run: i64) -> i64 {
+    use sqlx::Connection as _;
+    match target_of(db) {
+        DbTarget::File(path) => {
+            let options = sqlx::sqlite::SqliteConnectOptions::new()
+                .filename(path)
+                .read_only(true);
+            let Ok(mut conn) = sqlx::ConnectOptions::connect(&options).await else {
+                return 0;
+            };
+            sqlx::query_scalar("SELECT COUNT(*) FROM samples WHERE run_id = ?")
+                .bind(run)
+                .fetch_one(&mut conn)
+                .await
+                .unwrap_or(0)
+        }
+        DbTarget::Postgres(url) => {
+            let Ok(mut conn) = sqlx::PgConnection::connect(&url).await else {
+                return 0;
+            };
+            let n = sqlx::query_scalar("SELECT COUNT(*) FROM samples WHERE run_id = $1")
+                .bind(run)
+                .fetch_one(&mut conn)
+                .await
+                .unwrap_or(0);
+            let _ = conn.close().await;
+            n
+        }
+    }
+}
+
+/// `target_of` as `--db` takes it.
+pub(crate) fn db_arg(db: &Path) -> String {
+    match target_of(db) {
+        DbTarget::File(path) => path.display().to_string(),
+        DbTarget::Postgres(url) => url,
+    }
+}
+
+/// The `softtouch` binary to run in `dir`, its database `dir/softtouch.db` (or that
+/// path's database on the PostgreSQL test server), no `SOFTTOUCH_DB` from outside.
+pub(crate) fn command(dir: &Path) -> std::process::Command {
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_softtouch"));
+    command.current_dir(dir).env_remove("SOFTTOUCH_DB");
+    if on_postgres() {
+        command.env("SOFTTOUCH_DB", db_arg(&dir.join("softtouch.db")));
+    }
+    command
+}
+
+/// Run the `softtouch` binary in `dir` with `args` (see [`command`]); on PostgreSQL a
+/// `--db PATH` stands for that path's database there.
 pub(crate) fn softtouch(dir: &Path, args: &[&str]) -> Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_softtouch"))
-        .args(args)
-        .current_dir(dir)
-        .env_remove("SOFTTOUCH_DB")
+    let mut args: Vec<String> = args.iter().map(|a| (*a).to_owned()).collect();
+    if on_postgres() {
+        for i in 1..args.len() {
+            if args[i - 1] == "--db" {
+                args[i] = db_arg(&dir.join(&args[i]));
+            }
+        }
+    }
+    command(dir)
+        .args(&args)
         .output()
         .unwrap_or_else(|e| panic!("cannot run softtouch: {e}"))
 }

@@ -354,7 +354,7 @@ pub async fn create(store: &Store, new: &NewDataset) -> Result<DatasetInfo, Data
 
 /// Insert a dataset and its members (position = order of `members`) in a transaction.
 pub(crate) async fn insert_dataset(
-    tx: &mut sqlx::SqliteConnection,
+    tx: &mut sqlx::AnyConnection,
     name: &str,
     definition: &Definition,
     members: &[(i64, i64, Split)],

@@ -25,7 +25,8 @@ mod predict;
 mod results;
 mod svg;
 
-use std::path::{Path, PathBuf};
+use softtouch_store::DbTarget;
+use std::path::PathBuf;
 
 /// The report failed.
 #[derive(Debug, thiserror::Error)]
@@ -138,7 +139,7 @@ pub struct Report {
 /// The database is missing, of another schema, or unreadable; an option names a run
 /// or model that is not there; a results file is unreadable or malformed; a stored
 /// model or frame cannot be used.
-pub async fn build(db: &Path, options: &ReportOptions) -> Result<Report, ReportError> {
+pub async fn build(db: &DbTarget, options: &ReportOptions) -> Result<Report, ReportError> {
     let pool = data::open_read_only(db).await?;
     let result = gather(&pool, db, options).await;
     pool.close().await;
@@ -170,7 +171,8 @@ pub(crate) struct ModelData {
 /// Everything on the page.
 #[derive(Debug, Clone)]
 pub(crate) struct Content {
-    pub db: PathBuf,
+    /// The database as shown (a URL without its password).
+    pub db: String,
     pub generated_at: String,
     pub schema_version: i64,
     pub options: ReportOptions,
@@ -188,7 +190,7 @@ pub(crate) struct Content {
 
 async fn gather(
     pool: &data::ReadOnly,
-    db: &Path,
+    db: &DbTarget,
     options: &ReportOptions,
 ) -> Result<Content, ReportError> {
     // Files first: a typo in a path fails before any slow work.
@@ -266,7 +268,7 @@ async fn gather(
         });
     }
     Ok(Content {
-        db: db.to_owned(),
+        db: db.display().to_string(),
         generated_at: data::now(pool).await?,
         schema_version: crate::store::Store::schema_version(),
         options: options.clone(),

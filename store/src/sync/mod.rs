@@ -22,7 +22,6 @@ use super::{
 use crate::WrenchColumns;
 use softtouch_drivers::Frame;
 use softtouch_schemas::{FrameFormat, FrameMeta, FtReading, Medium, Sample, TimestampNs};
-use std::path::Path;
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
@@ -232,11 +231,11 @@ pub fn encode_for_store(frame: &Frame) -> Result<(FrameMeta, Vec<u8>), StoreErro
 
 impl SyncStore {
     /// Open (creating and migrating) the database at `path` on a new thread.
-    pub fn open(path: &Path) -> Result<Self, StoreError> {
+    pub fn open(target: impl Into<crate::DbTarget>) -> Result<Self, StoreError> {
         let (tx, rx) = mpsc::sync_channel::<Op>(1);
         let (ready_tx, ready_rx) = mpsc::sync_channel::<Result<(), StoreError>>(1);
         let shared = Arc::new(Mutex::new(Shared::default()));
-        let path = path.to_owned();
+        let target = target.into();
         let writer_shared = Arc::clone(&shared);
         let thread = std::thread::Builder::new()
             .name("softtouch-store".into())
@@ -254,7 +253,7 @@ impl SyncStore {
                         return;
                     }
                 };
-                let store = match rt.block_on(Store::open(&path)) {
+                let store = match rt.block_on(Store::open(target)) {
                     Ok(s) => {
                         let _ = ready_tx.send(Ok(()));
                         s

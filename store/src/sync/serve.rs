@@ -148,11 +148,11 @@ pub(super) async fn serve(store: &Store, op: Op, shared: &Mutex<Shared>) {
             let _ = reply.send(store.set_run_status(run_id, status).await);
         }
         Op::Labels { run_id, reply } => {
-            let rows = sqlx::query_as::<_, LabelRow>(
+            let rows = sqlx::query_as::<_, LabelRow>(store.dialect().sql(
                 "SELECT sample_index, rod, status, cmd_x_m, cmd_z_m, cmd_theta_rad,
                         fx_n, fy_n, fz_n, tx_nm, ty_nm, tz_nm
                  FROM samples WHERE run_id = ? ORDER BY sample_index",
-            )
+            ))
             .bind(run_id)
             .fetch_all(store.pool())
             .await

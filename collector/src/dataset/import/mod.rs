@@ -38,7 +38,7 @@ use crate::store::{FrameRecord, RunId, RunStatus, Store};
 use softtouch_schemas::{
     ContactPose, FrameFormat, FrameMeta, Medium, Sample, SampleStatus, TimestampNs, Wrench,
 };
-use sqlx::SqliteConnection;
+use sqlx::AnyConnection;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -253,7 +253,7 @@ pub async fn import(
 
 /// Create an imported run: completed, one rod per block, and its `run_imports` row.
 async fn write_run(
-    conn: &mut SqliteConnection,
+    conn: &mut AnyConnection,
     run: &NewImportedRun,
     layout: Layout,
     source: &Path,
@@ -291,7 +291,7 @@ async fn write_run(
 /// Store an item as a sample with its PNG frame and an empty window; what the files do
 /// not carry is neutral (see the module doc).
 async fn write_sample(
-    conn: &mut SqliteConnection,
+    conn: &mut AnyConnection,
     run_id: RunId,
     item: &Item,
     png: &[u8],

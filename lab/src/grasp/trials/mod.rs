@@ -555,7 +555,7 @@ pub(crate) async fn stored_session(
     let s = store.grasp_session(id).await?.ok_or_else(|| {
         invalid(format!(
             "--resume {id}: no grasp session {id} in {}",
-            store.path().display()
+            store.target().display()
         ))
     })?;
     if let Some(m) = model

@@ -116,14 +116,14 @@ pub(crate) fn render(c: &Content) -> Result<String, ReportError> {
             head {
                 meta charset="utf-8";
                 meta name="viewport" content="width=device-width, initial-scale=1";
-                title { "softtouch report: " (c.db.display().to_string()) }
+                title { "softtouch report: " (c.db) }
                 style { (PreEscaped(CSS)) }
             }
             body {
                 header {
                     h1 { "softtouch report" }
                     p.prov {
-                        "Database " code { (c.db.display().to_string()) }
+                        "Database " code { (c.db) }
                         " (schema " (c.schema_version) "), written by softtouch " (version)
                         " at " (c.generated_at) ". "
                         @if let Some(runs) = &c.options.runs {

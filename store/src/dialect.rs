@@ -1,0 +1,193 @@
+//! One text per query, two engines: the store's SQL is written once, in SQLite's
+//! spelling, and [`Dialect::sql`] hands it to PostgreSQL with the few differences
+//! rewritten.
+//!
+//! Why a rewrite and not two sets of queries: the store has about a hundred queries and
+//! every one of them means the same on both engines once three things are spelled
+//! PostgreSQL's way. Keeping one text keeps one place to read and review a query; the
+//! rewrite is small, tested below, and never touches SQLite's text (SQLite runs exactly
+//! what is written).
+//!
+//! What is rewritten for PostgreSQL:
+//! - placeholders: `?` becomes `$1`, `$2`, … in order; `?NNN` becomes `$NNN`;
+//! - "now" as text: the store's ISO-8601 UTC timestamps
+//!   ([`crate::rows::now_sql`]) become `to_char(clock_timestamp() …)` of the same
+//!   format;
+//! - nothing inside a quoted string or identifier.
+//!
+//! What is written portably instead (both engines accept it): `ON CONFLICT … DO
+//! NOTHING`, `RETURNING`, `COALESCE`, `CASE`, `CAST(… AS BIGINT)` around `SUM` (which
+//! PostgreSQL widens to `numeric`), and `CAST(… AS DOUBLE PRECISION)`. `julianday` is
+//! defined as a function in PostgreSQL's schema (`migrations/postgres`), with SQLite's
+//! meaning. What has no common spelling (PRAGMAs, sizes, integrity checks) is a method
+//! with one arm per engine.
+
+use sqlx::AnyConnection;
+use sqlx::{AssertSqlSafe, SqlSafeStr, SqlStr};
+
+/// Which engine a connection speaks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dialect {
+    /// SQLite: the embedded default, one file.
+    Sqlite,
+    /// PostgreSQL: the fleet database.
+    Postgres,
+}
+
+/// The store's "now" as SQLite writes it, and PostgreSQL's same text.
+const NOW_REWRITES: [(&str, &str); 2] = [
+    (
+        "strftime('%Y-%m-%dT%H:%M:%fZ', 'now')",
+        "to_char(clock_timestamp() AT TIME ZONE 'UTC', 'YYYY-MM-DD\"T\"HH24:MI:SS.MS\"Z\"')",
+    ),
+    (
+        "strftime('%Y-%m-%d %H:%M:%SZ', 'now')",
+        "to_char(clock_timestamp() AT TIME ZONE 'UTC', 'YYYY-MM-DD HH24:MI:SS\"Z\"')",
+    ),
+];
+
+impl Dialect {
+    /// The engine behind a connection.
+    #[must_use]
+    pub fn of(conn: &AnyConnection) -> Self {
+        Self::named(conn.backend_name())
+    }
+
+    /// The engine by sqlx's backend name (`SQLite`, `PostgreSQL`).
+    #[must_use]
+    pub fn named(backend: &str) -> Self {
+        if backend.eq_ignore_ascii_case("postgresql") || backend.eq_ignore_ascii_case("postgres") {
+            Self::Postgres
+        } else {
+            Self::Sqlite
+        }
+    }
+
+    /// A short name for messages.
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Sqlite => "SQLite",
+            Self::Postgres => "PostgreSQL",
+        }
+    }
+
+    /// The query text this engine runs for the store's `text` (see the module's docs).
+    #[must_use]
+    pub fn sql(self, text: &'static str) -> SqlStr {
+        match self {
+            Self::Sqlite => text.into_sql_str(),
+            Self::Postgres => AssertSqlSafe(to_postgres(text)).into_sql_str(),
+        }
+    }
+}
+
+impl Dialect {
+    /// [`Dialect::sql`] of a text made at run time (the copier's, from the schema's own
+    /// table and column names: never from input).
+    #[must_use]
+    pub fn sql_owned(self, text: String) -> SqlStr {
+        match self {
+            Self::Sqlite => AssertSqlSafe(text).into_sql_str(),
+            Self::Postgres => AssertSqlSafe(to_postgres(&text)).into_sql_str(),
+        }
+    }
+}
+
+/// SQLite's text in PostgreSQL's spelling: placeholders numbered, "now" rewritten,
+/// quoted text left alone.
+#[must_use]
+pub fn to_postgres(text: &str) -> String {
+    let mut text = std::borrow::Cow::Borrowed(text);
+    for (sqlite, postgres) in NOW_REWRITES {
+        if text.contains(sqlite) {
+            text = std::borrow::Cow::Owned(text.replace(sqlite, postgres));
+        }
+    }
+    let mut out = String::with_capacity(text.len() + 16);
+    let mut next = 0u32;
+    let mut quote: Option<char> = None;
+    let mut chars = text.chars().peekable();
+    while let Some(c) = chars.next() {
+        match quote {
+            Some(q) => {
+                out.push(c);
+                if c == q {
+                    quote = None;
+                }
+            }
+            None if c == '\'' || c == '"' => {
+                quote = Some(c);
+                out.push(c);
+            }
+            None if c == '?' => {
+                out.push('$');
+                if chars.peek().is_some_and(char::is_ascii_digit) {
+                    while let Some(d) = chars.next_if(char::is_ascii_digit) {
+                        out.push(d);
+                    }
+                } else {
+                    next += 1;
+                    out.push_str(&next.to_string());
+                }
+            }
+            None => out.push(c),
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn placeholders_are_numbered_in_order_and_numbered_ones_kept() {
+        assert_eq!(
+            to_postgres("SELECT a FROM t WHERE b = ? AND c = ? LIMIT ?"),
+            "SELECT a FROM t WHERE b = $1 AND c = $2 LIMIT $3"
+        );
+        assert_eq!(
+            to_postgres("VALUES (?1, ?2, ?12, ?1)"),
+            "VALUES ($1, $2, $12, $1)"
+        );
+    }
+
+    #[test]
+    fn quoted_text_and_identifiers_are_left_alone() {
+        assert_eq!(
+            to_postgres("SELECT '?', \"a?b\" FROM t WHERE x = ? AND y = 'it''s ?'"),
+            "SELECT '?', \"a?b\" FROM t WHERE x = $1 AND y = 'it''s ?'"
+        );
+    }
+
+    #[test]
+    fn now_is_rewritten_with_the_same_format() {
+        let pg = to_postgres(concat!("UPDATE runs SET updated_at = ", crate::now_sql!()));
+        assert!(pg.contains("clock_timestamp()"), "{pg}");
+        assert!(!pg.contains("strftime"), "{pg}");
+        // The format's quotes do not open a placeholder-free zone that swallows the rest.
+        assert_eq!(
+            to_postgres(concat!("SELECT ", crate::now_sql!(), ", ?"))
+                .matches("$1")
+                .count(),
+            1
+        );
+    }
+
+    #[test]
+    fn empty_and_unterminated_text_is_passed_through() {
+        assert_eq!(to_postgres(""), "");
+        assert_eq!(to_postgres("SELECT 'open ?"), "SELECT 'open ?");
+        assert_eq!(to_postgres("?"), "$1");
+    }
+
+    #[test]
+    fn sqlite_runs_what_is_written() {
+        let text = "SELECT ? FROM t";
+        assert_eq!(Dialect::Sqlite.sql(text).as_str(), text);
+        assert_eq!(Dialect::Postgres.sql(text).as_str(), "SELECT $1 FROM t");
+        assert_eq!(Dialect::named("PostgreSQL"), Dialect::Postgres);
+        assert_eq!(Dialect::named("SQLite"), Dialect::Sqlite);
+    }
+}
