@@ -308,7 +308,7 @@ struct Faults {
     /// Before collecting: change the plan (e.g. poses outside the workspace).
     edit_plan: fn(&mut CollectPlan),
     /// Before collecting: SQL run on the database from another connection.
-    sql: &'static str,
+    sql: String,
 }
 
 impl Default for Faults {
@@ -319,7 +319,7 @@ impl Default for Faults {
             stop_on_approach: None,
             absent_operator: false,
             edit_plan: |_| {},
-            sql: "",
+            sql: String::new(),
         }
     }
 }
@@ -826,11 +826,6 @@ fn a_second_stop_request_interrupts_the_rod_change_prompt() {
     nothing_lost(&e, &s);
 }
 
-/// Sample inserts fail from index 2 on (as a full disk would: the trigger aborts the
-/// insert; events and status still go through).
-const FAIL_FROM_SAMPLE_2: &str = "CREATE TRIGGER injected_full BEFORE INSERT ON samples
-     WHEN NEW.sample_index >= 2 BEGIN SELECT RAISE(ABORT, 'database or disk is full (injected)'); END;";
-
 #[test]
 fn a_store_that_fails_mid_run_ends_in_a_safe_stop_and_resume_fills_the_gap() {
     let dir = tempdir();
@@ -839,7 +834,9 @@ fn a_store_that_fails_mid_run_ends_in_a_safe_stop_and_resume_fills_the_gap() {
         &db,
         6,
         Faults {
-            sql: FAIL_FROM_SAMPLE_2,
+            // Sample inserts fail from index 2 on (as a full disk would: the trigger
+            // aborts the insert; events and status still go through).
+            sql: common::fail_inserts_from(2),
             ..Faults::default()
         },
     );
@@ -872,7 +869,7 @@ fn a_store_that_fails_mid_run_ends_in_a_safe_stop_and_resume_fills_the_gap() {
         let store = Store::open(common::target_of(&db))
             .await
             .unwrap_or_else(|e| panic!("{e}"));
-        sqlx::query(store.dialect().sql("DROP TRIGGER injected_full"))
+        sqlx::raw_sql(common::stop_failing())
             .execute(store.pool())
             .await
             .unwrap_or_else(|e| panic!("{e}"));
@@ -1169,13 +1166,29 @@ fn a_lease_from_another_host_is_taken_over_only_once_its_heartbeat_is_stale() {
                 .execute(store.pool())
                 .await
                 .unwrap_or_else(|e| panic!("{e}"));
-            sqlx::query(store.dialect().sql(
-                "INSERT OR REPLACE INTO run_leases (run_id, holder, pid, host, acquired_at, heartbeat_at)
-                 VALUES (1, 'elsewhere', 4242, 'another-host',
-                         strftime('%Y-%m-%dT%H:%M:%fZ', 'now', ?1),
-                         strftime('%Y-%m-%dT%H:%M:%fZ', 'now', ?1))"),
-            )
-            .bind(format!("-{age_s} seconds"))
+            let backdated = if store.dialect() == softtouch_collector::store::Dialect::Postgres {
+                sqlx::query(
+                    "INSERT INTO run_leases (run_id, holder, pid, host, acquired_at, heartbeat_at)
+                     VALUES (1, 'elsewhere', 4242, 'another-host',
+                             to_char(clock_timestamp() AT TIME ZONE 'UTC' - make_interval(secs => $1),
+                                     'YYYY-MM-DD\"T\"HH24:MI:SS.MS\"Z\"'),
+                             to_char(clock_timestamp() AT TIME ZONE 'UTC' - make_interval(secs => $1),
+                                     'YYYY-MM-DD\"T\"HH24:MI:SS.MS\"Z\"'))
+                     ON CONFLICT (run_id) DO UPDATE SET holder = excluded.holder, pid = excluded.pid,
+                         host = excluded.host, acquired_at = excluded.acquired_at,
+                         heartbeat_at = excluded.heartbeat_at",
+                )
+                .bind(f64::from(age_s))
+            } else {
+                sqlx::query(
+                    "INSERT OR REPLACE INTO run_leases (run_id, holder, pid, host, acquired_at, heartbeat_at)
+                     VALUES (1, 'elsewhere', 4242, 'another-host',
+                             strftime('%Y-%m-%dT%H:%M:%fZ', 'now', ?1),
+                             strftime('%Y-%m-%dT%H:%M:%fZ', 'now', ?1))",
+                )
+                .bind(format!("-{age_s} seconds"))
+            };
+            backdated
             .execute(store.pool())
             .await
             .unwrap_or_else(|e| panic!("{e}"));

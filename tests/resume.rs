@@ -253,15 +253,11 @@ fn a_run_stopped_twice_and_resumed_equals_an_uninterrupted_one_underwater() {
 
 // ---------------------------------------------------------------- a store failure
 
-/// Sample inserts fail from index 3 on (as a full disk would); events still go through.
-const FAIL_FROM_SAMPLE_3: &str = "CREATE TRIGGER injected_full BEFORE INSERT ON samples
-     WHEN NEW.sample_index >= 3 BEGIN SELECT RAISE(ABORT, 'database or disk is full (injected)'); END;";
-
 fn failed_and_resumed(scene: Option<&Path>, samples: u64, seed: u64) {
     let dir = tempdir();
     let db = dir.path().join("softtouch.db");
     ok(&softtouch(dir.path(), &["db", "init"]));
-    let sql = |sql: &'static str| {
+    let sql = |sql: String| {
         runtime().block_on(async {
             let store = Store::open(common::target_of(&db))
                 .await
@@ -273,10 +269,11 @@ fn failed_and_resumed(scene: Option<&Path>, samples: u64, seed: u64) {
             store.close().await;
         });
     };
-    sql(FAIL_FROM_SAMPLE_3);
+    // Sample inserts fail from index 3 on (as a full disk would); events still go through.
+    sql(common::fail_inserts_from(3));
     let out = run_binary(dir.path(), &new_run_args(samples, seed, scene));
     common::fails_with(&out, 1, "disk is full");
-    sql("DROP TRIGGER injected_full");
+    sql(common::stop_failing().to_owned());
     let partial = snapshot(&db, 1);
     assert_eq!(
         partial.samples.len(),

@@ -282,7 +282,9 @@ fn bind(q: Query<'_>, cell: Cell) -> Query<'_> {
         Cell::Text(v) => q.bind(v),
         Cell::Blob(v) => q.bind(v),
         Cell::Null(kind) => match kind {
-            AnyTypeInfoKind::Real | AnyTypeInfoKind::Double => q.bind(None::<f64>),
+            AnyTypeInfoKind::Real | AnyTypeInfoKind::Double => {
+                q.bind(crate::dialect::NullableF64(None))
+            }
             AnyTypeInfoKind::Text => q.bind(None::<String>),
             AnyTypeInfoKind::Blob => q.bind(None::<Vec<u8>>),
             _ => q.bind(None::<i64>),

@@ -124,7 +124,7 @@ pub async fn insert_dataset(
         what: "dataset",
         why: "too many samples".into(),
     })?;
-    let inserted: Option<i64> = sqlx::query_scalar(Dialect::of(&conn).sql(concat!(
+    let inserted: Option<i64> = sqlx::query_scalar(Dialect::of(conn).sql(concat!(
         "INSERT INTO datasets (name, definition_json, seed, split_ratio, sample_count,
                                software_version, schema_version, created_at)
          VALUES (?, ?, ?, ?, ?, ?, ?, ",
@@ -145,7 +145,7 @@ pub async fn insert_dataset(
         return Ok(None);
     };
     for (position, &(run, index, split)) in d.members.iter().enumerate() {
-        sqlx::query(Dialect::of(&conn).sql(
+        sqlx::query(Dialect::of(conn).sql(
             "INSERT INTO dataset_members (dataset_id, position, run_id, sample_index, split)
              VALUES (?, ?, ?, ?, ?)",
         ))

@@ -23,6 +23,9 @@
 //! with one arm per engine.
 
 use sqlx::AnyConnection;
+use sqlx::Database;
+use sqlx::any::{Any, AnyTypeInfo};
+use sqlx::encode::{Encode, IsNull};
 use sqlx::{AssertSqlSafe, SqlSafeStr, SqlStr};
 
 /// Which engine a connection speaks.
@@ -78,6 +81,34 @@ impl Dialect {
         match self {
             Self::Sqlite => text.into_sql_str(),
             Self::Postgres => AssertSqlSafe(to_postgres(text)).into_sql_str(),
+        }
+    }
+}
+
+/// A nullable double to bind: `Option<f64>` itself cannot be bound on PostgreSQL
+/// through sqlx 0.9.0's `Any`, whose NULL of a double becomes a 4-byte `real` NULL
+/// (`AnyArguments::convert_into` swaps the two float kinds); the statement is then
+/// prepared with a `real` parameter and the next non-NULL double is refused ("incorrect
+/// binary data format"). This binds NULL as the kind that arrives as an 8-byte `double
+/// precision` (a `real`'s NULL, which sqlx swaps to a double's). The PostgreSQL runs of the store's tests (TESTING.md) catch a sqlx that
+/// changes this.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NullableF64(pub Option<f64>);
+
+impl sqlx::Type<Any> for NullableF64 {
+    fn type_info() -> AnyTypeInfo {
+        <f64 as sqlx::Type<Any>>::type_info()
+    }
+}
+
+impl Encode<'_, Any> for NullableF64 {
+    fn encode_by_ref(
+        &self,
+        buf: &mut <Any as Database>::ArgumentBuffer,
+    ) -> Result<IsNull, sqlx::error::BoxDynError> {
+        match self.0 {
+            Some(v) => <f64 as Encode<'_, Any>>::encode_by_ref(&v, buf),
+            None => <Option<f32> as Encode<'_, Any>>::encode_by_ref(&None, buf),
         }
     }
 }

@@ -124,7 +124,7 @@ impl Store {
         .bind(&row.ended)
         .bind(&row.points_json)
         .bind(&row.lambda_json)
-        .bind(row.true_lambda_max_n_per_mm.filter(|v| v.is_finite()))
+        .bind(crate::dialect::NullableF64(row.true_lambda_max_n_per_mm.filter(|v| v.is_finite())))
         .bind(softtouch_schemas::SOFTWARE_VERSION)
         .fetch_one(self.pool())
         .await

@@ -87,7 +87,7 @@ pub async fn insert_run(conn: &mut AnyConnection, run: &RunRow<'_>) -> Result<Ru
         now_sql!(),
         " END) RETURNING run_id"
     );
-    let run_id: i64 = sqlx::query_scalar(Dialect::of(&conn).sql(sql))
+    let run_id: i64 = sqlx::query_scalar(Dialect::of(conn).sql(sql))
         .bind(run.status.as_str())
         .bind(seed_to_sql(run.seed))
         .bind(to_i64("samples_planned", run.samples_planned)?)
@@ -116,7 +116,7 @@ pub async fn insert_run_import(
     origin_run_id: Option<i64>,
     provenance: &str,
 ) -> Result<(), StoreError> {
-    sqlx::query(Dialect::of(&conn).sql(concat!(
+    sqlx::query(Dialect::of(conn).sql(concat!(
         "INSERT INTO run_imports (run_id, layout, source_path, origin_run_id, provenance, imported_at)
          VALUES (?, ?, ?, ?, ?, ",
         now_sql!(),
@@ -142,7 +142,7 @@ pub async fn insert_sample(
     let m = sample.wrench_mean_in_sensor.to_array();
     let s = sample.wrench_std_in_sensor.to_array();
     let measured = sample.measured;
-    let inserted = sqlx::query(Dialect::of(&conn).sql(
+    let inserted = sqlx::query(Dialect::of(conn).sql(
         "INSERT INTO samples (run_id, sample_index, rod, medium,
              cmd_x_m, cmd_z_m, cmd_theta_rad, meas_x_m, meas_z_m, meas_theta_rad,
              fx_n, fy_n, fz_n, tx_nm, ty_nm, tz_nm,
@@ -159,9 +159,9 @@ pub async fn insert_sample(
     .bind(sample.commanded.x_m)
     .bind(sample.commanded.z_m)
     .bind(sample.commanded.theta_rad)
-    .bind(measured.map(|p| p.x_m))
-    .bind(measured.map(|p| p.z_m))
-    .bind(measured.map(|p| p.theta_rad))
+    .bind(crate::dialect::NullableF64(measured.map(|p| p.x_m)))
+    .bind(crate::dialect::NullableF64(measured.map(|p| p.z_m)))
+    .bind(crate::dialect::NullableF64(measured.map(|p| p.theta_rad)))
     .bind(m[0])
     .bind(m[1])
     .bind(m[2])
@@ -195,7 +195,7 @@ pub async fn insert_frame(
     sample_index: u64,
     frame: FrameRecord<'_>,
 ) -> Result<(), StoreError> {
-    sqlx::query(Dialect::of(&conn).sql(
+    sqlx::query(Dialect::of(conn).sql(
         "INSERT INTO frames (run_id, sample_index, format, width, height, sequence, t_ns, data)
          VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
     ))
@@ -224,7 +224,7 @@ pub async fn insert_ft_window(
         what: "window",
         why: "too many readings".into(),
     })?;
-    sqlx::query(Dialect::of(&conn).sql(
+    sqlx::query(Dialect::of(conn).sql(
         "INSERT INTO ft_windows (run_id, sample_index, encoding, reading_count, data) VALUES (?, ?, ?, ?, ?)"),
     )
     .bind(run_id)
@@ -248,7 +248,7 @@ pub async fn insert_event(
     kind: &str,
     message: &str,
 ) -> Result<(), StoreError> {
-    sqlx::query(Dialect::of(&conn).sql(concat!(
+    sqlx::query(Dialect::of(conn).sql(concat!(
         "INSERT INTO events (run_id, sample_index, t_ns, created_at, level, kind, message)
          VALUES (?, ?, ?, ",
         now_sql!(),

@@ -451,17 +451,30 @@ const LEASE_SELECT: &str = "SELECT holder, pid, host, acquired_at, heartbeat_at,
 impl Store {
     /// Take run `run_id`'s lease for `me`: refused with [`StoreError::Leased`] while
     /// another live process holds it; a stale one is taken over (see [`LEASE_STALE_S`]).
-    /// One `BEGIN IMMEDIATE` transaction, so two processes cannot both win.
+    /// One transaction that holds the lease's lock from its start, so two processes
+    /// (on any hosts) cannot both win: SQLite's `BEGIN IMMEDIATE` (the database's write
+    /// lock), PostgreSQL's transaction-scoped advisory lock on the run.
     pub async fn acquire_lease(
         &self,
         run_id: RunId,
         me: &LeaseHolder,
     ) -> Result<LeaseTaken, StoreError> {
-        let mut tx = self
-            .pool
-            .begin_with("BEGIN IMMEDIATE")
+        let mut tx = match self.dialect {
+            Dialect::Sqlite => self.pool.begin_with("BEGIN IMMEDIATE").await,
+            Dialect::Postgres => self.pool.begin().await,
+        }
+        .map_err(query_err("locking the run's lease"))?;
+        if self.dialect == Dialect::Postgres {
+            // Two keys: this lock's namespace, and the run. Released at commit or rollback,
+            // or when a killed holder's connection drops.
+            sqlx::query(
+                "SELECT CAST(pg_advisory_xact_lock(hashtext('softtouch.run_lease'), CAST($1 AS INTEGER)) AS TEXT)",
+            )
+            .bind(run_id)
+            .fetch_one(&mut *tx)
             .await
             .map_err(query_err("locking the run's lease"))?;
+        }
         let existing = sqlx::query_as::<_, LeaseRow>(Dialect::of(&tx).sql(LEASE_SELECT))
             .bind(run_id)
             .fetch_optional(&mut *tx)

@@ -77,6 +77,48 @@ pub(crate) async fn samples_in(db: &Path, run: i64) -> i64 {
     }
 }
 
+/// Whether a test of the SQLite file itself (its path, its log, its write-ahead log)
+/// is skipped: on PostgreSQL there is no file. Says so on stderr.
+pub(crate) fn skip_on_postgres(test: &str) -> bool {
+    let skip = on_postgres();
+    if skip {
+        eprintln!("{test}: about the SQLite file; not run against PostgreSQL");
+    }
+    skip
+}
+
+/// SQL that makes every sample insert from index `from` on fail as a full disk would
+/// (the trigger `injected_full`), in the engine's own spelling; [`stop_failing`] undoes it.
+pub(crate) fn fail_inserts_from(from: u32) -> String {
+    if on_postgres() {
+        format!(
+            "CREATE FUNCTION injected_full() RETURNS trigger LANGUAGE plpgsql AS $$
+             BEGIN
+                 IF NEW.sample_index >= {from} THEN
+                     RAISE EXCEPTION 'database or disk is full (injected)';
+                 END IF;
+                 RETURN NEW;
+             END $$;
+             CREATE TRIGGER injected_full BEFORE INSERT ON samples
+                 FOR EACH ROW EXECUTE FUNCTION injected_full();"
+        )
+    } else {
+        format!(
+            "CREATE TRIGGER injected_full BEFORE INSERT ON samples
+             WHEN NEW.sample_index >= {from} BEGIN SELECT RAISE(ABORT, 'database or disk is full (injected)'); END;"
+        )
+    }
+}
+
+/// Drops [`fail_inserts_from`]'s trigger.
+pub(crate) fn stop_failing() -> &'static str {
+    if on_postgres() {
+        "DROP TRIGGER injected_full ON samples"
+    } else {
+        "DROP TRIGGER injected_full"
+    }
+}
+
 /// `target_of` as `--db` takes it.
 pub(crate) fn db_arg(db: &Path) -> String {
     match target_of(db) {
