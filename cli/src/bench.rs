@@ -78,15 +78,28 @@ Runs on virtual time; the scratch database DIR/bench.db is replaced on each run.
         seed: u64,
     },
     /// Store ingest: samples per second written with 640×480 frames, with and without
-    /// PNG encoding.
-    #[command(after_help = "Example:\n  softtouch bench ingest --samples 2000")]
+    /// PNG encoding; then 1, 2 and 4 rigs writing one store at once (each its own run,
+    /// raw frames PNG-encoded on its writer thread), on SQLite and, with `--postgres`, on
+    /// a PostgreSQL server beside it.
+    #[command(after_help = "Examples:
+  softtouch bench ingest --samples 2000
+  softtouch bench ingest --samples 500 --rigs 1,2,4 --postgres postgres://lab@db.lab/postgres
+
+--postgres names a server database the user may create databases from: each case writes
+a new database of its own (softtouch_bench_PID_RIGS), left there for a look.")]
     Ingest {
-        /// Samples to write per case.
+        /// Samples to write per case (per rig in the several-rigs table).
         #[arg(long, default_value_t = 2000)]
         samples: u64,
         /// Where the scratch database goes.
         #[arg(long, default_value = "bench-out")]
         out: PathBuf,
+        /// Rig counts for the several-rigs table (empty: no table).
+        #[arg(long, value_delimiter = ',', default_value = "1,2,4")]
+        rigs: Vec<usize>,
+        /// A PostgreSQL server to run the several-rigs table on too.
+        #[arg(long)]
+        postgres: Option<String>,
     },
 }
 
@@ -172,16 +185,81 @@ pub async fn run(
             store.close();
             report_collection(&dir, &points, &breakdown, default_point, out)
         }
-        BenchCommand::Ingest { samples, out: dir } => {
+        BenchCommand::Ingest {
+            samples,
+            out: dir,
+            rigs,
+            postgres,
+        } => {
+            if samples == 0 || rigs.iter().any(|&r| r == 0 || r > 64) {
+                return Err(Failure::BadInput(anyhow!(
+                    "--samples and --rigs: expected at least 1 (and at most 64 rigs)"
+                )));
+            }
+            let server = postgres
+                .map(|url| match url.parse::<softtouch_store::DbTarget>() {
+                    Ok(softtouch_store::DbTarget::Postgres(url)) => Ok(url),
+                    _ => Err(Failure::BadInput(anyhow!(
+                        "--postgres: expected postgres://USER@HOST[:PORT]/DATABASE"
+                    ))),
+                })
+                .transpose()?;
             let db = scratch_db(&dir)?;
             let store = SyncStore::open(&db)?;
             let timed = time_ingest(&store, samples);
             store.close();
             let mut text = timed.map_err(|e| Failure::Runtime(e.into()))?;
             text.push_str(&db_size_line(&db));
-            out.write_all(text.as_bytes()).map_err(io_failure)
+            out.write_all(text.as_bytes()).map_err(io_failure)?;
+            if !rigs.is_empty() {
+                several_rigs(&dir, &rigs, samples, server.as_deref(), out).await?;
+            }
+            Ok(())
         }
     }
+}
+
+/// The several-rigs table: total and per-rig samples/s for each rig count, SQLite
+/// (a new file per case) and PostgreSQL (a new database per case) side by side.
+async fn several_rigs(
+    dir: &Path,
+    rigs: &[usize],
+    samples: u64,
+    server: Option<&str>,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    use softtouch_collector::collect::bench_out::time_rigs;
+    use softtouch_store::{DbTarget, Store};
+    let mut text = format!(
+        "\nseveral rigs into one store ({samples} samples of 640×480 each, raw RGB → PNG):\n\
+         engine      rigs   samples   seconds   samples/s   per rig/s\n"
+    );
+    for &n in rigs {
+        let mut targets = vec![("SQLite", DbTarget::File(scratch_db(dir)?))];
+        if let Some(server) = server {
+            let name = format!("softtouch_bench_{}_{n}", std::process::id());
+            targets.push((
+                "PostgreSQL",
+                Store::create_postgres_database(server, &name).await?,
+            ));
+        }
+        for (engine, target) in targets {
+            let t = target.clone();
+            let secs = tokio::task::spawn_blocking(move || time_rigs(&t, n, samples))
+                .await
+                .map_err(|e| Failure::Runtime(anyhow!("the bench's thread: {e}")))?
+                .map_err(|e| Failure::Runtime(e.into()))?;
+            let total = samples * n as u64;
+            let line = format!(
+                "{engine:<10}  {n:>4}  {total:>8}  {secs:>8.2}  {:>10.0}  {:>10.0}\n",
+                total as f64 / secs,
+                samples as f64 / secs
+            );
+            eprint!("{line}");
+            text.push_str(&line);
+        }
+    }
+    out.write_all(text.as_bytes()).map_err(io_failure)
 }
 
 fn report_collection(

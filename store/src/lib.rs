@@ -404,6 +404,16 @@ impl Store {
             Dialect::Sqlite => &MIGRATOR,
             Dialect::Postgres => &PG_MIGRATOR,
         };
+        if dialect == Dialect::Postgres {
+            // One connection first, so that a server that is not there, a refused login
+            // or a missing database is said at once (the pool would retry for its whole
+            // acquire timeout).
+            use sqlx::Connection as _;
+            let conn = sqlx::AnyConnection::connect(&url)
+                .await
+                .map_err(|source| connect_error(&shown, source))?;
+            let _ = conn.close().await;
+        }
         // Two processes opening a new database at once race: switching a new SQLite file
         // to WAL can find it locked, and both try the first migration (the loser fails on
         // a table that now exists; on PostgreSQL sqlx's advisory lock serialises them).

@@ -188,6 +188,77 @@ pub fn time_ingest(store: &SyncStore, samples: u64) -> Result<String, BenchError
     Ok(text)
 }
 
+/// Several rigs writing one store at once: `rigs` threads, each with a store of its own
+/// (its own writer thread and connections, as a collector process has) and a run of
+/// its own, each submitting `samples` samples with raw 640×480 frames (PNG-encoded on
+/// its writer thread, as collection does). The wall time from the first submission to
+/// the last commit, in seconds.
+///
+/// # Errors
+/// A store that fails to open or write.
+pub fn time_rigs(
+    target: &crate::store::DbTarget,
+    rigs: usize,
+    samples: u64,
+) -> Result<f64, BenchError> {
+    let raw = std::sync::Arc::new(rendered_frames()?);
+    let stores = (0..rigs)
+        .map(|_| SyncStore::open(target.clone()))
+        .collect::<Result<Vec<_>, _>>()?;
+    let runs = stores
+        .iter()
+        .enumerate()
+        .map(|(i, store)| {
+            store.create_run(OwnedNewRun {
+                seed: i as u64,
+                samples_planned: samples,
+                rod_schedule: vec!["circle-10".into()],
+                rod_block: samples.max(1),
+                scene_name: format!("bench ingest: rig {i} of {rigs}"),
+                medium: Medium::Air,
+                rig_toml: String::new(),
+                scene_toml: String::new(),
+                poses_from: None,
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let started = Instant::now();
+    let results: Vec<Result<(), BenchError>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = stores
+            .iter()
+            .zip(&runs)
+            .map(|(store, &run)| {
+                let raw = std::sync::Arc::clone(&raw);
+                scope.spawn(move || -> Result<(), BenchError> {
+                    for i in 0..samples {
+                        let frame = raw[usize::try_from(i).unwrap_or(0) % raw.len()].clone();
+                        let sample = SampleBuilder::new(i);
+                        let window = sample.window();
+                        store.submit_sample(run, sample.build(), Some(frame), window)?;
+                    }
+                    store.flush()?;
+                    Ok(())
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err(BenchError::Sim("a rig's thread panicked".into())))
+            })
+            .collect()
+    });
+    let secs = started.elapsed().as_secs_f64();
+    for store in stores {
+        store.close();
+    }
+    for r in results {
+        r?;
+    }
+    Ok(secs)
+}
+
 /// The database's size line under the ingest table: the file and its write-ahead log
 /// (measure after the store is closed, when the log has been folded in).
 #[must_use]

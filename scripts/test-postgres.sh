@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Runs the store, collect, dataset, fault and resume tests (and db copy and several rigs
+# at once) against a throwaway PostgreSQL server: initdb into a temporary folder as an
+# unprivileged user (PostgreSQL refuses root), a free port on loopback, stopped and
+# removed on every exit. Needs Debian's `postgresql` package (initdb, pg_ctl).
+#
+#   bash scripts/test-postgres.sh                 # the PostgreSQL tier, as CI runs it
+#   bash scripts/test-postgres.sh --test faults   # other `cargo test` arguments instead
+#
+# Against a server of your own instead: SOFTTOUCH_TEST_POSTGRES=postgres://USER@HOST/postgres
+# cargo test --release ... (the user needs CREATEDB: every test makes a database of its own).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BIN=$(ls -d /usr/lib/postgresql/*/bin 2>/dev/null | sort -V | tail -1)
+if [ -z "$BIN" ] || [ ! -x "$BIN/initdb" ]; then
+    echo "no PostgreSQL server binaries (apt-get install postgresql)" >&2
+    exit 2
+fi
+DIR=$(mktemp -d /tmp/softtouch-pg.XXXXXX)
+chmod 755 "$DIR"
+PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+as_db_user() {
+    if [ "$(id -u)" -eq 0 ]; then
+        chown -R postgres "$DIR"
+        su postgres -s /bin/bash -c "$*"
+    else
+        bash -c "$*"
+    fi
+}
+stop() {
+    as_db_user "'$BIN/pg_ctl' -D '$DIR/data' -m immediate stop >/dev/null 2>&1" || true
+    rm -rf "$DIR"
+}
+trap stop EXIT
+as_db_user "'$BIN/initdb' -D '$DIR/data' -U postgres --auth=trust -E UTF8 >/dev/null"
+as_db_user "'$BIN/pg_ctl' -D '$DIR/data' -l '$DIR/log' -w start \
+    -o \"-p $PORT -k $DIR -c listen_addresses=127.0.0.1 -c max_connections=300\" >/dev/null"
+export SOFTTOUCH_TEST_POSTGRES="postgres://postgres@127.0.0.1:$PORT/postgres"
+echo "PostgreSQL $("$BIN/postgres" --version | awk '{print $3}') on port $PORT"
+if [ $# -eq 0 ]; then
+    set -- -p softtouch-collector --lib --test collect --test dataset --test faults \
+        --test resume --test postgres
+fi
+cargo test --release "$@"

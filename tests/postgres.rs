@@ -1,0 +1,237 @@
+//! Many rigs, one store (issue 38): several collectors writing one database at once,
+//! `db copy` between stores (SQLite → PostgreSQL → SQLite, never twice), and the
+//! connection errors a lab meets. Every test runs on SQLite files; with
+//! `SOFTTOUCH_TEST_POSTGRES` set (`scripts/test-postgres.sh`, CI) each path stands for a
+//! database of its own on that server (see `common::target_of`).
+
+mod common;
+use common::{db_arg, fails_with, ok, on_postgres, runtime, softtouch, tempdir, text};
+
+use softtouch_collector::store::Store;
+use std::path::Path;
+use std::process::Stdio;
+
+async fn open(db: &Path) -> Store {
+    Store::open(common::target_of(db))
+        .await
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// (run, samples, frames, windows, sha256 of every frame in order) of each run.
+async fn runs_of(store: &Store) -> Vec<(i64, i64, i64, i64, String)> {
+    use sha2::{Digest as _, Sha256};
+    let mut out = Vec::new();
+    for run in store.runs().await.unwrap_or_else(|e| panic!("{e}")) {
+        let c = store
+            .row_counts(run.run_id)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        let frames: Vec<Vec<u8>> = sqlx::query_scalar(
+            store
+                .dialect()
+                .sql("SELECT data FROM frames WHERE run_id = ? ORDER BY sample_index"),
+        )
+        .bind(run.run_id)
+        .fetch_all(store.pool())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"));
+        let mut h = Sha256::new();
+        for f in &frames {
+            h.update(Sha256::digest(f));
+        }
+        let hex: String = h.finalize().iter().map(|b| format!("{b:02x}")).collect();
+        out.push((run.run_id, c.samples, c.frames, c.windows, hex));
+    }
+    out
+}
+
+#[test]
+fn several_rigs_collect_into_one_database_at_once_without_colliding() {
+    let dir = tempdir();
+    ok(&softtouch(dir.path(), &["db", "init"]));
+    // Three collectors, each its own rig (seed) and run, started together.
+    let children: Vec<_> = (0..3)
+        .map(|i| {
+            common::command(dir.path())
+                .args([
+                    "collect",
+                    "--samples",
+                    "12",
+                    "--seed",
+                    &(40 + i).to_string(),
+                ])
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap_or_else(|e| panic!("{e}"))
+        })
+        .collect();
+    for child in children {
+        let out = child.wait_with_output().unwrap_or_else(|e| panic!("{e}"));
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        assert!(text(&out.stdout).contains("12 ok"), "{}", text(&out.stdout));
+    }
+    runtime().block_on(async {
+        let store = open(&dir.path().join("softtouch.db")).await;
+        let runs = runs_of(&store).await;
+        let ids: Vec<i64> = runs.iter().map(|r| r.0).collect();
+        assert_eq!(ids, [1, 2, 3], "one run each, no id twice");
+        for r in &runs {
+            assert_eq!((r.1, r.2, r.3), (12, 12, 12), "run {}", r.0);
+        }
+        // Each run is its seed's: the same seed alone stores the same frames.
+        let seeds: Vec<i64> = {
+            let mut s = Vec::new();
+            for r in &runs {
+                s.push(
+                    store
+                        .run_record(r.0)
+                        .await
+                        .unwrap_or_else(|e| panic!("{e}"))
+                        .seed,
+                );
+            }
+            s
+        };
+        let mut sorted = seeds.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, [40, 41, 42]);
+        store.close().await;
+    });
+}
+
+#[test]
+fn db_copy_moves_everything_checks_it_and_never_copies_twice() {
+    let dir = tempdir();
+    let d = dir.path();
+    // The source: two runs and a dataset, always a SQLite file (a rig's own store).
+    let source = d.join("rig.db");
+    let rig = source.display().to_string();
+    ok(&softtouch_file(
+        d,
+        &["--db", &rig, "collect", "--samples", "10", "--seed", "3"],
+    ));
+    ok(&softtouch_file(
+        d,
+        &["--db", &rig, "collect", "--samples", "6", "--seed", "4"],
+    ));
+    ok(&softtouch_file(
+        d,
+        &[
+            "--db", &rig, "dataset", "create", "both", "--runs", "1,2", "--split", "6:2:2",
+        ],
+    ));
+    // The fleet store: PostgreSQL when the tests run there, another file otherwise.
+    let fleet = db_arg(&d.join("fleet.db"));
+    let first = ok(&softtouch_file(
+        d,
+        &["db", "copy", "--from", &rig, "--to", &fleet],
+    ));
+    assert!(first.contains("new: 2 run, 1 dataset"), "{first}");
+    assert!(
+        first.contains("16 samples, 16 frames, 16 ft_windows"),
+        "{first}"
+    );
+    assert!(!first.contains("hunter"), "{first}");
+    // Again: nothing new.
+    let again = ok(&softtouch_file(
+        d,
+        &["db", "copy", "--from", &rig, "--to", &fleet],
+    ));
+    assert!(again.contains("new: nothing"), "{again}");
+    assert!(again.contains("already there: 2 run, 1 dataset"), "{again}");
+    assert!(again.contains("rows written: 0 samples"), "{again}");
+    // A third run on the rig: only it is copied.
+    ok(&softtouch_file(
+        d,
+        &["--db", &rig, "collect", "--samples", "4", "--seed", "5"],
+    ));
+    let third = ok(&softtouch_file(
+        d,
+        &["db", "copy", "--from", &rig, "--to", &fleet],
+    ));
+    assert!(third.contains("new: 1 run"), "{third}");
+    assert!(third.contains("4 samples"), "{third}");
+    // Back to a new file, and from it into the fleet again: the fleet's own runs (and
+    // the rig's, which the fleet got first) are not copied back.
+    let back = d.join("back.db").display().to_string();
+    let out = ok(&softtouch_file(
+        d,
+        &["db", "copy", "--from", &fleet, "--to", &back],
+    ));
+    assert!(out.contains("new: 3 run, 1 dataset"), "{out}");
+    let round = ok(&softtouch_file(
+        d,
+        &["db", "copy", "--from", &back, "--to", &fleet],
+    ));
+    assert!(round.contains("new: nothing"), "{round}");
+    // The same runs, samples and frames (by sha256) in all three stores.
+    runtime().block_on(async {
+        let rig_store = Store::open(&source).await.unwrap_or_else(|e| panic!("{e}"));
+        let fleet_store = open(&d.join("fleet.db")).await;
+        let back_store = Store::open(&d.join("back.db"))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        let a = runs_of(&rig_store).await;
+        assert_eq!(a.len(), 3);
+        assert_eq!(runs_of(&fleet_store).await, a);
+        assert_eq!(runs_of(&back_store).await, a);
+        let sets = |s: Store| async move {
+            let v = softtouch_collector::dataset::list(&s)
+                .await
+                .unwrap_or_else(|e| panic!("{e}"))
+                .into_iter()
+                .map(|d| (d.name, d.sample_count))
+                .collect::<Vec<_>>();
+            s.close().await;
+            v
+        };
+        let expected = sets(rig_store).await;
+        assert_eq!(sets(fleet_store).await, expected);
+        assert_eq!(sets(back_store).await, expected);
+    });
+}
+
+/// `softtouch` with `--db` and `--from`/`--to` as given (no mapping of paths).
+fn softtouch_file(dir: &Path, args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_softtouch"))
+        .args(args)
+        .current_dir(dir)
+        .env_remove("SOFTTOUCH_DB")
+        .output()
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn a_server_that_is_not_there_or_a_database_that_is_not_is_said_without_the_password() {
+    let dir = tempdir();
+    // Nothing listens on a port just freed.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let url = format!("postgres://rig:hunter2@127.0.0.1:{port}/softtouch?sslmode=prefer");
+    let out = softtouch_file(dir.path(), &["--db", &url, "runs"]);
+    fails_with(
+        &out,
+        1,
+        &format!("postgres://rig:***@127.0.0.1:{port}/softtouch"),
+    );
+    assert!(
+        !text(&out.stderr).contains("hunter2"),
+        "{}",
+        text(&out.stderr)
+    );
+    // A malformed URL is bad input.
+    let out = softtouch_file(dir.path(), &["--db", "postgres://", "runs"]);
+    fails_with(&out, 2, "no server in the URL");
+    if !on_postgres() {
+        eprintln!("the missing-database case needs SOFTTOUCH_TEST_POSTGRES");
+        return;
+    }
+    let server = std::env::var(softtouch_collector::testing::TEST_POSTGRES_ENV)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let missing = softtouch_collector::store::target::with_database(&server, "no_such_db_38");
+    let out = softtouch_file(dir.path(), &["--db", &missing, "status"]);
+    fails_with(&out, 2, "does not exist");
+}
