@@ -37,8 +37,11 @@ as_db_user "'$BIN/pg_ctl' -D '$DIR/data' -l '$DIR/log' -w start \
     -o \"-p $PORT -k $DIR -c listen_addresses=127.0.0.1 -c max_connections=300\" >/dev/null"
 export SOFTTOUCH_TEST_POSTGRES="postgres://postgres@127.0.0.1:$PORT/postgres"
 echo "PostgreSQL $("$BIN/postgres" --version | awk '{print $3}') on port $PORT"
+# --workspace, as the README's test command: the same features, so nothing is rebuilt.
 if [ $# -eq 0 ]; then
-    set -- -p softtouch-collector --lib --test collect --test dataset --test faults \
+    cargo test --release --workspace --lib -- store_tests
+    cargo test --release --workspace --test collect --test dataset --test faults \
         --test resume --test postgres
+else
+    cargo test --release "$@"
 fi
-cargo test --release "$@"
