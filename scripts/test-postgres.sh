@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Runs the store, collect, dataset, fault and resume tests (and db copy and several rigs
+# Runs the store's tests (the collector's store_tests, the store crate's grasp, results
+# and calibration round trips), the collect, dataset, fault and resume tests (and db copy and several rigs
 # at once) against a throwaway PostgreSQL server: initdb into a temporary folder as an
 # unprivileged user (PostgreSQL refuses root), a free port on loopback, stopped and
 # removed on every exit. Needs Debian's `postgresql` package (initdb, pg_ctl).
@@ -39,7 +40,7 @@ export SOFTTOUCH_TEST_POSTGRES="postgres://postgres@127.0.0.1:$PORT/postgres"
 echo "PostgreSQL $("$BIN/postgres" --version | awk '{print $3}') on port $PORT"
 # --workspace, as the README's test command: the same features, so nothing is rebuilt.
 if [ $# -eq 0 ]; then
-    cargo test --release --workspace --lib -- store_tests
+    cargo test --release --workspace --lib -- store_tests grasp:: results:: grasp_calibration::
     cargo test --release --workspace --test collect --test dataset --test faults \
         --test resume --test postgres
 else

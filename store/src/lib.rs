@@ -746,6 +746,27 @@ fn connect_error(shown: &str, source: sqlx::Error) -> StoreError {
     }
 }
 
+/// For the store's own tests: a new database at `dir/file`, or with
+/// `SOFTTOUCH_TEST_POSTGRES` set (TESTING.md) a new one of its own on that server.
+#[cfg(test)]
+pub(crate) async fn test_target(dir: &std::path::Path, file: &str) -> DbTarget {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let Ok(server) = std::env::var("SOFTTOUCH_TEST_POSTGRES") else {
+        return DbTarget::File(dir.join(file));
+    };
+    let name = format!(
+        "s{}_{}_{}",
+        std::process::id(),
+        NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.subsec_nanos())
+    );
+    Store::create_postgres_database(&server, &name)
+        .await
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// Counts of a run's rows per table.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RowCounts {
