@@ -245,10 +245,13 @@ async fn several_rigs(
         }
         for (engine, target) in targets {
             let t = target.clone();
-            let secs = tokio::task::spawn_blocking(move || time_rigs(&t, n, samples))
-                .await
-                .map_err(|e| Failure::Runtime(anyhow!("the bench's thread: {e}")))?
-                .map_err(|e| Failure::Runtime(e.into()))?;
+            // The error as text: it crosses a thread.
+            let secs = tokio::task::spawn_blocking(move || {
+                time_rigs(&t, n, samples).map_err(|e| e.to_string())
+            })
+            .await
+            .map_err(|e| Failure::Runtime(anyhow!("the bench's thread: {e}")))?
+            .map_err(|e| Failure::Runtime(anyhow!("{engine}, {n} rigs: {e}")))?;
             let total = samples * n as u64;
             let line = format!(
                 "{engine:<10}  {n:>4}  {total:>8}  {secs:>8.2}  {:>10.0}  {:>10.0}\n",
