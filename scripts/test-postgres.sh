@@ -19,7 +19,18 @@ if [ -z "$BIN" ] || [ ! -x "$BIN/initdb" ]; then
 fi
 DIR=$(mktemp -d /tmp/softtouch-pg.XXXXXX)
 chmod 755 "$DIR"
-PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+# A free port: one nobody answers on (bash's /dev/tcp; no python needed).
+free_port() {
+    local p
+    for _ in $(seq 50); do
+        p=$(( 20000 + RANDOM % 40000 ))
+        if ! (exec 3<>"/dev/tcp/127.0.0.1/$p") 2>/dev/null; then
+            echo "$p"
+            return 0
+        fi
+    done
+    return 1
+}
 as_db_user() {
     if [ "$(id -u)" -eq 0 ]; then
         chown -R postgres "$DIR"
@@ -34,8 +45,15 @@ stop() {
 }
 trap stop EXIT
 as_db_user "'$BIN/initdb' -D '$DIR/data' -U postgres --auth=trust -E UTF8 >/dev/null"
-as_db_user "'$BIN/pg_ctl' -D '$DIR/data' -l '$DIR/log' -w start \
-    -o \"-p $PORT -k $DIR -c listen_addresses=127.0.0.1 -c max_connections=300\" >/dev/null"
+# Another process may take the port between the look and the start: try another.
+for attempt in 1 2 3; do
+    PORT=$(free_port)
+    if as_db_user "'$BIN/pg_ctl' -D '$DIR/data' -l '$DIR/log' -w start \
+        -o \"-p $PORT -k $DIR -c listen_addresses=127.0.0.1 -c max_connections=300\" >/dev/null"; then
+        break
+    fi
+    [ "$attempt" -lt 3 ] || { cat "$DIR/log" >&2; exit 1; }
+done
 export SOFTTOUCH_TEST_POSTGRES="postgres://postgres@127.0.0.1:$PORT/postgres"
 echo "PostgreSQL $("$BIN/postgres" --version | awk '{print $3}') on port $PORT"
 # --workspace, as the README's test command: the same features, so nothing is rebuilt.
