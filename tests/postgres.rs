@@ -409,3 +409,17 @@ fn kill_loop_four_rigs_twenty_kills_lose_nothing_and_repeat_nothing() {
     });
     assert!(done_kills >= kills.min(1), "no rig was killed");
 }
+
+#[test]
+fn help_never_prints_the_database_url_from_the_environment() {
+    let dir = tempdir();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_softtouch"))
+        .args(["runs", "--help"])
+        .current_dir(dir.path())
+        .env("SOFTTOUCH_DB", "postgres://rig:hunter2@db.lab/softtouch")
+        .output()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let help = text(&out.stdout);
+    assert!(help.contains("SOFTTOUCH_DB"), "{help}");
+    assert!(!help.contains("hunter2"), "{help}");
+}

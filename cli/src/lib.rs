@@ -58,7 +58,9 @@ pub struct Cli {
         long,
         global = true,
         default_value = "softtouch.db",
-        env = "SOFTTOUCH_DB"
+        env = "SOFTTOUCH_DB",
+        // --help would print the variable's value: a URL may hold a password.
+        hide_env_values = true
     )]
     pub db: softtouch_store::DbTarget,
 
