@@ -11,12 +11,6 @@ use sqlx::Row as _;
 use std::path::Path;
 use std::process::Stdio;
 
-async fn open(db: &Path) -> Store {
-    Store::open(common::target_of(db))
-        .await
-        .unwrap_or_else(|e| panic!("{e}"))
-}
-
 /// Every sample's commanded pose, by index.
 async fn poses(store: &Store, run: i64) -> Vec<(i64, f64, f64, f64)> {
     sqlx::query(store.dialect().sql("SELECT sample_index, cmd_x_m, cmd_z_m, cmd_theta_rad FROM samples WHERE run_id = ? ORDER BY sample_index"))
@@ -46,7 +40,7 @@ fn a_simulated_run_stores_every_sample_with_its_frame_and_window() {
     );
 
     runtime().block_on(async {
-        let store = open(&dir.path().join("softtouch.db")).await;
+        let store = common::open_store(&dir.path().join("softtouch.db")).await;
         let counts = store.row_counts(1).await.unwrap_or_else(|e| panic!("{e}"));
         assert_eq!((counts.samples, counts.frames, counts.windows), (240, 240, 240));
 
@@ -154,7 +148,7 @@ fn a_run_killed_at_random_points_resumes_to_exactly_the_planned_samples() {
     assert!(out.status.success(), "{}", text(&out.stderr));
 
     rt.block_on(async {
-        let store = open(&db).await;
+        let store = common::open_store(&db).await;
         assert_eq!(store.integrity_check().await.unwrap_or_default(), "ok");
         let c = store.row_counts(1).await.unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(c.samples, planned);
@@ -204,7 +198,7 @@ fn a_scene_with_packet_loss_frame_drops_and_reflexes_completes_and_logs_every_fa
     );
 
     runtime().block_on(async {
-        let store = open(&dir.path().join("softtouch.db")).await;
+        let store = common::open_store(&dir.path().join("softtouch.db")).await;
         let count = |kind: &'static str| {
             let pool = store.pool().clone();
             let d = store.dialect();
@@ -419,7 +413,7 @@ fn rod_names_with_commas_quotes_and_unicode_survive_collection_status_and_resume
     let db = dir.path().join("softtouch.db");
     let rt = runtime();
     rt.block_on(async {
-        let store = open(&db).await;
+        let store = common::open_store(&db).await;
         assert_eq!(sample_rods(&store, 1).await, expected);
         let record = store.run_record(1).await.unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(record.rod_schedule, schedule);
@@ -429,7 +423,7 @@ fn rod_names_with_commas_quotes_and_unicode_survive_collection_status_and_resume
     // The resume takes samples 1..10 with the stored schedule, read back exactly.
     ok(&softtouch(dir.path(), &["collect", "--resume", "1"]));
     rt.block_on(async {
-        let store = open(&db).await;
+        let store = common::open_store(&db).await;
         assert_eq!(sample_rods(&store, 1).await, expected);
         store.close().await;
     });
@@ -457,7 +451,7 @@ fn a_comma_joined_rod_schedule_of_an_old_database_is_migrated_and_reads_back() {
     let db = dir.path().join("softtouch.db");
     let rt = runtime();
     rt.block_on(async {
-        let store = open(&db).await;
+        let store = common::open_store(&db).await;
         // Back to the old format: the schedule comma-joined, the migration not applied.
         for sql in [
             "UPDATE runs SET rod_schedule = 'circle-10,square-10,,oval-12' WHERE run_id = 1",
@@ -471,7 +465,7 @@ fn a_comma_joined_rod_schedule_of_an_old_database_is_migrated_and_reads_back() {
         cut_run(&store, 1, 2).await;
         store.close().await;
         // Opening migrates it.
-        let store = open(&db).await;
+        let store = common::open_store(&db).await;
         let record = store.run_record(1).await.unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(
             record.rod_schedule,
@@ -521,7 +515,7 @@ fn a_comma_joined_rod_schedule_of_an_old_database_is_migrated_and_reads_back() {
     // The migrated run resumes on its schedule: samples 2 and 3 on square-10.
     ok(&softtouch(dir.path(), &["collect", "--resume", "1"]));
     rt.block_on(async {
-        let store = open(&db).await;
+        let store = common::open_store(&db).await;
         let rods = sample_rods(&store, 1).await;
         assert_eq!(
             rods.iter().map(|(_, r)| r.as_str()).collect::<Vec<_>>(),
@@ -556,7 +550,7 @@ fn a_resume_refuses_a_rig_that_changes_more_than_where_devices_are() {
         &["collect", "--samples", "2", "--seed", "1"],
     ));
     runtime().block_on(async {
-        let store = open(&dir.path().join("softtouch.db")).await;
+        let store = common::open_store(&dir.path().join("softtouch.db")).await;
         cut_run(&store, 1, 1).await;
         store.close().await;
     });
@@ -636,7 +630,7 @@ fn a_resume_on_a_rig_with_a_moved_device_uses_and_records_the_new_port() {
     );
     fails_with(&out, 1, &new_port);
     runtime().block_on(async {
-        let store = open(&dir.path().join("softtouch.db")).await;
+        let store = common::open_store(&dir.path().join("softtouch.db")).await;
         let record = store.run_record(1).await.unwrap_or_else(|e| panic!("{e}"));
         assert!(record.rig_toml.contains(&new_port), "{}", record.rig_toml);
         let events = store.events(1, 100).await.unwrap_or_else(|e| panic!("{e}"));
@@ -661,7 +655,7 @@ fn a_resume_checks_the_stored_scene_against_the_rig_again() {
         &["collect", "--samples", "2", "--seed", "1"],
     ));
     runtime().block_on(async {
-        let store = open(&dir.path().join("softtouch.db")).await;
+        let store = common::open_store(&dir.path().join("softtouch.db")).await;
         cut_run(&store, 1, 1).await;
         // A scene whose poses the rig cannot reach (stored by an older build, say).
         let scene = defaults::SCENE_TOML.replace("x_m = [0.0, 0.05]", "x_m = [0.0, 0.09]");
@@ -705,7 +699,7 @@ fn a_water_run_with_poses_from_a_land_run_repeats_its_poses_and_rods_pose_by_pos
     let status = ok(&softtouch(dir.path(), &["status", "2"]));
     assert!(status.contains("poses and rods of run 1"), "{status}");
     runtime().block_on(async {
-        let store = open(&dir.path().join("softtouch.db")).await;
+        let store = common::open_store(&dir.path().join("softtouch.db")).await;
         let (land, wet) = (store.run_record(1).await, store.run_record(2).await);
         let (land, wet) = (
             land.unwrap_or_else(|e| panic!("{e}")),
@@ -811,7 +805,7 @@ fn a_water_run_with_poses_from_a_land_run_repeats_its_poses_and_rods_pose_by_pos
         "--seed",
     );
     runtime().block_on(async {
-        let store = open(&dir.path().join("softtouch.db")).await;
+        let store = common::open_store(&dir.path().join("softtouch.db")).await;
         let runs: i64 = sqlx::query_scalar(store.dialect().sql("SELECT COUNT(*) FROM runs"))
             .fetch_one(store.pool())
             .await

@@ -96,9 +96,7 @@ async fn make_run(store: &Store, spec: &RunSpec, width: u32, height: u32) -> i64
 fn lab() -> (tempfile::TempDir, PathBuf) {
     block_on(async {
         let dir = softtouch_collector::testing::tempdir();
-        let store = Store::open(common::target_of(&dir.path().join("lab.db")))
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let store = common::open_store(&dir.path().join("lab.db")).await;
         let air = RunSpec {
             medium: Medium::Air,
             samples: 120,
@@ -134,9 +132,7 @@ const RUN2_OK: usize = 53;
 
 fn members(db: &Path, name: &str) -> Vec<(i64, i64, i64, String)> {
     block_on(async {
-        let store = Store::open(common::target_of(db))
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let store = common::open_store(db).await;
         let rows: Vec<(i64, i64, i64, String)> = sqlx::query_as(store.dialect().sql(
             "SELECT m.position, m.run_id, m.sample_index, m.split FROM dataset_members m
              JOIN datasets d ON d.dataset_id = m.dataset_id WHERE d.name = ? ORDER BY m.position",
@@ -158,9 +154,7 @@ fn count_rows(db: &Path, table: &'static str) -> i64 {
         _ => panic!("{table}"),
     };
     block_on(async {
-        let store = Store::open(common::target_of(db))
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let store = common::open_store(db).await;
         let n: i64 = sqlx::query_scalar(store.dialect().sql(sql))
             .fetch_one(store.pool())
             .await
@@ -339,9 +333,7 @@ type MemberRow = (
 fn filters_select_what_they_say() {
     let (_dir, db) = lab();
     let counts = block_on(async {
-        let store = Store::open(common::target_of(&db))
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let store = common::open_store(&db).await;
         let mut out = BTreeMap::new();
         let cases: Vec<(&str, Filters)> = vec![
             ("default", Filters::default()),
@@ -582,9 +574,7 @@ fn export_writes_images_labels_and_a_manifest_with_checksums() {
     );
 
     let stored: BTreeMap<(i64, i64), (String, Vec<u8>, f64)> = block_on(async {
-        let store = Store::open(common::target_of(&db))
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let store = common::open_store(&db).await;
         let rows: Vec<(i64, i64, String, Vec<u8>, f64)> = sqlx::query_as(store.dialect().sql(
             "SELECT f.run_id, f.sample_index, f.format, f.data, s.tx_nm FROM frames f JOIN samples s USING (run_id, sample_index)"),
         )

@@ -17,7 +17,7 @@ use softtouch_collector::collect::{
     CollectDevices, CollectPlan, Counters, NewRunRequest, Outcome, PlanError, Progress, Resumed,
     build_devices, collect,
 };
-use softtouch_collector::store::{Store, StoreError, SyncStore};
+use softtouch_collector::store::{StoreError, SyncStore};
 use softtouch_drivers::{Arm, ArmState, Camera, DeviceError, ForceSensor, Frame};
 use softtouch_schemas::{ArmPose, FtReading, TimestampNs};
 use sqlx::Row as _;
@@ -350,9 +350,7 @@ impl Ended {
 fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
     if !faults.sql.is_empty() {
         runtime().block_on(async {
-            let store = Store::open(common::target_of(db))
-                .await
-                .unwrap_or_else(|e| panic!("{e}"));
+            let store = common::open_store(db).await;
             sqlx::raw_sql(sqlx::AssertSqlSafe(faults.sql))
                 .execute(store.pool())
                 .await
@@ -468,9 +466,7 @@ impl Stored {
 
 fn stored(db: &Path, run: i64) -> Stored {
     runtime().block_on(async {
-        let store = Store::open(common::target_of(db))
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let store = common::open_store(db).await;
         let status = store
             .run_record(run)
             .await
@@ -749,9 +745,7 @@ fn non_finite_readings_reject_the_window_and_never_reach_a_label_column() {
     assert_eq!(s.kinds("non_finite").len(), 3);
     assert!(s.samples[1..].iter().all(|x| x.1 == "ok"));
     runtime().block_on(async {
-        let store = Store::open(common::target_of(&db))
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let store = common::open_store(&db).await;
         let fx: f64 = sqlx::query_scalar(
             store
                 .dialect()
@@ -866,9 +860,7 @@ fn a_store_that_fails_mid_run_ends_in_a_safe_stop_and_resume_fills_the_gap() {
 
     // The disk is freed; a resume takes every missing index.
     runtime().block_on(async {
-        let store = Store::open(common::target_of(&db))
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let store = common::open_store(&db).await;
         sqlx::raw_sql(common::stop_failing())
             .execute(store.pool())
             .await
@@ -896,9 +888,7 @@ fn a_run_whose_store_holds_a_gap_is_not_completed_until_the_gap_is_filled() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     // A hole below the highest index (as a write lost mid-run leaves).
     runtime().block_on(async {
-        let store = Store::open(common::target_of(&db))
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let store = common::open_store(&db).await;
         sqlx::query(
             store
                 .dialect()
@@ -926,9 +916,7 @@ fn a_run_whose_store_holds_a_gap_is_not_completed_until_the_gap_is_filled() {
         &format!("being collected by process {}", std::process::id()),
     );
     runtime().block_on(async {
-        let store = Store::open(common::target_of(&db))
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let store = common::open_store(&db).await;
         // Given back, as the job would at its end.
         sqlx::query(store.dialect().sql("DELETE FROM run_leases"))
             .execute(store.pool())
@@ -1094,9 +1082,7 @@ fn a_second_process_is_refused_a_leased_run_and_takes_it_over_once_the_holder_is
     // Shrink the run so that the takeover finishes quickly.
     let planned = committed.len() as i64 + 3;
     runtime().block_on(async {
-        let store = Store::open(common::target_of(&db))
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let store = common::open_store(&db).await;
         sqlx::query(
             store
                 .dialect()
@@ -1161,7 +1147,7 @@ fn a_lease_from_another_host_is_taken_over_only_once_its_heartbeat_is_stale() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     let lease = |age_s: u32| {
         runtime().block_on(async {
-            let store = Store::open(common::target_of(&db)).await.unwrap_or_else(|e| panic!("{e}"));
+            let store = common::open_store(&db).await;
             sqlx::query(store.dialect().sql("UPDATE runs SET status = 'stopped', samples_planned = 3 WHERE run_id = 1"))
                 .execute(store.pool())
                 .await

@@ -11,12 +11,6 @@ use softtouch_collector::store::Store;
 use std::path::Path;
 use std::process::Stdio;
 
-async fn open(db: &Path) -> Store {
-    Store::open(common::target_of(db))
-        .await
-        .unwrap_or_else(|e| panic!("{e}"))
-}
-
 /// (run, samples, frames, windows, sha256 of every frame in order) of each run.
 async fn runs_of(store: &Store) -> Vec<(i64, i64, i64, i64, String)> {
     use sha2::{Digest as _, Sha256};
@@ -72,7 +66,7 @@ fn several_rigs_collect_into_one_database_at_once_without_colliding() {
         assert!(text(&out.stdout).contains("12 ok"), "{}", text(&out.stdout));
     }
     runtime().block_on(async {
-        let store = open(&dir.path().join("softtouch.db")).await;
+        let store = common::open_store(&dir.path().join("softtouch.db")).await;
         let runs = runs_of(&store).await;
         let ids: Vec<i64> = runs.iter().map(|r| r.0).collect();
         assert_eq!(ids, [1, 2, 3], "one run each, no id twice");
@@ -168,7 +162,7 @@ fn db_copy_moves_everything_checks_it_and_never_copies_twice() {
     // The same runs, samples and frames (by sha256) in all three stores.
     runtime().block_on(async {
         let rig_store = Store::open(&source).await.unwrap_or_else(|e| panic!("{e}"));
-        let fleet_store = open(&d.join("fleet.db")).await;
+        let fleet_store = common::open_store(&d.join("fleet.db")).await;
         let back_store = Store::open(&d.join("back.db"))
             .await
             .unwrap_or_else(|e| panic!("{e}"));
@@ -330,7 +324,7 @@ fn kill_loop_four_rigs_twenty_kills_lose_nothing_and_repeat_nothing() {
         |run: u64| -> Vec<String> { vec!["collect".into(), "--resume".into(), run.to_string()] };
     let runs_in = |dir: &Path| -> usize {
         runtime().block_on(async {
-            let store = open(&dir.join("softtouch.db")).await;
+            let store = common::open_store(&dir.join("softtouch.db")).await;
             let n = store.runs().await.map_or(0, |r| r.len());
             store.close().await;
             n
@@ -390,8 +384,8 @@ fn kill_loop_four_rigs_twenty_kills_lose_nothing_and_repeat_nothing() {
         assert!(status.success());
     }
     runtime().block_on(async {
-        let a = open(&killed.join("softtouch.db")).await;
-        let b = open(&clean.join("softtouch.db")).await;
+        let a = common::open_store(&killed.join("softtouch.db")).await;
+        let b = common::open_store(&clean.join("softtouch.db")).await;
         for run in 1..=i64::try_from(rigs).unwrap_or(0) {
             let (n, killed_digest) = run_digest(&a, run).await;
             let (m, clean_digest) = run_digest(&b, run).await;

@@ -76,9 +76,7 @@ struct Snapshot {
 
 fn snapshot(db: &Path, run: i64) -> Snapshot {
     runtime().block_on(async {
-        let store = Store::open(common::target_of(db))
-            .await
-            .unwrap_or_else(|e| panic!("{e}"));
+        let store = common::open_store(db).await;
         let status: String = sqlx::query_scalar(
             store
                 .dialect()
@@ -259,9 +257,7 @@ fn failed_and_resumed(scene: Option<&Path>, samples: u64, seed: u64) {
     ok(&softtouch(dir.path(), &["db", "init"]));
     let sql = |sql: String| {
         runtime().block_on(async {
-            let store = Store::open(common::target_of(&db))
-                .await
-                .unwrap_or_else(|e| panic!("{e}"));
+            let store = common::open_store(&db).await;
             sqlx::raw_sql(sqlx::AssertSqlSafe(sql))
                 .execute(store.pool())
                 .await

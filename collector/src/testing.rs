@@ -4,7 +4,7 @@
 
 pub use crate::synthetic::SampleBuilder;
 
-use crate::store::{DbTarget, FrameRecord, NewRun, RunId, Store};
+use crate::store::{FrameRecord, NewRun, RunId, Store};
 use softtouch_drivers::Frame;
 use softtouch_schemas::{
     ContactPose, FrameFormat, FrameMeta, Medium, TimestampNs, Wrench, defaults,
@@ -27,36 +27,7 @@ pub fn tempdir() -> TempDir {
     tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// The environment variable that runs the store's tests against PostgreSQL: a URL of a
-/// server database the user may create databases from (`postgres://USER@HOST:PORT/postgres`).
-/// Unset, the tests use SQLite files.
-pub const TEST_POSTGRES_ENV: &str = "SOFTTOUCH_TEST_POSTGRES";
-
-/// Where a test's new database goes: `dir/file` (SQLite), or, with
-/// [`TEST_POSTGRES_ENV`] set, a new database of its own on that server.
-pub async fn fresh_target(dir: &std::path::Path, file: &str) -> DbTarget {
-    let Ok(server) = std::env::var(TEST_POSTGRES_ENV) else {
-        return DbTarget::File(dir.join(file));
-    };
-    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.subsec_nanos());
-    let name = format!(
-        "t{}_{}_{nanos}",
-        std::process::id(),
-        NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-    );
-    Store::create_postgres_database(&server, &name)
-        .await
-        .unwrap_or_else(|e| panic!("{e}"))
-}
-
-/// Whether the tests run against PostgreSQL ([`TEST_POSTGRES_ENV`]).
-#[must_use]
-pub fn on_postgres() -> bool {
-    std::env::var_os(TEST_POSTGRES_ENV).is_some()
-}
+pub use crate::store::testing::{TEST_POSTGRES_ENV, fresh_target, on_postgres};
 
 /// A new store at `file` in a fresh temporary directory (which must outlive it), or a
 /// new PostgreSQL database ([`fresh_target`]).

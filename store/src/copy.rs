@@ -42,6 +42,22 @@ struct Child {
     refs: &'static [(&'static str, &'static str)],
 }
 
+impl Child {
+    /// The child rows of object `parent` in `store`, in [`Child::order`].
+    fn rows_of<'a>(
+        &self,
+        store: &'a Store,
+        parent: i64,
+    ) -> futures_util::stream::BoxStream<'a, Result<AnyRow, sqlx::Error>> {
+        sqlx::query(store.dialect.sql_owned(format!(
+            "SELECT * FROM {} WHERE {} ORDER BY {}",
+            self.table, self.select_where, self.order
+        )))
+        .bind(parent)
+        .fetch(&store.pool)
+    }
+}
+
 #[derive(Debug, Clone, Copy)]
 enum ChildKey {
     Natural(&'static str),
@@ -349,10 +365,6 @@ fn map_refs(
     Ok(())
 }
 
-fn sql(d: Dialect, text: String) -> sqlx::SqlStr {
-    d.sql_owned(text)
-}
-
 impl Store {
     /// This store's identity for copies (made once, kept in `store_identity`).
     ///
@@ -360,17 +372,7 @@ impl Store {
     /// A query failure.
     pub async fn uid(&self) -> Result<String, StoreError> {
         use std::hash::{BuildHasher as _, Hasher as _};
-        let found: Option<String> = sqlx::query_scalar(
-            self.dialect
-                .sql("SELECT uid FROM store_identity WHERE singleton = 1"),
-        )
-        .fetch_optional(&self.pool)
-        .await
-        .map_err(query_err("reading the store's identity"))?;
-        if let Some(uid) = found {
-            return Ok(uid);
-        }
-        // 128 random bits from the standard library's randomly keyed hashers.
+        // A candidate, kept only where the store has none yet: 128 random bits from the standard library's randomly keyed hashers.
         let mut words = [0u64; 2];
         for (i, w) in words.iter_mut().enumerate() {
             let mut h = std::collections::hash_map::RandomState::new().build_hasher();
@@ -390,7 +392,7 @@ impl Store {
         .execute(&self.pool)
         .await
         .map_err(query_err("recording the store's identity"))?;
-        // Another process may have won the race: read what is stored.
+        // The stored one: this candidate, an earlier one, or another process's.
         sqlx::query_scalar(
             self.dialect
                 .sql("SELECT uid FROM store_identity WHERE singleton = 1"),
@@ -511,15 +513,12 @@ impl Store {
                 if !kind.refresh.is_empty() {
                     let set: Vec<String> =
                         kind.refresh.iter().map(|c| format!("{c} = ?")).collect();
-                    let mut q = sqlx::query(sql(
-                        d,
-                        format!(
-                            "UPDATE {} SET {} WHERE {} = ?",
-                            kind.table,
-                            set.join(", "),
-                            kind.id
-                        ),
-                    ));
+                    let mut q = sqlx::query(d.sql_owned(format!(
+                        "UPDATE {} SET {} WHERE {} = ?",
+                        kind.table,
+                        set.join(", "),
+                        kind.id
+                    )));
                     for c in kind.refresh {
                         if let Some((_, cell)) = cells.iter().find(|(n, _)| n == c) {
                             q = bind(q, cell.clone());
@@ -537,13 +536,10 @@ impl Store {
                 if let Some(name_col) = kind.name
                     && let Some((_, Cell::Text(name))) = cells.iter().find(|(c, _)| c == name_col)
                 {
-                    let taken: Option<i64> = sqlx::query_scalar(sql(
-                        d,
-                        format!(
-                            "SELECT {} FROM {} WHERE {name_col} = ?",
-                            kind.id, kind.table
-                        ),
-                    ))
+                    let taken: Option<i64> = sqlx::query_scalar(d.sql_owned(format!(
+                        "SELECT {} FROM {} WHERE {name_col} = ?",
+                        kind.id, kind.table
+                    )))
                     .bind(name.clone())
                     .fetch_optional(&mut *tx)
                     .await
@@ -614,13 +610,7 @@ impl Store {
         from_uid: &str,
         maps: &mut Maps,
     ) -> Result<u64, StoreError> {
-        let select = format!(
-            "SELECT * FROM {} WHERE {} ORDER BY {}",
-            child.table, child.select_where, child.order
-        );
-        let mut rows = sqlx::query(self.dialect.sql_owned(select))
-            .bind(parent)
-            .fetch(&self.pool);
+        let mut rows = child.rows_of(self, parent);
         let mut n = 0u64;
         while let Some(row) = rows
             .try_next()
@@ -631,21 +621,15 @@ impl Store {
             match child.key {
                 ChildKey::Natural(conflict) => {
                     map_refs(&mut cells, child.refs, maps, child.table)?;
-                    let (columns, marks) = columns_and_marks(&cells);
-                    let mut q = sqlx::query(sql(
+                    let done = insert(
                         d,
-                        format!(
-                            "INSERT INTO {} ({columns}) VALUES ({marks}) ON CONFLICT {conflict} DO NOTHING",
-                            child.table
-                        ),
-                    ));
-                    for (_, cell) in cells {
-                        q = bind(q, cell);
-                    }
-                    let done = q
-                        .execute(&mut *tx)
-                        .await
-                        .map_err(query_err("copying rows"))?;
+                        child.table,
+                        cells,
+                        &format!("ON CONFLICT {conflict} DO NOTHING"),
+                    )
+                    .execute(&mut *tx)
+                    .await
+                    .map_err(query_err("copying rows"))?;
                     n += done.rows_affected();
                 }
                 ChildKey::Identity(id_col, kind) => {
@@ -656,7 +640,6 @@ impl Store {
                     else {
                         continue;
                     };
-                    let kind = kind_name(kind).unwrap_or("event");
                     if maps.get(kind).is_some_and(|m| m.contains_key(&source_id)) {
                         continue;
                     }
@@ -693,13 +676,7 @@ impl Store {
             (self, parent, &mut ours, true),
             (to, dest_parent, &mut theirs, false),
         ] {
-            let select = format!(
-                "SELECT * FROM {} WHERE {} ORDER BY {}",
-                child.table, child.select_where, child.order
-            );
-            let mut rows = sqlx::query(store.dialect.sql_owned(select))
-                .bind(parent)
-                .fetch(&store.pool);
+            let mut rows = child.rows_of(store, parent);
             let mut count = 0u64;
             while let Some(row) = rows
                 .try_next()
@@ -747,6 +724,18 @@ fn columns_and_marks(cells: &Cells) -> (String, String) {
     (columns.join(", "), marks)
 }
 
+/// `INSERT INTO table (its cells' columns) VALUES (…) tail`, the cells bound.
+fn insert(d: Dialect, table: &str, cells: Cells, tail: &str) -> Query<'static> {
+    let (columns, marks) = columns_and_marks(&cells);
+    let mut q = sqlx::query(d.sql_owned(format!(
+        "INSERT INTO {table} ({columns}) VALUES ({marks}) {tail}"
+    )));
+    for (_, cell) in cells {
+        q = bind(q, cell);
+    }
+    q
+}
+
 async fn insert_returning(
     tx: &mut AnyConnection,
     d: Dialect,
@@ -754,15 +743,8 @@ async fn insert_returning(
     id_col: &str,
     cells: Cells,
 ) -> Result<i64, StoreError> {
-    let (columns, marks) = columns_and_marks(&cells);
-    let mut q = sqlx::query(sql(
-        d,
-        format!("INSERT INTO {table} ({columns}) VALUES ({marks}) RETURNING {id_col}"),
-    ));
-    for (_, cell) in cells {
-        q = bind(q, cell);
-    }
-    q.fetch_one(&mut *tx)
+    insert(d, table, cells, &format!("RETURNING {id_col}"))
+        .fetch_one(&mut *tx)
         .await
         .map_err(query_err("copying an object"))?
         .try_get::<i64, _>(0)

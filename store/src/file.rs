@@ -84,10 +84,21 @@ pub struct Checkpoint {
     pub log_pages: i64,
 }
 
+impl Checkpoint {
+    /// From `PRAGMA wal_checkpoint`'s row: (busy, log pages, pages checkpointed).
+    const fn from_pragma((busy, log, checkpointed): (i64, i64, i64)) -> Self {
+        Self {
+            // (0, -1, -1) for a database not in WAL mode: nothing to fold.
+            complete: busy == 0 && (log <= 0 || checkpointed == log),
+            log_pages: if log > 0 { log } else { 0 },
+        }
+    }
+}
+
 /// The URL sqlx's `Any` driver opens the SQLite file at `path` by: the path
 /// percent-encoded where a URL would misread it (`%`, `?`, `#`), and SQLite's open
-/// `mode`: `rwc` (create a missing file), `rw` or `ro`. The path is made absolute first: a URL would read `a.db` in
-/// `sqlite://a.db` as a host name.
+/// `mode`: `rwc` (create a missing file), `rw` or `ro`. The path is made absolute
+/// first: a URL would read `a.db` in `sqlite://a.db` as a host name.
 #[must_use]
 pub fn sqlite_url(path: &Path, mode: &str) -> String {
     let path = std::path::absolute(path).unwrap_or_else(|_| path.to_owned());
@@ -143,39 +154,28 @@ pub async fn checkpoint(path: &Path, wait: Duration) -> Result<Checkpoint, Store
         .connect()
         .await
         .map_err(open)?;
-    let done = checkpoint_with(&mut conn).await;
+    let done = sqlx::query_as(CHECKPOINT_SQL)
+        .fetch_one(&mut conn)
+        .await
+        .map(Checkpoint::from_pragma)
+        .map_err(crate::query_err("checkpointing the write-ahead log"));
     // Closing the last connection of a WAL database also checkpoints; a close error
     // leaves the committed data where it was.
     let _ = sqlx::Connection::close(conn).await;
     done
 }
 
+/// The checkpoint PRAGMA, run by [`checkpoint_on`] (a store's pool, through `Any`) and
+/// [`checkpoint`] (a connection of SQLite's own, for its busy wait).
+const CHECKPOINT_SQL: &str = "PRAGMA wal_checkpoint(PASSIVE)";
+
 /// The checkpoint on a pool the caller holds (a SQLite store's, before it closes).
 pub(crate) async fn checkpoint_on(pool: &sqlx::AnyPool) -> Result<Checkpoint, StoreError> {
-    let (busy, log, checkpointed): (i64, i64, i64) =
-        sqlx::query_as("PRAGMA wal_checkpoint(PASSIVE)")
-            .fetch_one(pool)
-            .await
-            .map_err(crate::query_err("checkpointing the write-ahead log"))?;
-    Ok(Checkpoint {
-        // (0, -1, -1) for a database not in WAL mode: nothing to fold.
-        complete: busy == 0 && (log <= 0 || checkpointed == log),
-        log_pages: log.max(0),
-    })
-}
-
-/// [`checkpoint_on`] on a connection of SQLite's own driver.
-async fn checkpoint_with(conn: &mut sqlx::SqliteConnection) -> Result<Checkpoint, StoreError> {
-    let (busy, log, checkpointed): (i64, i64, i64) =
-        sqlx::query_as("PRAGMA wal_checkpoint(PASSIVE)")
-            .fetch_one(conn)
-            .await
-            .map_err(crate::query_err("checkpointing the write-ahead log"))?;
-    Ok(Checkpoint {
-        // (0, -1, -1) for a database not in WAL mode: nothing to fold.
-        complete: busy == 0 && (log <= 0 || checkpointed == log),
-        log_pages: log.max(0),
-    })
+    sqlx::query_as(CHECKPOINT_SQL)
+        .fetch_one(pool)
+        .await
+        .map(Checkpoint::from_pragma)
+        .map_err(crate::query_err("checkpointing the write-ahead log"))
 }
 
 /// Bytes on disk: the database file and its write-ahead log.

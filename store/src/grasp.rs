@@ -631,7 +631,7 @@ mod tests {
     #[tokio::test]
     async fn a_trial_and_its_trace_store_once_and_read_back() {
         let dir = tempfile::tempdir().expect("temp dir");
-        let store = Store::open(crate::test_target(dir.path(), "g.db").await)
+        let store = Store::open(crate::testing::fresh_target(dir.path(), "g.db").await)
             .await
             .unwrap_or_else(|e| panic!("{e}"));
         let id = store

@@ -203,7 +203,7 @@ mod tests {
     #[tokio::test]
     async fn the_latest_matching_calibration_reads_back_and_others_do_not_match() {
         let dir = tempfile::tempdir().expect("tmp");
-        let store = Store::open(crate::test_target(dir.path(), "c.db").await)
+        let store = Store::open(crate::testing::fresh_target(dir.path(), "c.db").await)
             .await
             .expect("open");
         assert!(

@@ -45,6 +45,7 @@ pub mod rows;
 mod runs;
 mod sync;
 pub mod target;
+pub mod testing;
 mod window;
 pub use dialect::Dialect;
 pub use target::DbTarget;
@@ -396,10 +397,7 @@ impl Store {
     async fn connect(target: DbTarget) -> Result<Self, StoreError> {
         sqlx::any::install_default_drivers();
         let shown = target.display().to_string();
-        let (url, dialect) = match &target {
-            DbTarget::File(path) => (file::sqlite_url(path, "rwc"), Dialect::Sqlite),
-            DbTarget::Postgres(url) => (url.clone(), Dialect::Postgres),
-        };
+        let (url, dialect) = target.url_and_dialect("rwc");
         let migrator = match dialect {
             Dialect::Sqlite => &MIGRATOR,
             Dialect::Postgres => &PG_MIGRATOR,
@@ -744,27 +742,6 @@ fn connect_error(shown: &str, source: sqlx::Error) -> StoreError {
             source,
         },
     }
-}
-
-/// For the store's own tests: a new database at `dir/file`, or with
-/// `SOFTTOUCH_TEST_POSTGRES` set (TESTING.md) a new one of its own on that server.
-#[cfg(test)]
-pub(crate) async fn test_target(dir: &std::path::Path, file: &str) -> DbTarget {
-    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let Ok(server) = std::env::var("SOFTTOUCH_TEST_POSTGRES") else {
-        return DbTarget::File(dir.join(file));
-    };
-    let name = format!(
-        "s{}_{}_{}",
-        std::process::id(),
-        NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.subsec_nanos())
-    );
-    Store::create_postgres_database(&server, &name)
-        .await
-        .unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Counts of a run's rows per table.

@@ -121,13 +121,10 @@ fn check_file(path: &Path) -> Result<(), ReadError> {
 pub async fn open_read_only(target: &DbTarget) -> Result<ReadOnly, ReadError> {
     sqlx::any::install_default_drivers();
     let shown = target.display().to_string();
-    let (url, dialect) = match target {
-        DbTarget::File(path) => {
-            check_file(path)?;
-            (crate::file::sqlite_url(path, "ro"), Dialect::Sqlite)
-        }
-        DbTarget::Postgres(url) => (url.clone(), Dialect::Postgres),
-    };
+    if let Some(path) = target.file() {
+        check_file(path)?;
+    }
+    let (url, dialect) = target.url_and_dialect("ro");
     let pool = AnyPoolOptions::new()
         .max_connections(2)
         .acquire_timeout(Duration::from_secs(10))

@@ -312,7 +312,7 @@ mod tests {
     #[tokio::test]
     async fn a_result_reads_back_whole_and_reruns_add_rows() {
         let dir = tempfile::tempdir().expect("test step");
-        let store = Store::open(crate::test_target(dir.path(), "r.db").await)
+        let store = Store::open(crate::testing::fresh_target(dir.path(), "r.db").await)
             .await
             .expect("test step");
         let a = store
@@ -347,7 +347,7 @@ mod tests {
     #[tokio::test]
     async fn bad_results_store_nothing() {
         let dir = tempfile::tempdir().expect("test step");
-        let store = Store::open(crate::test_target(dir.path(), "r.db").await)
+        let store = Store::open(crate::testing::fresh_target(dir.path(), "r.db").await)
             .await
             .expect("test step");
         let mut empty_verb = result("x");

@@ -39,6 +39,18 @@ impl DbTarget {
         Shown(self)
     }
 
+    /// The URL sqlx's `Any` driver connects by, and the engine behind it; a SQLite file
+    /// is opened in `sqlite_mode` (`rwc`, `rw`, `ro`: see [`crate::file::sqlite_url`]).
+    pub(crate) fn url_and_dialect(&self, sqlite_mode: &str) -> (String, crate::Dialect) {
+        match self {
+            Self::File(path) => (
+                crate::file::sqlite_url(path, sqlite_mode),
+                crate::Dialect::Sqlite,
+            ),
+            Self::Postgres(url) => (url.clone(), crate::Dialect::Postgres),
+        }
+    }
+
     /// Whether this is a PostgreSQL server.
     #[must_use]
     pub const fn is_postgres(&self) -> bool {

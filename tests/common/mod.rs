@@ -119,6 +119,13 @@ pub(crate) fn stop_failing() -> &'static str {
     }
 }
 
+/// The store `db` stands for ([`target_of`]), opened (and created) or the test fails.
+pub(crate) async fn open_store(db: &Path) -> softtouch_collector::store::Store {
+    softtouch_collector::store::Store::open(target_of(db))
+        .await
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// `target_of` as `--db` takes it.
 pub(crate) fn db_arg(db: &Path) -> String {
     match target_of(db) {

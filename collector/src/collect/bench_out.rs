@@ -153,17 +153,7 @@ pub fn time_ingest(store: &SyncStore, samples: u64) -> Result<String, BenchError
     let raw = rendered_frames()?;
     let mut text = String::from("case                      samples   seconds   samples/s\n");
     for (case, encoded) in [("raw RGB → PNG → SQLite", false), ("PNG → SQLite", true)] {
-        let run = store.create_run(OwnedNewRun {
-            seed: 0,
-            samples_planned: samples,
-            rod_schedule: vec!["circle-10".into()],
-            rod_block: samples.max(1),
-            scene_name: format!("bench ingest: {case}"),
-            medium: Medium::Air,
-            rig_toml: String::new(),
-            scene_toml: String::new(),
-            poses_from: None,
-        })?;
+        let run = bench_run(store, 0, samples, format!("bench ingest: {case}"))?;
         let frames: Vec<Frame> = if encoded {
             raw.iter()
                 .map(|f| crate::store::encode_for_store(f).map(|(meta, data)| Frame { meta, data }))
@@ -172,13 +162,7 @@ pub fn time_ingest(store: &SyncStore, samples: u64) -> Result<String, BenchError
             raw.clone()
         };
         let started = Instant::now();
-        for i in 0..samples {
-            let frame = frames[usize::try_from(i).unwrap_or(0) % frames.len()].clone();
-            let sample = SampleBuilder::new(i);
-            let window = sample.window();
-            store.submit_sample(run, sample.build(), Some(frame), window)?;
-        }
-        store.flush()?;
+        submit_samples(store, run, &frames, samples)?;
         let secs = started.elapsed().as_secs_f64();
         text.push_str(&format!(
             "{case:<24}  {samples:>7}  {secs:>8.2}  {:>10.0}\n",
@@ -186,6 +170,44 @@ pub fn time_ingest(store: &SyncStore, samples: u64) -> Result<String, BenchError
         ));
     }
     Ok(text)
+}
+
+/// A run for the ingest bench to write into.
+fn bench_run(
+    store: &SyncStore,
+    seed: u64,
+    samples: u64,
+    scene_name: String,
+) -> Result<crate::store::RunId, BenchError> {
+    Ok(store.create_run(OwnedNewRun {
+        seed,
+        samples_planned: samples,
+        rod_schedule: vec!["circle-10".into()],
+        rod_block: samples.max(1),
+        scene_name,
+        medium: Medium::Air,
+        rig_toml: String::new(),
+        scene_toml: String::new(),
+        poses_from: None,
+    })?)
+}
+
+/// Submits `samples` synthetic samples to `run`, the frames taken in turn, and waits
+/// until every one is committed.
+fn submit_samples(
+    store: &SyncStore,
+    run: crate::store::RunId,
+    frames: &[Frame],
+    samples: u64,
+) -> Result<(), BenchError> {
+    for i in 0..samples {
+        let frame = frames[usize::try_from(i).unwrap_or(0) % frames.len()].clone();
+        let sample = SampleBuilder::new(i);
+        let window = sample.window();
+        store.submit_sample(run, sample.build(), Some(frame), window)?;
+    }
+    store.flush()?;
+    Ok(())
 }
 
 /// Several rigs writing one store at once: `rigs` threads, each with a store of its own
@@ -209,17 +231,12 @@ pub fn time_rigs(
         .iter()
         .enumerate()
         .map(|(i, store)| {
-            store.create_run(OwnedNewRun {
-                seed: i as u64,
-                samples_planned: samples,
-                rod_schedule: vec!["circle-10".into()],
-                rod_block: samples.max(1),
-                scene_name: format!("bench ingest: rig {i} of {rigs}"),
-                medium: Medium::Air,
-                rig_toml: String::new(),
-                scene_toml: String::new(),
-                poses_from: None,
-            })
+            bench_run(
+                store,
+                i as u64,
+                samples,
+                format!("bench ingest: rig {i} of {rigs}"),
+            )
         })
         .collect::<Result<Vec<_>, _>>()?;
     let started = Instant::now();
@@ -229,16 +246,7 @@ pub fn time_rigs(
             .zip(&runs)
             .map(|(store, &run)| {
                 let raw = std::sync::Arc::clone(&raw);
-                scope.spawn(move || -> Result<(), BenchError> {
-                    for i in 0..samples {
-                        let frame = raw[usize::try_from(i).unwrap_or(0) % raw.len()].clone();
-                        let sample = SampleBuilder::new(i);
-                        let window = sample.window();
-                        store.submit_sample(run, sample.build(), Some(frame), window)?;
-                    }
-                    store.flush()?;
-                    Ok(())
-                })
+                scope.spawn(move || submit_samples(store, run, &raw, samples))
             })
             .collect();
         handles
