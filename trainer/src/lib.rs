@@ -14,6 +14,7 @@ pub mod artifact;
 pub mod backend;
 mod im2col;
 pub mod infer;
+pub mod kernels;
 pub mod labels;
 pub mod loss;
 pub mod metrics;

@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::TrainError;
 use crate::im2col::{Feature, FlatConv};
+use crate::kernels::{conv_transpose2d, conv2d};
 use crate::preprocess::{Fork, Preprocess};
 
 /// Which of the paper's models.
@@ -237,10 +238,10 @@ impl ResBlock {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let h = relu(self.bn1.forward(self.conv1.forward(x.clone())));
-        let h = self.bn2.forward(self.conv2.forward(h));
+        let h = relu(self.bn1.forward(conv2d(x.clone(), &self.conv1)));
+        let h = self.bn2.forward(conv2d(h, &self.conv2));
         let s = match &self.skip {
-            Some(conv) => conv.forward(x),
+            Some(conv) => conv2d(x, conv),
             None => x,
         };
         relu(h + s)
@@ -267,7 +268,7 @@ impl UpBlock {
         }
     }
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        relu(self.bn.forward(self.conv.forward(x)))
+        relu(self.bn.forward(conv_transpose2d(x, &self.conv)))
     }
 }
 
@@ -287,7 +288,7 @@ impl Decoder {
         for up in &self.ups {
             x = up.forward(x);
         }
-        sigmoid(self.out.forward(x))
+        sigmoid(conv_transpose2d(x, &self.out))
     }
 }
 
@@ -361,7 +362,7 @@ impl Net {
 
     /// Image → flattened features.
     fn encode(&self, images: Tensor<4>) -> Tensor<2> {
-        let mut x = relu(self.stem_bn.forward(self.stem.forward(images)));
+        let mut x = relu(self.stem_bn.forward(conv2d(images, &self.stem)));
         for stage in &self.stages {
             x = stage.forward(x);
         }

@@ -1,0 +1,280 @@
+//! Training's convolutions on the flex backend: forward and backward as im2col and
+//! one `gemm` per chunk of the batch (`conv.rs`), registered with burn's autodiff as
+//! custom operations.
+//!
+//! Why: burn-flex converts every convolution's input to channels-last and back,
+//! builds its patches image by image, computes the input gradient as a transposed
+//! convolution of scalar loops and the weight gradient as a convolution with the
+//! batch as channels; on the SVAE's small maps that kept training at about 0.6× the
+//! PyTorch peer on the same two cores. `softtouch bench train` measures both paths
+//! side by side (`SOFTTOUCH_CONV=burn` selects burn's); the numbers are in
+//! `trainer/README.md`.
+//!
+//! [`conv2d`] and [`conv_transpose2d`] take the burn modules as they are (the same
+//! parameters, the same artifacts) and fall back to the module's own `forward` for
+//! anything these kernels do not cover: a tensor that is not an autodiff flex tensor
+//! (evaluation, inference, the ndarray backend), groups, dilation, asymmetric or
+//! `Same` padding, or a dtype other than f32.
+
+mod conv;
+mod gemm;
+#[cfg(test)]
+mod tests;
+
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::flex::FlexTensor;
+use burn::backend::{Autodiff, Flex};
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::{Conv2d, ConvTranspose2d};
+use burn::prelude::*;
+use burn::tensor::DType;
+
+use conv::Geometry;
+
+/// The environment variable that sends training's convolutions back to burn's own
+/// kernels (`SOFTTOUCH_CONV=burn`), to compare the two.
+pub const ENV: &str = "SOFTTOUCH_CONV";
+
+fn enabled() -> bool {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ON.get_or_init(|| std::env::var(ENV).map_or(true, |v| v != "burn"))
+}
+
+type Ad = Autodiff<Flex>;
+
+/// `conv.forward(x)`, through these kernels where they apply.
+pub(crate) fn conv2d(x: Tensor<4>, conv: &Conv2d) -> Tensor<4> {
+    let [batch, c_in, h, w] = x.dims();
+    let [c_out, c_in_w, kh, kw] = conv.weight.dims();
+    let pad = match conv.padding {
+        PaddingConfig2d::Valid => Some([0, 0]),
+        PaddingConfig2d::Explicit(top, left, bottom, right) if top == bottom && left == right => {
+            Some([top, left])
+        }
+        _ => None,
+    };
+    let geometry = pad
+        .filter(|_| enabled() && conv.groups == 1 && conv.dilation == [1, 1] && c_in == c_in_w)
+        .and_then(|pad| Geometry::new([batch, c_in, c_out], [kh, kw], conv.stride, pad, [h, w]));
+    let bias = conv.bias.as_ref().map(|b| b.val());
+    match geometry.and_then(|g| run(Kind::Conv, g, x.clone(), conv.weight.val(), bias)) {
+        Some(y) => y,
+        None => conv.forward(x),
+    }
+}
+
+/// `conv.forward(x)` of a transposed convolution, through these kernels where they
+/// apply: the input gradient of the convolution it transposes, whose input is this
+/// one's output.
+pub(crate) fn conv_transpose2d(x: Tensor<4>, conv: &ConvTranspose2d) -> Tensor<4> {
+    let [batch, c_in, h, w] = x.dims();
+    let [c_in_w, c_out, kh, kw] = conv.weight.dims();
+    let out = |d: usize, size: usize, k: usize| {
+        ((size.max(1) - 1) * conv.stride[d] + k + conv.padding_out[d])
+            .checked_sub(2 * conv.padding[d])
+    };
+    let geometry = (enabled()
+        && conv.groups == 1
+        && conv.dilation == [1, 1]
+        && c_in == c_in_w
+        && h > 0
+        && w > 0)
+        .then(|| Some([out(0, h, kh)?, out(1, w, kw)?]))
+        .flatten()
+        .and_then(|out_hw| {
+            Geometry::new(
+                [batch, c_out, c_in],
+                [kh, kw],
+                conv.stride,
+                conv.padding,
+                out_hw,
+            )
+        })
+        .filter(|g| g.out_hw == [h, w]);
+    let bias = conv.bias.as_ref().map(|b| b.val());
+    match geometry.and_then(|g| run(Kind::Transposed, g, x.clone(), conv.weight.val(), bias)) {
+        Some(y) => y,
+        None => conv.forward(x),
+    }
+}
+
+/// Whether the operation is the convolution of [`Geometry`] or its transpose (whose
+/// input is the geometry's output and whose output is the geometry's input).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Conv,
+    Transposed,
+}
+
+/// What the backward pass needs: the operation's input and weight.
+#[derive(Debug, Clone)]
+struct State {
+    kind: Kind,
+    geometry: Geometry,
+    input: FlexTensor,
+    weight: FlexTensor,
+}
+
+/// The operation's gradients with respect to its input, weight and bias.
+struct Grads {
+    input: Option<FlexTensor>,
+    weight: Option<FlexTensor>,
+    bias: Option<FlexTensor>,
+}
+
+fn f32s(t: &FlexTensor) -> Option<FlexTensor> {
+    (t.dtype() == DType::F32).then(|| t.to_contiguous())
+}
+
+fn slice(t: &FlexTensor) -> &[f32] {
+    t.as_slice::<f32>().unwrap_or(&[])
+}
+
+fn tensor(values: Vec<f32>, shape: Vec<usize>) -> FlexTensor {
+    FlexTensor::from_data(TensorData::new(values, shape))
+}
+
+impl State {
+    fn grads(&self, grad: FlexTensor, want: [bool; 3]) -> Grads {
+        let g = &self.geometry;
+        let grad = grad.to_contiguous();
+        let (dy, x, w) = (slice(&grad), slice(&self.input), slice(&self.weight));
+        let in_shape = self.input.layout().shape().to_vec();
+        let w_shape = self.weight.layout().shape().to_vec();
+        let [want_input, want_weight, want_bias] = want;
+        let (input, weight, bias) = match self.kind {
+            Kind::Conv => {
+                let (dw, dx) = if want_weight {
+                    let (dw, dx) = conv::backward(g, x, w, dy, want_input);
+                    (Some(dw), dx)
+                } else {
+                    (None, want_input.then(|| conv::input_gradient(g, w, dy)))
+                };
+                let db = want_bias
+                    .then(|| conv::channel_sums(dy, g.batch, g.c_out, g.out_hw[0] * g.out_hw[1]));
+                (dx, dw, db)
+            }
+            Kind::Transposed => {
+                // The output's gradient has the geometry's input shape.
+                let dx = want_input.then(|| conv::forward(g, dy, w, None));
+                let dw = want_weight.then(|| conv::backward(g, dy, w, x, false).0);
+                let db = want_bias
+                    .then(|| conv::channel_sums(dy, g.batch, g.c_in, g.in_hw[0] * g.in_hw[1]));
+                (dx, dw, db)
+            }
+        };
+        let c_bias = match self.kind {
+            Kind::Conv => g.c_out,
+            Kind::Transposed => g.c_in,
+        };
+        Grads {
+            input: input.map(|v| tensor(v, in_shape)),
+            weight: weight.map(|v| tensor(v, w_shape)),
+            bias: bias.map(|v| tensor(v, vec![c_bias])),
+        }
+    }
+}
+
+#[derive(Debug)]
+struct WithBias;
+#[derive(Debug)]
+struct NoBias;
+
+impl Backward<Flex, 3> for WithBias {
+    type State = State;
+    fn backward(self, ops: Ops<State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [input, weight, bias] = ops.parents;
+        let grad = grads.consume::<Flex>(&ops.node);
+        let want = [input.is_some(), weight.is_some(), bias.is_some()];
+        let out = ops.state.grads(grad, want);
+        for (node, grad) in [(input, out.input), (weight, out.weight), (bias, out.bias)] {
+            if let (Some(node), Some(grad)) = (node, grad) {
+                grads.register::<Flex>(node.id, grad);
+            }
+        }
+    }
+}
+
+impl Backward<Flex, 2> for NoBias {
+    type State = State;
+    fn backward(self, ops: Ops<State, 2>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [input, weight] = ops.parents;
+        let grad = grads.consume::<Flex>(&ops.node);
+        let want = [input.is_some(), weight.is_some(), false];
+        let out = ops.state.grads(grad, want);
+        for (node, grad) in [(input, out.input), (weight, out.weight)] {
+            if let (Some(node), Some(grad)) = (node, grad) {
+                grads.register::<Flex>(node.id, grad);
+            }
+        }
+    }
+}
+
+/// The operation on autodiff flex tensors; `None` (nothing consumed but clones) when
+/// a tensor is of another backend or dtype.
+fn run(
+    kind: Kind,
+    g: Geometry,
+    x: Tensor<4>,
+    w: Tensor<4>,
+    b: Option<Tensor<1>>,
+) -> Option<Tensor<4>> {
+    let x = x.try_into_primitive::<Ad>().ok()?;
+    let w = w.try_into_primitive::<Ad>().ok()?;
+    let b = match b {
+        Some(b) => Some(b.try_into_primitive::<Ad>().ok()?),
+        None => None,
+    };
+    let input = f32s(x.primitive())?;
+    let weight = f32s(w.primitive())?;
+    let bias = match &b {
+        Some(b) => Some(f32s(b.primitive())?),
+        None => None,
+    };
+    let bias_values = bias.as_ref().map(slice);
+    let (values, shape) = match kind {
+        Kind::Conv => (
+            conv::forward(&g, slice(&input), slice(&weight), bias_values),
+            [g.batch, g.c_out, g.out_hw[0], g.out_hw[1]],
+        ),
+        Kind::Transposed => {
+            let mut y = conv::input_gradient(&g, slice(&weight), slice(&input));
+            if let Some(bias) = bias_values {
+                let px = g.in_hw[0] * g.in_hw[1];
+                for (i, v) in y.iter_mut().enumerate() {
+                    *v += bias[(i / px) % g.c_in];
+                }
+            }
+            (y, [g.batch, g.c_in, g.in_hw[0], g.in_hw[1]])
+        }
+    };
+    let output = tensor(values, shape.to_vec());
+    let state = State {
+        kind,
+        geometry: g,
+        input,
+        weight,
+    };
+    let out = match b {
+        Some(b) => match WithBias
+            .prepare::<NoCheckpointing>([x.node(), w.node(), b.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => prep.finish(state, output),
+            OpsKind::UnTracked(prep) => prep.finish(output),
+        },
+        None => match NoBias
+            .prepare::<NoCheckpointing>([x.node(), w.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => prep.finish(state, output),
+            OpsKind::UnTracked(prep) => prep.finish(output),
+        },
+    };
+    Some(Tensor::from_primitive::<Ad>(out))
+}
