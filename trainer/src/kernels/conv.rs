@@ -7,9 +7,16 @@
 //! per chunk rather than many small ones. The weight gradients of the chunks are
 //! added in chunk order, so a run is repeatable for a given thread count.
 
+use std::cell::RefCell;
+
 use rayon::prelude::*;
 
 use super::gemm::{View, matmul};
+
+/// Values of a block's patch matrix (256 KiB of f32): a quarter of the 1 MiB L2
+/// cache per core of the machine this was measured on, so that the matrix, the
+/// output block and `gemm`'s packed panels fit together.
+const BLOCK_VALUES: usize = 1 << 16;
 
 /// The shape of one convolution `x [batch, c_in, h_in, w_in] → y [batch, c_out,
 /// h_out, w_out]` with a weight `[c_out, c_in, kh, kw]`; dilation 1, one group.
@@ -72,25 +79,17 @@ impl Geometry {
         self.c_out * self.patch()
     }
 
+    /// Images per block within a chunk: as many as keep a block's patch matrix near
+    /// [`BLOCK_VALUES`], so that it is still in the core's cache when `gemm` reads it.
+    fn block(&self) -> usize {
+        (BLOCK_VALUES / (self.patch() * self.out_px()).max(1)).max(1)
+    }
+
     /// Images per chunk: the batch over rayon's threads.
     fn per_chunk(&self) -> usize {
         self.batch
             .div_ceil(rayon::current_num_threads().max(1))
             .max(1)
-    }
-
-    /// Columns `lo..hi` of a kernel row's output positions whose input column
-    /// `o·stride + j − pad` lies inside `0..w_in`, and the first such input column.
-    fn valid_cols(&self, j: usize) -> (usize, usize, usize) {
-        let (s, p, w_in, w_out) = (self.stride[1], self.pad[1], self.in_hw[1], self.out_hw[1]);
-        let lo = p.saturating_sub(j).div_ceil(s).min(w_out);
-        let hi = if w_in + p > j {
-            ((w_in + p - j - 1) / s + 1).min(w_out)
-        } else {
-            0
-        };
-        let hi = hi.max(lo);
-        (lo, hi, (lo * s + j).saturating_sub(p))
     }
 
     /// The input row of output row `o` at kernel row `i`, if inside the image.
@@ -101,40 +100,30 @@ impl Geometry {
     }
 
     /// The patch matrix `[patch, images·out_px]` of `images` consecutive images of `x`.
+    ///
+    /// Rows are short (4 to 32 values), so each value is one select rather than a
+    /// `memcpy` and two `memset` calls per row; an input column left of or past the
+    /// image wraps to an index ≥ `w_in`, which reads as zero padding.
     fn im2col(&self, x: &[f32], images: usize, col: &mut [f32]) {
         let (kh, kw) = (self.kernel[0], self.kernel[1]);
-        let (n, out_px, in_px) = (images * self.out_px(), self.out_px(), self.in_px());
-        let (h_out, w_out, w_in, s) = (
-            self.out_hw[0],
-            self.out_hw[1],
-            self.in_hw[1],
-            self.stride[1],
-        );
+        let (n, in_px) = (images * self.out_px(), self.in_px());
+        let (w_out, w_in, s, p) = (self.out_hw[1], self.in_hw[1], self.stride[1], self.pad[1]);
         for c in 0..self.c_in {
             for i in 0..kh {
+                let rows: Vec<Option<usize>> =
+                    (0..self.out_hw[0]).map(|o| self.in_row(o, i)).collect();
                 for j in 0..kw {
                     let row = &mut col[((c * kh + i) * kw + j) * n..][..n];
-                    let (lo, hi, first) = self.valid_cols(j);
-                    for b in 0..images {
+                    for (b, out_image) in row.chunks_exact_mut(self.out_px()).enumerate() {
                         let image = &x[(b * self.c_in + c) * in_px..][..in_px];
-                        for o in 0..h_out {
-                            let dst = &mut row[b * out_px + o * w_out..][..w_out];
-                            let Some(r) = self.in_row(o, i) else {
-                                dst.fill(0.0);
+                        for (dst, r) in out_image.chunks_exact_mut(w_out).zip(&rows) {
+                            let Some(r) = *r else {
+                                dst.iter_mut().for_each(|d| *d = 0.0);
                                 continue;
                             };
-                            dst[..lo].fill(0.0);
-                            dst[hi..].fill(0.0);
-                            if hi == lo {
-                                continue;
-                            }
-                            let src = &image[r * w_in + first..(r + 1) * w_in];
-                            if s == 1 {
-                                dst[lo..hi].copy_from_slice(&src[..hi - lo]);
-                            } else {
-                                for (d, v) in dst[lo..hi].iter_mut().zip(src.iter().step_by(s)) {
-                                    *d = *v;
-                                }
+                            let src = &image[r * w_in..][..w_in];
+                            for (o, d) in dst.iter_mut().enumerate() {
+                                *d = src.get((o * s + j).wrapping_sub(p)).copied().unwrap_or(0.0);
                             }
                         }
                     }
@@ -148,28 +137,23 @@ impl Geometry {
     fn col2im(&self, col: &[f32], images: usize, x: &mut [f32]) {
         x.fill(0.0);
         let (kh, kw) = (self.kernel[0], self.kernel[1]);
-        let (n, out_px, in_px) = (images * self.out_px(), self.out_px(), self.in_px());
-        let (h_out, w_out, w_in, s) = (
-            self.out_hw[0],
-            self.out_hw[1],
-            self.in_hw[1],
-            self.stride[1],
-        );
+        let (n, in_px) = (images * self.out_px(), self.in_px());
+        let (w_out, w_in, s, p) = (self.out_hw[1], self.in_hw[1], self.stride[1], self.pad[1]);
         for c in 0..self.c_in {
             for i in 0..kh {
+                let rows: Vec<Option<usize>> =
+                    (0..self.out_hw[0]).map(|o| self.in_row(o, i)).collect();
                 for j in 0..kw {
                     let row = &col[((c * kh + i) * kw + j) * n..][..n];
-                    let (lo, hi, first) = self.valid_cols(j);
-                    for b in 0..images {
+                    for (b, out_image) in row.chunks_exact(self.out_px()).enumerate() {
                         let image = &mut x[(b * self.c_in + c) * in_px..][..in_px];
-                        for o in 0..h_out {
-                            let Some(r) = self.in_row(o, i).filter(|_| hi > lo) else {
-                                continue;
-                            };
-                            let src = &row[b * out_px + o * w_out..][lo..hi];
-                            let dst = &mut image[r * w_in + first..(r + 1) * w_in];
-                            for (d, v) in dst.iter_mut().step_by(s).zip(src) {
-                                *d += *v;
+                        for (src, r) in out_image.chunks_exact(w_out).zip(&rows) {
+                            let Some(r) = *r else { continue };
+                            let dst = &mut image[r * w_in..][..w_in];
+                            for (o, v) in src.iter().enumerate() {
+                                if let Some(d) = dst.get_mut((o * s + j).wrapping_sub(p)) {
+                                    *d += v;
+                                }
                             }
                         }
                     }
@@ -191,31 +175,30 @@ fn to_channel_major(y: &[f32], images: usize, c: usize, px: usize, m: &mut [f32]
 
 /// The convolution's output, plus `bias[c_out]` when given.
 pub(crate) fn forward(g: &Geometry, x: &[f32], w: &[f32], bias: Option<&[f32]>) -> Vec<f32> {
-    let (per, patch, out_px) = (g.per_chunk(), g.patch(), g.out_px());
+    let (patch, out_px, block) = (g.patch(), g.out_px(), g.block());
     let mut y = vec![0.0f32; g.y_len()];
-    y.par_chunks_mut(per * g.c_out * out_px)
-        .zip(x.par_chunks(per * g.c_in * g.in_px()))
+    let (x_image, y_image) = (g.c_in * g.in_px(), g.c_out * out_px);
+    y.par_chunks_mut(g.per_chunk() * y_image)
+        .zip(x.par_chunks(g.per_chunk() * x_image))
         .for_each(|(y, x)| {
-            let images = x.len() / (g.c_in * g.in_px());
-            let n = images * out_px;
-            let mut col = vec![0.0f32; patch * n];
-            g.im2col(x, images, &mut col);
-            let mut m = vec![0.0f32; g.c_out * n];
-            matmul(
-                &mut m,
-                false,
-                View::rows(w, g.c_out, patch),
-                View::rows(&col, patch, n),
-            );
-            for b in 0..images {
-                for ch in 0..g.c_out {
-                    let src = &m[ch * n + b * out_px..][..out_px];
-                    let dst = &mut y[(b * g.c_out + ch) * out_px..][..out_px];
-                    let add = bias.map_or(0.0, |bias| bias[ch]);
-                    for (d, v) in dst.iter_mut().zip(src) {
-                        *d = v + add;
+            for (y, x) in y.chunks_mut(block * y_image).zip(x.chunks(block * x_image)) {
+                let images = x.len() / x_image;
+                let n = images * out_px;
+                with_scratch(patch * n, g.c_out * n, |col, m| {
+                    g.im2col(x, images, col);
+                    let (w, col) = (View::rows(w, g.c_out, patch), View::rows(col, patch, n));
+                    matmul(m, false, w, col);
+                    for b in 0..images {
+                        for ch in 0..g.c_out {
+                            let src = &m[ch * n + b * out_px..][..out_px];
+                            let dst = &mut y[(b * g.c_out + ch) * out_px..][..out_px];
+                            let add = bias.map_or(0.0, |bias| bias[ch]);
+                            for (d, v) in dst.iter_mut().zip(src) {
+                                *d = v + add;
+                            }
+                        }
                     }
-                }
+                });
             }
         });
     y
@@ -230,23 +213,32 @@ pub(crate) fn backward(
     dy: &[f32],
     want_x: bool,
 ) -> (Vec<f32>, Option<Vec<f32>>) {
-    let (per, patch, out_px) = (g.per_chunk(), g.patch(), g.out_px());
-    let chunk = |x_chunk: &[f32], dy: &[f32], dx: Option<&mut [f32]>| {
-        let images = dy.len() / (g.c_out * out_px);
-        let n = images * out_px;
-        let mut m = vec![0.0f32; g.c_out * n];
-        to_channel_major(dy, images, g.c_out, out_px, &mut m);
-        let dy = View::rows(&m, g.c_out, n);
-        let mut col = vec![0.0f32; patch * n];
-        g.im2col(x_chunk, images, &mut col);
+    let (patch, out_px, block) = (g.patch(), g.out_px(), g.block());
+    let (x_image, y_image) = (g.c_in * g.in_px(), g.c_out * out_px);
+    // One chunk: its weight gradient, and its input gradient into `dx`.
+    let chunk = |x: &[f32], dy: &[f32], mut dx: Option<&mut [f32]>| {
         let mut dw = vec![0.0f32; g.w_len()];
-        matmul(&mut dw, false, dy, View::rows(&col, patch, n).t());
-        if let Some(dx) = dx {
-            scatter_input_gradient(g, w, dy, images, dx);
+        for (i, (x, dy)) in x
+            .chunks(block * x_image)
+            .zip(dy.chunks(block * y_image))
+            .enumerate()
+        {
+            let images = x.len() / x_image;
+            let n = images * out_px;
+            with_scratch(patch * n, g.c_out * n, |col, m| {
+                to_channel_major(dy, images, g.c_out, out_px, m);
+                let dy = View::rows(m, g.c_out, n);
+                g.im2col(x, images, col);
+                matmul(&mut dw, i > 0, dy, View::rows(col, patch, n).t());
+                if let Some(dx) = dx.as_deref_mut() {
+                    let dx = &mut dx[i * block * x_image..][..images * x_image];
+                    scatter_input_gradient(g, w, dy, images, col, dx);
+                }
+            });
         }
         dw
     };
-    let (x_step, y_step) = (per * g.c_in * g.in_px(), per * g.c_out * out_px);
+    let (x_step, y_step) = (g.per_chunk() * x_image, g.per_chunk() * y_image);
     let (dx, parts): (Option<Vec<f32>>, Vec<Vec<f32>>) = if want_x {
         let mut dx = vec![0.0f32; g.x_len()];
         let parts = dx
@@ -276,25 +268,64 @@ pub(crate) fn backward(
 /// The gradient of the input alone: the transposed convolution of `dy` (what a
 /// transposed convolution's forward pass computes).
 pub(crate) fn input_gradient(g: &Geometry, w: &[f32], dy: &[f32]) -> Vec<f32> {
-    let (per, out_px, in_px) = (g.per_chunk(), g.out_px(), g.in_px());
+    let (out_px, block) = (g.out_px(), g.block());
+    let (x_image, y_image) = (g.c_in * g.in_px(), g.c_out * out_px);
     let mut dx = vec![0.0f32; g.x_len()];
-    dx.par_chunks_mut(per * g.c_in * in_px)
-        .zip(dy.par_chunks(per * g.c_out * out_px))
+    dx.par_chunks_mut(g.per_chunk() * x_image)
+        .zip(dy.par_chunks(g.per_chunk() * y_image))
         .for_each(|(dx, dy)| {
-            let images = dy.len() / (g.c_out * out_px);
-            let n = images * out_px;
-            let mut m = vec![0.0f32; g.c_out * n];
-            to_channel_major(dy, images, g.c_out, out_px, &mut m);
-            scatter_input_gradient(g, w, View::rows(&m, g.c_out, n), images, dx);
+            for (dx, dy) in dx
+                .chunks_mut(block * x_image)
+                .zip(dy.chunks(block * y_image))
+            {
+                let images = dy.len() / y_image;
+                let n = images * out_px;
+                with_scratch(g.patch() * n, g.c_out * n, |col, m| {
+                    to_channel_major(dy, images, g.c_out, out_px, m);
+                    scatter_input_gradient(g, w, View::rows(m, g.c_out, n), images, col, dx);
+                });
+            }
         });
     dx
 }
 
-/// `images` images' input gradient from their output gradient `dy [c_out, images·out_px]`.
-fn scatter_input_gradient(g: &Geometry, w: &[f32], dy: View<'_>, images: usize, dx: &mut [f32]) {
-    let mut col = vec![0.0f32; g.patch() * images * g.out_px()];
-    matmul(&mut col, false, View::rows(w, g.c_out, g.patch()).t(), dy);
-    g.col2im(&col, images, dx);
+/// `images` images' input gradient from their output gradient `dy [c_out, images·out_px]`,
+/// through `col` (`patch × images·out_px`, overwritten).
+fn scatter_input_gradient(
+    g: &Geometry,
+    w: &[f32],
+    dy: View<'_>,
+    images: usize,
+    col: &mut [f32],
+    dx: &mut [f32],
+) {
+    matmul(col, false, View::rows(w, g.c_out, g.patch()).t(), dy);
+    g.col2im(col, images, dx);
+}
+
+thread_local! {
+    /// Each thread's two working matrices, kept between calls: a training step asks
+    /// for the same sizes again and again, and fresh ones cost page faults and zeroing
+    /// (a tenth of the step, measured with `perf`). They hold the largest block's
+    /// patches until the thread ends (at most a few hundred KiB; see [`BLOCK_VALUES`]).
+    static SCRATCH: RefCell<(Vec<f32>, Vec<f32>)> = const { RefCell::new((Vec::new(), Vec::new())) };
+}
+
+/// `f` on two working buffers of `a` and `b` values, their contents unspecified.
+fn with_scratch<R>(a: usize, b: usize, f: impl FnOnce(&mut [f32], &mut [f32]) -> R) -> R {
+    SCRATCH.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut pair) => {
+            let (va, vb) = &mut *pair;
+            for (v, len) in [(&mut *va, a), (&mut *vb, b)] {
+                if v.len() < len {
+                    v.resize(len, 0.0);
+                }
+            }
+            f(&mut va[..a], &mut vb[..b])
+        }
+        // Only if `f` re-entered on this thread (it does not): fresh buffers.
+        Err(_) => f(&mut vec![0.0; a], &mut vec![0.0; b]),
+    })
 }
 
 /// Per-channel sums of an NCHW buffer `[batch, c, px]` (a bias's gradient), summed

@@ -1,6 +1,6 @@
 //! The kernels against burn's own convolutions: outputs and every gradient, on
-//! random shapes (batch 1, odd sizes, strides 1 and 2, padding 0–2, 1×1 to 4×4
-//! kernels, with and without bias) and on zero inputs.
+//! random shapes (batch 1, odd sizes, strides 1 to 3, padding 0–2, 1×1 to 4×4
+//! kernels, with and without bias, one block or several per chunk) and on zero inputs.
 
 use burn::module::Param;
 use burn::nn::PaddingConfig2d;
@@ -80,7 +80,7 @@ fn compare(what: &str, ours: Run, burns: Run) {
 /// (batch, c_in, c_out, kernel, stride, padding, height, width, bias)
 type Case = (usize, usize, usize, usize, usize, usize, usize, usize, bool);
 
-const CONVS: [Case; 9] = [
+const CONVS: [Case; 10] = [
     (1, 1, 1, 1, 1, 0, 1, 1, false),
     (1, 1, 16, 3, 2, 1, 32, 32, false),
     (3, 5, 7, 3, 1, 1, 9, 7, true),
@@ -90,6 +90,8 @@ const CONVS: [Case; 9] = [
     (2, 2, 3, 4, 1, 0, 5, 6, false),
     (7, 8, 8, 3, 1, 1, 4, 4, false),
     (2, 4, 2, 3, 3, 1, 11, 10, true),
+    // Patches of more than one block per image: each image its own block.
+    (3, 16, 8, 3, 1, 1, 32, 32, true),
 ];
 
 fn conv_of(case: Case, device: &Device) -> Conv2d {
@@ -127,13 +129,14 @@ fn transposed_convolutions_match_burns_values_and_gradients() {
     let device = device();
     let mut rng = ChaCha8Rng::seed_from_u64(8);
     // (batch, c_in, c_out, kernel, stride, padding, height, width, bias)
-    let cases: [Case; 6] = [
+    let cases: [Case; 7] = [
         (1, 1, 1, 1, 1, 0, 1, 1, false),
         (4, 32, 16, 4, 2, 1, 4, 4, false),
         (2, 16, 1, 4, 2, 1, 16, 16, true),
         (3, 5, 3, 3, 1, 1, 7, 6, true),
         (1, 2, 4, 3, 2, 0, 5, 3, false),
         (5, 3, 2, 4, 3, 2, 4, 5, true),
+        (3, 8, 16, 4, 2, 1, 16, 16, false),
     ];
     for (i, case) in cases.into_iter().enumerate() {
         let (batch, c_in, c_out, k, stride, pad, h, w, bias) = case;
