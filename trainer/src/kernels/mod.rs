@@ -1,6 +1,7 @@
-//! Training's convolutions on the flex backend: forward and backward as im2col and
-//! one `gemm` per chunk of the batch (`conv.rs`), registered with burn's autodiff as
-//! custom operations.
+//! Training's convolutions and batch norms on the flex backend, registered with
+//! burn's autodiff as custom operations: convolutions forward and backward as im2col
+//! and one `gemm` per block of the batch (`conv.rs`), batch norm with the batch's
+//! statistics in a few passes over the map (`norm.rs`).
 //!
 //! Why: burn-flex converts every convolution's input to channels-last and back,
 //! builds its patches image by image, computes the input gradient as a transposed
@@ -10,14 +11,16 @@
 //! side by side (`SOFTTOUCH_CONV=burn` selects burn's); the numbers are in
 //! `trainer/README.md`.
 //!
-//! [`conv2d`] and [`conv_transpose2d`] take the burn modules as they are (the same
-//! parameters, the same artifacts) and fall back to the module's own `forward` for
+//! [`conv2d`], [`conv_transpose2d`] and [`batch_norm`] take the burn modules as they
+//! are (the same parameters, running statistics and artifacts) and fall back to the
+//! module's own `forward` for
 //! anything these kernels do not cover: a tensor that is not an autodiff flex tensor
 //! (evaluation, inference, the ndarray backend), groups, dilation, asymmetric or
-//! `Same` padding, or a dtype other than f32.
+//! `Same` padding, a batch norm that is not training, or a dtype other than f32.
 
 mod conv;
 mod gemm;
+mod norm;
 #[cfg(test)]
 mod tests;
 
@@ -27,8 +30,8 @@ use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::flex::FlexTensor;
 use burn::backend::{Autodiff, Flex};
-use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, ConvTranspose2d};
+use burn::nn::{BatchNorm, PaddingConfig2d};
 use burn::prelude::*;
 use burn::tensor::DType;
 
@@ -277,4 +280,110 @@ fn run(
         },
     };
     Some(Tensor::from_primitive::<Ad>(out))
+}
+
+/// `bn.forward(x)` in training mode (the batch's statistics, the running statistics
+/// updated as burn's `BatchNorm` updates them), through [`norm`] where it applies.
+pub(crate) fn batch_norm(x: Tensor<4>, bn: &BatchNorm) -> Tensor<4> {
+    let training = x.device().is_autodiff() && bn.training.is_enabled();
+    match (enabled() && training)
+        .then(|| batch_norm_train(x.clone(), bn))
+        .flatten()
+    {
+        Some(y) => y,
+        None => bn.forward(x),
+    }
+}
+
+/// What batch norm's backward pass needs.
+#[derive(Debug, Clone)]
+struct NormState {
+    shape: norm::Shape,
+    input: FlexTensor,
+    gamma: Vec<f32>,
+    mean: Vec<f32>,
+    inv_std: Vec<f32>,
+}
+
+#[derive(Debug)]
+struct NormOp;
+
+impl Backward<Flex, 3> for NormOp {
+    type State = NormState;
+    fn backward(self, ops: Ops<NormState, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [input, gamma, beta] = ops.parents;
+        let grad = grads.consume::<Flex>(&ops.node).to_contiguous();
+        let st = &ops.state;
+        let (dx, d_gamma, d_beta) = norm::backward(
+            st.shape,
+            slice(&st.input),
+            slice(&grad),
+            &st.gamma,
+            &st.mean,
+            &st.inv_std,
+            input.is_some(),
+        );
+        let shape = st.input.layout().shape().to_vec();
+        let c = st.shape.channels;
+        let out = [
+            (input, dx.map(|v| tensor(v, shape))),
+            (gamma, Some(tensor(d_gamma, vec![c]))),
+            (beta, Some(tensor(d_beta, vec![c]))),
+        ];
+        for (node, grad) in out {
+            if let (Some(node), Some(grad)) = (node, grad) {
+                grads.register::<Flex>(node.id, grad);
+            }
+        }
+    }
+}
+
+fn batch_norm_train(x: Tensor<4>, bn: &BatchNorm) -> Option<Tensor<4>> {
+    let device = x.device();
+    let [batch, channels, h, w] = x.dims();
+    let x = x.try_into_primitive::<Ad>().ok()?;
+    let gamma = bn.gamma.val().try_into_primitive::<Ad>().ok()?;
+    let beta = bn.beta.val().try_into_primitive::<Ad>().ok()?;
+    let input = f32s(x.primitive())?;
+    let (g, b) = (f32s(gamma.primitive())?, f32s(beta.primitive())?);
+    if slice(&g).len() != channels || slice(&b).len() != channels || batch * h * w == 0 {
+        return None;
+    }
+    let shape = norm::Shape {
+        batch,
+        channels,
+        px: h * w,
+    };
+    let out = norm::forward(shape, slice(&input), slice(&g), slice(&b), bn.epsilon);
+    let state = NormState {
+        shape,
+        input,
+        gamma: slice(&g).to_vec(),
+        mean: out.mean.clone(),
+        inv_std: out.inv_std,
+    };
+    let output = tensor(out.output, vec![batch, channels, h, w]);
+    let y = match NormOp
+        .prepare::<NoCheckpointing>([x.node(), gamma.node(), beta.node()])
+        .compute_bound()
+        .stateful()
+    {
+        OpsKind::Tracked(prep) => prep.finish(state, output),
+        OpsKind::UnTracked(prep) => prep.finish(output),
+    };
+    // The running statistics, as `BatchNorm::forward` keeps them.
+    let stat = |v: Vec<f32>| Tensor::<1>::from_data(TensorData::new(v, [channels]), &device);
+    let m = bn.momentum;
+    let follow = |running: Tensor<1>, batch: Vec<f32>| {
+        running
+            .to_device(&device)
+            .mul_scalar(1.0 - m)
+            .add(stat(batch).mul_scalar(m))
+            .detach()
+    };
+    bn.running_mean
+        .update(follow(bn.running_mean.value_sync(), out.mean));
+    bn.running_var
+        .update(follow(bn.running_var.value_sync(), out.variance));
+    Some(Tensor::from_primitive::<Ad>(y))
 }

@@ -3,14 +3,14 @@
 //! kernels, with and without bias, one block or several per chunk) and on zero inputs.
 
 use burn::module::Param;
-use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
+use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d};
 use burn::prelude::*;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::gemm::{View, matmul};
-use super::{conv_transpose2d, conv2d};
+use super::{batch_norm, conv_transpose2d, conv2d};
 
 fn device() -> Device {
     Device::flex().autodiff()
@@ -46,9 +46,9 @@ struct Run {
     db: Option<Vec<f32>>,
 }
 
-fn gradients(
+fn gradients<const W: usize>(
     x: &Tensor<4>,
-    weight: &Param<Tensor<4>>,
+    weight: &Param<Tensor<W>>,
     bias: Option<&Param<Tensor<1>>>,
     op: impl FnOnce(Tensor<4>) -> Tensor<4>,
     rng_seed: u64,
@@ -269,4 +269,99 @@ fn mismatched_inner_dimensions_are_refused() {
         View::rows(&[1.0; 6], 2, 3),
         View::rows(&[1.0; 4], 2, 2),
     );
+}
+
+/// A training-mode batch norm of `c` channels with random γ and β.
+fn norm_of(c: usize, seed: u64, device: &Device) -> BatchNorm {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut bn = BatchNormConfig::new(c).init(device);
+    let mut param = |lo: f32, hi: f32| {
+        let v: Vec<f32> = (0..c).map(|_| rng.random_range(lo..hi)).collect();
+        Param::from_tensor(Tensor::<1>::from_data(TensorData::new(v, [c]), device))
+    };
+    bn.gamma = param(0.5, 1.5);
+    bn.beta = param(-0.5, 0.5);
+    bn
+}
+
+#[test]
+fn batch_norm_matches_burns_values_gradients_and_running_statistics() {
+    let device = device();
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    // (batch, channels, height, width, how the input is filled)
+    let cases = [
+        (4, 3, 5, 5, "random"),
+        (1, 2, 1, 1, "random"), // one value per channel: variance 0
+        (3, 16, 8, 8, "random"),
+        (2, 4, 3, 3, "zero"),
+        (2, 4, 3, 3, "constant"),
+        (5, 2, 4, 3, "large"),
+    ];
+    for (i, (batch, c, h, w, fill)) in cases.into_iter().enumerate() {
+        let shape = [batch, c, h, w];
+        let x = match fill {
+            "zero" => Tensor::zeros(shape, &device),
+            "constant" => Tensor::full(shape, 3.25, &device),
+            "large" => random(shape, &mut rng, &device)
+                .mul_scalar(1e4)
+                .add_scalar(5e4),
+            _ => random(shape, &mut rng, &device),
+        };
+        let (ours_bn, burns_bn) = (norm_of(c, i as u64, &device), norm_of(c, i as u64, &device));
+        let ours = gradients(
+            &x,
+            &ours_bn.gamma,
+            Some(&ours_bn.beta),
+            |x| batch_norm(x, &ours_bn),
+            i as u64,
+        );
+        let burns = gradients(
+            &x,
+            &burns_bn.gamma,
+            Some(&burns_bn.beta),
+            |x| burns_bn.forward(x),
+            i as u64,
+        );
+        let what = format!("batch norm {shape:?} {fill}");
+        assert!(
+            ours.output.iter().chain(&ours.dx).all(|v| v.is_finite()),
+            "{what}: not finite"
+        );
+        // burn's f32 sums against these f64 ones: the large inputs' variance differs in
+        // the last bits, which the gradient (a difference of nearly equal terms) shows.
+        let tol = if fill == "large" { 2e-3 } else { 2e-5 };
+        assert_close(&format!("{what} output"), &ours.output, &burns.output, tol);
+        assert_close(&format!("{what} ∂x"), &ours.dx, &burns.dx, tol);
+        assert_close(&format!("{what} ∂γ"), &ours.dw, &burns.dw, tol);
+        let (a, b) = (ours.db.unwrap_or_default(), burns.db.unwrap_or_default());
+        assert_close(&format!("{what} ∂β"), &a, &b, tol);
+        for (name, a, b) in [
+            (
+                "running mean",
+                &ours_bn.running_mean,
+                &burns_bn.running_mean,
+            ),
+            (
+                "running variance",
+                &ours_bn.running_var,
+                &burns_bn.running_var,
+            ),
+        ] {
+            assert_close(
+                &format!("{what} {name}"),
+                &values(a.value()),
+                &values(b.value()),
+                1e-5,
+            );
+        }
+    }
+}
+
+#[test]
+fn batch_norm_outside_training_is_burns_own() {
+    let plain = Device::flex();
+    let mut rng = ChaCha8Rng::seed_from_u64(12);
+    let bn = norm_of(3, 1, &plain);
+    let x = random([2, 3, 4, 4], &mut rng, &plain);
+    assert_eq!(values(batch_norm(x.clone(), &bn)), values(bn.forward(x)));
 }

@@ -1,0 +1,147 @@
+//! Batch normalisation with the batch's own statistics (training mode) on NCHW `f32`
+//! buffers: the statistics in two read-only passes per channel, the output in one
+//! pass, and the backward pass in two. burn's default (which flex uses) builds the
+//! same from about ten tensor operations each way, two of them NCHW → CNHW copies.
+
+use rayon::prelude::*;
+
+/// The shape: `batch` images of `channels` planes of `px` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Shape {
+    pub batch: usize,
+    pub channels: usize,
+    pub px: usize,
+}
+
+impl Shape {
+    fn count(&self) -> f64 {
+        (self.batch * self.px) as f64
+    }
+
+    /// Each image's plane of channel `ch`.
+    fn planes<'a>(&self, t: &'a [f32], ch: usize) -> impl Iterator<Item = &'a [f32]> {
+        let (c, px) = (self.channels, self.px);
+        (0..self.batch).map(move |b| &t[(b * c + ch) * px..][..px])
+    }
+
+    /// `f(channel, plane of x, plane of out)` over every image's planes, images in
+    /// parallel.
+    fn each_plane(&self, x: &[f32], out: &mut [f32], f: impl Fn(usize, &[f32], &mut [f32]) + Sync) {
+        let image = self.channels * self.px;
+        out.par_chunks_mut(image)
+            .zip(x.par_chunks(image))
+            .for_each(|(out, x)| {
+                for (ch, (out, x)) in out.chunks_mut(self.px).zip(x.chunks(self.px)).enumerate() {
+                    f(ch, x, out);
+                }
+            });
+    }
+}
+
+/// What the forward pass gives: the output, and per channel the batch mean, the
+/// biased variance (what the running statistics follow) and `1/√(var + ε)`.
+pub(crate) struct Forward {
+    pub output: Vec<f32>,
+    pub mean: Vec<f32>,
+    pub variance: Vec<f32>,
+    pub inv_std: Vec<f32>,
+}
+
+/// `γ·(x − mean)/√(var + ε) + β` with the batch's mean and biased variance per
+/// channel, summed in f64.
+pub(crate) fn forward(s: Shape, x: &[f32], gamma: &[f32], beta: &[f32], epsilon: f64) -> Forward {
+    let stats: Vec<(f64, f64)> = (0..s.channels)
+        .into_par_iter()
+        .map(|ch| {
+            let sum: f64 = s.planes(x, ch).flatten().map(|v| f64::from(*v)).sum();
+            let mean = sum / s.count();
+            let sq: f64 = s
+                .planes(x, ch)
+                .flatten()
+                .map(|v| (f64::from(*v) - mean).powi(2))
+                .sum();
+            (mean, sq / s.count())
+        })
+        .collect();
+    let inv_std: Vec<f64> = stats
+        .iter()
+        .map(|(_, var)| 1.0 / (var + epsilon).sqrt())
+        .collect();
+    let scale: Vec<f32> = (0..s.channels)
+        .map(|c| (f64::from(gamma[c]) * inv_std[c]) as f32)
+        .collect();
+    let mean: Vec<f32> = stats.iter().map(|(m, _)| *m as f32).collect();
+    let mut output = vec![0.0f32; x.len()];
+    // (x − mean)·scale + β rather than x·scale + shift: with a variance near 0 the scale
+    // is large, and the folded shift would cancel to the last bits of x·scale.
+    s.each_plane(x, &mut output, |ch, x, out| {
+        let (m, a, b) = (mean[ch], scale[ch], beta[ch]);
+        for (o, v) in out.iter_mut().zip(x) {
+            *o = (v - m) * a + b;
+        }
+    });
+    Forward {
+        output,
+        mean,
+        variance: stats.iter().map(|(_, v)| *v as f32).collect(),
+        inv_std: inv_std.iter().map(|v| *v as f32).collect(),
+    }
+}
+
+/// Gradients with respect to `x`, γ and β from the output's gradient `dy`, for the
+/// statistics [`forward`] returned: with `x̂ = (x − mean)·inv_std`,
+/// `∂β = Σ dy`, `∂γ = Σ dy·x̂`, `∂x = γ·inv_std·(dy − ∂β/N − x̂·∂γ/N)`.
+pub(crate) fn backward(
+    s: Shape,
+    x: &[f32],
+    dy: &[f32],
+    gamma: &[f32],
+    mean: &[f32],
+    inv_std: &[f32],
+    want_x: bool,
+) -> (Option<Vec<f32>>, Vec<f32>, Vec<f32>) {
+    let sums: Vec<(f64, f64)> = (0..s.channels)
+        .into_par_iter()
+        .map(|ch| {
+            let (m, is) = (f64::from(mean[ch]), f64::from(inv_std[ch]));
+            s.planes(dy, ch)
+                .zip(s.planes(x, ch))
+                .fold((0.0, 0.0), |(a, b), (dy, x)| {
+                    dy.iter().zip(x).fold((a, b), |(a, b), (d, v)| {
+                        let d = f64::from(*d);
+                        (a + d, b + d * (f64::from(*v) - m) * is)
+                    })
+                })
+        })
+        .collect();
+    let d_beta: Vec<f32> = sums.iter().map(|(a, _)| *a as f32).collect();
+    let d_gamma: Vec<f32> = sums.iter().map(|(_, b)| *b as f32).collect();
+    let dx = want_x.then(|| {
+        // ∂x = A·dy + B·(x − mean) + C per channel (centred for the reason in `forward`).
+        let n = s.count();
+        let coef: Vec<(f32, f32, f32)> = (0..s.channels)
+            .map(|c| {
+                let (g, is) = (f64::from(gamma[c]), f64::from(inv_std[c]));
+                let (sdy, sdx) = sums[c];
+                let a = g * is;
+                (a as f32, (-a * is * sdx / n) as f32, (-a * sdy / n) as f32)
+            })
+            .collect();
+        let mut dx = vec![0.0f32; x.len()];
+        // `dy` and `x` share the layout: walk them image by image together.
+        let image = s.channels * s.px;
+        dx.par_chunks_mut(image)
+            .zip(dy.par_chunks(image).zip(x.par_chunks(image)))
+            .for_each(|(dx, (dy, x))| {
+                let planes = dx.chunks_mut(s.px).zip(dy.chunks(s.px).zip(x.chunks(s.px)));
+                for (ch, (dx, (dy, x))) in planes.enumerate() {
+                    let ((a, b, c), m) = (coef[ch], mean[ch]);
+                    for (o, (d, v)) in dx.iter_mut().zip(dy.iter().zip(x)) {
+                        *o = a * d + b * (v - m) + c;
+                    }
+                }
+            });
+        dx
+    });
+    (dx, d_gamma, d_beta)
+}
