@@ -222,6 +222,20 @@ impl Phases {
         (((y % sy) * sx + x % sx) * self.rows + y / sy) * self.cols + x / sx
     }
 
+    /// The phase rows that padded row `y`'s columns `q, q + 2, …` and `q + 1, q + 3, …`
+    /// go to (stride 2 across), `w` values in all: two disjoint slices.
+    fn two_phases(&mut self, y: usize, q: usize, w: usize) -> (&mut [f32], &mut [f32]) {
+        let (e, o) = (self.at(y, q), self.at(y, q + 1));
+        let (ne, no) = (w.div_ceil(2), w / 2);
+        if e < o {
+            let (first, second) = self.values.split_at_mut(o);
+            (&mut first[e..][..ne], &mut second[..no])
+        } else {
+            let (first, second) = self.values.split_at_mut(e);
+            (&mut second[..ne], &mut first[o..][..no])
+        }
+    }
+
     /// Loads `plane` (`h_in × w_in`) into the unpadded part.
     fn load(&mut self, plane: &[f32]) {
         let [p, q] = self.pad;
@@ -230,6 +244,19 @@ impl Phases {
             if sx == 1 {
                 let at = self.at(y + p, q);
                 self.values[at..][..w].copy_from_slice(src);
+                continue;
+            }
+            if sx == 2 {
+                let (even, odd) = self.two_phases(y + p, q, w);
+                for ((pair, e), o) in src.chunks_exact(2).zip(even.iter_mut()).zip(odd) {
+                    *e = pair[0];
+                    *o = pair[1];
+                }
+                if let (Some(last), Some(e)) = (src.last(), even.last_mut())
+                    && w % 2 == 1
+                {
+                    *e = *last;
+                }
                 continue;
             }
             for x0 in 0..sx.min(w) {
@@ -249,6 +276,23 @@ impl Phases {
         for (y, dst) in plane.chunks_exact_mut(w).enumerate() {
             if sx == 1 {
                 dst.copy_from_slice(&self.values[self.at(y + p, q)..][..w]);
+                continue;
+            }
+            if sx == 2 {
+                let (e, o) = (self.at(y + p, q), self.at(y + p, q + 1));
+                let (even, odd) = (
+                    &self.values[e..][..w.div_ceil(2)],
+                    &self.values[o..][..w / 2],
+                );
+                for ((pair, e), o) in dst.chunks_exact_mut(2).zip(even).zip(odd) {
+                    pair[0] = *e;
+                    pair[1] = *o;
+                }
+                if let (Some(last), Some(e)) = (dst.last_mut(), even.last())
+                    && w % 2 == 1
+                {
+                    *last = *e;
+                }
                 continue;
             }
             for x0 in 0..sx.min(w) {
