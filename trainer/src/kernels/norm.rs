@@ -38,6 +38,47 @@ impl Shape {
     }
 }
 
+/// Accumulators per plane: 16 independent f32 sums (so the loop vectorises rather
+/// than waiting on one add at a time), added up in f64. A plane has at most a few
+/// thousand values, so each lane sums a few hundred.
+const LANES: usize = 16;
+
+/// `Σ f(v)` over a plane.
+fn lanes(plane: &[f32], f: impl Fn(f32) -> f32) -> f64 {
+    let mut acc = [0.0f32; LANES];
+    let chunks = plane.chunks_exact(LANES);
+    let rest: f64 = chunks.remainder().iter().map(|v| f64::from(f(*v))).sum();
+    for chunk in chunks {
+        for (a, v) in acc.iter_mut().zip(chunk) {
+            *a += f(*v);
+        }
+    }
+    acc.iter().map(|a| f64::from(*a)).sum::<f64>() + rest
+}
+
+/// `(Σ f(a, b).0, Σ f(a, b).1)` over two planes of one shape.
+fn lanes2(a: &[f32], b: &[f32], f: impl Fn(f32, f32) -> (f32, f32)) -> (f64, f64) {
+    let (mut acc0, mut acc1) = ([0.0f32; LANES], [0.0f32; LANES]);
+    let (ca, cb) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
+    let rest = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .fold((0.0, 0.0), |(s0, s1), (x, y)| {
+            let (u, v) = f(*x, *y);
+            (s0 + f64::from(u), s1 + f64::from(v))
+        });
+    for (xa, xb) in ca.zip(cb) {
+        for (((a0, a1), x), y) in acc0.iter_mut().zip(acc1.iter_mut()).zip(xa).zip(xb) {
+            let (u, v) = f(*x, *y);
+            *a0 += u;
+            *a1 += v;
+        }
+    }
+    let total = |acc: [f32; LANES]| acc.iter().map(|a| f64::from(*a)).sum::<f64>();
+    (total(acc0) + rest.0, total(acc1) + rest.1)
+}
+
 /// What the forward pass gives: the output, and per channel the batch mean, the
 /// biased variance (what the running statistics follow) and `1/√(var + ε)`.
 pub(crate) struct Forward {
@@ -48,17 +89,17 @@ pub(crate) struct Forward {
 }
 
 /// `γ·(x − mean)/√(var + ε) + β` with the batch's mean and biased variance per
-/// channel, summed in f64.
+/// channel, summed in f32 lanes and f64 (see [`lanes`]).
 pub(crate) fn forward(s: Shape, x: &[f32], gamma: &[f32], beta: &[f32], epsilon: f64) -> Forward {
     let stats: Vec<(f64, f64)> = (0..s.channels)
         .into_par_iter()
         .map(|ch| {
-            let sum: f64 = s.planes(x, ch).flatten().map(|v| f64::from(*v)).sum();
+            let sum: f64 = s.planes(x, ch).map(|p| lanes(p, |v| v)).sum();
             let mean = sum / s.count();
+            let m = mean as f32;
             let sq: f64 = s
                 .planes(x, ch)
-                .flatten()
-                .map(|v| (f64::from(*v) - mean).powi(2))
+                .map(|p| lanes(p, |v| (v - m) * (v - m)))
                 .sum();
             (mean, sq / s.count())
         })
@@ -103,15 +144,15 @@ pub(crate) fn backward(
     let sums: Vec<(f64, f64)> = (0..s.channels)
         .into_par_iter()
         .map(|ch| {
-            let (m, is) = (f64::from(mean[ch]), f64::from(inv_std[ch]));
-            s.planes(dy, ch)
-                .zip(s.planes(x, ch))
-                .fold((0.0, 0.0), |(a, b), (dy, x)| {
-                    dy.iter().zip(x).fold((a, b), |(a, b), (d, v)| {
-                        let d = f64::from(*d);
-                        (a + d, b + d * (f64::from(*v) - m) * is)
-                    })
-                })
+            let m = mean[ch];
+            let (sdy, sdyx) =
+                s.planes(dy, ch)
+                    .zip(s.planes(x, ch))
+                    .fold((0.0, 0.0), |(a, b), (dy, x)| {
+                        let (da, db) = lanes2(dy, x, |d, v| (d, d * (v - m)));
+                        (a + da, b + db)
+                    });
+            (sdy, sdyx * f64::from(inv_std[ch]))
         })
         .collect();
     let d_beta: Vec<f32> = sums.iter().map(|(a, _)| *a as f32).collect();
