@@ -330,65 +330,79 @@ pub(crate) fn forward(g: &Geometry, x: &[f32], w: &[f32], bias: Option<&[f32]>) 
                     g.im2col(x, images, col);
                     let (w, col) = (View::rows(w, g.c_out, patch), View::rows(col, patch, n));
                     matmul(m, false, w, col);
-                    for b in 0..images {
-                        for ch in 0..g.c_out {
-                            let src = &m[ch * n + b * out_px..][..out_px];
-                            let dst = &mut y[(b * g.c_out + ch) * out_px..][..out_px];
-                            let add = bias.map_or(0.0, |bias| bias[ch]);
-                            for (d, v) in dst.iter_mut().zip(src) {
-                                *d = v + add;
-                            }
-                        }
-                    }
+                    place(m, images, g.c_out, out_px, bias, y);
                 });
             }
         });
     y
 }
 
-/// Gradients of a convolution with respect to its weight and (when `want_x`) its
-/// input, from the output's gradient `dy`; [`input_gradient`] for the input's alone.
+/// What [`backward`] computes beside the weight gradient, from the same patches.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Also {
+    Nothing,
+    /// The gradient of the input `x`.
+    InputGradient,
+    /// The convolution of `x` itself (what a transposed convolution's input gradient
+    /// is, while its weight gradient is this one's).
+    Output,
+}
+
+/// The gradient of a convolution's weight from its input `x` and its output's
+/// gradient `dy`, and what `also` asks for (`None` for [`Also::Nothing`]).
 pub(crate) fn backward(
     g: &Geometry,
     x: &[f32],
     w: &[f32],
     dy: &[f32],
-    want_x: bool,
+    also: Also,
 ) -> (Vec<f32>, Option<Vec<f32>>) {
     let (patch, out_px, block) = (g.patch(), g.out_px(), g.block());
     let (x_image, y_image) = (g.c_in * g.in_px(), g.c_out * out_px);
-    // One chunk: its weight gradient, and its input gradient into `dx`.
-    let chunk = |x: &[f32], dy: &[f32], mut dx: Option<&mut [f32]>| {
+    let extra_image = match also {
+        Also::Nothing => 0,
+        Also::InputGradient => x_image,
+        Also::Output => y_image,
+    };
+    // One chunk: its weight gradient, and what `also` asks for into `extra`.
+    let chunk = |x: &[f32], dy: &[f32], mut extra: Option<&mut [f32]>| {
         let mut dw = vec![0.0f32; g.w_len()];
-        for (i, (x, dy)) in x
-            .chunks(block * x_image)
-            .zip(dy.chunks(block * y_image))
-            .enumerate()
-        {
+        let blocks = x.chunks(block * x_image).zip(dy.chunks(block * y_image));
+        for (i, (x, dy)) in blocks.enumerate() {
             let images = x.len() / x_image;
             let n = images * out_px;
+            let extra = extra
+                .as_deref_mut()
+                .map(|e| &mut e[i * block * extra_image..][..images * extra_image]);
             with_scratch(patch * n, g.c_out * n, |col, m| {
                 to_channel_major(dy, images, g.c_out, out_px, m);
-                let dy = View::rows(m, g.c_out, n);
                 g.im2col(x, images, col);
+                let dy = View::rows(m, g.c_out, n);
                 matmul(&mut dw, i > 0, dy, View::rows(col, patch, n).t());
-                if let Some(dx) = dx.as_deref_mut() {
-                    let dx = &mut dx[i * block * x_image..][..images * x_image];
-                    scatter_input_gradient(g, w, dy, images, col, dx);
+                match (also, extra) {
+                    (Also::InputGradient, Some(dx)) => {
+                        scatter_input_gradient(g, w, dy, images, col, dx);
+                    }
+                    (Also::Output, Some(y)) => {
+                        let (w, col) = (View::rows(w, g.c_out, patch), View::rows(col, patch, n));
+                        matmul(m, false, w, col);
+                        place(m, images, g.c_out, out_px, None, y);
+                    }
+                    _ => {}
                 }
             });
         }
         dw
     };
     let (x_step, y_step) = (g.per_chunk() * x_image, g.per_chunk() * y_image);
-    let (dx, parts): (Option<Vec<f32>>, Vec<Vec<f32>>) = if want_x {
-        let mut dx = vec![0.0f32; g.x_len()];
-        let parts = dx
-            .par_chunks_mut(x_step)
+    let (extra, parts): (Option<Vec<f32>>, Vec<Vec<f32>>) = if extra_image > 0 {
+        let mut extra = vec![0.0f32; g.batch * extra_image];
+        let parts = extra
+            .par_chunks_mut(g.per_chunk() * extra_image)
             .zip(x.par_chunks(x_step).zip(dy.par_chunks(y_step)))
-            .map(|(dx, (x, dy))| chunk(x, dy, Some(dx)))
+            .map(|(e, (x, dy))| chunk(x, dy, Some(e)))
             .collect();
-        (Some(dx), parts)
+        (Some(extra), parts)
     } else {
         let parts = x
             .par_chunks(x_step)
@@ -404,7 +418,22 @@ pub(crate) fn backward(
             *a += b;
         }
     }
-    (dw, dx)
+    (dw, extra)
+}
+
+/// `m [c, images·px]` into `y [images, c, px]`, plus `bias[c]` when given.
+fn place(m: &[f32], images: usize, c: usize, px: usize, bias: Option<&[f32]>, y: &mut [f32]) {
+    let n = images * px;
+    for b in 0..images {
+        for ch in 0..c {
+            let src = &m[ch * n + b * px..][..px];
+            let dst = &mut y[(b * c + ch) * px..][..px];
+            let add = bias.map_or(0.0, |bias| bias[ch]);
+            for (d, v) in dst.iter_mut().zip(src) {
+                *d = v + add;
+            }
+        }
+    }
 }
 
 /// The gradient of the input alone: the transposed convolution of `dy` (what a

@@ -151,7 +151,12 @@ impl State {
         let (input, weight, bias) = match self.kind {
             Kind::Conv => {
                 let (dw, dx) = if want_weight {
-                    let (dw, dx) = conv::backward(g, x, w, dy, want_input);
+                    let also = if want_input {
+                        conv::Also::InputGradient
+                    } else {
+                        conv::Also::Nothing
+                    };
+                    let (dw, dx) = conv::backward(g, x, w, dy, also);
                     (Some(dw), dx)
                 } else {
                     (None, want_input.then(|| conv::input_gradient(g, w, dy)))
@@ -161,9 +166,21 @@ impl State {
                 (dx, dw, db)
             }
             Kind::Transposed => {
-                // The output's gradient has the geometry's input shape.
-                let dx = want_input.then(|| conv::forward(g, dy, w, None));
-                let dw = want_weight.then(|| conv::backward(g, dy, w, x, false).0);
+                // The output's gradient has the geometry's input shape; the input's
+                // gradient is its convolution, from the patches the weight's uses.
+                let (dw, dx) = match (want_weight, want_input) {
+                    (true, _) => {
+                        let also = if want_input {
+                            conv::Also::Output
+                        } else {
+                            conv::Also::Nothing
+                        };
+                        let (dw, dx) = conv::backward(g, dy, w, x, also);
+                        (Some(dw), dx)
+                    }
+                    (false, true) => (None, Some(conv::forward(g, dy, w, None))),
+                    (false, false) => (None, None),
+                };
                 let db = want_bias
                     .then(|| conv::channel_sums(dy, g.batch, g.c_in, g.in_hw[0] * g.in_hw[1]));
                 (dx, dw, db)
