@@ -92,6 +92,15 @@ impl Geometry {
             .max(1)
     }
 
+    /// For image `b`'s channel `c`: each kernel tap's row start in a patch matrix of
+    /// `n` columns, and the tap's first value in [`Phases`].
+    fn taps(&self, c: usize, b: usize, n: usize) -> impl Iterator<Item = (usize, usize)> {
+        let ([kh, kw], layout, out_px) = (self.kernel, PhaseLayout::new(self), self.out_px());
+        (0..kh).flat_map(move |i| {
+            (0..kw).map(move |j| (((c * kh + i) * kw + j) * n + b * out_px, layout.at(i, j)))
+        })
+    }
+
     /// The patch matrix `[patch, images·out_px]` of `images` consecutive images of `x`.
     ///
     /// Each input plane is copied once into a zero-padded plane split by phase of the
@@ -100,7 +109,6 @@ impl Geometry {
     /// use. (Rows of 4 to 32 values: per-value bounds tests, strided gathers and a
     /// `memcpy` call per row each took about 15 % of a training step.)
     fn im2col(&self, x: &[f32], images: usize, col: &mut [f32]) {
-        let (kh, kw) = (self.kernel[0], self.kernel[1]);
         let (n, out_px, in_px, w_out) = (
             images * self.out_px(),
             self.out_px(),
@@ -108,17 +116,11 @@ impl Geometry {
             self.out_hw[1],
         );
         let mut phases = Phases::new(self);
-        for c in 0..self.c_in {
-            for b in 0..images {
-                phases.load(&x[(b * self.c_in + c) * in_px..][..in_px]);
-                for i in 0..kh {
-                    for j in 0..kw {
-                        let row = &mut col[((c * kh + i) * kw + j) * n + b * out_px..][..out_px];
-                        let tap = phases.at(i, j);
-                        for (o, dst) in row.chunks_exact_mut(w_out).enumerate() {
-                            copy_row(dst, &phases.values[tap + o * phases.cols..]);
-                        }
-                    }
+        for (c, b) in (0..self.c_in).flat_map(|c| (0..images).map(move |b| (c, b))) {
+            phases.load(&x[(b * self.c_in + c) * in_px..][..in_px]);
+            for (start, tap) in self.taps(c, b, n) {
+                for (o, dst) in col[start..][..out_px].chunks_exact_mut(w_out).enumerate() {
+                    copy_row(dst, &phases.values[tap + o * phases.layout.cols..]);
                 }
             }
         }
@@ -127,7 +129,6 @@ impl Geometry {
     /// The images whose patch matrix is `col` (the transpose of [`Self::im2col`]):
     /// each patch value added back where it came from.
     fn col2im(&self, col: &[f32], images: usize, x: &mut [f32]) {
-        let (kh, kw) = (self.kernel[0], self.kernel[1]);
         let (n, out_px, in_px, w_out) = (
             images * self.out_px(),
             self.out_px(),
@@ -135,20 +136,14 @@ impl Geometry {
             self.out_hw[1],
         );
         let mut phases = Phases::new(self);
-        for c in 0..self.c_in {
-            for b in 0..images {
-                phases.values.fill(0.0);
-                for i in 0..kh {
-                    for j in 0..kw {
-                        let row = &col[((c * kh + i) * kw + j) * n + b * out_px..][..out_px];
-                        let tap = phases.at(i, j);
-                        for (o, src) in row.chunks_exact(w_out).enumerate() {
-                            add_row(&mut phases.values[tap + o * phases.cols..], src);
-                        }
-                    }
+        for (c, b) in (0..self.c_in).flat_map(|c| (0..images).map(move |b| (c, b))) {
+            phases.values.fill(0.0);
+            for (start, tap) in self.taps(c, b, n) {
+                for (o, src) in col[start..][..out_px].chunks_exact(w_out).enumerate() {
+                    add_row(&mut phases.values[tap + o * phases.layout.cols..], src);
                 }
-                phases.store(&mut x[(b * self.c_in + c) * in_px..][..in_px]);
             }
+            phases.store(&mut x[(b * self.c_in + c) * in_px..][..in_px]);
         }
     }
 }
@@ -194,25 +189,26 @@ fn add_row(dst: &mut [f32], src: &[f32]) {
 /// `j / sx`. The padding is never written, so it stays zero between loads.
 struct Phases {
     values: Vec<f32>,
-    rows: usize,
-    cols: usize,
-    stride: [usize; 2],
+    layout: PhaseLayout,
     pad: [usize; 2],
     in_hw: [usize; 2],
 }
 
-impl Phases {
+/// Where [`Phases`] keeps each padded value.
+#[derive(Debug, Clone, Copy)]
+struct PhaseLayout {
+    rows: usize,
+    cols: usize,
+    stride: [usize; 2],
+}
+
+impl PhaseLayout {
     fn new(g: &Geometry) -> Self {
         let [sy, sx] = g.stride;
-        let rows = (g.in_hw[0] + 2 * g.pad[0]).div_ceil(sy);
-        let cols = (g.in_hw[1] + 2 * g.pad[1]).div_ceil(sx);
         Self {
-            values: vec![0.0; sy * sx * rows * cols],
-            rows,
-            cols,
+            rows: (g.in_hw[0] + 2 * g.pad[0]).div_ceil(sy),
+            cols: (g.in_hw[1] + 2 * g.pad[1]).div_ceil(sx),
             stride: g.stride,
-            pad: g.pad,
-            in_hw: g.in_hw,
         }
     }
 
@@ -220,6 +216,22 @@ impl Phases {
     fn at(&self, y: usize, x: usize) -> usize {
         let [sy, sx] = self.stride;
         (((y % sy) * sx + x % sx) * self.rows + y / sy) * self.cols + x / sx
+    }
+}
+
+impl Phases {
+    fn new(g: &Geometry) -> Self {
+        let layout = PhaseLayout::new(g);
+        Self {
+            values: vec![0.0; layout.stride[0] * layout.stride[1] * layout.rows * layout.cols],
+            layout,
+            pad: g.pad,
+            in_hw: g.in_hw,
+        }
+    }
+
+    fn at(&self, y: usize, x: usize) -> usize {
+        self.layout.at(y, x)
     }
 
     /// The phase rows that padded row `y`'s columns `q, q + 2, …` and `q + 1, q + 3, …`
@@ -239,7 +251,7 @@ impl Phases {
     /// Loads `plane` (`h_in × w_in`) into the unpadded part.
     fn load(&mut self, plane: &[f32]) {
         let [p, q] = self.pad;
-        let (w, sx) = (self.in_hw[1], self.stride[1]);
+        let (w, sx) = (self.in_hw[1], self.layout.stride[1]);
         for (y, src) in plane.chunks_exact(w).enumerate() {
             if sx == 1 {
                 let at = self.at(y + p, q);
@@ -272,7 +284,7 @@ impl Phases {
     /// Writes the unpadded part into `plane` (`h_in × w_in`).
     fn store(&self, plane: &mut [f32]) {
         let [p, q] = self.pad;
-        let (w, sx) = (self.in_hw[1], self.stride[1]);
+        let (w, sx) = (self.in_hw[1], self.layout.stride[1]);
         for (y, dst) in plane.chunks_exact_mut(w).enumerate() {
             if sx == 1 {
                 dst.copy_from_slice(&self.values[self.at(y + p, q)..][..w]);

@@ -24,6 +24,7 @@ mod norm;
 #[cfg(test)]
 mod tests;
 
+use burn::backend::autodiff::NodeId;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
 use burn::backend::autodiff::grads::Gradients;
@@ -148,52 +149,49 @@ impl State {
         let in_shape = self.input.layout().shape().to_vec();
         let w_shape = self.weight.layout().shape().to_vec();
         let [want_input, want_weight, want_bias] = want;
-        let (input, weight, bias) = match self.kind {
-            Kind::Conv => {
-                let (dw, dx) = if want_weight {
-                    let also = if want_input {
-                        conv::Also::InputGradient
-                    } else {
-                        conv::Also::Nothing
-                    };
-                    let (dw, dx) = conv::backward(g, x, w, dy, also);
-                    (Some(dw), dx)
-                } else {
-                    (None, want_input.then(|| conv::input_gradient(g, w, dy)))
-                };
-                let db = want_bias
-                    .then(|| conv::channel_sums(dy, g.batch, g.c_out, g.out_hw[0] * g.out_hw[1]));
-                (dx, dw, db)
-            }
-            Kind::Transposed => {
-                // The output's gradient has the geometry's input shape; the input's
-                // gradient is its convolution, from the patches the weight's uses.
-                let (dw, dx) = match (want_weight, want_input) {
-                    (true, _) => {
-                        let also = if want_input {
-                            conv::Also::Output
-                        } else {
-                            conv::Also::Nothing
-                        };
-                        let (dw, dx) = conv::backward(g, dy, w, x, also);
-                        (Some(dw), dx)
-                    }
-                    (false, true) => (None, Some(conv::forward(g, dy, w, None))),
-                    (false, false) => (None, None),
-                };
-                let db = want_bias
-                    .then(|| conv::channel_sums(dy, g.batch, g.c_in, g.in_hw[0] * g.in_hw[1]));
-                (dx, dw, db)
-            }
+        // The weight's gradient is that of the convolution of the geometry: of this
+        // operation's input for a convolution, of its output's gradient for a transposed
+        // one, whose input gradient is then that convolution's output.
+        let (conv_x, conv_dy, also) = match self.kind {
+            Kind::Conv => (x, dy, conv::Also::InputGradient),
+            Kind::Transposed => (dy, x, conv::Also::Output),
         };
-        let c_bias = match self.kind {
-            Kind::Conv => g.c_out,
-            Kind::Transposed => g.c_in,
+        let (weight, input) = match (want_weight, want_input) {
+            (true, true) => {
+                let (dw, dx) = conv::backward(g, conv_x, w, conv_dy, also);
+                (Some(dw), dx)
+            }
+            (true, false) => (
+                Some(conv::backward(g, conv_x, w, conv_dy, conv::Also::Nothing).0),
+                None,
+            ),
+            (false, true) => match self.kind {
+                Kind::Conv => (None, Some(conv::input_gradient(g, w, dy))),
+                Kind::Transposed => (None, Some(conv::forward(g, dy, w, None))),
+            },
+            (false, false) => (None, None),
         };
+        let (c_bias, px) = match self.kind {
+            Kind::Conv => (g.c_out, g.out_hw[0] * g.out_hw[1]),
+            Kind::Transposed => (g.c_in, g.in_hw[0] * g.in_hw[1]),
+        };
+        let bias = want_bias.then(|| conv::channel_sums(dy, g.batch, c_bias, px));
         Grads {
             input: input.map(|v| tensor(v, in_shape)),
             weight: weight.map(|v| tensor(v, w_shape)),
             bias: bias.map(|v| tensor(v, vec![c_bias])),
+        }
+    }
+}
+
+/// Hands each gradient that was asked for (a parent that is tracked) to autodiff.
+fn register<const K: usize>(
+    grads: &mut Gradients,
+    pairs: [(Option<NodeId>, Option<FlexTensor>); K],
+) {
+    for (node, grad) in pairs {
+        if let (Some(node), Some(grad)) = (node, grad) {
+            grads.register::<Flex>(node, grad);
         }
     }
 }
@@ -208,13 +206,14 @@ impl Backward<Flex, 3> for WithBias {
     fn backward(self, ops: Ops<State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
         let [input, weight, bias] = ops.parents;
         let grad = grads.consume::<Flex>(&ops.node);
-        let want = [input.is_some(), weight.is_some(), bias.is_some()];
-        let out = ops.state.grads(grad, want);
-        for (node, grad) in [(input, out.input), (weight, out.weight), (bias, out.bias)] {
-            if let (Some(node), Some(grad)) = (node, grad) {
-                grads.register::<Flex>(node.id, grad);
-            }
-        }
+        let [input, weight, bias] = [input, weight, bias].map(|n| n.map(|n| n.id));
+        let out = ops
+            .state
+            .grads(grad, [input, weight, bias].map(|n| n.is_some()));
+        register(
+            grads,
+            [(input, out.input), (weight, out.weight), (bias, out.bias)],
+        );
     }
 }
 
@@ -223,13 +222,11 @@ impl Backward<Flex, 2> for NoBias {
     fn backward(self, ops: Ops<State, 2>, grads: &mut Gradients, _: &mut Checkpointer) {
         let [input, weight] = ops.parents;
         let grad = grads.consume::<Flex>(&ops.node);
-        let want = [input.is_some(), weight.is_some(), false];
-        let out = ops.state.grads(grad, want);
-        for (node, grad) in [(input, out.input), (weight, out.weight)] {
-            if let (Some(node), Some(grad)) = (node, grad) {
-                grads.register::<Flex>(node.id, grad);
-            }
-        }
+        let [input, weight] = [input, weight].map(|n| n.map(|n| n.id));
+        let out = ops
+            .state
+            .grads(grad, [input.is_some(), weight.is_some(), false]);
+        register(grads, [(input, out.input), (weight, out.weight)]);
     }
 }
 
@@ -343,15 +340,11 @@ impl Backward<Flex, 3> for NormOp {
         let shape = st.input.layout().shape().to_vec();
         let c = st.shape.channels;
         let out = [
-            (input, dx.map(|v| tensor(v, shape))),
-            (gamma, Some(tensor(d_gamma, vec![c]))),
-            (beta, Some(tensor(d_beta, vec![c]))),
+            (input.map(|n| n.id), dx.map(|v| tensor(v, shape))),
+            (gamma.map(|n| n.id), Some(tensor(d_gamma, vec![c]))),
+            (beta.map(|n| n.id), Some(tensor(d_beta, vec![c]))),
         ];
-        for (node, grad) in out {
-            if let (Some(node), Some(grad)) = (node, grad) {
-                grads.register::<Flex>(node.id, grad);
-            }
-        }
+        register(grads, out);
     }
 }
 

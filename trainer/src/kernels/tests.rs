@@ -77,6 +77,29 @@ fn compare(what: &str, ours: Run, burns: Run) {
     }
 }
 
+/// `ours` against `burns` on a random and an all-zero input of `shape`.
+fn check(
+    what: &str,
+    shape: [usize; 4],
+    rng: &mut ChaCha8Rng,
+    (weight, bias): (&Param<Tensor<4>>, Option<&Param<Tensor<1>>>),
+    ours: impl Fn(Tensor<4>) -> Tensor<4>,
+    burns: impl Fn(Tensor<4>) -> Tensor<4>,
+) {
+    let device = device();
+    for zero in [false, true] {
+        let x = if zero {
+            Tensor::zeros(shape, &device)
+        } else {
+            random(shape, rng, &device)
+        };
+        let seed = rng.random();
+        let a = gradients(&x, weight, bias, &ours, seed);
+        let b = gradients(&x, weight, bias, &burns, seed);
+        compare(&format!("{what} zero {zero}"), a, b);
+    }
+}
+
 /// (batch, c_in, c_out, kernel, stride, padding, height, width, bias)
 type Case = (usize, usize, usize, usize, usize, usize, usize, usize, bool);
 
@@ -107,20 +130,13 @@ fn conv_of(case: Case, device: &Device) -> Conv2d {
 fn convolutions_match_burns_values_and_gradients() {
     let device = device();
     let mut rng = ChaCha8Rng::seed_from_u64(7);
-    for (i, case) in CONVS.into_iter().enumerate() {
+    for case in CONVS {
         let (batch, c_in, _, _, _, _, h, w, _) = case;
         let conv = conv_of(case, &device);
-        for zero in [false, true] {
-            let x = if zero {
-                Tensor::zeros([batch, c_in, h, w], &device)
-            } else {
-                random([batch, c_in, h, w], &mut rng, &device)
-            };
-            let bias = conv.bias.as_ref();
-            let ours = gradients(&x, &conv.weight, bias, |x| conv2d(x, &conv), i as u64);
-            let burns = gradients(&x, &conv.weight, bias, |x| conv.forward(x), i as u64);
-            compare(&format!("conv {case:?} zero {zero}"), ours, burns);
-        }
+        let (ours, burns) = (|x| conv2d(x, &conv), |x| conv.forward(x));
+        let what = format!("conv {case:?}");
+        let params = (&conv.weight, conv.bias.as_ref());
+        check(&what, [batch, c_in, h, w], &mut rng, params, ours, burns);
     }
 }
 
@@ -138,30 +154,17 @@ fn transposed_convolutions_match_burns_values_and_gradients() {
         (5, 3, 2, 4, 3, 2, 4, 5, true),
         (3, 8, 16, 4, 2, 1, 16, 16, false),
     ];
-    for (i, case) in cases.into_iter().enumerate() {
+    for case in cases {
         let (batch, c_in, c_out, k, stride, pad, h, w, bias) = case;
         let conv: ConvTranspose2d = ConvTranspose2dConfig::new([c_in, c_out], [k, k])
             .with_stride([stride, stride])
             .with_padding([pad, pad])
             .with_bias(bias)
             .init(&device);
-        for zero in [false, true] {
-            let x = if zero {
-                Tensor::zeros([batch, c_in, h, w], &device)
-            } else {
-                random([batch, c_in, h, w], &mut rng, &device)
-            };
-            let b = conv.bias.as_ref();
-            let ours = gradients(
-                &x,
-                &conv.weight,
-                b,
-                |x| conv_transpose2d(x, &conv),
-                i as u64,
-            );
-            let burns = gradients(&x, &conv.weight, b, |x| conv.forward(x), i as u64);
-            compare(&format!("transposed {case:?} zero {zero}"), ours, burns);
-        }
+        let (ours, burns) = (|x| conv_transpose2d(x, &conv), |x| conv.forward(x));
+        let what = format!("transposed {case:?}");
+        let params = (&conv.weight, conv.bias.as_ref());
+        check(&what, [batch, c_in, h, w], &mut rng, params, ours, burns);
     }
 }
 
