@@ -42,9 +42,12 @@ pub enum BenchCommand {
   softtouch bench train
   softtouch bench train --sizes 32 --widths 16 --steps 30 --repeats 1
   softtouch bench train --torch .venv-torch/bin/python --repeats 5
+  SOFTTOUCH_CONV=burn softtouch bench train --torch .venv-torch/bin/python
 
 The PyTorch peer is ../shared/peers/torch_light_bench.py (its README says how to
-install PyTorch); --torch-script points elsewhere. CI does not run PyTorch.")]
+install PyTorch); --torch-script points elsewhere. CI does not run PyTorch.
+SOFTTOUCH_CONV=burn trains with burn's own convolutions and batch norm instead of
+softtouch's kernels, to compare the two.")]
     Train(super::bench_train::BenchTrainArgs),
     /// Accuracy costs time: sweep settle time and force/torque window on the simulated
     /// scene (whose true wrench is known); print label error against samples per hour,

@@ -161,6 +161,12 @@ pub async fn run(
         )
         .map_err(io_failure)?;
     }
+    writeln!(
+        out,
+        "convolutions and batch norm: {}",
+        softtouch_trainer::kernels::describe()
+    )
+    .map_err(io_failure)?;
     let store = match &args.dataset {
         Some(_) => Some(super::open_existing(db).await?),
         None => None,

@@ -47,6 +47,16 @@ fn enabled() -> bool {
     *ON.get_or_init(|| std::env::var(ENV).map_or(true, |v| v != "burn"))
 }
 
+/// Which kernels training's convolutions and batch norms run on flex, for a bench's
+/// header.
+pub fn describe() -> &'static str {
+    if enabled() {
+        "softtouch's kernels (SOFTTOUCH_CONV=burn for burn's)"
+    } else {
+        "burn's own (SOFTTOUCH_CONV=burn)"
+    }
+}
+
 type Ad = Autodiff<Flex>;
 
 /// `conv.forward(x)`, through these kernels where they apply.
