@@ -1,7 +1,7 @@
 //! End-to-end tests of the `softtouch` CLI: the binary as a user runs it.
 
 mod common;
-use common::{softtouch, tempdir, text};
+use common::{command, softtouch, tempdir, text};
 
 use softtouch_collector::store::RunStatus;
 use softtouch_collector::testing::{RunPlan, block_on, frame, seeded_run, temp_store};
@@ -409,6 +409,21 @@ fn bench_train_times_a_tiny_net_beside_a_peer_and_names_what_it_cannot_run() {
         "{}",
         text(&out.stdout)
     );
+    // The header names the kernels; SOFTTOUCH_CONV picks burn's or is refused by name.
+    for (value, code, says) in [
+        ("softtouch", 0, "softtouch's kernels"),
+        ("burn", 0, "burn's own"),
+        ("flex", 2, "SOFTTOUCH_CONV=flex"),
+    ] {
+        let out = command(d)
+            .env("SOFTTOUCH_CONV", value)
+            .args(tiny)
+            .output()
+            .expect("run softtouch");
+        let all = format!("{}{}", text(&out.stdout), text(&out.stderr));
+        assert_eq!(out.status.code(), Some(code), "{value}: {all}");
+        assert!(all.contains(says), "{value}: {all}");
+    }
     let csv = std::fs::read_to_string(d.join("o/bench-train.csv")).expect("csv");
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines.len(), 2, "{csv}");

@@ -161,6 +161,8 @@ pub async fn run(
         )
         .map_err(io_failure)?;
     }
+    // A mistyped SOFTTOUCH_BACKEND or SOFTTOUCH_CONV is said before the header.
+    softtouch_trainer::backend::device().map_err(|e| Failure::BadInput(anyhow!(e)))?;
     writeln!(
         out,
         "convolutions and batch norm: {}",

@@ -6,7 +6,8 @@
 //! - `ndarray` (cargo feature `ndarray`, deprecated upstream): built only to compare
 //!   against; see `trainer/README.md` for the measurements.
 //!
-//! `SOFTTOUCH_BACKEND=flex|ndarray` picks one; unset means `flex`.
+//! `SOFTTOUCH_BACKEND=flex|ndarray` picks one; unset means `flex`. `SOFTTOUCH_CONV`
+//! (see [`crate::kernels`]) is checked here too.
 
 use burn::prelude::Device;
 
@@ -17,6 +18,10 @@ pub const ENV: &str = "SOFTTOUCH_BACKEND";
 
 /// The device of the backend named by [`ENV`] (plain; training wraps it in autodiff).
 pub fn device() -> Result<Device, TrainError> {
+    // Training's kernels are chosen by their own variable; a mistyped value is said
+    // here, before any work, rather than silently meaning the default.
+    crate::kernels::parse_env(std::env::var(crate::kernels::ENV).ok().as_deref())
+        .map_err(TrainError::Config)?;
     let name = std::env::var(ENV).unwrap_or_default();
     match name.as_str() {
         "" | "flex" => Ok(Device::flex()),

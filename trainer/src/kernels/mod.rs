@@ -44,7 +44,19 @@ pub const ENV: &str = "SOFTTOUCH_CONV";
 
 fn enabled() -> bool {
     static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *ON.get_or_init(|| std::env::var(ENV).map_or(true, |v| v != "burn"))
+    *ON.get_or_init(|| parse_env(std::env::var(ENV).ok().as_deref()).unwrap_or(true))
+}
+
+/// Whether [`ENV`]'s value selects these kernels: unset, empty or `softtouch` yes,
+/// `burn` no, anything else an error naming the variable.
+pub(crate) fn parse_env(value: Option<&str>) -> Result<bool, String> {
+    match value.map(str::trim) {
+        None | Some("" | "softtouch") => Ok(true),
+        Some("burn") => Ok(false),
+        Some(other) => Err(format!(
+            "{ENV}={other}: expected softtouch (the default) or burn"
+        )),
+    }
 }
 
 /// Which kernels training's convolutions and batch norms run on flex, for a bench's

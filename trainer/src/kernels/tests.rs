@@ -368,3 +368,17 @@ fn batch_norm_outside_training_is_burns_own() {
     let x = random([2, 3, 4, 4], &mut rng, &plain);
     assert_eq!(values(batch_norm(x.clone(), &bn)), values(bn.forward(x)));
 }
+
+#[test]
+fn the_kernels_variable_is_read_or_refused_by_name() {
+    use super::parse_env;
+    for on in [None, Some(""), Some("softtouch"), Some(" softtouch ")] {
+        assert_eq!(parse_env(on), Ok(true), "{on:?}");
+    }
+    assert_eq!(parse_env(Some("burn")), Ok(false));
+    let err = parse_env(Some("flex")).expect_err("unknown value");
+    assert!(
+        err.contains("SOFTTOUCH_CONV=flex") && err.contains("burn"),
+        "{err}"
+    );
+}
