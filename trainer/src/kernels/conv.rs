@@ -1,11 +1,12 @@
 //! A 2-D convolution's forward pass and gradients on NCHW `f32` buffers, as im2col
-//! and one matrix product per chunk of the batch, the chunks on rayon's threads.
+//! and matrix products over blocks of images, the batch split over rayon's threads.
 //!
-//! The batch is cut into as many chunks as rayon has threads; each chunk's patches
-//! sit in one matrix `[c_in·kh·kw, images·h_out·w_out]`, so the three products of a
-//! convolution (output, weight gradient, input gradient) are each one large `gemm`
-//! per chunk rather than many small ones. The weight gradients of the chunks are
-//! added in chunk order, so a run is repeatable for a given thread count.
+//! The batch is cut into as many chunks as rayon has threads, and each chunk into
+//! blocks of images whose patches sit in one matrix `[c_in·kh·kw, images·h_out·w_out]`
+//! of about [`BLOCK_VALUES`]; the three products of a convolution (output, weight
+//! gradient, input gradient) are then one `gemm` each per block rather than one per
+//! image. A weight gradient is summed block after block and chunk after chunk, so a
+//! run repeats exactly for a given thread count.
 
 use std::cell::RefCell;
 
@@ -15,7 +16,9 @@ use super::gemm::{View, matmul};
 
 /// Values of a block's patch matrix (256 KiB of f32): a quarter of the 1 MiB L2
 /// cache per core of the machine this was measured on, so that the matrix, the
-/// output block and `gemm`'s packed panels fit together.
+/// output block and `gemm`'s packed panels fit together (+5–10 % against one block
+/// per chunk there). A smaller cache gives the same results, maybe more slowly; no
+/// other machine was measured.
 const BLOCK_VALUES: usize = 1 << 16;
 
 /// The shape of one convolution `x [batch, c_in, h_in, w_in] → y [batch, c_out,
@@ -317,7 +320,7 @@ impl Phases {
     }
 }
 
-/// `y [images, c, px]` ↔ `m [c, images·px]`.
+/// `y [images, c, px]` → `m [c, images·px]`.
 fn to_channel_major(y: &[f32], images: usize, c: usize, px: usize, m: &mut [f32]) {
     let n = images * px;
     for b in 0..images {
@@ -489,8 +492,9 @@ fn scatter_input_gradient(
 thread_local! {
     /// Each thread's two working matrices, kept between calls: a training step asks
     /// for the same sizes again and again, and fresh ones cost page faults and zeroing
-    /// (a tenth of the step, measured with `perf`). They hold the largest block's
-    /// patches until the thread ends (at most a few hundred KiB; see [`BLOCK_VALUES`]).
+    /// (a tenth of the step, measured with `perf`). They keep the largest block's
+    /// patches and products until the thread ends: about [`BLOCK_VALUES`], or one
+    /// image's when that is more (300 KiB at 64×64/16).
     static SCRATCH: RefCell<(Vec<f32>, Vec<f32>)> = const { RefCell::new((Vec::new(), Vec::new())) };
 }
 

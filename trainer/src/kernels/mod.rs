@@ -13,8 +13,7 @@
 //!
 //! [`conv2d`], [`conv_transpose2d`] and [`batch_norm`] take the burn modules as they
 //! are (the same parameters, running statistics and artifacts) and fall back to the
-//! module's own `forward` for
-//! anything these kernels do not cover: a tensor that is not an autodiff flex tensor
+//! module's own `forward` for anything these kernels do not cover: a tensor that is not an autodiff flex tensor
 //! (evaluation, inference, the ndarray backend), groups, dilation, asymmetric or
 //! `Same` padding, a batch norm that is not training, or a dtype other than f32.
 
@@ -38,8 +37,8 @@ use burn::tensor::DType;
 
 use conv::Geometry;
 
-/// The environment variable that sends training's convolutions back to burn's own
-/// kernels (`SOFTTOUCH_CONV=burn`), to compare the two.
+/// The environment variable that sends training's convolutions and batch norms back
+/// to burn's own kernels (`SOFTTOUCH_CONV=burn`), to compare the two.
 pub const ENV: &str = "SOFTTOUCH_CONV";
 
 fn enabled() -> bool {
@@ -274,6 +273,17 @@ fn run(
         None => None,
     };
     let bias_values = bias.as_ref().map(slice);
+    // The geometry was worked out from these tensors' shapes; their values must fill it.
+    let (in_len, bias_len) = match kind {
+        Kind::Conv => (g.x_len(), g.c_out),
+        Kind::Transposed => (g.y_len(), g.c_in),
+    };
+    if slice(&input).len() != in_len
+        || slice(&weight).len() != g.w_len()
+        || bias_values.is_some_and(|b| b.len() != bias_len)
+    {
+        return None;
+    }
     let (values, shape) = match kind {
         Kind::Conv => (
             conv::forward(&g, slice(&input), slice(&weight), bias_values),
@@ -378,7 +388,11 @@ fn batch_norm_train(x: Tensor<4>, bn: &BatchNorm) -> Option<Tensor<4>> {
     let beta = bn.beta.val().try_into_primitive::<Ad>().ok()?;
     let input = f32s(x.primitive())?;
     let (g, b) = (f32s(gamma.primitive())?, f32s(beta.primitive())?);
-    if slice(&g).len() != channels || slice(&b).len() != channels || batch * h * w == 0 {
+    if slice(&g).len() != channels
+        || slice(&b).len() != channels
+        || slice(&input).len() != batch * channels * h * w
+        || batch * h * w == 0
+    {
         return None;
     }
     let shape = norm::Shape {
