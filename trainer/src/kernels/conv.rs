@@ -96,9 +96,15 @@ impl Geometry {
     }
 
     /// For image `b`'s channel `c`: each kernel tap's row start in a patch matrix of
-    /// `n` columns, and the tap's first value in [`Phases`].
-    fn taps(&self, c: usize, b: usize, n: usize) -> impl Iterator<Item = (usize, usize)> {
-        let ([kh, kw], layout, out_px) = (self.kernel, PhaseLayout::new(self), self.out_px());
+    /// `n` columns, and the tap's first value in [`Phases`] of `layout`.
+    fn taps(
+        &self,
+        layout: PhaseLayout,
+        c: usize,
+        b: usize,
+        n: usize,
+    ) -> impl Iterator<Item = (usize, usize)> {
+        let ([kh, kw], out_px) = (self.kernel, self.out_px());
         (0..kh).flat_map(move |i| {
             (0..kw).map(move |j| (((c * kh + i) * kw + j) * n + b * out_px, layout.at(i, j)))
         })
@@ -121,7 +127,7 @@ impl Geometry {
         let mut phases = Phases::new(self);
         for (c, b) in (0..self.c_in).flat_map(|c| (0..images).map(move |b| (c, b))) {
             phases.load(&x[(b * self.c_in + c) * in_px..][..in_px]);
-            for (start, tap) in self.taps(c, b, n) {
+            for (start, tap) in self.taps(phases.layout, c, b, n) {
                 for (o, dst) in col[start..][..out_px].chunks_exact_mut(w_out).enumerate() {
                     copy_row(dst, &phases.values[tap + o * phases.layout.cols..]);
                 }
@@ -141,7 +147,7 @@ impl Geometry {
         let mut phases = Phases::new(self);
         for (c, b) in (0..self.c_in).flat_map(|c| (0..images).map(move |b| (c, b))) {
             phases.values.fill(0.0);
-            for (start, tap) in self.taps(c, b, n) {
+            for (start, tap) in self.taps(phases.layout, c, b, n) {
                 for (o, src) in col[start..][..out_px].chunks_exact(w_out).enumerate() {
                     add_row(&mut phases.values[tap + o * phases.layout.cols..], src);
                 }
@@ -513,6 +519,14 @@ fn with_scratch<R>(a: usize, b: usize, f: impl FnOnce(&mut [f32], &mut [f32]) ->
         // Only if `f` re-entered on this thread (it does not): fresh buffers.
         Err(_) => f(&mut vec![0.0; a], &mut vec![0.0; b]),
     })
+}
+
+/// Adds `bias[c]` to every value of channel `c` of an NCHW buffer of `c` channels
+/// of `px` values (the transpose of [`channel_sums`]).
+pub(crate) fn add_channel_bias(t: &mut [f32], px: usize, bias: &[f32]) {
+    for (plane, b) in t.chunks_exact_mut(px).zip(bias.iter().cycle()) {
+        plane.iter_mut().for_each(|v| *v += b);
+    }
 }
 
 /// Per-channel sums of an NCHW buffer `[batch, c, px]` (a bias's gradient), summed

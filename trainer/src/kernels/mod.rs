@@ -27,7 +27,7 @@ use burn::backend::autodiff::NodeId;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, NodeGuard, Ops, OpsKind};
 use burn::backend::flex::FlexTensor;
 use burn::backend::{Autodiff, Flex};
 use burn::nn::conv::{Conv2d, ConvTranspose2d};
@@ -292,10 +292,7 @@ fn run(
         Kind::Transposed => {
             let mut y = conv::input_gradient(&g, slice(&weight), slice(&input));
             if let Some(bias) = bias_values {
-                let px = g.in_hw[0] * g.in_hw[1];
-                for (i, v) in y.iter_mut().enumerate() {
-                    *v += bias[(i / px) % g.c_in];
-                }
+                conv::add_channel_bias(&mut y, g.in_hw[0] * g.in_hw[1], bias);
             }
             (y, [g.batch, g.c_in, g.in_hw[0], g.in_hw[1]])
         }
@@ -307,25 +304,32 @@ fn run(
         input,
         weight,
     };
-    let out = match b {
-        Some(b) => match WithBias
-            .prepare::<NoCheckpointing>([x.node(), w.node(), b.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => prep.finish(state, output),
-            OpsKind::UnTracked(prep) => prep.finish(output),
-        },
-        None => match NoBias
-            .prepare::<NoCheckpointing>([x.node(), w.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => prep.finish(state, output),
-            OpsKind::UnTracked(prep) => prep.finish(output),
-        },
+    Some(match b {
+        Some(b) => record(WithBias, [x.node(), w.node(), b.node()], state, output),
+        None => record(NoBias, [x.node(), w.node()], state, output),
+    })
+}
+
+/// Records `op` in autodiff's graph over the tensors of `nodes` (with `state` for its
+/// backward pass when any of them is tracked) and gives its `output`.
+fn record<O, const N: usize>(
+    op: O,
+    nodes: [NodeGuard; N],
+    state: O::State,
+    output: FlexTensor,
+) -> Tensor<4>
+where
+    O: Backward<Flex, N>,
+{
+    let out = match op
+        .prepare::<NoCheckpointing>(nodes)
+        .compute_bound()
+        .stateful()
+    {
+        OpsKind::Tracked(prep) => prep.finish(state, output),
+        OpsKind::UnTracked(prep) => prep.finish(output),
     };
-    Some(Tensor::from_primitive::<Ad>(out))
+    Tensor::from_primitive::<Ad>(out)
 }
 
 /// `bn.forward(x)` in training mode (the batch's statistics, the running statistics
@@ -409,14 +413,7 @@ fn batch_norm_train(x: Tensor<4>, bn: &BatchNorm) -> Option<Tensor<4>> {
         inv_std: out.inv_std,
     };
     let output = tensor(out.output, vec![batch, channels, h, w]);
-    let y = match NormOp
-        .prepare::<NoCheckpointing>([x.node(), gamma.node(), beta.node()])
-        .compute_bound()
-        .stateful()
-    {
-        OpsKind::Tracked(prep) => prep.finish(state, output),
-        OpsKind::UnTracked(prep) => prep.finish(output),
-    };
+    let y = record(NormOp, [x.node(), gamma.node(), beta.node()], state, output);
     // The running statistics, as `BatchNorm::forward` keeps them.
     let stat = |v: Vec<f32>| Tensor::<1>::from_data(TensorData::new(v, [channels]), &device);
     let m = bn.momentum;
@@ -431,5 +428,5 @@ fn batch_norm_train(x: Tensor<4>, bn: &BatchNorm) -> Option<Tensor<4>> {
         .update(follow(bn.running_mean.value_sync(), out.mean));
     bn.running_var
         .update(follow(bn.running_var.value_sync(), out.variance));
-    Some(Tensor::from_primitive::<Ad>(y))
+    Some(y)
 }
