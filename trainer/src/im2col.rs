@@ -71,6 +71,74 @@ impl Feature {
     }
 }
 
+/// [`FlatConv::few_channels`]'s sums, as a [`pulp::WithSimd`] operation so that its
+/// loops are compiled once per instruction set.
+struct FewChannels<'a> {
+    /// `c_out × oh × ow`, zeroed.
+    out: &'a mut [f32],
+    /// `[oh, ow]`.
+    out_size: [usize; 2],
+    /// The input, `c_in × stride_w phases × h × run`.
+    phased: &'a [f32],
+    run: usize,
+    /// `[c_out, c_in, kh, kw]`.
+    weights: &'a [f32],
+    bias: Option<&'a [f32]>,
+    c_in: usize,
+    kernel: [usize; 2],
+    stride: [usize; 2],
+    padding: [usize; 2],
+    /// Per kernel row and column, the outputs whose input is inside the image.
+    rows: &'a [(usize, usize)],
+    columns: &'a [(usize, usize)],
+}
+
+impl pulp::WithSimd for FewChannels<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let [kh, kw] = self.kernel;
+        let [sh, sw] = self.stride;
+        let [ph, pw] = self.padding;
+        let [oh, ow] = self.out_size;
+        let phase_plane = self.phased.len() / (self.c_in * sw).max(1);
+        for (co, plane) in self.out.chunks_exact_mut((oh * ow).max(1)).enumerate() {
+            for ci in 0..self.c_in {
+                let planes = &self.phased[ci * sw * phase_plane..(ci + 1) * sw * phase_plane];
+                let weights = &self.weights[(co * self.c_in + ci) * kh * kw..][..kh * kw];
+                for (a, &(y0, y1)) in self.rows.iter().enumerate() {
+                    for (b, &(x0, x1)) in self.columns.iter().enumerate() {
+                        let weight = weights[a * kw + b];
+                        // Input column of output x0 for this tap, as (phase, index).
+                        let ix0 = x0 * sw + b - pw;
+                        let input = &planes[(ix0 % sw) * phase_plane..][..phase_plane];
+                        let j0 = ix0 / sw;
+                        for oy in y0..y1 {
+                            let iy = oy * sh + a - ph;
+                            let out_row = &mut plane[oy * ow + x0..oy * ow + x1];
+                            let in_run = &input[iy * self.run + j0..][..out_row.len()];
+                            for (o, &v) in out_row.iter_mut().zip(in_run) {
+                                *o += v * weight;
+                            }
+                        }
+                    }
+                }
+            }
+            if let Some(bias) = self.bias {
+                for v in plane.iter_mut() {
+                    *v += bias[co];
+                }
+            }
+        }
+    }
+}
+
+/// flex's few-channel path takes convolutions of at most this many input and output
+/// channels (its `SMALL_CHANNEL_IN_THRESHOLD` and `SMALL_CHANNEL_OUT_THRESHOLD`).
+const SMALL_CHANNELS_IN: usize = 4;
+const SMALL_CHANNELS_OUT: usize = 16;
+
 /// Output pixels per im2col tile (flex's `TILE_SIZE`).
 const TILE: usize = 512;
 
@@ -81,6 +149,10 @@ pub(crate) struct FlatConv {
     conv: Conv2d,
     /// `[c_out, kh · kw · c_in]`, each row in `(kh, kw, c_in)` order.
     weight: Option<Tensor<2>>,
+    /// `[c_out, c_in, kh, kw]` as stored, for flex's few-channel path (`None` for
+    /// other layers, and where a weight is not finite: flex then marks padded
+    /// outputs NaN, which is left to it).
+    raw: Option<Vec<f32>>,
     bias: Option<Vec<f32>>,
     c_in: usize,
     c_out: usize,
@@ -102,6 +174,14 @@ impl FlatConv {
             .as_ref()
             .and_then(|b| b.val().into_data().try_into_vec::<f32>().ok());
         let k = kh * kw;
+        let few_channels = c_in_per_group * conv.groups <= SMALL_CHANNELS_IN
+            && c_out <= SMALL_CHANNELS_OUT
+            && conv.groups == 1;
+        let raw_kept = raw
+            .as_ref()
+            .filter(|raw| few_channels && raw.len() == c_out * c_in_per_group * k)
+            .filter(|raw| raw.iter().all(|v| v.is_finite()))
+            .cloned();
         // As flex reorders it: for each output channel, (c_in, k) → (k, c_in).
         let weight = raw
             .filter(|raw| raw.len() == c_out * c_in_per_group * k)
@@ -132,6 +212,7 @@ impl FlatConv {
                 && (conv.bias.is_none() || bias.as_ref().is_some_and(|b| b.len() == c_out)),
             conv: conv.clone(),
             weight,
+            raw: raw_kept,
             bias,
             c_in: c_in_per_group * conv.groups,
             c_out,
@@ -152,7 +233,7 @@ impl FlatConv {
         let [sh, sw] = self.conv.stride;
         let one_by_one = kh == 1 && kw == 1 && sh == 1 && sw == 1 && ph == 0 && pw == 0;
         let depthwise = self.c_in == 1 && self.c_out == 1;
-        let few_channels = self.c_in <= 4 && self.c_out <= 16;
+        let few_channels = self.c_in <= SMALL_CHANNELS_IN && self.c_out <= SMALL_CHANNELS_OUT;
         let direct = ph == 0
             && pw == 0
             && kh == 1
@@ -185,7 +266,12 @@ impl FlatConv {
     ) -> Result<Feature, TrainError> {
         let weight = match &self.weight {
             Some(w) if self.runs(&x) => w,
-            _ => return Feature::from_tensor(self.conv.forward(x.into_tensor(&self.device))),
+            _ => {
+                if let Some(out) = self.few_channels(&x) {
+                    return Ok(out);
+                }
+                return Feature::from_tensor(self.conv.forward(x.into_tensor(&self.device)));
+            }
         };
         let [kh, kw] = self.conv.kernel_size;
         let [sh, sw] = self.conv.stride;
@@ -243,6 +329,89 @@ impl FlatConv {
             }
         }
         Ok(Feature {
+            data: out,
+            c: self.c_out,
+            h: oh,
+            w: ow,
+        })
+    }
+
+    /// flex's few-channel convolution (`c_in ≤ 4`, `c_out ≤ 16`: the stem), term for
+    /// term: each output starts at 0 and adds `input · weight` for each input
+    /// channel, kernel row and kernel column in that order, skipping padded
+    /// positions, then the bias. flex runs it as one job per output channel through
+    /// rayon and its own vector dispatch, about 10 µs for the default 1→16 stem on
+    /// 32×32 px; here the same sums take a plain loop the compiler vectorises.
+    /// `None` where flex would take another path or its conditions are not met.
+    fn few_channels(&self, x: &Feature) -> Option<Feature> {
+        let raw = self.raw.as_ref()?;
+        let [ph, pw] = self.padding?;
+        let [kh, kw] = self.conv.kernel_size;
+        let [sh, sw] = self.conv.stride;
+        let one_by_one = kh == 1 && kw == 1 && sh == 1 && sw == 1 && ph == 0 && pw == 0;
+        let depthwise = self.c_in == 1 && self.c_out == 1;
+        if !self.on_flex
+            || one_by_one
+            || depthwise
+            || self.conv.dilation != [1, 1]
+            || x.c != self.c_in
+            || x.data.len() != x.c * x.h * x.w
+        {
+            return None;
+        }
+        let (oh, ow) = (
+            self.out_size(x.h, kh, sh, ph)?,
+            self.out_size(x.w, kw, sw, pw)?,
+        );
+        // For kernel offset k, the outputs whose input lies inside the image.
+        let valid = |k: usize, pad: usize, stride: usize, size: usize, out: usize| {
+            let start = if k >= pad {
+                0
+            } else {
+                (pad - k).div_ceil(stride)
+            };
+            let end = if k >= size + pad {
+                0
+            } else {
+                (size + pad - k).div_ceil(stride).min(out)
+            };
+            (start, end.max(start))
+        };
+        let rows: Vec<_> = (0..kh).map(|k| valid(k, ph, sh, x.h, oh)).collect();
+        let columns: Vec<_> = (0..kw).map(|k| valid(k, pw, sw, x.w, ow)).collect();
+        // Each input row split by column phase of the stride, so that every kernel
+        // tap reads a contiguous run: `phased[ci][phase][y][j]` is column
+        // `j·stride + phase` of row `y`.
+        let run = x.w.div_ceil(sw);
+        let phase_plane = x.h * run;
+        let mut phased = vec![0.0f32; self.c_in * sw * phase_plane];
+        for (ci, planes) in phased.chunks_exact_mut(sw * phase_plane).enumerate() {
+            let input = &x.data[ci * x.h * x.w..(ci + 1) * x.h * x.w];
+            for (phase, plane) in planes.chunks_exact_mut(phase_plane).enumerate() {
+                for (row, in_row) in plane.chunks_exact_mut(run).zip(input.chunks_exact(x.w)) {
+                    for (v, &u) in row.iter_mut().zip(in_row.iter().skip(phase).step_by(sw)) {
+                        *v = u;
+                    }
+                }
+            }
+        }
+        let mut out = vec![0.0f32; self.c_out * oh * ow];
+        // The loops compiled for the vector unit found at run time (AVX-512 here).
+        pulp::Arch::new().dispatch(FewChannels {
+            out: &mut out,
+            out_size: [oh, ow],
+            phased: &phased,
+            run,
+            weights: raw,
+            bias: self.bias.as_deref(),
+            c_in: self.c_in,
+            kernel: [kh, kw],
+            stride: [sh, sw],
+            padding: [ph, pw],
+            rows: &rows,
+            columns: &columns,
+        });
+        Some(Feature {
             data: out,
             c: self.c_out,
             h: oh,
@@ -361,6 +530,59 @@ mod tests {
     fn feature(c: usize, h: usize, w: usize, device: &Device) -> Feature {
         let t = Tensor::<4>::random([1, c, h, w], Distribution::Uniform(-1.0, 1.0), device);
         Feature::from_tensor(t).expect("one image")
+    }
+
+    /// flex's few-channel path (the stem's), repeated here: the same bits on strides,
+    /// paddings, kernel sizes, odd sizes and an all-zero input, and burn's own call
+    /// where flex would take another path.
+    #[test]
+    fn the_few_channel_path_gives_burns_values_bit_for_bit() {
+        let device = Device::flex();
+        let pad = |p| PaddingConfig2d::Explicit(p, p, p, p);
+        // (c_in, c_out, kernel, stride, padding, bias, input size, repeated here)
+        let cases = [
+            (1, 16, 3, 1, pad(1), true, 32, true),
+            (1, 16, 3, 2, pad(1), false, 32, true),
+            (3, 8, 3, 1, pad(1), true, 17, true),
+            (4, 16, 5, 2, pad(2), true, 15, true),
+            (2, 4, 3, 3, PaddingConfig2d::Valid, true, 10, true),
+            (1, 16, 4, 1, pad(1), true, 9, true),
+            (3, 2, 3, 1, pad(3), true, 2, true),
+            // More channels than the path takes (im2col, burn), a 1×1 and a 1→1.
+            (1, 17, 3, 1, pad(1), true, 8, false),
+            (5, 4, 3, 1, pad(1), true, 8, false),
+            (2, 4, 1, 1, PaddingConfig2d::Valid, true, 8, false),
+            (1, 1, 3, 1, pad(1), true, 8, false),
+        ];
+        for (i, (c_in, c_out, k, stride, padding, bias, size, here)) in
+            cases.into_iter().enumerate()
+        {
+            let _guard = crate::train::init_lock();
+            let conv = Conv2dConfig::new([c_in, c_out], [k, k])
+                .with_stride([stride, stride])
+                .with_padding(padding)
+                .with_bias(bias)
+                .init(&device);
+            let flat = FlatConv::new(&conv);
+            for zeros in [false, true] {
+                let x = feature(c_in, size, size, &device);
+                let x = if zeros {
+                    Feature {
+                        data: vec![0.0; x.data.len()],
+                        ..x
+                    }
+                } else {
+                    x
+                };
+                // flex's few-channel path is not its im2col one.
+                assert!(!(here && flat.runs(&x)), "case {i}: not im2col");
+                assert_eq!(flat.few_channels(&x).is_some(), here, "case {i}: path");
+                let expected = Feature::from_tensor(conv.forward(x.clone().into_tensor(&device)))
+                    .expect("burn");
+                let got = flat.forward(x, None).expect("flat");
+                assert_eq!(got, expected, "case {i} zeros {zeros}: values");
+            }
+        }
     }
 
     #[test]

@@ -10,7 +10,7 @@ use softtouch_schemas::Wrench;
 use crate::TrainError;
 use crate::artifact::{ArtifactHeader, ModelArtifact};
 use crate::labels::{WrenchLabel, wrench_from_label};
-use crate::model::{FlatBlock, InferenceNet};
+use crate::model::{FlatNet, InferenceNet};
 use crate::preprocess::{FingerTable, Fork};
 
 /// One inference.
@@ -37,8 +37,8 @@ pub struct Predictor {
     header: ArtifactHeader,
     /// The encoder and heads with batch norm folded in (what one image needs).
     net: InferenceNet,
-    /// The net's residual stages with their weights reordered once.
-    blocks: Vec<FlatBlock>,
+    /// The net's stem and residual stages with their weights reordered once.
+    blocks: FlatNet,
     device: Device,
     input: Vec<f32>,
     /// The model's colour threshold as a lookup table (built once, about 0.1 s).
@@ -59,7 +59,7 @@ impl Predictor {
         let input = vec![0.0; artifact.header.config.preprocess.input_len()];
         let table = FingerTable::new(&artifact.header.config.preprocess);
         let net = InferenceNet::new(&artifact.net);
-        let blocks = net.flat_blocks();
+        let blocks = net.flat();
         Self {
             table,
             net,

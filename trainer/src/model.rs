@@ -453,6 +453,14 @@ impl FoldedBlock {
     }
 }
 
+/// An [`InferenceNet`]'s convolutions with their weights reordered once, for
+/// [`InferenceNet::forward_one`].
+#[derive(Debug, Clone)]
+pub(crate) struct FlatNet {
+    stem: FlatConv,
+    blocks: Vec<FlatBlock>,
+}
+
 /// A [`FoldedBlock`]'s convolutions with their weights reordered once
 /// ([`crate::im2col`]), for one image at a time.
 #[derive(Debug, Clone)]
@@ -512,31 +520,38 @@ impl InferenceNet {
         }
     }
 
-    /// The residual stages for [`Self::forward_one`].
-    pub(crate) fn flat_blocks(&self) -> Vec<FlatBlock> {
-        self.stages
-            .iter()
-            .map(|b| FlatBlock {
-                conv1: FlatConv::new(&b.conv1),
-                conv2: FlatConv::new(&b.conv2),
-                skip: b.skip.as_ref().map(FlatConv::new),
-            })
-            .collect()
+    /// The stem and residual stages for [`Self::forward_one`].
+    pub(crate) fn flat(&self) -> FlatNet {
+        FlatNet {
+            stem: FlatConv::new(&self.stem),
+            blocks: self
+                .stages
+                .iter()
+                .map(|b| FlatBlock {
+                    conv1: FlatConv::new(&b.conv1),
+                    conv2: FlatConv::new(&b.conv2),
+                    skip: b.skip.as_ref().map(FlatConv::new),
+                })
+                .collect(),
+        }
     }
 
-    /// [`Self::forward`] of one image (`[1, c, h, w]`), the residual stages through
-    /// `blocks` (from [`Self::flat_blocks`]): the same values, without reordering
-    /// the stages' weights on every call. `fork`: the larger convolutions' output
+    /// [`Self::forward`] of one image (`[1, c, h, w]`), the stem and the residual
+    /// stages through `flat` (from [`Self::flat`]): the same values, without
+    /// reordering the weights on every call. `fork`: the larger convolutions' output
     /// pixels in two halves through it (the same values).
     pub(crate) fn forward_one(
         &self,
-        blocks: &[FlatBlock],
+        flat: &FlatNet,
         image: Tensor<4>,
         fork: Option<&dyn Fork>,
     ) -> Result<(Tensor<2>, Option<Tensor<2>>), TrainError> {
         let device = image.device();
-        let mut x = Feature::from_tensor(relu(self.stem.forward(image)))?;
-        for block in blocks {
+        let mut x = flat
+            .stem
+            .forward(Feature::from_tensor(image)?, fork)?
+            .relu();
+        for block in &flat.blocks {
             x = block.forward(x, fork)?;
         }
         let mean = self.fc_mean.forward(x.into_tensor(&device).flatten(1, 3));
@@ -721,7 +736,7 @@ mod tests {
             let _guard = crate::train::init_lock();
             let net = with_random_statistics(&config, 40, &device);
             let folded = InferenceNet::new(&net);
-            let blocks = folded.flat_blocks();
+            let blocks = folded.flat();
             let values = |t: Tensor<2>| t.into_data().as_slice::<f32>().expect("f32").to_vec();
             for round in 0..3 {
                 let x = Tensor::<4>::random(
