@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::TrainError;
 use crate::im2col::{Feature, FlatConv};
-use crate::kernels::{batch_norm, conv_transpose2d, conv2d};
+use crate::kernels::{add_relu, batch_norm, batch_norm_relu, conv_transpose2d, conv2d};
 use crate::preprocess::{Fork, Preprocess};
 
 /// Which of the paper's models.
@@ -238,13 +238,13 @@ impl ResBlock {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let h = relu(batch_norm(conv2d(x.clone(), &self.conv1), &self.bn1));
+        let h = batch_norm_relu(conv2d(x.clone(), &self.conv1), &self.bn1);
         let h = batch_norm(conv2d(h, &self.conv2), &self.bn2);
         let s = match &self.skip {
             Some(conv) => conv2d(x, conv),
             None => x,
         };
-        relu(h + s)
+        add_relu(h, s)
     }
 }
 
@@ -268,7 +268,7 @@ impl UpBlock {
         }
     }
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        relu(batch_norm(conv_transpose2d(x, &self.conv), &self.bn))
+        batch_norm_relu(conv_transpose2d(x, &self.conv), &self.bn)
     }
 }
 
@@ -362,7 +362,7 @@ impl Net {
 
     /// Image → flattened features.
     fn encode(&self, images: Tensor<4>) -> Tensor<2> {
-        let mut x = relu(batch_norm(conv2d(images, &self.stem), &self.stem_bn));
+        let mut x = batch_norm_relu(conv2d(images, &self.stem), &self.stem_bn);
         for stage in &self.stages {
             x = stage.forward(x);
         }

@@ -335,14 +335,85 @@ where
 /// `bn.forward(x)` in training mode (the batch's statistics, the running statistics
 /// updated as burn's `BatchNorm` updates them), through [`norm`] where it applies.
 pub(crate) fn batch_norm(x: Tensor<4>, bn: &BatchNorm) -> Tensor<4> {
-    let training = x.device().is_autodiff() && bn.training.is_enabled();
-    match (enabled() && training)
-        .then(|| batch_norm_train(x.clone(), bn))
+    match train_norm(&x, bn)
+        .then(|| batch_norm_train(x.clone(), bn, false))
         .flatten()
     {
         Some(y) => y,
         None => bn.forward(x),
     }
+}
+
+/// `relu(bn.forward(x))`, the two in one operation where [`batch_norm`] runs
+/// [`norm`] (the same values: two passes over the activations fewer each way).
+pub(crate) fn batch_norm_relu(x: Tensor<4>, bn: &BatchNorm) -> Tensor<4> {
+    match train_norm(&x, bn)
+        .then(|| batch_norm_train(x.clone(), bn, true))
+        .flatten()
+    {
+        Some(y) => y,
+        None => burn::tensor::activation::relu(bn.forward(x)),
+    }
+}
+
+/// `relu(a + b)`, the residual join, as one operation on autodiff flex tensors of one
+/// shape (one pass each way where burn makes two; the same values).
+pub(crate) fn add_relu(a: Tensor<4>, b: Tensor<4>) -> Tensor<4> {
+    let fused = (enabled() && a.dims() == b.dims())
+        .then(|| add_relu_tracked(a.clone(), b.clone()))
+        .flatten();
+    match fused {
+        Some(y) => y,
+        None => burn::tensor::activation::relu(a + b),
+    }
+}
+
+fn add_relu_tracked(a: Tensor<4>, b: Tensor<4>) -> Option<Tensor<4>> {
+    let shape = a.dims().to_vec();
+    let a = a.try_into_primitive::<Ad>().ok()?;
+    let b = b.try_into_primitive::<Ad>().ok()?;
+    let (va, vb) = (f32s(a.primitive())?, f32s(b.primitive())?);
+    let (sa, sb) = (slice(&va), slice(&vb));
+    if sa.len() != sb.len() || sa.len() != shape.iter().product::<usize>() {
+        return None;
+    }
+    let mut out = vec![0.0f32; sa.len()];
+    norm::add_relu(sa, sb, &mut out);
+    let output = tensor(out, shape);
+    Some(record(
+        AddRelu,
+        [a.node(), b.node()],
+        output.clone(),
+        output,
+    ))
+}
+
+/// [`add_relu`]'s backward pass: the output's gradient where the output was kept,
+/// to both terms. Its state is the output (a shared buffer, not a copy).
+#[derive(Debug)]
+struct AddRelu;
+
+impl Backward<Flex, 2> for AddRelu {
+    type State = FlexTensor;
+    fn backward(self, ops: Ops<FlexTensor, 2>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [a, b] = ops.parents;
+        let grad = grads.consume::<Flex>(&ops.node).to_contiguous();
+        let output = &ops.state;
+        let mut d = vec![0.0f32; slice(&grad).len()];
+        norm::relu_gradient(slice(output), slice(&grad), &mut d);
+        let d = tensor(d, output.layout().shape().to_vec());
+        register(
+            grads,
+            [
+                (a.map(|n| n.id), Some(d.clone())),
+                (b.map(|n| n.id), Some(d)),
+            ],
+        );
+    }
+}
+
+fn train_norm(x: &Tensor<4>, bn: &BatchNorm) -> bool {
+    enabled() && x.device().is_autodiff() && bn.training.is_enabled()
 }
 
 /// What batch norm's backward pass needs.
@@ -353,6 +424,8 @@ struct NormState {
     gamma: Vec<f32>,
     mean: Vec<f32>,
     inv_std: Vec<f32>,
+    /// With a ReLU after it: the output's scale and shift per channel.
+    relu: Option<(Vec<f32>, Vec<f32>)>,
 }
 
 #[derive(Debug)]
@@ -372,6 +445,9 @@ impl Backward<Flex, 3> for NormOp {
             &st.mean,
             &st.inv_std,
             input.is_some(),
+            st.relu
+                .as_ref()
+                .map(|(scale, beta)| norm::Relu { scale, beta }),
         );
         let shape = st.input.layout().shape().to_vec();
         let c = st.shape.channels;
@@ -384,7 +460,7 @@ impl Backward<Flex, 3> for NormOp {
     }
 }
 
-fn batch_norm_train(x: Tensor<4>, bn: &BatchNorm) -> Option<Tensor<4>> {
+fn batch_norm_train(x: Tensor<4>, bn: &BatchNorm, relu: bool) -> Option<Tensor<4>> {
     let device = x.device();
     let [batch, channels, h, w] = x.dims();
     let x = x.try_into_primitive::<Ad>().ok()?;
@@ -404,13 +480,14 @@ fn batch_norm_train(x: Tensor<4>, bn: &BatchNorm) -> Option<Tensor<4>> {
         channels,
         px: h * w,
     };
-    let out = norm::forward(shape, slice(&input), slice(&g), slice(&b), bn.epsilon);
+    let out = norm::forward(shape, slice(&input), slice(&g), slice(&b), bn.epsilon, relu);
     let state = NormState {
         shape,
         input,
         gamma: slice(&g).to_vec(),
         mean: out.mean.clone(),
         inv_std: out.inv_std,
+        relu: relu.then(|| (out.scale, slice(&b).to_vec())),
     };
     let output = tensor(out.output, vec![batch, channels, h, w]);
     let y = record(NormOp, [x.node(), gamma.node(), beta.node()], state, output);

@@ -80,17 +80,67 @@ fn lanes2(a: &[f32], b: &[f32], f: impl Fn(f32, f32) -> (f32, f32)) -> (f64, f64
 }
 
 /// What the forward pass gives: the output, and per channel the batch mean, the
-/// biased variance (what the running statistics follow) and `1/√(var + ε)`.
+/// biased variance (what the running statistics follow), `1/√(var + ε)` and the
+/// output's scale `γ/√(var + ε)`.
 pub(crate) struct Forward {
     pub output: Vec<f32>,
     pub mean: Vec<f32>,
     pub variance: Vec<f32>,
     pub inv_std: Vec<f32>,
+    pub scale: Vec<f32>,
+}
+
+/// flex's ReLU: NaN passes, as does its gradient where the output was NaN.
+#[inline]
+fn kept(y: f32) -> bool {
+    y.is_nan() || y > 0.0
+}
+
+/// Values per parallel job of the element-wise passes below.
+const CHUNK: usize = 1 << 14;
+
+/// `out = relu(a + b)` (flex's ReLU), in parallel chunks.
+pub(crate) fn add_relu(a: &[f32], b: &[f32], out: &mut [f32]) {
+    out.par_chunks_mut(CHUNK)
+        .zip(a.par_chunks(CHUNK).zip(b.par_chunks(CHUNK)))
+        .for_each(|(out, (a, b))| {
+            for (o, (x, y)) in out.iter_mut().zip(a.iter().zip(b)) {
+                let v = x + y;
+                *o = if kept(v) { v } else { 0.0 };
+            }
+        });
+}
+
+/// A ReLU's input gradient `d` from its `output` and the output's gradient `dy`.
+pub(crate) fn relu_gradient(output: &[f32], dy: &[f32], d: &mut [f32]) {
+    d.par_chunks_mut(CHUNK)
+        .zip(output.par_chunks(CHUNK).zip(dy.par_chunks(CHUNK)))
+        .for_each(|(d, (y, g))| {
+            for (o, (y, g)) in d.iter_mut().zip(y.iter().zip(g)) {
+                *o = if kept(*y) { *g } else { 0.0 };
+            }
+        });
+}
+
+/// A ReLU after the batch norm, its mask worked out again from `x` in the backward
+/// pass (the same expression as the forward's, so the same bits) rather than kept.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Relu<'a> {
+    pub scale: &'a [f32],
+    pub beta: &'a [f32],
 }
 
 /// `γ·(x − mean)/√(var + ε) + β` with the batch's mean and biased variance per
-/// channel, summed in f32 lanes and f64 (see [`lanes`]).
-pub(crate) fn forward(s: Shape, x: &[f32], gamma: &[f32], beta: &[f32], epsilon: f64) -> Forward {
+/// channel, summed in f32 lanes and f64 (see [`lanes`]); then ReLU when `relu`
+/// (one pass rather than burn's two, and its own in the backward pass).
+pub(crate) fn forward(
+    s: Shape,
+    x: &[f32],
+    gamma: &[f32],
+    beta: &[f32],
+    epsilon: f64,
+    relu: bool,
+) -> Forward {
     let stats: Vec<(f64, f64)> = (0..s.channels)
         .into_par_iter()
         .map(|ch| {
@@ -118,7 +168,8 @@ pub(crate) fn forward(s: Shape, x: &[f32], gamma: &[f32], beta: &[f32], epsilon:
     s.each_plane(x, &mut output, |ch, x, out| {
         let (m, a, b) = (mean[ch], scale[ch], beta[ch]);
         for (o, v) in out.iter_mut().zip(x) {
-            *o = (v - m) * a + b;
+            let y = (v - m) * a + b;
+            *o = if !relu || kept(y) { y } else { 0.0 };
         }
     });
     Forward {
@@ -126,12 +177,15 @@ pub(crate) fn forward(s: Shape, x: &[f32], gamma: &[f32], beta: &[f32], epsilon:
         mean,
         variance: stats.iter().map(|(_, v)| *v as f32).collect(),
         inv_std: inv_std.iter().map(|v| *v as f32).collect(),
+        scale,
     }
 }
 
 /// Gradients with respect to `x`, γ and β from the output's gradient `dy`, for the
 /// statistics [`forward`] returned: with `x̂ = (x − mean)·inv_std`,
-/// `∂β = Σ dy`, `∂γ = Σ dy·x̂`, `∂x = γ·inv_std·(dy − ∂β/N − x̂·∂γ/N)`.
+/// `∂β = Σ dy`, `∂γ = Σ dy·x̂`, `∂x = γ·inv_std·(dy − ∂β/N − x̂·∂γ/N)`. With `relu`,
+/// `dy` is the ReLU's output gradient, zeroed first where the ReLU dropped its input.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn backward(
     s: Shape,
     x: &[f32],
@@ -140,16 +194,26 @@ pub(crate) fn backward(
     mean: &[f32],
     inv_std: &[f32],
     want_x: bool,
+    relu: Option<Relu<'_>>,
 ) -> (Option<Vec<f32>>, Vec<f32>, Vec<f32>) {
+    // The gradient reaching the batch norm's output, for channel `ch`.
+    let through = |ch: usize| {
+        let (m, on) = (mean[ch], relu.is_some());
+        let (a, b) = relu.map_or((0.0, 0.0), |r| (r.scale[ch], r.beta[ch]));
+        move |d: f32, v: f32| if !on || kept((v - m) * a + b) { d } else { 0.0 }
+    };
     let sums: Vec<(f64, f64)> = (0..s.channels)
         .into_par_iter()
         .map(|ch| {
-            let m = mean[ch];
+            let (m, pass) = (mean[ch], through(ch));
             let (sdy, sdyx) =
                 s.planes(dy, ch)
                     .zip(s.planes(x, ch))
                     .fold((0.0, 0.0), |(a, b), (dy, x)| {
-                        let (da, db) = lanes2(dy, x, |d, v| (d, d * (v - m)));
+                        let (da, db) = lanes2(dy, x, |d, v| {
+                            let d = pass(d, v);
+                            (d, d * (v - m))
+                        });
                         (a + da, b + db)
                     });
             (sdy, sdyx * f64::from(inv_std[ch]))
@@ -176,9 +240,9 @@ pub(crate) fn backward(
             .for_each(|(dx, (dy, x))| {
                 let planes = dx.chunks_mut(s.px).zip(dy.chunks(s.px).zip(x.chunks(s.px)));
                 for (ch, (dx, (dy, x))) in planes.enumerate() {
-                    let ((a, b, c), m) = (coef[ch], mean[ch]);
+                    let ((a, b, c), m, pass) = (coef[ch], mean[ch], through(ch));
                     for (o, (d, v)) in dx.iter_mut().zip(dy.iter().zip(x)) {
-                        *o = a * d + b * (v - m) + c;
+                        *o = a * pass(*d, *v) + b * (v - m) + c;
                     }
                 }
             });

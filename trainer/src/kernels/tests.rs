@@ -10,7 +10,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::gemm::{View, matmul};
-use super::{batch_norm, conv_transpose2d, conv2d};
+use super::{add_relu, batch_norm, batch_norm_relu, conv_transpose2d, conv2d};
 
 fn device() -> Device {
     Device::flex().autodiff()
@@ -310,54 +310,144 @@ fn batch_norm_matches_burns_values_gradients_and_running_statistics() {
                 .add_scalar(5e4),
             _ => random(shape, &mut rng, &device),
         };
-        let (ours_bn, burns_bn) = (norm_of(c, i as u64, &device), norm_of(c, i as u64, &device));
-        let ours = gradients(
-            &x,
-            &ours_bn.gamma,
-            Some(&ours_bn.beta),
-            |x| batch_norm(x, &ours_bn),
-            i as u64,
-        );
-        let burns = gradients(
-            &x,
-            &burns_bn.gamma,
-            Some(&burns_bn.beta),
-            |x| burns_bn.forward(x),
-            i as u64,
-        );
-        let what = format!("batch norm {shape:?} {fill}");
-        assert!(
-            ours.output.iter().chain(&ours.dx).all(|v| v.is_finite()),
-            "{what}: not finite"
-        );
-        // burn's f32 sums against these f64 ones: the large inputs' variance differs in
-        // the last bits, which the gradient (a difference of nearly equal terms) shows.
-        let tol = if fill == "large" { 2e-3 } else { 2e-5 };
-        assert_close(&format!("{what} output"), &ours.output, &burns.output, tol);
-        assert_close(&format!("{what} ∂x"), &ours.dx, &burns.dx, tol);
-        assert_close(&format!("{what} ∂γ"), &ours.dw, &burns.dw, tol);
-        let (a, b) = (ours.db.unwrap_or_default(), burns.db.unwrap_or_default());
-        assert_close(&format!("{what} ∂β"), &a, &b, tol);
-        for (name, a, b) in [
-            (
-                "running mean",
-                &ours_bn.running_mean,
-                &burns_bn.running_mean,
-            ),
-            (
-                "running variance",
-                &ours_bn.running_var,
-                &burns_bn.running_var,
-            ),
-        ] {
-            assert_close(
-                &format!("{what} {name}"),
-                &values(a.value()),
-                &values(b.value()),
-                1e-5,
+        // Alone, and with the ReLU after it fused in.
+        for relu in [false, true] {
+            batch_norm_case(
+                &x,
+                c,
+                i as u64,
+                relu,
+                &format!("{shape:?} {fill}"),
+                fill == "large",
             );
         }
     }
+}
+
+/// One batch-norm case of [`batch_norm_matches_burns_values_gradients_and_running_statistics`].
+fn batch_norm_case(x: &Tensor<4>, c: usize, seed: u64, relu: bool, what: &str, large: bool) {
+    let device = x.device();
+    let (ours_bn, burns_bn) = (norm_of(c, seed, &device), norm_of(c, seed, &device));
+    let ours = gradients(
+        x,
+        &ours_bn.gamma,
+        Some(&ours_bn.beta),
+        |x| {
+            if relu {
+                batch_norm_relu(x, &ours_bn)
+            } else {
+                batch_norm(x, &ours_bn)
+            }
+        },
+        seed,
+    );
+    let burns = gradients(
+        x,
+        &burns_bn.gamma,
+        Some(&burns_bn.beta),
+        |x| {
+            let y = burns_bn.forward(x);
+            if relu {
+                burn::tensor::activation::relu(y)
+            } else {
+                y
+            }
+        },
+        seed,
+    );
+    let what = format!("batch norm{} {what}", if relu { " + ReLU" } else { "" });
+    if relu {
+        // Fused, the same bits as the kernel's batch norm followed by burn's ReLU.
+        let apart_bn = norm_of(c, seed, &device);
+        let apart = gradients(
+            x,
+            &apart_bn.gamma,
+            Some(&apart_bn.beta),
+            |x| burn::tensor::activation::relu(batch_norm(x, &apart_bn)),
+            seed,
+        );
+        assert_eq!(ours.output, apart.output, "{what}: output, fused and apart");
+        assert_eq!(ours.dx, apart.dx, "{what}: ∂x, fused and apart");
+        assert_eq!(ours.dw, apart.dw, "{what}: ∂γ, fused and apart");
+        assert_eq!(ours.db, apart.db, "{what}: ∂β, fused and apart");
+    }
+    assert!(
+        ours.output.iter().chain(&ours.dx).all(|v| v.is_finite()),
+        "{what}: not finite"
+    );
+    // burn's f32 sums against these f64 ones: the large inputs' variance differs in
+    // the last bits, which the gradient (a difference of nearly equal terms) shows.
+    let tol = if large { 2e-3 } else { 2e-5 };
+    assert_close(&format!("{what} output"), &ours.output, &burns.output, tol);
+    assert_close(&format!("{what} ∂x"), &ours.dx, &burns.dx, tol);
+    assert_close(&format!("{what} ∂γ"), &ours.dw, &burns.dw, tol);
+    let (a, b) = (ours.db.unwrap_or_default(), burns.db.unwrap_or_default());
+    assert_close(&format!("{what} ∂β"), &a, &b, tol);
+    for (name, a, b) in [
+        (
+            "running mean",
+            &ours_bn.running_mean,
+            &burns_bn.running_mean,
+        ),
+        (
+            "running variance",
+            &ours_bn.running_var,
+            &burns_bn.running_var,
+        ),
+    ] {
+        assert_close(
+            &format!("{what} {name}"),
+            &values(a.value()),
+            &values(b.value()),
+            1e-5,
+        );
+    }
+}
+
+/// The residual join `relu(a + b)` in one operation: burn's values and both terms'
+/// gradients bit for bit, on random terms, on terms that cancel to exactly 0 (the
+/// ReLU's edge) and with one term not tracked; burn's own outside autodiff.
+#[test]
+fn add_relu_is_burns_relu_of_the_sum() {
+    let device = device();
+    let mut rng = ChaCha8Rng::seed_from_u64(13);
+    let shape = [3, 4, 5, 5];
+    let a = random(shape, &mut rng, &device);
+    for (name, b) in [
+        ("random", random(shape, &mut rng, &device)),
+        ("cancelling", a.clone().neg()),
+    ] {
+        for track_b in [true, false] {
+            let run = |fused: bool| {
+                let a = a.clone().detach().require_grad();
+                let b = if track_b {
+                    b.clone().detach().require_grad()
+                } else {
+                    b.clone().detach()
+                };
+                let y = if fused {
+                    add_relu(a.clone(), b.clone())
+                } else {
+                    burn::tensor::activation::relu(a.clone() + b.clone())
+                };
+                let r = random(shape, &mut ChaCha8Rng::seed_from_u64(5), &device);
+                let grads = (y.clone() * r).sum().backward();
+                let da = a.grad(&grads).map(values);
+                let db = b.grad(&grads).map(values);
+                (values(y), da, db)
+            };
+            assert_eq!(run(true), run(false), "{name}, b tracked {track_b}");
+        }
+    }
+    let plain = Device::flex();
+    let (a, b) = (
+        random(shape, &mut rng, &plain),
+        random(shape, &mut rng, &plain),
+    );
+    assert_eq!(
+        values(add_relu(a.clone(), b.clone())),
+        values(burn::tensor::activation::relu(a + b))
+    );
 }
 
 #[test]
@@ -366,7 +456,14 @@ fn batch_norm_outside_training_is_burns_own() {
     let mut rng = ChaCha8Rng::seed_from_u64(12);
     let bn = norm_of(3, 1, &plain);
     let x = random([2, 3, 4, 4], &mut rng, &plain);
-    assert_eq!(values(batch_norm(x.clone(), &bn)), values(bn.forward(x)));
+    assert_eq!(
+        values(batch_norm(x.clone(), &bn)),
+        values(bn.forward(x.clone()))
+    );
+    assert_eq!(
+        values(batch_norm_relu(x.clone(), &bn)),
+        values(burn::tensor::activation::relu(bn.forward(x)))
+    );
 }
 
 #[test]
