@@ -236,14 +236,33 @@ impl IntegerRule {
     /// the sums below `u16::MAX` (at most [`super::ROWS_PER_FLUSH`] rows).
     pub(super) fn add_row(&self, row: &[u8], grey: bool, sums: &mut [u16]) {
         #[cfg(target_arch = "x86_64")]
-        if grey && let Some(simd) = pulp::x86::V4::try_new() {
-            simd.vectorize(|| {
-                let done = v4::grey_row(simd, self, row, sums);
-                self.add_row_from(done, row, grey, sums);
-            });
-            return;
+        if grey {
+            if let Some(simd) = pulp::x86::V4::try_new() {
+                simd.vectorize(|| {
+                    let done = v4::grey_row(simd, self, row, sums);
+                    self.add_row_from(done, row, grey, sums);
+                });
+                return;
+            }
+            if self.add_grey_row_avx2(row, sums) {
+                return;
+            }
         }
         self.add_row_from(0, row, grey, sums);
+    }
+
+    /// The one-channel row with AVX2 intrinsics, where the machine has AVX2 (`false`,
+    /// nothing done, where it has not). [`Self::add_row`] takes it without AVX-512.
+    #[cfg(target_arch = "x86_64")]
+    pub(super) fn add_grey_row_avx2(&self, row: &[u8], sums: &mut [u16]) -> bool {
+        let Some(simd) = pulp::x86::V3::try_new() else {
+            return false;
+        };
+        simd.vectorize(|| {
+            let done = v3::grey_row(simd, self, row, sums);
+            self.add_row_from(done, row, true, sums);
+        });
+        true
     }
 
     /// [`Self::add_row`] from pixel `first` on, compiled for the instruction set
@@ -433,6 +452,130 @@ mod v4 {
             *sum = cast(bw._mm512_mask_add_epi16(before, keep, before, all));
         }
         pixel_steps.len().min(sum_steps.len()) * 32
+    }
+}
+
+/// The one-channel row with AVX2 intrinsics, for machines without AVX-512: the
+/// same steps as [`v4`] on 16 pixels at a time, with vector masks for its mask
+/// registers and `max(a, b) == a` for its unsigned comparisons. The compiler's own
+/// AVX2 code for [`IntegerRule::keep`] took 173 µs a 640×480 frame.
+#[cfg(target_arch = "x86_64")]
+mod v3 {
+    use pulp::cast;
+    use pulp::x86::V3;
+    use std::arch::x86_64::__m256i;
+
+    use super::IntegerRule;
+
+    /// Adds the kept pixels' `r + g + b` of whole steps of 16 pixels into `sums`;
+    /// returns how many pixels it did (the caller does the rest).
+    #[inline(always)]
+    pub(super) fn grey_row(simd: V3, rule: &IntegerRule, row: &[u8], sums: &mut [u16]) -> usize {
+        let (x2, x) = (simd.avx2, simd.avx);
+        let (pixel_steps, _) = row.as_chunks::<48>();
+        let (sum_steps, _) = sums.as_chunks_mut::<16>();
+        // Four pixels (12 bytes) per 128-bit lane, as 32-bit words of the step's first
+        // 32 bytes (words 0–7) or its last 32 (words 4–11): lanes of pixels 0–3 and
+        // 8–11, then of 4–7 and 12–15.
+        let low_first: __m256i = cast([0i32, 1, 2, 0, 0, 0, 0, 0]);
+        let low_last: __m256i = cast([0i32, 0, 0, 0, 2, 3, 4, 0]);
+        let high_first: __m256i = cast([3i32, 4, 5, 0, 0, 0, 0, 0]);
+        let high_last: __m256i = cast([0i32, 0, 0, 0, 5, 6, 7, 0]);
+        const Z: i8 = -1;
+        let red_green: __m256i = cast([[0i8, Z, 3, Z, 6, Z, 9, Z, 1, Z, 4, Z, 7, Z, 10, Z]; 2]);
+        let blue: __m256i = cast([[2i8, Z, 5, Z, 8, Z, 11, Z, Z, Z, Z, Z, Z, Z, Z, Z]; 2]);
+        let splat = |v: i16| x._mm256_set1_epi16(v);
+        let whole_num = |b: super::Bound| (b.whole * b.den + b.num) as i16;
+        let (lo, hi) = (rule.hue_lo, rule.hue_hi);
+        let lo_coef: __m256i = cast([[lo.den as i16, -whole_num(lo)]; 8]);
+        let hi_coef: __m256i = cast([[-(hi.den as i16), whole_num(hi)]; 8]);
+        // All values are at most 1785, so signed comparisons serve, except for the
+        // saturation's products (up to 65 025).
+        let value_above = splat(rule.value_min as i16 - 1);
+        let (sat_num, sat_den) = (
+            splat(rule.saturation_num as i16),
+            splat(rule.saturation_den as i16),
+        );
+        let (two, four, six, below_zero) = (splat(2), splat(4), splat(6), splat(-1));
+        let all_or_none = |on: bool| splat(if on { -1 } else { 0 });
+        let (grey_kept, outside) = (all_or_none(rule.grey_kept), all_or_none(!rule.hue_inside));
+        let zero = x._mm256_setzero_si256();
+        for (step, sum) in pixel_steps.iter().zip(sum_steps.iter_mut()) {
+            let (Some(first), Some(last)) = (step.first_chunk::<32>(), step.last_chunk::<32>())
+            else {
+                continue;
+            };
+            let (first, last): (__m256i, __m256i) = (cast(*first), cast(*last));
+            let low = x2._mm256_blend_epi32::<0xF0>(
+                x2._mm256_permutevar8x32_epi32(first, low_first),
+                x2._mm256_permutevar8x32_epi32(last, low_last),
+            );
+            let high = x2._mm256_blend_epi32::<0xF0>(
+                x2._mm256_permutevar8x32_epi32(first, high_first),
+                x2._mm256_permutevar8x32_epi32(last, high_last),
+            );
+            let (rg_low, rg_high) = (
+                x2._mm256_shuffle_epi8(low, red_green),
+                x2._mm256_shuffle_epi8(high, red_green),
+            );
+            let r = x2._mm256_unpacklo_epi64(rg_low, rg_high);
+            let g = x2._mm256_unpackhi_epi64(rg_low, rg_high);
+            let b = x2._mm256_unpacklo_epi64(
+                x2._mm256_shuffle_epi8(low, blue),
+                x2._mm256_shuffle_epi8(high, blue),
+            );
+
+            let max = x2._mm256_max_epu16(x2._mm256_max_epu16(r, g), b);
+            let min = x2._mm256_min_epu16(x2._mm256_min_epu16(r, g), b);
+            let delta = x2._mm256_sub_epi16(max, min);
+            let red = x2._mm256_cmpeq_epi16(max, r);
+            let green = x2._mm256_andnot_si256(red, x2._mm256_cmpeq_epi16(max, g));
+            let red_wraps = x2._mm256_and_si256(red, x2._mm256_cmpgt_epi16(b, g));
+            // hue / 60° = n / delta, as in IntegerRule::keep.
+            let base = x2._mm256_blendv_epi8(four, two, green);
+            let base = x2._mm256_blendv_epi8(base, zero, red);
+            let base = x2._mm256_blendv_epi8(base, six, red_wraps);
+            let difference = x2._mm256_blendv_epi8(
+                x2._mm256_blendv_epi8(x2._mm256_sub_epi16(r, g), x2._mm256_sub_epi16(b, r), green),
+                x2._mm256_sub_epi16(g, b),
+                red,
+            );
+            let n = x2._mm256_add_epi16(x2._mm256_mullo_epi16(base, delta), difference);
+            let (pairs_low, pairs_high) = (
+                x2._mm256_unpacklo_epi16(n, delta),
+                x2._mm256_unpackhi_epi16(n, delta),
+            );
+            let over_lo = x2._mm256_packs_epi32(
+                x2._mm256_madd_epi16(pairs_low, lo_coef),
+                x2._mm256_madd_epi16(pairs_high, lo_coef),
+            );
+            let under_hi = x2._mm256_packs_epi32(
+                x2._mm256_madd_epi16(pairs_low, hi_coef),
+                x2._mm256_madd_epi16(pairs_high, hi_coef),
+            );
+            let above = x2._mm256_cmpgt_epi16(over_lo, below_zero);
+            let below = x2._mm256_cmpgt_epi16(under_hi, below_zero);
+            let hue = x2._mm256_or_si256(
+                x2._mm256_and_si256(above, below),
+                x2._mm256_and_si256(outside, x2._mm256_or_si256(above, below)),
+            );
+            let (sat_have, sat_need) = (
+                x2._mm256_mullo_epi16(delta, sat_den),
+                x2._mm256_mullo_epi16(max, sat_num),
+            );
+            let saturated =
+                x2._mm256_cmpeq_epi16(x2._mm256_max_epu16(sat_have, sat_need), sat_have);
+            let grey = x2._mm256_cmpeq_epi16(delta, zero);
+            let coloured = x2._mm256_or_si256(
+                x2._mm256_and_si256(grey, grey_kept),
+                x2._mm256_andnot_si256(grey, x2._mm256_and_si256(hue, saturated)),
+            );
+            let keep = x2._mm256_and_si256(x2._mm256_cmpgt_epi16(max, value_above), coloured);
+            let all = x2._mm256_add_epi16(x2._mm256_add_epi16(r, g), b);
+            let before: __m256i = cast(*sum);
+            *sum = cast(x2._mm256_add_epi16(before, x2._mm256_and_si256(all, keep)));
+        }
+        pixel_steps.len().min(sum_steps.len()) * 16
     }
 }
 
