@@ -134,6 +134,15 @@ impl pulp::WithSimd for FewChannels<'_> {
     }
 }
 
+/// The paths of flex's convolution that matter here: the two repeated in this file,
+/// and the rest, left to burn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum FlexPath {
+    Im2col,
+    FewChannels,
+    Other,
+}
+
 /// flex's few-channel path takes convolutions of at most this many input and output
 /// channels (its `SMALL_CHANNEL_IN_THRESHOLD` and `SMALL_CHANNEL_OUT_THRESHOLD`).
 const SMALL_CHANNELS_IN: usize = 4;
@@ -226,11 +235,24 @@ impl FlatConv {
     /// or dilated convolutions, and padding that flex applies to the input first are
     /// left to burn.
     fn runs(&self, x: &Feature) -> bool {
+        self.flex_path(x) == FlexPath::Im2col
+    }
+
+    /// Which of flex's convolution paths it would take for `x`, tried in flex's
+    /// order: 1×1, depthwise, few channels, direct, im2col.
+    fn flex_path(&self, x: &Feature) -> FlexPath {
         let Some([ph, pw]) = self.padding else {
-            return false;
+            return FlexPath::Other;
         };
         let [kh, kw] = self.conv.kernel_size;
         let [sh, sw] = self.conv.stride;
+        let handled = self.on_flex
+            && self.conv.groups == 1
+            && self.conv.dilation == [1, 1]
+            && x.c == self.c_in
+            && x.data.len() == x.c * x.h * x.w
+            && self.out_size(x.h, kh, sh, ph).is_some()
+            && self.out_size(x.w, kw, sw, pw).is_some();
         let one_by_one = kh == 1 && kw == 1 && sh == 1 && sw == 1 && ph == 0 && pw == 0;
         let depthwise = self.c_in == 1 && self.c_out == 1;
         let few_channels = self.c_in <= SMALL_CHANNELS_IN && self.c_out <= SMALL_CHANNELS_OUT;
@@ -241,14 +263,15 @@ impl FlatConv {
             && self.c_in >= 32
             && kw <= 8
             && self.out_size(x.w, kw, sw, pw).is_some_and(|ow| ow <= 800);
-        self.on_flex
-            && self.conv.groups == 1
-            && self.conv.dilation == [1, 1]
-            && x.c == self.c_in
-            && x.data.len() == x.c * x.h * x.w
-            && !(one_by_one || depthwise || few_channels || direct)
-            && self.out_size(x.h, kh, sh, ph).is_some()
-            && self.out_size(x.w, kw, sw, pw).is_some()
+        if !handled || one_by_one || depthwise {
+            FlexPath::Other
+        } else if few_channels {
+            FlexPath::FewChannels
+        } else if direct {
+            FlexPath::Other
+        } else {
+            FlexPath::Im2col
+        }
     }
 
     fn out_size(&self, size: usize, k: usize, stride: usize, pad: usize) -> Option<usize> {
@@ -345,20 +368,12 @@ impl FlatConv {
     /// `None` where flex would take another path or its conditions are not met.
     fn few_channels(&self, x: &Feature) -> Option<Feature> {
         let raw = self.raw.as_ref()?;
+        if self.flex_path(x) != FlexPath::FewChannels {
+            return None;
+        }
         let [ph, pw] = self.padding?;
         let [kh, kw] = self.conv.kernel_size;
         let [sh, sw] = self.conv.stride;
-        let one_by_one = kh == 1 && kw == 1 && sh == 1 && sw == 1 && ph == 0 && pw == 0;
-        let depthwise = self.c_in == 1 && self.c_out == 1;
-        if !self.on_flex
-            || one_by_one
-            || depthwise
-            || self.conv.dilation != [1, 1]
-            || x.c != self.c_in
-            || x.data.len() != x.c * x.h * x.w
-        {
-            return None;
-        }
         let (oh, ow) = (
             self.out_size(x.h, kh, sh, ph)?,
             self.out_size(x.w, kw, sw, pw)?,
@@ -527,6 +542,22 @@ mod tests {
     use burn::nn::conv::Conv2dConfig;
     use burn::tensor::Distribution;
 
+    /// A square-kernel convolution with burn's random weights.
+    fn conv_of(
+        channels: [usize; 2],
+        k: usize,
+        stride: usize,
+        padding: PaddingConfig2d,
+        bias: bool,
+        device: &Device,
+    ) -> Conv2d {
+        Conv2dConfig::new(channels, [k, k])
+            .with_stride([stride, stride])
+            .with_padding(padding)
+            .with_bias(bias)
+            .init(device)
+    }
+
     fn feature(c: usize, h: usize, w: usize, device: &Device) -> Feature {
         let t = Tensor::<4>::random([1, c, h, w], Distribution::Uniform(-1.0, 1.0), device);
         Feature::from_tensor(t).expect("one image")
@@ -558,11 +589,7 @@ mod tests {
             cases.into_iter().enumerate()
         {
             let _guard = crate::train::init_lock();
-            let conv = Conv2dConfig::new([c_in, c_out], [k, k])
-                .with_stride([stride, stride])
-                .with_padding(padding)
-                .with_bias(bias)
-                .init(&device);
+            let conv = conv_of([c_in, c_out], k, stride, padding, bias, &device);
             let flat = FlatConv::new(&conv);
             for zeros in [false, true] {
                 let x = feature(c_in, size, size, &device);
@@ -618,11 +645,7 @@ mod tests {
             cases.into_iter().enumerate()
         {
             let _guard = crate::train::init_lock();
-            let conv = Conv2dConfig::new([c_in, c_out], [k, k])
-                .with_stride([stride, stride])
-                .with_padding(padding)
-                .with_bias(bias)
-                .init(&device);
+            let conv = conv_of([c_in, c_out], k, stride, padding, bias, &device);
             let flat = FlatConv::new(&conv);
             let x = feature(c_in, size, size, &device);
             assert_eq!(flat.runs(&x), im2col, "case {i}: path");

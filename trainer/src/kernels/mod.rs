@@ -335,24 +335,29 @@ where
 /// `bn.forward(x)` in training mode (the batch's statistics, the running statistics
 /// updated as burn's `BatchNorm` updates them), through [`norm`] where it applies.
 pub(crate) fn batch_norm(x: Tensor<4>, bn: &BatchNorm) -> Tensor<4> {
-    match train_norm(&x, bn)
-        .then(|| batch_norm_train(x.clone(), bn, false))
-        .flatten()
-    {
-        Some(y) => y,
-        None => bn.forward(x),
-    }
+    norm_then(x, bn, false)
 }
 
 /// `relu(bn.forward(x))`, the two in one operation where [`batch_norm`] runs
 /// [`norm`] (the same values: two passes over the activations fewer each way).
 pub(crate) fn batch_norm_relu(x: Tensor<4>, bn: &BatchNorm) -> Tensor<4> {
-    match train_norm(&x, bn)
-        .then(|| batch_norm_train(x.clone(), bn, true))
+    norm_then(x, bn, true)
+}
+
+/// Batch norm, then ReLU when `relu`: through [`norm`] in training, else burn's.
+fn norm_then(x: Tensor<4>, bn: &BatchNorm, relu: bool) -> Tensor<4> {
+    let training = enabled() && x.device().is_autodiff() && bn.training.is_enabled();
+    if let Some(y) = training
+        .then(|| batch_norm_train(x.clone(), bn, relu))
         .flatten()
     {
-        Some(y) => y,
-        None => burn::tensor::activation::relu(bn.forward(x)),
+        return y;
+    }
+    let y = bn.forward(x);
+    if relu {
+        burn::tensor::activation::relu(y)
+    } else {
+        y
     }
 }
 
@@ -410,10 +415,6 @@ impl Backward<Flex, 2> for AddRelu {
             ],
         );
     }
-}
-
-fn train_norm(x: &Tensor<4>, bn: &BatchNorm) -> bool {
-    enabled() && x.device().is_autodiff() && bn.training.is_enabled()
 }
 
 /// What batch norm's backward pass needs.

@@ -506,6 +506,17 @@ mod tests {
         (hue_deg(r, g, b, max_u, delta), delta / max, value)
     }
 
+    /// A window across 0° with no saturation or value threshold: greys pass.
+    fn reds_and_greys() -> Preprocess {
+        Preprocess {
+            hue_min_deg: 340.0,
+            hue_max_deg: 20.0,
+            saturation_min: 0.0,
+            value_min: 0.0,
+            ..Preprocess::default()
+        }
+    }
+
     fn solid(w: usize, h: usize, px: [u8; 3]) -> Vec<u8> {
         px.iter().copied().cycle().take(w * h * 3).collect()
     }
@@ -639,13 +650,7 @@ mod tests {
         };
         let params = [
             Preprocess::default(),
-            Preprocess {
-                hue_min_deg: 340.0,
-                hue_max_deg: 20.0,
-                saturation_min: 0.0,
-                value_min: 0.0,
-                ..Preprocess::default()
-            },
+            reds_and_greys(),
             // Every hue, saturation ≥ 0.55: (200, 100, b) keeps low and high blues but
             // not the middle ones, so the table falls back on its bits.
             Preprocess {
@@ -687,13 +692,7 @@ mod tests {
     fn the_vector_rule_sums_every_colour_as_the_lookup_does() {
         let params = [
             Preprocess::default(),
-            Preprocess {
-                hue_min_deg: 340.0,
-                hue_max_deg: 20.0,
-                saturation_min: 0.0,
-                value_min: 0.0,
-                ..Preprocess::default()
-            },
+            reds_and_greys(),
             Preprocess {
                 hue_min_deg: 200.0,
                 hue_max_deg: 200.5,
