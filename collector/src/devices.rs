@@ -111,6 +111,13 @@ pub async fn build(
         None
     };
     let handle = sim.as_ref().map(|s| s.handle.clone());
+    // A real arm among simulated devices: the simulated world follows its measured
+    // pose, so the simulated sensor and camera see the finger where the arm put it.
+    if let (Some(real), Some(h)) = (&arm, &handle)
+        && let Some(feed) = real.pose_feed()
+    {
+        tokio::spawn(follow_arm(feed, h.clone()));
+    }
     let (sa, sf, sc, sg) = match sim {
         Some(s) => (
             Some(s.arm),
@@ -147,6 +154,23 @@ pub async fn build(
         },
         sim: handle,
     })
+}
+
+/// Hands each pose a real arm measures to the simulated world, until the arm is gone.
+pub async fn follow_arm(mut feed: softtouch_drivers::PoseFeed, sim: SimHandle) {
+    loop {
+        let latest = *feed.borrow_and_update();
+        // The only error is a world poisoned by a panic elsewhere, which every
+        // simulated device then reports on its own.
+        if let Some((t, pose)) = latest
+            && sim.follow_arm(t, pose).is_err()
+        {
+            return;
+        }
+        if feed.changed().await.is_err() {
+            return;
+        }
+    }
 }
 
 #[cfg(test)]

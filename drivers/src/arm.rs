@@ -17,9 +17,15 @@ pub struct ArmState {
     pub faulted: bool,
     /// Share of the last 100 commands of the real-time loop that reached the robot
     /// (libfranka's `control_command_success_rate`), where the arm has one. Below
-    /// about 0.95 the host is missing cycles; 20 lost in a row abort the motion.
+    /// about 0.95 the host is missing cycles; 20 lost in a row abort the motion. The
+    /// robot reports 0 when no motion runs, so only the state a move returns carries
+    /// a meaningful value (sampled during that move).
     pub command_success_rate: Option<f64>,
 }
+
+/// The measured finger pose as an arm streams it while it moves: when it was measured
+/// and where the finger was (base frame). `None` until the first measurement.
+pub type PoseFeed = tokio::sync::watch::Receiver<Option<(TimestampNs, ArmPose)>>;
 
 /// A robot arm moving the finger through Cartesian poses.
 ///
@@ -40,6 +46,12 @@ pub trait Arm: Send {
 
     /// Stop any motion now.
     async fn stop(&mut self) -> Result<(), DeviceError>;
+
+    /// The measured pose while the arm moves, for an arm that streams it (a real arm's
+    /// control loop). Lets a simulated sensor and camera follow a real arm.
+    fn pose_feed(&self) -> Option<PoseFeed> {
+        None
+    }
 }
 
 #[async_trait]
@@ -55,5 +67,8 @@ impl<T: Arm + ?Sized> Arm for Box<T> {
     }
     async fn stop(&mut self) -> Result<(), DeviceError> {
         (**self).stop().await
+    }
+    fn pose_feed(&self) -> Option<PoseFeed> {
+        (**self).pose_feed()
     }
 }

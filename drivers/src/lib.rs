@@ -43,7 +43,7 @@ pub mod realtime;
 pub mod v4l_camera;
 pub mod v4l_controls;
 
-pub use arm::{Arm, ArmState};
+pub use arm::{Arm, ArmState, PoseFeed};
 pub use camera::{Camera, Frame};
 pub use clock::{Clock, TokioClock};
 pub use error::DeviceError;

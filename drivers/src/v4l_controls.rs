@@ -4,7 +4,10 @@
 //!
 //! Control ids are the kernel's (`linux/v4l2-controls.h`). Each automatic control is
 //! turned off before its manual value is written: a UVC camera ignores, or refuses, a
-//! manual exposure while automatic exposure is on.
+//! manual exposure while automatic exposure is on. Only controls the camera lists are
+//! touched ([`plan_for`]): the UVC driver has no automatic gain, so a typical USB
+//! camera's gain is written without it; a setting whose value control is missing is
+//! refused by name.
 
 use softtouch_schemas::rig::ImageSettings;
 
@@ -66,6 +69,37 @@ pub fn plan(image: &ImageSettings) -> Vec<ControlWrite> {
         push(GAIN, "gain", i64::from(g));
     }
     out
+}
+
+/// The writes that lock `image` on a camera that lists the controls `listed` (ids
+/// from `VIDIOC_QUERYCTRL`): an automatic control it lacks is left out (named in the
+/// second value, for `rig check`), and a setting whose own control it lacks is refused
+/// naming the setting.
+pub fn plan_for(
+    image: &ImageSettings,
+    listed: &[u32],
+) -> Result<(Vec<ControlWrite>, Vec<&'static str>), String> {
+    const AUTOMATIC: [u32; 3] = [EXPOSURE_AUTO, AUTO_WHITE_BALANCE, AUTOGAIN];
+    let mut writes = Vec::new();
+    let mut lacking = Vec::new();
+    for w in plan(image) {
+        if listed.contains(&w.id) {
+            writes.push(w);
+        } else if AUTOMATIC.contains(&w.id) {
+            lacking.push(w.name);
+        } else {
+            let setting = match w.id {
+                EXPOSURE_ABSOLUTE => "exposure_us",
+                WHITE_BALANCE_TEMPERATURE => "white_balance_k",
+                _ => "gain",
+            };
+            return Err(format!(
+                "[camera.image] {setting} asks for {} = {}, and the camera has no such control (v4l2-ctl -L lists those it has); remove {setting} from the rig file",
+                w.name, w.value
+            ));
+        }
+    }
+    Ok((writes, lacking))
 }
 
 /// Compares what the camera holds (`held`: each planned control read back, `None`
@@ -161,6 +195,38 @@ mod tests {
         assert!(e.contains("exposure_auto = 1"), "{e}");
         let e = check_held(&p, &[Some(1)]).expect_err("unreadable");
         assert!(e.contains("cannot be read back"), "{e}");
+    }
+
+    #[test]
+    fn only_controls_the_camera_lists_are_touched() {
+        let all = ImageSettings {
+            exposure_us: Some(5000),
+            white_balance_k: Some(4600),
+            gain: Some(12),
+        };
+        // A UVC camera: no automatic gain (the uvcvideo driver maps none).
+        let uvc = [
+            EXPOSURE_AUTO,
+            EXPOSURE_ABSOLUTE,
+            AUTO_WHITE_BALANCE,
+            WHITE_BALANCE_TEMPERATURE,
+            GAIN,
+        ];
+        let (writes, lacking) = plan_for(&all, &uvc).expect("a UVC camera takes it");
+        assert!(writes.iter().all(|w| w.id != AUTOGAIN), "{writes:?}");
+        assert_eq!(writes.last().map(|w| (w.id, w.value)), Some((GAIN, 12)));
+        assert_eq!(lacking, ["gain_automatic"]);
+        // Every control listed: the whole plan.
+        let every = [uvc.as_slice(), &[AUTOGAIN]].concat();
+        assert_eq!(plan_for(&all, &every).map(|p| p.0), Ok(plan(&all)));
+        // No gain control at all: refused, naming the setting.
+        let e = plan_for(&all, &uvc[..4]).expect_err("no gain");
+        assert!(
+            e.contains("gain asks for gain = 12") && e.contains("remove gain"),
+            "{e}"
+        );
+        let e = plan_for(&all, &[]).expect_err("nothing listed");
+        assert!(e.contains("exposure_us"), "{e}");
     }
 
     #[test]

@@ -409,6 +409,43 @@ async fn a_stream_that_stops_is_asked_for_again_and_goes_on() {
 }
 
 #[tokio::test]
+async fn a_late_datagram_of_the_old_stream_does_not_stall_the_new_one() {
+    // After an hour at 1 kHz the sensor is restarted; one datagram of the old stream
+    // (sequence 3 600 000) arrives after the restart. Taken as the new baseline, it
+    // would hold back every record of the new stream (1, 2, ...) as old for an hour.
+    let (peer, mut c) = peer_and_client(200, 1).await;
+    let fake = tokio::spawn(async move {
+        let to = accept_start(&peer, 1).await;
+        peer.send_to(&rec(2, 0), to).await.expect("send");
+        // Silent now; what answers the restart first is the old stream's straggler.
+        let restarted_from = accept_start(&peer, 3_600_000).await;
+        assert_eq!(restarted_from, to);
+        for seq in 1..=3 {
+            peer.send_to(&rec(seq, 0), to).await.expect("send");
+        }
+        peer
+    });
+    let mut batch = Vec::new();
+    c.start().await.expect("start");
+    let mut seen = Vec::new();
+    while seen.len() < 5 {
+        batch.clear();
+        c.read(&mut batch)
+            .await
+            .unwrap_or_else(|e| panic!("read after {seen:?}: {e}"));
+        seen.extend(batch.iter().map(|r| r.rdt_sequence));
+    }
+    assert_eq!(seen, [1, 2, 1, 2, 3]);
+    let stats = c.stats();
+    assert_eq!(stats.restarts, 1, "{stats:?}");
+    assert_eq!(
+        stats.out_of_order, 1,
+        "the old stream's late record: {stats:?}"
+    );
+    drop(fake.await);
+}
+
+#[tokio::test]
 async fn datagrams_read_together_are_stamped_a_period_apart() {
     // A host busy for 30 ms reads five queued datagrams at once; they were sampled
     // 1 ms apart (1000 Hz), and their stamps say so.

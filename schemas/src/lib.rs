@@ -28,7 +28,8 @@ pub mod wrench;
 pub use config::{ConfigError, ConfigSource};
 pub use geometry::{ArmPose, ContactPose, Range};
 pub use rig::{
-    ArmDevice, CameraDevice, ForceSensorDevice, GripperDevice, Payload, Realtime, RigConfig,
+    ArmDevice, CameraDevice, FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM,
+    FRANKA_JOINT_TORQUE_LIMITS_NM, ForceSensorDevice, GripperDevice, Payload, Realtime, RigConfig,
 };
 pub use sample::{FrameFormat, FrameMeta, Sample, SampleStatus};
 pub use scene::{Effect, GustComponent, Medium, RodShape, RodSpec, SceneSpec};

@@ -122,7 +122,7 @@ use softtouch_drivers::clock::TokioClock;
 use softtouch_drivers::error::DeviceError;
 use softtouch_drivers::{Arm, Camera, ForceSensor, Gripper};
 use softtouch_schemas::rig::{ArmDevice, CameraDevice, ForceSensorDevice, GripperDevice};
-use softtouch_schemas::{ArmPose, ContactPose, RigConfig, SceneSpec, Wrench};
+use softtouch_schemas::{ArmPose, ContactPose, RigConfig, SceneSpec, TimestampNs, Wrench};
 use std::sync::{Arc, Mutex, MutexGuard};
 use world::{Model, Scene};
 
@@ -316,6 +316,27 @@ impl SimHandle {
         self.world
             .lock()
             .map_err(|_| SimError::Solver("simulation state poisoned by an earlier panic".into()))
+    }
+
+    /// Where a real arm measured the finger at `t` (base frame): the simulated
+    /// sensor and camera then see the finger there from `t` on, as they see the
+    /// simulated arm's moves. A measurement older than the newest one kept is ignored.
+    pub fn follow_arm(&self, t: TimestampNs, base_from_finger: ArmPose) -> Result<(), SimError> {
+        if !base_from_finger.is_valid() {
+            return Ok(());
+        }
+        let mut w = self.lock()?;
+        if w.segments.last().is_some_and(|s| s.t1 > t) {
+            return Ok(());
+        }
+        let from = w.pose_at(t);
+        w.push_segment(world::Segment {
+            t0: t,
+            t1: t,
+            from,
+            to: base_from_finger.normalised(),
+        });
+        Ok(())
     }
 
     /// Put rod `name` (from the scene) in place.

@@ -324,6 +324,13 @@ impl<T: AsyncRead + AsyncWrite + Unpin + Send> ForceSensor for AtiSerial<T> {
                     Err(e) => {
                         self.stats.garbled_lines += 1;
                         self.sequence = self.sequence.wrapping_add(1);
+                        // Readings already taken in this call are good: hand them
+                        // out (the gap in their sequence shows the lost line); a
+                        // caller drops a batch that comes with an error.
+                        if appended > 0 {
+                            tracing::debug!("ati serial: garbled record line: {e}");
+                            return Ok(appended);
+                        }
                         return Err(protocol(format!("garbled record line: {e}")));
                     }
                 },

@@ -17,20 +17,41 @@
 //! the finger), and its `payload` with `set_load`, so that the unmodelled finger, mount
 //! and sensor do not bias the robot's external-force estimate.
 //!
+//! The stiffness frame `K` is set to the end effector (`EE_T_K` = identity, read back
+//! at connect), so the robot's external wrench estimate is taken at the finger whatever
+//! Desk left there.
+//!
+//! A move is cancelled by generation: each move sent gets the next number, and
+//! dropping its future or [`Arm::stop`] cancels every move up to that number. A move
+//! still queued behind another when it is cancelled never reaches the robot; one
+//! running brakes to rest. (A single abort flag, cleared when a move was taken from the
+//! queue, let a cancelled queued move run in full with nobody waiting on it.)
+//!
+//! `control_command_success_rate` is zero whenever no motion runs (libfranka's
+//! documentation), so the share of commands that reached the robot is sampled inside
+//! the move's control loop and returned with the move's state.
+//!
 //! Real time: by default the control thread must get SCHED_FIFO on a PREEMPT_RT
 //! kernel (franka-rs's `RealtimeConfig::Enforce`), or the connection is refused with
 //! the reason; a rig may relax this (`realtime = "ignore"`), warned about at every
 //! connect.
 
-use crate::arm::{Arm, ArmState};
+use crate::arm::{Arm, ArmState, PoseFeed};
 use crate::clock::Clock;
 use crate::error::DeviceError;
 use async_trait::async_trait;
 use softtouch_schemas::{ArmPose, Wrench};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc;
-use tokio::sync::oneshot;
+use tokio::sync::{oneshot, watch};
+
+/// The measured pose's publisher (every [`FEED_EVERY`] control cycles, and every state
+/// read).
+type FeedTx = Arc<watch::Sender<Option<(softtouch_schemas::TimestampNs, ArmPose)>>>;
+
+/// Control cycles between two poses published on the feed (4 ms at 1 kHz).
+const FEED_EVERY: usize = 4;
 
 const DEVICE: &str = "franka";
 
@@ -93,8 +114,7 @@ pub const MAX_SPEED_M_S: f64 = 1.7;
 pub struct FrankaConfig {
     /// The robot's address (`172.16.0.2`, optionally `:port`).
     pub address: String,
-    /// Upper force threshold of the collision behaviour, N (half of it the lower one;
-    /// joint torque thresholds 100 N·m).
+    /// Upper force threshold of the collision behaviour, N (half of it the lower one).
     pub reflex_force_n: f64,
     /// Upper Cartesian torque threshold, N·m (half of it the lower one).
     pub reflex_torque_nm: f64,
@@ -105,6 +125,9 @@ pub struct FrankaConfig {
     /// The payload for `set_load`: mass (kg), centre of mass in the flange frame (m),
     /// inertia (kg·m²); `None` sets none.
     pub payload: Option<(f64, [f64; 3], [f64; 9])>,
+    /// Upper joint torque thresholds of the collision behaviour, N·m (half of each
+    /// the lower one); each below the joint's torque limit.
+    pub joint_torque_thresholds_nm: [f64; 7],
     /// Move limits.
     pub limits: MotionLimits,
 }
@@ -120,6 +143,7 @@ impl FrankaConfig {
             realtime,
             end_effector,
             payload,
+            joint_torque_thresholds_nm,
         } = d
         else {
             return None;
@@ -133,6 +157,8 @@ impl FrankaConfig {
             payload: payload
                 .as_deref()
                 .map(|p| (p.mass_kg, p.com_in_flange_m, p.inertia_kg_m2)),
+            joint_torque_thresholds_nm: joint_torque_thresholds_nm
+                .unwrap_or(softtouch_schemas::FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM),
             limits: MotionLimits::default(),
         })
     }
@@ -144,6 +170,8 @@ enum Cmd {
     Move {
         target: ArmPose,
         speed: f64,
+        /// This move's number: cancelled once [`Cancel::through`] reaches it.
+        generation: u64,
         reply: Reply<ArmState>,
     },
     State {
@@ -157,12 +185,37 @@ enum Cmd {
     },
 }
 
+/// Which moves are cancelled: every move whose generation is at most `through`.
+/// Shared between the handle (which numbers moves and cancels them) and the robot
+/// thread (which skips a cancelled move it takes from the queue and brakes a running
+/// one). Generations only grow, so a cancel never reaches a later move.
+#[derive(Debug, Default)]
+pub struct Cancel {
+    through: AtomicU64,
+}
+
+impl Cancel {
+    /// Cancel every move up to and including `generation`.
+    pub fn cancel_through(&self, generation: u64) {
+        self.through.fetch_max(generation, Ordering::SeqCst);
+    }
+
+    /// Whether the move numbered `generation` is cancelled.
+    #[must_use]
+    pub fn is_cancelled(&self, generation: u64) -> bool {
+        self.through.load(Ordering::SeqCst) >= generation
+    }
+}
+
 /// A Panda behind a worker thread. Implements [`Arm`].
 #[derive(Debug)]
 pub struct FrankaArm {
     tx: mpsc::Sender<Cmd>,
-    abort: Arc<AtomicBool>,
+    cancel: Arc<Cancel>,
+    /// The last move's generation (moves are numbered from 1).
+    generation: u64,
     clock: Arc<dyn Clock>,
+    feed: PoseFeed,
 }
 
 impl std::fmt::Debug for Cmd {
@@ -205,6 +258,10 @@ fn err(e: franka::FrankaError) -> DeviceError {
             message: format!(
                 "incompatible FCI version: server {server_version}, library {library_version}"
             ),
+        },
+        F::Realtime(m) => DeviceError::Link {
+            device: DEVICE.into(),
+            message: format!("{m}: {}", crate::realtime::REFUSED_ADVICE),
         },
         F::InvalidArgument(m) | F::InvalidOperation(m) => DeviceError::InvalidCommand {
             device: DEVICE.into(),
@@ -355,12 +412,50 @@ fn state_of(s: &franka::RobotState, clock: &dyn Clock) -> ArmState {
     }
 }
 
+/// Cycles libfranka's `control_command_success_rate` is taken over: before that many
+/// cycles of a move it describes fewer commands than it says.
+const SUCCESS_RATE_WINDOW: usize = 100;
+
+/// The share of commands that reached the robot over a move, from the rate the robot
+/// reports in each cycle of it: the lowest once a full window has passed (a dip in the
+/// middle of a move counts), else the last reported (a move shorter than the window).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SuccessRate {
+    /// Control cycles recorded.
+    pub cycles: usize,
+    last: Option<f64>,
+    lowest_full: Option<f64>,
+}
+
+impl SuccessRate {
+    /// One control cycle's reported rate (NaN is kept: it fails every check).
+    pub fn record(&mut self, rate: f64) {
+        self.cycles += 1;
+        self.last = Some(rate);
+        if self.cycles >= SUCCESS_RATE_WINDOW {
+            self.lowest_full = Some(match self.lowest_full {
+                Some(l) if !(rate < l) && !l.is_nan() => l,
+                _ => rate,
+            });
+        }
+    }
+
+    /// The move's rate, `None` before any cycle.
+    #[must_use]
+    pub fn rate(&self) -> Option<f64> {
+        self.lowest_full.or(self.last)
+    }
+}
+
 fn run_move(
     robot: &franka::Robot,
     target: &ArmPose,
     speed: f64,
     limits: &MotionLimits,
-    abort: &AtomicBool,
+    cancel: &Cancel,
+    generation: u64,
+    success: &mut SuccessRate,
+    feed: (&FeedTx, &dyn Clock),
 ) -> Result<(), DeviceError> {
     let start = robot.read_once().map_err(err)?;
     let from = ArmPose::from_matrix(&start.O_T_EE_c);
@@ -378,8 +473,13 @@ fn run_move(
             |state, dt| {
                 // Seed from the commanded pose of the first cycle.
                 let a = *seed.get_or_insert_with(|| ArmPose::from_matrix(&state.O_T_EE_c));
+                success.record(state.control_command_success_rate);
+                if success.cycles % FEED_EVERY == 1 {
+                    feed.0
+                        .send_replace(Some((feed.1.now(), ArmPose::from_matrix(&state.O_T_EE))));
+                }
                 // An abort ramps down within the limits; the motion ends at rest.
-                if brake.is_none() && abort.load(Ordering::SeqCst) {
+                if brake.is_none() && cancel.is_cancelled(generation) {
                     brake = Some(Brake::new(
                         otg.position(),
                         otg.velocity(),
@@ -413,24 +513,51 @@ fn worker(
     robot: franka::Robot,
     rx: mpsc::Receiver<Cmd>,
     limits: MotionLimits,
-    abort: Arc<AtomicBool>,
+    cancel: Arc<Cancel>,
     clock: Arc<dyn Clock>,
+    feed: FeedTx,
 ) {
     let state = |r: &franka::Robot| {
-        r.read_once()
+        let s = r
+            .read_once()
             .map_err(err)
-            .map(|s| state_of(&s, clock.as_ref()))
+            .map(|s| state_of(&s, clock.as_ref()))?;
+        feed.send_replace(Some((s.t, s.base_from_finger)));
+        Ok(s)
     };
     while let Ok(cmd) = rx.recv() {
         match cmd {
             Cmd::Move {
                 target,
                 speed,
+                generation,
                 reply,
             } => {
-                abort.store(false, Ordering::SeqCst);
-                let r =
-                    run_move(&robot, &target, speed, &limits, &abort).and_then(|()| state(&robot));
+                // Cancelled while it waited: it never reaches the robot.
+                if cancel.is_cancelled(generation) {
+                    tracing::debug!("franka: move {generation} cancelled before it started");
+                    let _ = reply.send(Err(DeviceError::InvalidCommand {
+                        device: DEVICE.into(),
+                        message: format!("move {generation} was cancelled before it started"),
+                    }));
+                    continue;
+                }
+                let mut success = SuccessRate::default();
+                let r = run_move(
+                    &robot,
+                    &target,
+                    speed,
+                    &limits,
+                    &cancel,
+                    generation,
+                    &mut success,
+                    (&feed, clock.as_ref()),
+                )
+                .and_then(|()| state(&robot))
+                .map(|s| ArmState {
+                    command_success_rate: success.rate(),
+                    ..s
+                });
                 let _ = reply.send(r);
             }
             Cmd::State { reply } => {
@@ -446,13 +573,17 @@ fn worker(
     }
 }
 
-/// Sets the abort flag if a move's future is dropped before it completes.
-struct AbortOnDrop<'a>(&'a AtomicBool, bool);
+/// Cancels its move if the move's future is dropped before it completes.
+struct CancelOnDrop<'a> {
+    cancel: &'a Cancel,
+    generation: u64,
+    armed: bool,
+}
 
-impl Drop for AbortOnDrop<'_> {
+impl Drop for CancelOnDrop<'_> {
     fn drop(&mut self) {
-        if self.1 {
-            self.0.store(true, Ordering::SeqCst);
+        if self.armed {
+            self.cancel.cancel_through(self.generation);
         }
     }
 }
@@ -506,12 +637,68 @@ fn configure(robot: &franka::Robot, config: &FrankaConfig) -> Result<(), DeviceE
             }
         })?;
     }
+    // The stiffness frame at the end effector: the external wrench the guard can
+    // cross-check is then the finger's, not wherever Desk left K.
+    robot.set_k(IDENTITY).map_err(err)?;
+    let s = robot.read_once().map_err(err)?;
+    check_stiffness_frame(&s.EE_T_K).map_err(|message| DeviceError::InvalidCommand {
+        device: DEVICE.into(),
+        message,
+    })?;
+    let (upper_q, lower_q) =
+        joint_thresholds(&config.joint_torque_thresholds_nm).map_err(|message| {
+            DeviceError::InvalidCommand {
+                device: DEVICE.into(),
+                message,
+            }
+        })?;
     let (f, t) = (config.reflex_force_n, config.reflex_torque_nm);
     let lower_f = [f * 0.5, f * 0.5, f * 0.5, t * 0.5, t * 0.5, t * 0.5];
     let upper_f = [f, f, f, t, t, t];
     robot
-        .set_collision_behavior_simple([50.0; 7], [100.0; 7], lower_f, upper_f)
+        .set_collision_behavior_simple(lower_q, upper_q, lower_f, upper_f)
         .map_err(err)
+}
+
+/// The identity transform, column-major.
+const IDENTITY: [f64; 16] = [
+    1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+];
+
+/// Whether the robot reports the stiffness frame at the end effector (`EE_T_K` the
+/// identity), as connect set it.
+pub fn check_stiffness_frame(ee_t_k: &[f64; 16]) -> Result<(), String> {
+    if ee_t_k
+        .iter()
+        .zip(IDENTITY)
+        .all(|(a, b)| (a - b).abs() <= 1e-6)
+    {
+        Ok(())
+    } else {
+        Err(format!(
+            "set_k sent the identity but the robot reports EE_T_K translation ({:.4}, {:.4}, {:.4}) m: the external wrench would not be the finger's",
+            ee_t_k[12], ee_t_k[13], ee_t_k[14]
+        ))
+    }
+}
+
+/// The collision behaviour's joint torque thresholds, `(upper, lower)` N·m: the
+/// configured upper ones (each above 0 and below the joint's torque limit, else the
+/// joint reflex could never act) and half of each as the lower.
+pub fn joint_thresholds(upper_nm: &[f64; 7]) -> Result<([f64; 7], [f64; 7]), String> {
+    for (i, (v, limit)) in upper_nm
+        .iter()
+        .zip(softtouch_schemas::FRANKA_JOINT_TORQUE_LIMITS_NM)
+        .enumerate()
+    {
+        if !(v.is_finite() && *v > 0.0 && *v < limit) {
+            return Err(format!(
+                "joint {}'s collision threshold {v} N·m is not above 0 and below its torque limit {limit} N·m",
+                i + 1
+            ));
+        }
+    }
+    Ok((*upper_nm, upper_nm.map(|v| 0.5 * v)))
 }
 
 impl FrankaArm {
@@ -527,8 +714,10 @@ impl FrankaArm {
         }
         let (tx, rx) = mpsc::channel::<Cmd>();
         let (ready_tx, ready_rx) = oneshot::channel::<Result<(), DeviceError>>();
-        let abort = Arc::new(AtomicBool::new(false));
-        let (abort2, clock2) = (abort.clone(), clock.clone());
+        let cancel = Arc::new(Cancel::default());
+        let (cancel2, clock2) = (cancel.clone(), clock.clone());
+        let (feed_tx, feed) = watch::channel(None);
+        let feed_tx = Arc::new(feed_tx);
         std::thread::Builder::new()
             .name("franka".into())
             .spawn(move || {
@@ -561,7 +750,7 @@ impl FrankaArm {
                 let ok = set.is_ok();
                 let _ = ready_tx.send(set);
                 if ok {
-                    worker(robot, rx, config.limits, abort2, clock2);
+                    worker(robot, rx, config.limits, cancel2, clock2, feed_tx);
                 }
             })
             .map_err(|e| DeviceError::Link {
@@ -569,7 +758,13 @@ impl FrankaArm {
                 message: format!("cannot start the robot thread: {e}"),
             })?;
         ready_rx.await.map_err(|_| gone())??;
-        Ok(Self { tx, abort, clock })
+        Ok(Self {
+            tx,
+            cancel,
+            generation: 0,
+            clock,
+            feed,
+        })
     }
 
     async fn ask<T>(&self, make: impl FnOnce(Reply<T>) -> Cmd) -> Result<T, DeviceError> {
@@ -600,16 +795,25 @@ impl Arm for FrankaArm {
                 ),
             });
         }
-        let mut guard = AbortOnDrop(&self.abort, true);
+        self.generation += 1;
+        let generation = self.generation;
         let target = *target;
-        let r = self
-            .ask(|reply| Cmd::Move {
+        let (reply, rx) = oneshot::channel();
+        self.tx
+            .send(Cmd::Move {
                 target,
                 speed: speed_m_s,
+                generation,
                 reply,
             })
-            .await;
-        guard.1 = false;
+            .map_err(|_| gone())?;
+        let mut guard = CancelOnDrop {
+            cancel: &self.cancel,
+            generation,
+            armed: true,
+        };
+        let r = rx.await.map_err(|_| gone())?;
+        guard.armed = false;
         r
     }
 
@@ -622,8 +826,13 @@ impl Arm for FrankaArm {
     }
 
     async fn stop(&mut self) -> Result<(), DeviceError> {
-        self.abort.store(true, Ordering::SeqCst);
+        // Every move sent so far: the running one brakes, queued ones never start.
+        self.cancel.cancel_through(self.generation);
         self.ask(|reply| Cmd::Stop { reply }).await
+    }
+
+    fn pose_feed(&self) -> Option<PoseFeed> {
+        Some(self.feed.clone())
     }
 }
 

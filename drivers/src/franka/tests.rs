@@ -16,6 +16,7 @@ async fn hardware_arm() -> FrankaArm {
         realtime: softtouch_schemas::Realtime::Enforce,
         ne_t_ee: None,
         payload: None,
+        joint_torque_thresholds_nm: softtouch_schemas::FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM,
         limits: MotionLimits::default(),
     };
     FrankaArm::connect(config, Arc::new(crate::TokioClock::new()))
@@ -41,6 +42,7 @@ fn a_rigs_franka_table_becomes_the_connect_settings() {
             com_in_flange_m: [0.0, 0.01, 0.05],
             inertia_kg_m2: [0.0; 9],
         })),
+        joint_torque_thresholds_nm: None,
     };
     let c = FrankaConfig::from_rig(&d).expect("a franka table");
     assert!((c.reflex_torque_nm - 3.0).abs() < 1e-12, "0.1 m x 30 N");

@@ -103,6 +103,13 @@ impl NetFtConfig {
 }
 
 /// 100 ms, or ten periods of a slow stream.
+/// The highest `rdt_sequence` taken as the first record of a new stream. RDT numbers
+/// the records of each start request from 1; a few may be lost before the first
+/// arrives (a second at 1 kHz is allowed for). A late record of the previous stream
+/// can be taken only if that stream was this short, and then holds the new one back
+/// by at most this many records.
+pub const NEW_STREAM_MAX_FIRST_SEQUENCE: u32 = 1000;
+
 fn restart_after(rate_hz: f64) -> Duration {
     let periods = if rate_hz.is_finite() && rate_hz > 0.0 {
         10.0 / rate_hz
@@ -145,6 +152,13 @@ pub struct NetFtClient {
     counts_per_torque: f64,
     streaming: bool,
     last_sequence: Option<u32>,
+    /// Whether a stream has been asked for on this socket before: then its datagrams
+    /// may still arrive after a new start (a new socket receives none of them).
+    streamed_before: bool,
+    /// Until the new stream's first record: take only one that starts a stream
+    /// ([`NEW_STREAM_MAX_FIRST_SEQUENCE`]); set by a restart and by a start on a
+    /// socket that streamed before.
+    new_stream_only: bool,
     stamps: super::stamp::SequenceStamps,
     latched_status: FtStatus,
     stats: NetFtStats,
@@ -286,6 +300,8 @@ impl NetFtClient {
             counts_per_torque,
             streaming: false,
             last_sequence: None,
+            streamed_before: false,
+            new_stream_only: false,
             stamps,
             latched_status: FtStatus::OK,
             stats: NetFtStats::default(),
@@ -362,6 +378,17 @@ impl NetFtClient {
         // The records that follow the stream, with their unwrapped sequence.
         let mut accepted: Vec<(usize, u64)> = Vec::with_capacity(self.records.len());
         for (i, r) in self.records.iter().enumerate() {
+            // A (re)started stream counts from 1: until its first record, anything
+            // further on is a late datagram of the stream before, which would
+            // otherwise become the baseline and hold back every new record as old
+            // for as long as the old stream had run.
+            if self.last_sequence.is_none()
+                && self.new_stream_only
+                && r.rdt_sequence > NEW_STREAM_MAX_FIRST_SEQUENCE
+            {
+                self.stats.out_of_order += 1;
+                continue;
+            }
             if let Some(last) = self.last_sequence {
                 let ahead = r.rdt_sequence.wrapping_sub(last);
                 if ahead == 0 || ahead >= 1 << 31 {
@@ -471,6 +498,8 @@ impl ForceSensor for NetFtClient {
         }
         self.drain();
         self.last_sequence = None;
+        self.new_stream_only = self.streamed_before;
+        self.streamed_before = true;
         self.stamps.reset();
         let command = self.start_command();
         let attempts = self.config.start_attempts.max(1);
@@ -555,6 +584,7 @@ impl ForceSensor for NetFtClient {
                     self.stats.start_commands += 1;
                     self.stats.restarts += 1;
                     self.last_sequence = None;
+                    self.new_stream_only = true;
                     self.stamps.reset();
                 }
                 Some(len) => {

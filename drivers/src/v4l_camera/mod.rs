@@ -128,13 +128,19 @@ fn lock_image(
     path: &str,
     image: &softtouch_schemas::rig::ImageSettings,
 ) -> Result<String, DeviceError> {
-    use crate::v4l_controls::{check_held, plan};
+    use crate::v4l_controls::{check_held, plan_for};
     use v4l::control::{Control, Value};
     let refuse = |message: String| DeviceError::InvalidCommand {
         device: path.into(),
         message,
     };
-    let writes = plan(image);
+    let listed: Vec<u32> = dev
+        .query_controls()
+        .map_err(|e| refuse(format!("cannot list the camera's controls: {e}")))?
+        .iter()
+        .map(|d| d.id)
+        .collect();
+    let (writes, lacking) = plan_for(image, &listed).map_err(refuse)?;
     for w in &writes {
         dev.set_control(Control {
             id: w.id,
@@ -151,11 +157,14 @@ fn lock_image(
         })
         .collect();
     check_held(&writes, &held).map_err(refuse)?;
-    Ok(writes
+    let mut said: Vec<String> = writes
         .iter()
         .map(|w| format!("{} {}", w.name, w.value))
-        .collect::<Vec<_>>()
-        .join(", "))
+        .collect();
+    if !lacking.is_empty() {
+        said.push(format!("no {} control", lacking.join(", no ")));
+    }
+    Ok(said.join(", "))
 }
 
 impl Drop for V4lCamera {

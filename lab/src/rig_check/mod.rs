@@ -266,8 +266,10 @@ impl fmt::Display for Measured {
     }
 }
 
-/// Least measured rate of the force/torque stream, as a fraction of the configured one.
-const MIN_RATE_FRACTION: f64 = 0.8;
+/// How far the force/torque stream's measured rate may be from the configured one, as
+/// a fraction of it, either way (the host's clock over the window, lost readings
+/// counted as sent).
+const RATE_TOLERANCE: f64 = 0.1;
 /// Counts of the gripper's test move.
 const GRIPPER_TEST_COUNTS: u8 = 20;
 /// Exchanges timed to measure the gripper link's rate.

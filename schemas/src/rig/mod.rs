@@ -78,8 +78,24 @@ pub enum ArmDevice {
         /// the external-force estimate. Absent: none.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         payload: Option<Box<Payload>>,
+        /// Upper joint torque thresholds of the collision behaviour, N·m, joints 1–7
+        /// (half of each the lower one). Each must lie below that joint's torque
+        /// limit ([`FRANKA_JOINT_TORQUE_LIMITS_NM`]), or the joint reflex never acts.
+        /// Absent: [`FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM`].
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        joint_torque_thresholds_nm: Option<[f64; 7]>,
     },
 }
+
+/// The Panda's and FR3's joint torque limits, N·m (FCI documentation, "Robot and
+/// interface specifications": τ_max).
+pub const FRANKA_JOINT_TORQUE_LIMITS_NM: [f64; 7] = [87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0];
+
+/// Default upper joint torque thresholds, N·m: libfranka's examples' values
+/// (20, 20, 18, 18 on the big joints), capped below the wrist joints' 12 N·m limit.
+/// Pressing a finger with a few newtons 0.1 m from the flange asks for under 1 N·m.
+pub const FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM: [f64; 7] =
+    [20.0, 20.0, 18.0, 18.0, 10.0, 10.0, 10.0];
 
 /// How the Franka's control thread is scheduled.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
