@@ -375,7 +375,7 @@ fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
     let _ = child.wait();
     let db = dir.path().join("softtouch.db");
     let before = count(&db);
-    assert!(before >= 8 && before < 24, "{before}");
+    assert!((8..24).contains(&before), "{before}");
     let out = run(dir.path(), &["collect", "--resume", "1"]);
     ok(&out, &sim);
     let wall_s = t0.elapsed().as_secs_f64();
@@ -416,7 +416,12 @@ fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
     let simulated = stored(&sim_dir.path().join("softtouch.db"), 1);
     assert_eq!(simulated.status, "completed");
     for (f, s) in franka.samples.iter().zip(&simulated.samples) {
-        assert_eq!(f.cmd, s.cmd, "sample {}: the commanded pose", f.index);
+        assert_eq!(
+            f.cmd.map(f64::to_bits),
+            s.cmd.map(f64::to_bits),
+            "sample {}: the commanded pose, bit for bit",
+            f.index
+        );
         assert_eq!(f.status, "ok", "sample {}: {:?}", f.index, f.reason);
         // Where the arm was measured once settled: where it was sent.
         let meas = f.meas.map(|v| v.expect("measured"));

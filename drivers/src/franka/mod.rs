@@ -433,10 +433,7 @@ impl SuccessRate {
         self.cycles += 1;
         self.last = Some(rate);
         if self.cycles >= SUCCESS_RATE_WINDOW {
-            self.lowest_full = Some(match self.lowest_full {
-                Some(l) if !(rate < l) && !l.is_nan() => l,
-                _ => rate,
-            });
+            self.lowest_full = Some(lower(self.lowest_full, rate));
         }
     }
 
@@ -447,15 +444,31 @@ impl SuccessRate {
     }
 }
 
+/// The lower of a kept value and a new one; NaN is lowest (it fails every check).
+#[must_use]
+pub fn lower(kept: Option<f64>, new: f64) -> f64 {
+    match kept {
+        Some(k) if k.is_nan() || k <= new => k,
+        _ => new,
+    }
+}
+
+/// One move's bookkeeping on the robot thread: whether it is cancelled, the share of
+/// commands that arrived, and where the measured pose is published.
+struct MoveJob<'a> {
+    cancel: &'a Cancel,
+    generation: u64,
+    success: SuccessRate,
+    feed: &'a FeedTx,
+    clock: &'a dyn Clock,
+}
+
 fn run_move(
     robot: &franka::Robot,
     target: &ArmPose,
     speed: f64,
     limits: &MotionLimits,
-    cancel: &Cancel,
-    generation: u64,
-    success: &mut SuccessRate,
-    feed: (&FeedTx, &dyn Clock),
+    job: &mut MoveJob<'_>,
 ) -> Result<(), DeviceError> {
     let start = robot.read_once().map_err(err)?;
     let from = ArmPose::from_matrix(&start.O_T_EE_c);
@@ -473,13 +486,13 @@ fn run_move(
             |state, dt| {
                 // Seed from the commanded pose of the first cycle.
                 let a = *seed.get_or_insert_with(|| ArmPose::from_matrix(&state.O_T_EE_c));
-                success.record(state.control_command_success_rate);
-                if success.cycles % FEED_EVERY == 1 {
-                    feed.0
-                        .send_replace(Some((feed.1.now(), ArmPose::from_matrix(&state.O_T_EE))));
+                job.success.record(state.control_command_success_rate);
+                if job.success.cycles % FEED_EVERY == 1 {
+                    job.feed
+                        .send_replace(Some((job.clock.now(), ArmPose::from_matrix(&state.O_T_EE))));
                 }
                 // An abort ramps down within the limits; the motion ends at rest.
-                if brake.is_none() && cancel.is_cancelled(generation) {
+                if brake.is_none() && job.cancel.is_cancelled(job.generation) {
                     brake = Some(Brake::new(
                         otg.position(),
                         otg.velocity(),
@@ -542,22 +555,19 @@ fn worker(
                     }));
                     continue;
                 }
-                let mut success = SuccessRate::default();
-                let r = run_move(
-                    &robot,
-                    &target,
-                    speed,
-                    &limits,
-                    &cancel,
+                let mut job = MoveJob {
+                    cancel: &cancel,
                     generation,
-                    &mut success,
-                    (&feed, clock.as_ref()),
-                )
-                .and_then(|()| state(&robot))
-                .map(|s| ArmState {
-                    command_success_rate: success.rate(),
-                    ..s
-                });
+                    success: SuccessRate::default(),
+                    feed: &feed,
+                    clock: clock.as_ref(),
+                };
+                let r = run_move(&robot, &target, speed, &limits, &mut job)
+                    .and_then(|()| state(&robot))
+                    .map(|s| ArmState {
+                        command_success_rate: job.success.rate(),
+                        ..s
+                    });
                 let _ = reply.send(r);
             }
             Cmd::State { reply } => {

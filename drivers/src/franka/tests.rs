@@ -149,6 +149,7 @@ fn the_end_effector_and_payload_are_checked_against_what_the_robot_reports() {
         realtime: softtouch_schemas::Realtime::Enforce,
         ne_t_ee: Some(ee),
         payload: Some((0.35, [0.0, 0.0, 0.06], [0.0; 9])),
+        joint_torque_thresholds_nm: softtouch_schemas::FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM,
         limits: MotionLimits::default(),
     };
     assert_eq!(
@@ -169,6 +170,78 @@ fn the_end_effector_and_payload_are_checked_against_what_the_robot_reports() {
         ..config
     };
     assert_eq!(check_configured(&none, &desk, 0.0, &[0.0; 3]), Ok(()));
+}
+
+#[test]
+fn a_cancel_reaches_its_move_and_every_earlier_one_never_a_later_one() {
+    let c = Cancel::default();
+    assert!(!c.is_cancelled(1), "nothing cancelled yet");
+    // Move 2 dropped while queued: 1 and 2 are cancelled, 3 (sent after) is not.
+    c.cancel_through(2);
+    assert!(c.is_cancelled(1) && c.is_cancelled(2) && !c.is_cancelled(3));
+    // A late drop of an older move does not undo the newer cancel.
+    c.cancel_through(1);
+    assert!(c.is_cancelled(2) && !c.is_cancelled(3));
+    c.cancel_through(u64::MAX);
+    assert!(c.is_cancelled(u64::MAX));
+}
+
+#[test]
+fn the_success_rate_is_the_lowest_once_a_full_window_has_passed() {
+    let mut r = SuccessRate::default();
+    assert_eq!(r.rate(), None, "no cycle");
+    // The first cycles describe fewer than 100 commands: the last one stands.
+    for v in [0.2, 0.5, 1.0] {
+        r.record(v);
+    }
+    assert_eq!(r.rate(), Some(1.0));
+    for _ in 3..100 {
+        r.record(1.0);
+    }
+    r.record(0.93);
+    r.record(0.99);
+    assert_eq!(r.rate(), Some(0.93), "a dip in the middle of a move counts");
+    r.record(f64::NAN);
+    assert!(r.rate().is_some_and(f64::is_nan), "NaN fails every check");
+    r.record(1.0);
+    assert!(r.rate().is_some_and(f64::is_nan));
+    assert_eq!(lower(None, 0.5).to_bits(), 0.5f64.to_bits());
+    assert_eq!(lower(Some(0.4), 0.5).to_bits(), 0.4f64.to_bits());
+}
+
+#[test]
+fn joint_thresholds_are_below_each_joints_torque_limit() {
+    let d = softtouch_schemas::FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM;
+    let (upper, lower) = joint_thresholds(&d).expect("the defaults");
+    for i in 0..7 {
+        assert!(upper[i] < softtouch_schemas::FRANKA_JOINT_TORQUE_LIMITS_NM[i]);
+        assert!((lower[i] - upper[i] / 2.0).abs() < 1e-12);
+    }
+    // What connect sent before: 100 N·m, above every joint's limit.
+    let e = joint_thresholds(&[100.0; 7]).expect_err("above the limits");
+    assert!(e.contains("joint 1") && e.contains("87"), "{e}");
+    let mut wrist = d;
+    wrist[5] = 12.0;
+    let e = joint_thresholds(&wrist).expect_err("at the limit");
+    assert!(e.contains("joint 6") && e.contains("12 N·m"), "{e}");
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let mut t = d;
+        t[0] = bad;
+        assert!(joint_thresholds(&t).is_err(), "{bad}");
+    }
+}
+
+#[test]
+fn the_stiffness_frame_must_read_back_at_the_end_effector() {
+    assert_eq!(check_stiffness_frame(&IDENTITY), Ok(()));
+    // Desk left K 10 cm out.
+    let mut k = IDENTITY;
+    k[14] = 0.1;
+    let e = check_stiffness_frame(&k).expect_err("K elsewhere");
+    assert!(e.contains("0.1000"), "{e}");
+    let mut nan = IDENTITY;
+    nan[0] = f64::NAN;
+    assert!(check_stiffness_frame(&nan).is_err());
 }
 
 /// Time (s) and distance (m) to stop a straight move cruising at `speed_m_s`.

@@ -70,10 +70,8 @@ pub(super) async fn check_arm(
         }
         worst_m = worst_m.max(off_m);
         if let Some(rate) = reached.command_success_rate {
-            command_success_rate = Some(match command_success_rate {
-                Some(r) if !(rate < r) && !r.is_nan() => r,
-                _ => rate,
-            });
+            command_success_rate =
+                Some(softtouch_drivers::franka::lower(command_success_rate, rate));
         }
     }
     // A host that misses cycles fails here before it fails a night.
@@ -520,7 +518,7 @@ mod tests {
             loop {
                 tokio::time::sleep(self.period).await;
                 self.sent += 1;
-                if self.lose_every > 0 && self.sent % self.lose_every == 0 {
+                if self.lose_every > 0 && self.sent.is_multiple_of(self.lose_every) {
                     self.lost += 1;
                     continue;
                 }
