@@ -1,6 +1,8 @@
 //! End-to-end tests of the `softtouch` CLI: the binary as a user runs it.
 
 mod common;
+#[path = "fcisim/mod.rs"]
+mod fcisim;
 use common::{command, softtouch, tempdir, text};
 
 use softtouch_collector::store::RunStatus;
@@ -99,6 +101,66 @@ fn a_scene_outside_the_rigs_workspace_exits_2() {
     let out = softtouch(dir.path(), &["config", "check"]);
     assert!(out.status.success());
     assert!(text(&out.stdout).starts_with("ok: rig <embedded default rig>"));
+}
+
+/// A Franka rig whose workspace asks for a half turn of the wrist either way (θ over
+/// the full circle about a rod frame pointing the finger down) is refused before
+/// anything moves: `config check` names the pose, the joint and its limit. The same
+/// rig within ±0.4 rad passes. (Connect checks again from the arm's own joints: the
+/// franka-sim tier.)
+#[test]
+fn config_check_refuses_a_franka_workspace_beyond_the_fr3s_joint_limits() {
+    let dir = tempdir();
+    let full = "[-3.141592653589793, 3.141592653589793]";
+    let rig = fcisim::rig_toml("172.16.0.2", fcisim::SIM_DEVICES, fcisim::LIMITS);
+    fcisim::write_rig(dir.path(), &rig);
+    let ok = softtouch(
+        dir.path(),
+        &[
+            "config",
+            "check",
+            "--rig",
+            "rig.toml",
+            "--scene",
+            "scene.toml",
+        ],
+    );
+    assert!(ok.status.success(), "{}", text(&ok.stderr));
+    assert!(
+        text(&ok.stdout).contains("12 corners within the FR3's joint ranges"),
+        "{}",
+        text(&ok.stdout)
+    );
+    std::fs::write(
+        dir.path().join("full.toml"),
+        rig.replace("theta_rad = [-0.4, 0.4]", &format!("theta_rad = {full}")),
+    )
+    .expect("write");
+    std::fs::write(
+        dir.path().join("full-scene.toml"),
+        fcisim::SCENE.replace("theta_rad = [-0.4, 0.4]", &format!("theta_rad = {full}")),
+    )
+    .expect("write");
+    let out = softtouch(
+        dir.path(),
+        &[
+            "config",
+            "check",
+            "--rig",
+            "full.toml",
+            "--scene",
+            "full-scene.toml",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stdout));
+    let e = text(&out.stderr);
+    assert!(
+        e.contains("full.toml: arm: workspace corner")
+            && e.contains("θ = 3.14")
+            && e.contains("joint 7")
+            && e.contains("FR3's limit"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -57,6 +57,7 @@ async fn connect(sim: &FrankaSim) -> FrankaArm {
         payload: None,
         joint_torque_thresholds_nm: FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM,
         limits: MotionLimits::default(),
+        route: Vec::new(),
     };
     FrankaArm::connect(config, Arc::new(TokioClock::new()))
         .await
@@ -649,4 +650,306 @@ fn a_lost_robot_connection_ends_the_run_in_a_safe_stop() {
     let s = stored(&dir.path().join("softtouch.db"), 1);
     assert_eq!(s.status, "failed", "{:?}", s.events);
     assert!(!s.kinds("safe_stop").is_empty(), "{:?}", s.events);
+}
+
+// ------------------------------------------------------------- grasp trials --rig
+
+/// The arm of `grasp trials --rig` through FCI: every move goes to franka-sim first,
+/// and once the arm got there the simulated grasp world is told the same move (its
+/// physics decides what the fingers hold). The arm's state is the robot's.
+struct ThroughFci {
+    real: FrankaArm,
+    world: softtouch_sim::SoftGraspArm,
+}
+
+#[async_trait::async_trait]
+impl Arm for ThroughFci {
+    async fn move_to(
+        &mut self,
+        target: &ArmPose,
+        speed_m_s: f64,
+    ) -> Result<softtouch_drivers::ArmState, softtouch_drivers::DeviceError> {
+        let reached = self.real.move_to(target, speed_m_s).await?;
+        self.world.move_to(target, speed_m_s).await?;
+        Ok(reached)
+    }
+    async fn state(
+        &mut self,
+    ) -> Result<softtouch_drivers::ArmState, softtouch_drivers::DeviceError> {
+        self.real.state().await
+    }
+    async fn recover(&mut self) -> Result<(), softtouch_drivers::DeviceError> {
+        self.real.recover().await?;
+        self.world.recover().await
+    }
+    async fn stop(&mut self) -> Result<(), softtouch_drivers::DeviceError> {
+        let real = self.real.stop().await;
+        let world = self.world.stop().await;
+        real.and(world)
+    }
+}
+
+/// `grasp trials --rig`'s library path with the arm through FCI: two open-loop and two
+/// closed-loop trials of the cylinder, the Hand-E over a pty against the project's
+/// Modbus server (watchdog armed) backed by the soft-finger gripper, the finger's
+/// simulated camera, K from a calibration made over the pty. The FR3 lifts and sets
+/// down every trial at the rig's grasp poses; the session ends at the safe pose, the
+/// arm still, the fingers open, no motion aborted by the robot.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
+async fn grasp_trials_on_the_rig_lift_and_set_down_through_fci() {
+    use softtouch_drivers::hande::{self, HandE, HandEConfig, HandEService};
+    use softtouch_drivers::{Clock, Gripper};
+    use softtouch_grasp::{CalibrationConfig, OperatorInput, calibrate_ends, calibrate_stiffness};
+    use softtouch_lab::grasp::calibration::{config_for, rig_setup_hash, to_row, top_for};
+    use softtouch_lab::grasp::trials::rig::{
+        Operator, RigTrialDevices, run_rig_trials, start_rig_session,
+    };
+    use softtouch_lab::grasp::trials::{RunEnd, TrialPlan, load_scenes};
+    use softtouch_schemas::Medium;
+    use softtouch_schemas::rig::{GraspObjectSetup, GraspSetup};
+    use softtouch_sim::{GraspObject, SoftGraspArm, soft_grasp};
+    use softtouch_store::Store;
+    use softtouch_trainer::Predictor;
+
+    const MODEL: &str = "air-svae";
+    const OBJECT: &str = "cylinder";
+    let Some(py) = python() else { return };
+    let dir = tempdir();
+    let d = dir.path();
+    tokio::task::block_in_place(|| common::tiny_model(d));
+    let Some(pair) = pty::pty_pair() else { return };
+    let sim = FrankaSim::start(&py, d);
+
+    let db = d.join("softtouch.db");
+    let store = Store::open(&db).await.expect("store");
+    let bytes = softtouch_lab::models::force_artifact(&store, MODEL)
+        .await
+        .expect("model");
+    let scene = load_scenes(&[]).expect("scenes").remove(0);
+    let object = GraspObject::from_spec(scene.object(OBJECT).expect("cylinder"));
+    // The gripper as the FR3's flange points at franka-sim's home keyframe (down,
+    // turned 45° about its axis), in front of the robot.
+    let down = [0.0, 0.923_879_532_511_286_7, -0.382_683_432_365_089_8, 0.0];
+    let grasp_at = [0.5, 0.0, 0.35];
+    let safe_at = [0.5, 0.0, 0.45];
+    let mut rig = softtouch_schemas::defaults::rig();
+    rig.arm = softtouch_schemas::rig::ArmDevice::Franka {
+        address: sim.address(),
+        reflex_force_n: 30.0,
+        reflex_torque_nm: None,
+        realtime: Realtime::Ignore,
+        end_effector: None,
+        payload: None,
+        joint_torque_thresholds_nm: None,
+    };
+    rig.workspace.reach_in_base_m = [
+        softtouch_schemas::Range::new(0.25, 0.75),
+        softtouch_schemas::Range::new(-0.2, 0.2),
+        softtouch_schemas::Range::new(0.1, 0.8),
+    ];
+    rig.gripper = softtouch_schemas::rig::GripperDevice::HandE {
+        port: pair.a.clone(),
+        slave_id: 9,
+    };
+    rig.grasp = Some(GraspSetup {
+        medium: Medium::Air,
+        safe_pose: ArmPose {
+            translation_m: safe_at,
+            rotation_wxyz: down,
+        },
+        approach_height_m: 0.04,
+        speed_m_s: 0.2,
+        objects: vec![GraspObjectSetup {
+            name: OBJECT.into(),
+            base_from_grasp: ArmPose {
+                translation_m: grasp_at,
+                rotation_wxyz: down,
+            },
+            open_width_mm: object.width_m * 1000.0 - 8.0,
+            lift_mm: 20.0,
+            place: None,
+        }],
+    });
+
+    // The soft grasp behind the Hand-E server; the calibration over the pty.
+    let clock = TokioClock::new();
+    let (gripper, camera, handle) =
+        soft_grasp(&scene, object.clone(), 30.0, 7, clock).expect("builds");
+    let service = HandEService::new(gripper, 9).with_watchdog(Duration::from_secs(1));
+    tokio::spawn(hande::serve_serial(
+        service.clone(),
+        hande::open_port(&pair.b).expect("open pty b"),
+        std::future::pending(),
+    ));
+    let shared: Arc<dyn Clock> = Arc::new(clock);
+    let mut hand_e: Box<dyn Gripper> = Box::new(HandE::new(
+        hande::open_port(&pair.a).expect("open pty a"),
+        HandEConfig::default(),
+        shared.clone(),
+    ));
+    let mut camera: Box<dyn softtouch_drivers::Camera> = Box::new(camera);
+    handle.set_object(false).expect("clear");
+    let ends = calibrate_ends(hand_e.as_mut(), &clock, &CalibrationConfig::default())
+        .await
+        .expect("ends");
+    handle.set_object(true).expect("object back");
+    let mut predictor = Predictor::from_bytes(&bytes).expect("loads");
+    let projection = softtouch_lab::grasp::sim::projection().expect("projection");
+    let cal = calibrate_stiffness(
+        hand_e.as_mut(),
+        camera.as_mut(),
+        &mut predictor,
+        &projection,
+        &ends.stroke,
+        shared.as_ref(),
+        &config_for(&object, top_for(1.5)),
+    )
+    .await
+    .expect("the finger's estimate sees the cylinder");
+    let sha = softtouch_collector::dataset::export::sha256_hex(&bytes);
+    let setup = rig_setup_hash(&rig).expect("hash");
+    let mut row = to_row(&cal, ("rig", &setup), (MODEL, &sha), OBJECT, None).expect("row");
+    row.mm_per_count = ends.stroke.mm_per_count;
+    store.insert_grasp_calibration(&row).await.expect("stored");
+
+    // The arm: the real driver on franka-sim, the grasp world told every move.
+    let real = connect(&sim).await;
+    let world = SoftGraspArm::new(
+        handle.clone(),
+        clock,
+        ArmPose {
+            translation_m: grasp_at,
+            rotation_wxyz: down,
+        },
+        ArmPose {
+            translation_m: safe_at,
+            rotation_wxyz: down,
+        },
+    );
+    handle.set_object(false).expect("clear");
+    let mut devices = RigTrialDevices {
+        arm: Arc::new(tokio::sync::Mutex::new(
+            Box::new(ThroughFci { real, world }) as Box<dyn Arm>,
+        )),
+        gripper: hand_e,
+        camera,
+        clock: shared.clone(),
+    };
+    let plan = TrialPlan {
+        objects: vec![OBJECT.into()],
+        modes: vec!["open".into(), "closed".into()],
+        trials: 2,
+        sigmas_mm: vec![2.0],
+        fps: 30.0,
+        confirm_s: 0.1,
+        close_timeout_s: 1.5,
+        hold_s: 0.2,
+        ..TrialPlan::default()
+    };
+    let session = start_rig_session(&store, MODEL, 3, plan, &rig)
+        .await
+        .expect("starts");
+    let mut operator = Operator {
+        input: OperatorInput::from_reader(std::io::Cursor::new(Vec::new())),
+        output: Box::new(std::io::sink()),
+        confirm_verdicts: false,
+    };
+    let (_never, no_stop) = tokio::sync::watch::channel(0u32);
+    let todo = session.progress(&store).await.expect("progress").todo;
+    let t0 = std::time::Instant::now();
+    let end = run_rig_trials(
+        &store,
+        &session,
+        &mut devices,
+        &mut operator,
+        &todo,
+        &no_stop,
+        &mut |_| Ok(()),
+    )
+    .await
+    .unwrap_or_else(|e| panic!("{e}\nfranka-sim:\n{}", sim.log_tail()));
+    assert_eq!(end, RunEnd::Completed);
+    let rows = store.grasp_trials(session.id).await.expect("rows");
+    for r in &rows {
+        eprintln!(
+            "{} #{}: {} (final {:.1} mm, {:.2} s)",
+            r.key.mode,
+            r.key.trial,
+            r.reason.as_deref().unwrap_or("held"),
+            r.final_width_m * 1e3,
+            r.wall_s
+        );
+    }
+    eprintln!(
+        "4 rig trials through FCI in {:.0} s",
+        t0.elapsed().as_secs_f64()
+    );
+    assert_eq!(rows.len(), 4);
+    assert!(rows.iter().any(|r| r.success), "nothing held: {rows:?}");
+    assert_eq!(service.watchdog_faults(), 0, "the Hand-E was kept alive");
+    let s = devices.arm.lock().await.state().await.expect("state");
+    let safe = ArmPose {
+        translation_m: safe_at,
+        rotation_wxyz: down,
+    };
+    assert!(
+        s.base_from_finger.distance_to(&safe) < 1e-3,
+        "ended at {:?}",
+        s.base_from_finger
+    );
+    let status = devices.gripper.status().await.expect("status");
+    assert!(status.position <= 5, "fingers at count {}", status.position);
+    drop(devices);
+    assert!(
+        sim.aborted_a_motion().is_none(),
+        "{:?}",
+        sim.aborted_a_motion()
+    );
+    store.close().await;
+}
+
+/// A rig whose workspace the arm cannot reach within the FR3's limits from the joints
+/// it is at is refused at connect, naming the pose and the limit, and nothing moves.
+#[test]
+#[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
+fn a_workspace_beyond_the_fr3s_limits_is_refused_at_connect_before_any_motion() {
+    let Some(py) = python() else { return };
+    let dir = tempdir();
+    let sim = FrankaSim::start(&py, dir.path());
+    let full = "theta_rad = [-3.141592653589793, 3.141592653589793]";
+    fcisim::write_rig(
+        dir.path(),
+        &rig_toml(&sim.address(), SIM_DEVICES, LIMITS).replace("theta_rad = [-0.4, 0.4]", full),
+    );
+    std::fs::write(
+        dir.path().join("scene.toml"),
+        fcisim::SCENE.replace("theta_rad = [-0.4, 0.4]", full),
+    )
+    .expect("write");
+    let before = still_arm(&sim);
+    let out = run(
+        dir.path(),
+        &[
+            "collect",
+            "--rig",
+            "rig.toml",
+            "--scene",
+            "scene.toml",
+            "--samples",
+            "2",
+        ],
+    );
+    assert_ne!(out.status.code(), Some(0));
+    let e = text(&out.stderr);
+    assert!(
+        e.contains("beyond the FR3's limits") && e.contains("refused before any motion"),
+        "{e}"
+    );
+    assert!(e.contains("joint 7"), "{e}");
+    let after = still_arm(&sim);
+    assert!(
+        after.distance_to(&before) < 1e-4 && after.angle_to(&before) < 1e-3,
+        "the arm moved: {before:?} -> {after:?}"
+    );
 }

@@ -100,6 +100,11 @@ pub fn run(cmd: ConfigCommand, out: &mut dyn Write) -> Result<(), Failure> {
         }
         ConfigCommand::Check { rig, scene } => {
             let resolved = configs::resolve(rig.as_deref(), scene.as_deref())?;
+            if let Some(reach) = franka_reach(&resolved.rig).map_err(|e| {
+                Failure::BadInput(anyhow::anyhow!("{}: arm: {e}", resolved.rig_source))
+            })? {
+                writeln!(out, "{reach}").map_err(io_failure)?;
+            }
             writeln!(
                 out,
                 "ok: rig {} and scene {} ({} rods, {} effects, medium {})",
@@ -112,4 +117,41 @@ pub fn run(cmd: ConfigCommand, out: &mut dyn Write) -> Result<(), Failure> {
             .map_err(io_failure)
         }
     }
+}
+
+/// For a Franka arm: whether home and the workspace's corners lie within the FR3's
+/// joint ranges and velocity limits, followed from its ready joints at the procedure's
+/// speeds (`None` for a simulated arm). Offline, so Desk's end effector is taken as
+/// none (the rig's `end_effector` alone); connect checks again from the arm's own
+/// joints and end effector.
+fn franka_reach(rig: &softtouch_schemas::RigConfig) -> Result<Option<String>, String> {
+    use softtouch_drivers::franka::{FrankaConfig, reach};
+    let Some(config) = FrankaConfig::for_rig(rig) else {
+        return Ok(None);
+    };
+    const IDENTITY: [f64; 16] = [
+        1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+    ];
+    let kin = reach::Kinematics::new(config.ne_t_ee.unwrap_or(IDENTITY));
+    let Some(home) = config.route.first() else {
+        return Ok(None);
+    };
+    let start = kin.solve(&home.pose, &reach::READY_Q).ok_or_else(|| {
+        format!(
+            "{}: the FR3 cannot reach it from its ready joints (flange at {:?} m in the base frame)",
+            home.name, home.pose.translation_m
+        )
+    })?;
+    reach::check_route(
+        &kin,
+        reach::Robot::Fr3,
+        &start,
+        &config.route,
+        config.limits.rot_speed_rad_s,
+    )
+    .map_err(|e| format!("{e} (checked against the FR3 from its ready joints; connect checks again from the arm's own)"))?;
+    Ok(Some(format!(
+        "ok: arm: home and the workspace's {} corners within the FR3's joint ranges and velocity limits (from its ready joints; checked again at connect)",
+        config.route.len() / 2
+    )))
 }

@@ -3,7 +3,7 @@
 //! devices mix (a real sensor on a simulated arm, for instance). This is the one
 //! place that names both kinds; everything past it takes the drivers' traits.
 
-use softtouch_drivers::open::{real_arm, real_camera, real_force_sensor, real_gripper};
+use softtouch_drivers::open::{real_arm_for_rig, real_camera, real_force_sensor, real_gripper};
 use softtouch_drivers::{Arm, Camera, Clock, DeviceError, ForceSensor, Gripper, TokioClock};
 use softtouch_schemas::rig::{ArmDevice, CameraDevice, ForceSensorDevice, GripperDevice};
 use softtouch_schemas::{RigConfig, SceneSpec};
@@ -93,7 +93,7 @@ pub async fn build(
     clock: TokioClock,
 ) -> Result<Devices, SelectError> {
     let shared: Arc<dyn Clock> = Arc::new(clock);
-    let arm = real_arm(&rig.arm, shared.clone())
+    let arm = real_arm_for_rig(rig, shared.clone())
         .await
         .map_err(dev("arm"))?;
     let force_sensor = real_force_sensor(&rig.force_sensor, shared.clone())

@@ -129,6 +129,21 @@ pub async fn real_arm(
     })
 }
 
+/// A rig's real arm (`None` for `sim`), with its workspace checked at connect against
+/// the robot's joint ranges and velocity limits from the joints it is at
+/// ([`crate::franka::reach`]): a workspace it cannot reach is refused before any motion.
+pub async fn real_arm_for_rig(
+    rig: &softtouch_schemas::RigConfig,
+    clock: Arc<dyn Clock>,
+) -> Result<Option<Box<dyn Arm>>, DeviceError> {
+    match crate::franka::FrankaConfig::for_rig(rig) {
+        None => real_arm(&rig.arm, clock).await,
+        Some(config) => Ok(Some(Box::new(
+            crate::franka::FrankaArm::connect(config, clock).await?,
+        ))),
+    }
+}
+
 /// A real camera (`None` for `sim`). Without feature `v4l` a V4L2 camera is refused.
 pub async fn real_camera(
     d: &CameraDevice,

@@ -130,6 +130,9 @@ pub struct FrankaConfig {
     pub joint_torque_thresholds_nm: [f64; 7],
     /// Move limits.
     pub limits: MotionLimits,
+    /// The route to check against the robot's joint ranges and velocity limits at
+    /// connect, from the joints the arm is at ([`reach`]); empty: none.
+    pub route: Vec<reach::Leg>,
 }
 
 impl FrankaConfig {
@@ -160,7 +163,21 @@ impl FrankaConfig {
             joint_torque_thresholds_nm: joint_torque_thresholds_nm
                 .unwrap_or(softtouch_schemas::FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM),
             limits: MotionLimits::default(),
+            route: Vec::new(),
         })
+    }
+
+    /// The settings of a rig's arm, with its workspace's route to check at connect
+    /// (home, each corner and back, at the procedure's speeds).
+    #[must_use]
+    pub fn for_rig(rig: &softtouch_schemas::RigConfig) -> Option<Self> {
+        let mut c = Self::from_rig(&rig.arm)?;
+        c.route = reach::workspace_route(
+            &rig.workspace,
+            rig.procedure.approach_speed_m_s,
+            rig.procedure.retreat_speed_m_s,
+        );
+        Some(c)
     }
 }
 
@@ -670,6 +687,46 @@ fn configure(robot: &franka::Robot, config: &FrankaConfig) -> Result<(), DeviceE
         .map_err(err)
 }
 
+/// The route of `config` from the joints the arm is at, against the limits of the robot
+/// the FCI version names; refused before any motion.
+fn check_reach(robot: &franka::Robot, config: &FrankaConfig) -> Result<(), DeviceError> {
+    if config.route.is_empty() {
+        return Ok(());
+    }
+    let s = robot.read_once().map_err(err)?;
+    let kind = reach::Robot::of(robot.fci_version());
+    // The end effector as the robot reports it: its O_T_EE against the model's flange
+    // at its joints. On a robot this is F_T_EE; a simulator whose reported frame is
+    // not the documented flange (franka-sim's link7, TESTING.md) is taken at its word.
+    let flange = reach::Kinematics::new(IDENTITY).pose(&s.q);
+    let reported = ArmPose::from_matrix(&s.O_T_EE);
+    let f_t_ee = flange.inverse().compose(&reported);
+    let told = ArmPose::from_matrix(&s.F_T_EE);
+    if f_t_ee.distance_to(&told) > 1e-3 || f_t_ee.angle_to(&told) > 0.01 {
+        tracing::warn!(
+            "franka: the robot's O_T_EE is {:.1} mm and {:.2} rad from its model's flange · F_T_EE: the reach check takes the pose it reports",
+            f_t_ee.distance_to(&told) * 1000.0,
+            f_t_ee.angle_to(&told)
+        );
+    }
+    let kin = reach::Kinematics::new(f_t_ee.to_matrix());
+    reach::check_route(
+        &kin,
+        kind,
+        &s.q,
+        &config.route,
+        config.limits.rot_speed_rad_s,
+    )
+    .map(|_| ())
+    .map_err(|e| DeviceError::InvalidCommand {
+        device: DEVICE.into(),
+        message: format!(
+            "the rig's workspace is beyond the {}'s limits from its joints now, refused before any motion: {e}",
+            kind.name()
+        ),
+    })
+}
+
 /// The identity transform, column-major.
 const IDENTITY: [f64; 16] = [
     1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
@@ -756,7 +813,7 @@ impl FrankaArm {
                         return;
                     }
                 };
-                let set = configure(&robot, &config);
+                let set = configure(&robot, &config).and_then(|()| check_reach(&robot, &config));
                 let ok = set.is_ok();
                 let _ = ready_tx.send(set);
                 if ok {
@@ -845,6 +902,8 @@ impl Arm for FrankaArm {
         Some(self.feed.clone())
     }
 }
+
+pub mod reach;
 
 #[cfg(test)]
 mod tests;

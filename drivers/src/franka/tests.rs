@@ -18,6 +18,7 @@ async fn hardware_arm() -> FrankaArm {
         payload: None,
         joint_torque_thresholds_nm: softtouch_schemas::FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM,
         limits: MotionLimits::default(),
+        route: Vec::new(),
     };
     FrankaArm::connect(config, Arc::new(crate::TokioClock::new()))
         .await
@@ -151,6 +152,7 @@ fn the_end_effector_and_payload_are_checked_against_what_the_robot_reports() {
         payload: Some((0.35, [0.0, 0.0, 0.06], [0.0; 9])),
         joint_torque_thresholds_nm: softtouch_schemas::FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM,
         limits: MotionLimits::default(),
+        route: Vec::new(),
     };
     assert_eq!(
         check_configured(&config, &ee, 0.35, &[0.0, 0.0, 0.06]),

@@ -14,7 +14,7 @@ use std::fmt;
 use std::sync::Arc;
 use std::time::Duration;
 
-use softtouch_drivers::open::{real_arm, real_camera, real_force_sensor, real_gripper};
+use softtouch_drivers::open::{real_arm_for_rig, real_camera, real_force_sensor, real_gripper};
 use softtouch_drivers::{
     Arm, Camera, Clock, DeviceError, ForceSensor, Gripper, GripperCommand, ObjectStatus, TokioClock,
 };
@@ -448,12 +448,13 @@ pub async fn check_rig(
     );
     rows.push(
         row("arm", driver_of_arm(&rig.arm), timeout, async {
-            let arm: Box<dyn Arm> = match real_arm(&rig.arm, shared.clone()).await.map_err(|e| {
-                format!("expected the arm answering at {}: {e}", where_arm(&rig.arm))
-            })? {
-                Some(a) => a,
-                None => Box::new(sim_arm.take().ok_or_else(no_sim)?),
-            };
+            let arm: Box<dyn Arm> =
+                match real_arm_for_rig(rig, shared.clone()).await.map_err(|e| {
+                    format!("expected the arm answering at {}: {e}", where_arm(&rig.arm))
+                })? {
+                    Some(a) => a,
+                    None => Box::new(sim_arm.take().ok_or_else(no_sim)?),
+                };
             check_arm(arm, &rig.workspace).await
         })
         .await,
