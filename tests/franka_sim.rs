@@ -851,7 +851,8 @@ async fn grasp_trials_on_the_rig_lift_and_set_down_through_fci() {
         .await
         .expect("starts");
     let mut operator = Operator {
-        input: OperatorInput::from_reader(std::io::Cursor::new(Vec::new())),
+        // Enter at each "set the object in its place" (and to spare).
+        input: OperatorInput::from_reader(std::io::Cursor::new(b"\n".repeat(16))),
         output: Box::new(std::io::sink()),
         confirm_verdicts: false,
     };

@@ -579,12 +579,20 @@ fn worker(
                     feed: &feed,
                     clock: clock.as_ref(),
                 };
-                let r = run_move(&robot, &target, speed, &limits, &mut job)
-                    .and_then(|()| state(&robot))
-                    .map(|s| ArmState {
-                        command_success_rate: job.success.rate(),
-                        ..s
-                    });
+                let began = std::time::Instant::now();
+                let moved = run_move(&robot, &target, speed, &limits, &mut job);
+                // Where a sample's time goes on a robot: each move's speed and duration
+                // (`RUST_LOG=softtouch_drivers::franka=debug`).
+                tracing::debug!(
+                    "franka: move {generation} at {speed} m/s took {:.0} ms over {} control cycles{}",
+                    began.elapsed().as_secs_f64() * 1000.0,
+                    job.success.cycles,
+                    if moved.is_ok() { "" } else { " (failed)" }
+                );
+                let r = moved.and_then(|()| state(&robot)).map(|s| ArmState {
+                    command_success_rate: job.success.rate(),
+                    ..s
+                });
                 let _ = reply.send(r);
             }
             Cmd::State { reply } => {

@@ -103,6 +103,10 @@ impl NetFtConfig {
 }
 
 /// 100 ms, or ten periods of a slow stream.
+/// How far the stream's period may be from the configured one before the stream is
+/// refused, as a fraction ([`super::stamp::SequenceStamps::rate_error`]).
+pub const RATE_REFUSED: f64 = 0.05;
+
 /// The highest `rdt_sequence` taken as the first record of a new stream. RDT numbers
 /// the records of each start request from 1; a few may be lost before the first
 /// arrives (a second at 1 kHz is allowed for). A late record of the previous stream
@@ -549,6 +553,21 @@ impl ForceSensor for NetFtClient {
             return Err(DeviceError::InvalidCommand {
                 device: DEVICE.into(),
                 message: "read before start".into(),
+            });
+        }
+        // Stamps come from the sequence at the configured period: a sensor streaming
+        // at another rate would have every stamp drift (and its window pair with the
+        // wrong frame), so the stream is refused once its rate shows.
+        if let Some(off) = self.stamps.rate_error()
+            && off.abs() > RATE_REFUSED
+        {
+            let configured = self.config.rate_hz;
+            return Err(DeviceError::Protocol {
+                device: DEVICE.into(),
+                message: format!(
+                    "the sensor streams at {:.0} Hz, the rig says force_sensor.rate_hz = {configured}: readings are stamped from their sequence at the configured period, so set rate_hz to the sensor's RDT output rate (its web page)",
+                    configured / (1.0 + off)
+                ),
             });
         }
         // A malformed datagram is counted (`bad_datagrams`) and skipped: it must not

@@ -430,6 +430,18 @@ async fn run_inner(
     let plan = &session.plan;
     let mut predictor = Predictor::from_bytes(&session.model_bytes)?;
     let projection = crate::grasp::sim::projection()?;
+    // An activated Hand-E faults (0x09) after 1 s without a command, and the move to
+    // the safe pose can take longer on a robot: keep its standing request (what it
+    // already echoes, so nothing moves) alive meanwhile. Found against franka-sim.
+    if moves.hold.is_none()
+        && let Ok(s) = devices.gripper.status().await
+        && s.activated
+    {
+        moves.hold = Some(GripperCommand {
+            position: s.requested_position,
+            ..moves.open
+        });
+    }
     or_stop(
         stop,
         arm_to(devices, moves, &rig.grasp.safe_pose, moves.speed_m_s),
