@@ -70,8 +70,9 @@ impl SequenceStamps {
     /// run [`RATE_AFTER_NS`]; `None` before, or without a rate.
     pub(crate) fn rate_error(&self) -> Option<f64> {
         let (t0, b0, u0) = self.first?;
-        let &(t, b, u) = self.bounds.front()?;
-        if self.period_ns == 0.0 || t.saturating_sub(t0) < RATE_AFTER_NS || u <= u0 {
+        let &(_, b, u) = self.bounds.front()?;
+        let &(newest, _, _) = self.bounds.back()?;
+        if self.period_ns == 0.0 || newest.saturating_sub(t0) < RATE_AFTER_NS || u <= u0 {
             return None;
         }
         // bound = arrival − u·T grows by (T_true − T) per record.
