@@ -497,9 +497,12 @@ mod tests {
         }
     }
 
-    /// A sensor that sends one reading every `period`, and loses every `lose_every`th.
+    /// A sensor that sends one reading every `period` (on a fixed schedule: the paused
+    /// clock's timer rounds each sleep to the millisecond), and loses every
+    /// `lose_every`th.
     struct Paced {
         period: Duration,
+        next: Option<tokio::time::Instant>,
         lose_every: u32,
         sent: u32,
         lost: u64,
@@ -515,22 +518,31 @@ mod tests {
             &mut self,
             out: &mut Vec<softtouch_schemas::FtReading>,
         ) -> Result<usize, DeviceError> {
-            loop {
-                tokio::time::sleep(self.period).await;
-                self.sent += 1;
-                if self.lose_every > 0 && self.sent.is_multiple_of(self.lose_every) {
-                    self.lost += 1;
-                    continue;
+            let mut n = 0;
+            while n == 0 {
+                let next = *self
+                    .next
+                    .get_or_insert_with(|| tokio::time::Instant::now() + self.period);
+                tokio::time::sleep_until(next).await;
+                let now = tokio::time::Instant::now();
+                while self.next.is_some_and(|t| t <= now) {
+                    self.next = self.next.map(|t| t + self.period);
+                    self.sent += 1;
+                    if self.lose_every > 0 && self.sent.is_multiple_of(self.lose_every) {
+                        self.lost += 1;
+                        continue;
+                    }
+                    out.push(softtouch_schemas::FtReading {
+                        t: self.clock.now(),
+                        rdt_sequence: self.sent,
+                        ft_sequence: self.sent,
+                        status: softtouch_schemas::FtStatus::OK,
+                        wrench_in_sensor: softtouch_schemas::Wrench::default(),
+                    });
+                    n += 1;
                 }
-                out.push(softtouch_schemas::FtReading {
-                    t: self.clock.now(),
-                    rdt_sequence: self.sent,
-                    ft_sequence: self.sent,
-                    status: softtouch_schemas::FtStatus::OK,
-                    wrench_in_sensor: softtouch_schemas::Wrench::default(),
-                });
-                return Ok(1);
             }
+            Ok(n)
         }
         async fn bias(&mut self) -> Result<(), DeviceError> {
             Ok(())
@@ -547,6 +559,7 @@ mod tests {
         let clock = TokioClock::new();
         let mut s = Paced {
             period: Duration::from_secs_f64(1.0 / hz),
+            next: None,
             lose_every,
             sent: 0,
             lost: 0,
