@@ -6,7 +6,7 @@
 //!
 //! Wall clock (a real 1 kHz loop), one server per test, one test at a time:
 //! `#[ignore]`d, run by `.ci/run` as
-//! `cargo test --release -p softtouch-cli --test franka_sim -- --ignored --test-threads=1`
+//! `cargo test --workspace --release --test franka_sim -- --ignored --test-threads=1`
 //! with `SOFTTOUCH_FRANKA_SIM_PYTHON` set (TESTING.md, the franka-sim tier).
 
 mod common;
