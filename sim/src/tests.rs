@@ -1057,3 +1057,31 @@ fn print_label_ranges_over_10k_poses() {
     }
     println!("min {lo:?}\nmax {hi:?}");
 }
+
+/// A real arm's measured poses drive the simulated world: the sensor's truth is the
+/// wrench at the pose last measured; an older measurement and a NaN pose change
+/// nothing.
+#[test]
+fn the_world_follows_a_real_arms_measured_pose() {
+    let rig = defaults::rig();
+    let sim = SimRig::new(&rig, &bare(), 1, TokioClock::new()).expect("sim");
+    let h = sim.handle.clone();
+    let w = &rig.workspace;
+    let pressed = ArmPose::from_contact(&w.base_from_rod, &pose(0.03, 0.0, 0.5));
+    let home = ArmPose::from_contact(&w.base_from_rod, &w.home);
+    h.follow_arm(TimestampNs(1_000), home).expect("follow");
+    h.follow_arm(TimestampNs(2_000), pressed).expect("follow");
+    let at = |t: u64| h.world.lock().expect("world").pose_at(TimestampNs(t));
+    assert!(at(1_500).distance_to(&home) < 1e-12);
+    assert!(at(5_000).distance_to(&pressed) < 1e-12);
+    // Older than the newest, or not a pose: ignored.
+    h.follow_arm(TimestampNs(1_500), home).expect("follow");
+    let nan = ArmPose {
+        translation_m: [f64::NAN; 3],
+        ..home
+    };
+    h.follow_arm(TimestampNs(3_000), nan).expect("follow");
+    assert!(at(5_000).distance_to(&pressed) < 1e-12);
+    let truth = h.true_wrench(&at(5_000)).expect("wrench");
+    assert!(truth.force_norm_n() > 0.0, "pressed: {truth:?}");
+}
