@@ -129,10 +129,7 @@ fn franka_reach(rig: &softtouch_schemas::RigConfig) -> Result<Option<String>, St
     let Some(config) = FrankaConfig::for_rig(rig) else {
         return Ok(None);
     };
-    const IDENTITY: [f64; 16] = [
-        1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
-    ];
-    let kin = reach::Kinematics::new(config.ne_t_ee.unwrap_or(IDENTITY));
+    let kin = reach::Kinematics::new(config.ne_t_ee.unwrap_or(reach::IDENTITY));
     let Some(home) = config.route.first() else {
         return Ok(None);
     };

@@ -706,7 +706,8 @@ fn check_reach(robot: &franka::Robot, config: &FrankaConfig) -> Result<(), Devic
     // The end effector as the robot reports it: its O_T_EE against the model's flange
     // at its joints. On a robot this is F_T_EE; a simulator whose reported frame is
     // not the documented flange (franka-sim's link7, TESTING.md) is taken at its word.
-    let flange = reach::Kinematics::new(IDENTITY).pose(&s.q);
+    let kin = reach::Kinematics::new(IDENTITY);
+    let flange = kin.pose(&s.q);
     let reported = ArmPose::from_matrix(&s.O_T_EE);
     let f_t_ee = flange.inverse().compose(&reported);
     let told = ArmPose::from_matrix(&s.F_T_EE);
@@ -717,7 +718,7 @@ fn check_reach(robot: &franka::Robot, config: &FrankaConfig) -> Result<(), Devic
             f_t_ee.angle_to(&told)
         );
     }
-    let kin = reach::Kinematics::new(f_t_ee.to_matrix());
+    let kin = kin.with_end_effector(f_t_ee.to_matrix());
     reach::check_route(
         &kin,
         kind,
@@ -734,11 +735,6 @@ fn check_reach(robot: &franka::Robot, config: &FrankaConfig) -> Result<(), Devic
         ),
     })
 }
-
-/// The identity transform, column-major.
-const IDENTITY: [f64; 16] = [
-    1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
-];
 
 /// Whether the robot reports the stiffness frame at the end effector (`EE_T_K` the
 /// identity), as connect set it.
@@ -761,18 +757,7 @@ pub fn check_stiffness_frame(ee_t_k: &[f64; 16]) -> Result<(), String> {
 /// configured upper ones (each above 0 and below the joint's torque limit, else the
 /// joint reflex could never act) and half of each as the lower.
 pub fn joint_thresholds(upper_nm: &[f64; 7]) -> Result<([f64; 7], [f64; 7]), String> {
-    for (i, (v, limit)) in upper_nm
-        .iter()
-        .zip(softtouch_schemas::FRANKA_JOINT_TORQUE_LIMITS_NM)
-        .enumerate()
-    {
-        if !(v.is_finite() && *v > 0.0 && *v < limit) {
-            return Err(format!(
-                "joint {}'s collision threshold {v} N·m is not above 0 and below its torque limit {limit} N·m",
-                i + 1
-            ));
-        }
-    }
+    softtouch_schemas::rig::check_joint_thresholds(upper_nm)?;
     Ok((*upper_nm, upper_nm.map(|v| 0.5 * v)))
 }
 
@@ -912,6 +897,7 @@ impl Arm for FrankaArm {
 }
 
 pub mod reach;
+use reach::IDENTITY;
 
 #[cfg(test)]
 mod tests;

@@ -108,7 +108,8 @@ pub struct Kinematics {
     f_t_ee: [f64; 16],
 }
 
-const IDENTITY: [f64; 16] = [
+/// The identity transform, column-major (libfranka's layout).
+pub const IDENTITY: [f64; 16] = [
     1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
 ];
 
@@ -120,6 +121,13 @@ impl Kinematics {
             model: franka::Model::native_fer(),
             f_t_ee,
         }
+    }
+
+    /// The same kinematics with `f_t_ee` as the end effector (the model is kept: it is
+    /// parsed from a URDF).
+    #[must_use]
+    pub fn with_end_effector(self, f_t_ee: [f64; 16]) -> Self {
+        Self { f_t_ee, ..self }
     }
 
     /// The end effector's pose at joints `q`.

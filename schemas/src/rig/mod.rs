@@ -91,6 +91,26 @@ pub enum ArmDevice {
 /// interface specifications": τ_max).
 pub const FRANKA_JOINT_TORQUE_LIMITS_NM: [f64; 7] = [87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0];
 
+/// Whether upper joint torque thresholds lie above 0 and below each joint's torque
+/// limit; the first that does not, named. The rig's validation and the Franka driver's
+/// connect both ask this.
+pub fn check_joint_thresholds(upper_nm: &[f64; 7]) -> Result<(), String> {
+    for (i, (v, limit)) in upper_nm
+        .iter()
+        .zip(FRANKA_JOINT_TORQUE_LIMITS_NM)
+        .enumerate()
+    {
+        if !(v.is_finite() && *v > 0.0 && *v < limit) {
+            return Err(format!(
+                "expected joint {}'s threshold above 0 and below its torque limit {limit} N·m, found {}",
+                i + 1,
+                crate::config::readable(*v)
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Default upper joint torque thresholds, N·m: libfranka's examples' values
 /// (20, 20, 18, 18 on the big joints), capped below the wrist joints' 12 N·m limit.
 /// Pressing a finger with a few newtons 0.1 m from the flange asks for under 1 N·m.

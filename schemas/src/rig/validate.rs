@@ -19,23 +19,10 @@ impl Validate for RigConfig {
                 joint_torque_thresholds_nm,
             } => {
                 non_empty(c, "arm.address", address);
-                if let Some(t) = joint_torque_thresholds_nm {
-                    for (i, (v, limit)) in t
-                        .iter()
-                        .zip(super::FRANKA_JOINT_TORQUE_LIMITS_NM)
-                        .enumerate()
-                    {
-                        if !(v.is_finite() && *v > 0.0 && *v < limit) {
-                            c.fail(
-                                "arm.joint_torque_thresholds_nm",
-                                format!(
-                                    "expected joint {}'s threshold above 0 and below its torque limit {limit} N·m, found {}",
-                                    i + 1,
-                                    crate::config::readable(*v)
-                                ),
-                            );
-                        }
-                    }
+                if let Some(t) = joint_torque_thresholds_nm
+                    && let Err(e) = check_joint_thresholds(t)
+                {
+                    c.fail("arm.joint_torque_thresholds_nm", e);
                 }
                 c.positive("arm.reflex_force_n", *reflex_force_n, "N");
                 if let Some(t) = reflex_torque_nm {
