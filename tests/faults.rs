@@ -1008,15 +1008,6 @@ fn collect_until(dir: &Path, args: &[&str], at_least: i64) -> std::process::Chil
     child
 }
 
-fn signal(child: &std::process::Child, name: &str) {
-    let ok = Command::new("kill")
-        .args([&format!("-{name}"), &child.id().to_string()])
-        .status()
-        .unwrap_or_else(|e| panic!("kill: {e}"))
-        .success();
-    assert!(ok, "kill -{name} failed");
-}
-
 #[test]
 fn sigterm_finishes_the_sample_retreats_and_stops_the_run() {
     let dir = tempdir();
@@ -1025,7 +1016,7 @@ fn sigterm_finishes_the_sample_retreats_and_stops_the_run() {
         &["collect", "--samples", LONG_RUN, "--seed", "8"],
         3,
     );
-    signal(&child, "TERM");
+    common::signal(&child, "TERM");
     let out = child.wait_with_output().unwrap_or_else(|e| panic!("{e}"));
     assert!(
         out.status.success(),

@@ -18,7 +18,7 @@ use common::{runtime, tempdir, text};
 use fcisim::{FrankaSim, LIMITS, SIM_DEVICES, home_in_base, python, rig_toml, wait_until};
 use sqlx::Row;
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
+use std::process::{Output, Stdio};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -81,6 +81,25 @@ fn still_arm(sim: &FrankaSim) -> ArmPose {
         assert!(!b.faulted, "the arm is in a reflex");
         b.base_from_finger
     })
+}
+
+/// A franka-sim of its own and a folder holding the tier's rig (with `limits`) and
+/// scene; `None` (the test skips) without franka-sim.
+fn tier(limits: &str) -> Option<(tempfile::TempDir, FrankaSim)> {
+    let py = python()?;
+    let dir = tempdir();
+    let sim = FrankaSim::start(&py, dir.path());
+    fcisim::write_rig(dir.path(), &rig_toml(&sim.address(), SIM_DEVICES, limits));
+    Some((dir, sim))
+}
+
+/// The arm ended at the rigs' home, still; `context` is shown if not.
+fn ends_home_and_still(sim: &FrankaSim, context: &str) {
+    let at = still_arm(sim);
+    assert!(
+        at.distance_to(&home_in_base()) < 1e-3,
+        "ended at {at:?}\n{context}"
+    );
 }
 
 struct RunRow {
@@ -195,15 +214,6 @@ impl OutputOf for std::process::Child {
     }
 }
 
-fn signal(child: &std::process::Child, name: &str) {
-    let ok = Command::new("kill")
-        .args([&format!("-{name}"), &child.id().to_string()])
-        .status()
-        .unwrap_or_else(|e| panic!("kill: {e}"))
-        .success();
-    assert!(ok, "kill -{name} failed");
-}
-
 // ------------------------------------------------------------------- the driver
 
 /// A move whose future is dropped while it waits behind another (a timeout around
@@ -258,11 +268,7 @@ fn a_move_cancelled_while_queued_never_reaches_the_robot() {
         let idle = arm.state().await.expect("state").command_success_rate;
         assert!(idle.is_some_and(|r| r < 0.5), "{idle:?}");
     });
-    assert!(
-        sim.aborted_a_motion().is_none(),
-        "franka-sim aborted a motion: {:?}",
-        sim.aborted_a_motion()
-    );
+    sim.assert_no_abort();
 }
 
 // -------------------------------------------------------------------- rig check
@@ -354,10 +360,9 @@ slave_id = 9
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
-    let Some(py) = python() else { return };
-    let dir = tempdir();
-    let sim = FrankaSim::start(&py, dir.path());
-    fcisim::write_rig(dir.path(), &rig_toml(&sim.address(), SIM_DEVICES, LIMITS));
+    let Some((dir, sim)) = tier(LIMITS) else {
+        return;
+    };
     let samples = "24";
     let args = [
         "collect",
@@ -453,13 +458,8 @@ fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
         "no sample pressed the rod: {:?}",
         franka.samples.first()
     );
-    assert!(
-        sim.aborted_a_motion().is_none(),
-        "{:?}",
-        sim.aborted_a_motion()
-    );
-    let at = still_arm(&sim);
-    assert!(at.distance_to(&home_in_base()) < 1e-3, "ended at {at:?}");
+    sim.assert_no_abort();
+    ends_home_and_still(&sim, "");
 }
 
 // ------------------------------------------------------------------- safe exits
@@ -469,17 +469,9 @@ fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn a_force_guard_trip_on_franka_sim_stops_the_arm_and_rejects_the_sample() {
-    let Some(py) = python() else { return };
-    let dir = tempdir();
-    let sim = FrankaSim::start(&py, dir.path());
-    fcisim::write_rig(
-        dir.path(),
-        &rig_toml(
-            &sim.address(),
-            SIM_DEVICES,
-            "max_force_n = 0.05\nmax_torque_nm = 0.8",
-        ),
-    );
+    let Some((dir, sim)) = tier("max_force_n = 0.05\nmax_torque_nm = 0.8") else {
+        return;
+    };
     let out = run(
         dir.path(),
         &[
@@ -510,16 +502,8 @@ fn a_force_guard_trip_on_franka_sim_stops_the_arm_and_rejects_the_sample() {
         s.samples,
         s.status
     );
-    assert!(
-        sim.aborted_a_motion().is_none(),
-        "{:?}",
-        sim.aborted_a_motion()
-    );
-    let at = still_arm(&sim);
-    assert!(
-        at.distance_to(&home_in_base()) < 1e-3,
-        "ended at {at:?}\n{said}"
-    );
+    sim.assert_no_abort();
+    ends_home_and_still(&sim, &said);
 }
 
 /// SIGTERM mid-run: the sample in hand finishes, the arm goes home, the run is
@@ -527,10 +511,9 @@ fn a_force_guard_trip_on_franka_sim_stops_the_arm_and_rejects_the_sample() {
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn sigterm_on_franka_sim_finishes_the_sample_and_leaves_the_arm_home() {
-    let Some(py) = python() else { return };
-    let dir = tempdir();
-    let sim = FrankaSim::start(&py, dir.path());
-    fcisim::write_rig(dir.path(), &rig_toml(&sim.address(), SIM_DEVICES, LIMITS));
+    let Some((dir, sim)) = tier(LIMITS) else {
+        return;
+    };
     let child = collect_until(
         dir.path(),
         &[
@@ -547,7 +530,7 @@ fn sigterm_on_franka_sim_finishes_the_sample_and_leaves_the_arm_home() {
         2,
         &sim,
     );
-    signal(&child, "TERM");
+    common::signal(&child, "TERM");
     let out = child.wait_with_output().expect("wait");
     assert!(
         out.status.success(),
@@ -563,8 +546,7 @@ fn sigterm_on_franka_sim_finishes_the_sample_and_leaves_the_arm_home() {
         (0..n as i64).collect::<Vec<_>>(),
         "no gap"
     );
-    let at = still_arm(&sim);
-    assert!(at.distance_to(&home_in_base()) < 1e-3, "ended at {at:?}");
+    ends_home_and_still(&sim, "");
 }
 
 /// The store fails mid-run (inserts refused from index 2, as a full disk): a safe stop,
@@ -572,10 +554,9 @@ fn sigterm_on_franka_sim_finishes_the_sample_and_leaves_the_arm_home() {
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn a_store_failure_on_franka_sim_ends_in_a_safe_stop_at_home() {
-    let Some(py) = python() else { return };
-    let dir = tempdir();
-    let sim = FrankaSim::start(&py, dir.path());
-    fcisim::write_rig(dir.path(), &rig_toml(&sim.address(), SIM_DEVICES, LIMITS));
+    let Some((dir, sim)) = tier(LIMITS) else {
+        return;
+    };
     let db = dir.path().join("softtouch.db");
     ok(&run(dir.path(), &["db", "init"]), &sim);
     runtime().block_on(async {
@@ -611,8 +592,7 @@ fn a_store_failure_on_franka_sim_ends_in_a_safe_stop_at_home() {
         "{:?}",
         s.events
     );
-    let at = still_arm(&sim);
-    assert!(at.distance_to(&home_in_base()) < 1e-3, "ended at {at:?}");
+    ends_home_and_still(&sim, "");
 }
 
 /// The robot's connection is lost mid-run (the server killed): the run ends in a safe
@@ -620,10 +600,9 @@ fn a_store_failure_on_franka_sim_ends_in_a_safe_stop_at_home() {
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn a_lost_robot_connection_ends_the_run_in_a_safe_stop() {
-    let Some(py) = python() else { return };
-    let dir = tempdir();
-    let mut sim = FrankaSim::start(&py, dir.path());
-    fcisim::write_rig(dir.path(), &rig_toml(&sim.address(), SIM_DEVICES, LIMITS));
+    let Some((dir, mut sim)) = tier(LIMITS) else {
+        return;
+    };
     let child = collect_until(
         dir.path(),
         &[
@@ -902,11 +881,7 @@ async fn grasp_trials_on_the_rig_lift_and_set_down_through_fci() {
     let status = devices.gripper.status().await.expect("status");
     assert!(status.position <= 5, "fingers at count {}", status.position);
     drop(devices);
-    assert!(
-        sim.aborted_a_motion().is_none(),
-        "{:?}",
-        sim.aborted_a_motion()
-    );
+    sim.assert_no_abort();
     store.close().await;
 }
 

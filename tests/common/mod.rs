@@ -265,3 +265,13 @@ pub(crate) fn data_k(html: &scraper::Html, key: &str) -> String {
     assert_eq!(found.len(), 1, "one element with data-k={key}: {found:?}");
     found[0].clone()
 }
+
+/// Sends signal `name` (`TERM`, `HUP`, …) to `child` with `kill`, or the test fails.
+pub(crate) fn signal(child: &std::process::Child, name: &str) {
+    let ok = std::process::Command::new("kill")
+        .args([&format!("-{name}"), &child.id().to_string()])
+        .status()
+        .unwrap_or_else(|e| panic!("kill: {e}"))
+        .success();
+    assert!(ok, "kill -{name} failed");
+}

@@ -117,8 +117,17 @@ impl FrankaSim {
         lines[lines.len().saturating_sub(30)..].join("\n")
     }
 
-    /// Whether its log records a motion the simulator aborted (a limit the robot
-    /// would have enforced).
+    /// Asserts its log records no motion the simulator aborted (a limit the robot would
+    /// have enforced).
+    pub(crate) fn assert_no_abort(&self) {
+        let aborted = self.aborted_a_motion();
+        assert!(
+            aborted.is_none(),
+            "franka-sim aborted a motion: {aborted:?}"
+        );
+    }
+
+    /// The first line of its log that records an aborted motion.
     #[must_use]
     pub(crate) fn aborted_a_motion(&self) -> Option<String> {
         let text = std::fs::read_to_string(&self.log).unwrap_or_default();
