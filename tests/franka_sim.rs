@@ -57,6 +57,7 @@ async fn connect(sim: &FrankaSim) -> FrankaArm {
         payload: None,
         joint_torque_thresholds_nm: FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM,
         limits: MotionLimits::default(),
+        motion_margin: None,
         route: Vec::new(),
     };
     FrankaArm::connect(config, Arc::new(TokioClock::new()))
@@ -95,10 +96,15 @@ fn tier(limits: &str) -> Option<(tempfile::TempDir, FrankaSim)> {
 
 /// The arm ended at the rigs' home, still; `context` is shown if not.
 fn ends_home_and_still(sim: &FrankaSim, context: &str) {
+    ends_at_and_still(sim, &home_in_base(), context);
+}
+
+/// The arm ended at `home` (base frame), still; `context` is shown if not.
+fn ends_at_and_still(sim: &FrankaSim, home: &ArmPose, context: &str) {
     let at = still_arm(sim);
     assert!(
-        at.distance_to(&home_in_base()) < 1e-3,
-        "ended at {at:?}\n{context}"
+        at.distance_to(home) < 1e-3 && at.angle_to(home) < 1e-2,
+        "ended at {at:?}, not at {home:?}\n{context}"
     );
 }
 
@@ -462,6 +468,124 @@ fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
     ends_home_and_still(&sim, "");
 }
 
+/// The tier's rig and scene widened to nearly the largest wrist turn the FR3's joint 7
+/// allows (θ within ±2.6 rad, the rod frame turned so that θ = 0 is joint 7 near -0.2
+/// rad, its range ±3.02 rad: the robot's own inverse kinematics may take the wrist
+/// further than the reach check's), approaching at 0.2 m/s, with the visiting order
+/// `order`.
+fn wide(rig: &str, order: &str) -> (String, String) {
+    let rig = rig
+        .replace("theta_rad = [-0.4, 0.4]", "theta_rad = [-2.6, 2.6]")
+        .replace(
+            "rotation_wxyz = [0.0, 0.9238795325112867, -0.3826834323650898, 0.0]",
+            "rotation_wxyz = [0.0, 1.0, 0.0, 0.0]",
+        )
+        // A rig that approaches at 0.2 m/s (the last 3 mm still at 0.02 m/s).
+        .replace("approach_speed_m_s = 0.05", "approach_speed_m_s = 0.2")
+        .replace(
+            "max_consecutive_failures = 10\n",
+            &format!("max_consecutive_failures = 10\nvisit_order = \"{order}\"\n"),
+        );
+    let scene = fcisim::SCENE.replace("theta_rad = [-0.4, 0.4]", "theta_rad = [-2.6, 2.6]");
+    (rig, scene)
+}
+
+/// Samples of the pace check: `SOFTTOUCH_FRANKA_SIM_SAMPLES`, 40 unless set (1 000 for
+/// the night's check, TESTING.md).
+fn pace_samples() -> u64 {
+    std::env::var("SOFTTOUCH_FRANKA_SIM_SAMPLES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(40)
+}
+
+/// `softtouch collect` of `samples` on `rig` and `scene` in a folder of its own:
+/// `(wall seconds, stdout, the run as stored)`.
+fn timed_collect(sim: &FrankaSim, rig: &str, scene: &str, samples: u64) -> (f64, String, RunRow) {
+    let dir = tempdir();
+    std::fs::write(dir.path().join("rig.toml"), rig).unwrap_or_else(|e| panic!("{e}"));
+    std::fs::write(dir.path().join("scene.toml"), scene).unwrap_or_else(|e| panic!("{e}"));
+    let n = samples.to_string();
+    let t0 = std::time::Instant::now();
+    let out = run(
+        dir.path(),
+        &[
+            "collect",
+            "--rig",
+            "rig.toml",
+            "--scene",
+            "scene.toml",
+            "--samples",
+            &n,
+            "--seed",
+            "5",
+        ],
+    );
+    let stdout = ok(&out, sim);
+    let wall_s = t0.elapsed().as_secs_f64();
+    (wall_s, stdout, stored(&dir.path().join("softtouch.db"), 1))
+}
+
+/// Where a sample's time goes on the Franka path, and the pace of a planned run over
+/// the widest wrist turn the FR3 allows: the planned order at the robot's speeds
+/// takes every sample with no motion aborted by franka-sim's enforced limits, and at
+/// least twice the pace of index order (every sample from home, wrist turns of up to
+/// 5.2 rad). Prints both phase tables (`--nocapture`).
+#[test]
+#[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
+fn a_planned_run_on_franka_sim_turns_the_wrist_little_and_breaks_no_limit() {
+    let Some((_dir, sim)) = tier(LIMITS) else {
+        return;
+    };
+    let n = pace_samples();
+    let base = rig_toml(&sim.address(), SIM_DEVICES, LIMITS);
+    let (rig, scene) = wide(&base, "planned");
+    let (wall_s, stdout, planned) = timed_collect(&sim, &rig, &scene, n);
+    eprintln!("franka-sim, planned order, {n} samples in {wall_s:.1} s wall:\n{stdout}");
+    assert_eq!(planned.status, "completed");
+    assert_eq!(planned.samples.len() as u64, n);
+    let rejected: Vec<_> = planned
+        .samples
+        .iter()
+        .filter(|s| s.status != "ok")
+        .collect();
+    assert!(rejected.is_empty(), "{rejected:?}");
+    assert_eq!(
+        planned.kinds("phase_times").len(),
+        1,
+        "{:?}",
+        planned.events
+    );
+    assert_eq!(planned.kinds("visit_plan").len(), 1, "{:?}", planned.events);
+    sim.assert_no_abort();
+    // Home in the widened rig's rod frame (turned 180° about x).
+    let home = ArmPose::from_contact(
+        &ArmPose {
+            translation_m: [0.58, 0.0, 0.6],
+            rotation_wxyz: [0.0, 1.0, 0.0, 0.0],
+        },
+        &softtouch_schemas::ContactPose {
+            x_m: -0.03,
+            z_m: 0.0,
+            theta_rad: 0.0,
+        },
+    );
+    ends_at_and_still(&sim, &home, &stdout);
+
+    // A few samples in index order, for the comparison.
+    let (rig, scene) = wide(&base, "index");
+    let few = 6.min(n);
+    let (index_wall_s, stdout, index) = timed_collect(&sim, &rig, &scene, few);
+    eprintln!("franka-sim, index order, {few} samples in {index_wall_s:.1} s wall:\n{stdout}");
+    assert_eq!(index.status, "completed");
+    sim.assert_no_abort();
+    let (planned_per_s, index_per_s) = (wall_s / n as f64, index_wall_s / few as f64);
+    assert!(
+        index_per_s > 2.0 * planned_per_s,
+        "planned {planned_per_s:.2} s a sample, index order {index_per_s:.2} s"
+    );
+}
+
 // ------------------------------------------------------------------- safe exits
 
 /// The force guard trips on the approach (a limit below the first contact's force):
@@ -721,6 +845,7 @@ async fn grasp_trials_on_the_rig_lift_and_set_down_through_fci() {
         end_effector: None,
         payload: None,
         joint_torque_thresholds_nm: None,
+        motion_margin: None,
     };
     rig.workspace.reach_in_base_m = [
         softtouch_schemas::Range::new(0.25, 0.75),

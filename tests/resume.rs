@@ -271,10 +271,12 @@ fn failed_and_resumed(scene: Option<&Path>, samples: u64, seed: u64) {
     common::fails_with(&out, 1, "disk is full");
     sql(common::stop_failing().to_owned());
     let partial = snapshot(&db, 1);
-    assert_eq!(
-        partial.samples.len(),
-        3,
-        "samples 0..3 stored before the failure"
+    // Samples 0..3 are stored until the planned order first reaches an index from 3 on
+    // (blocks of 2: the order within [2, 3] is the plan's).
+    assert!(
+        (2..=3).contains(&partial.samples.len()),
+        "{} samples stored before the failure",
+        partial.samples.len()
     );
     ok(&run_binary(
         dir.path(),

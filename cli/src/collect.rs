@@ -234,6 +234,10 @@ pub async fn run_collect(
         counters.frame_timeouts,
         softtouch_drivers::Clock::now(&clock).as_secs_f64()
     );
+    // Where the time went, as stored with the run's events (`phase_times`).
+    if counters.phases.samples > 0 {
+        write!(out, "{}", counters.phases.table()).map_err(io_failure)?;
+    }
     match outcome {
         Outcome::Completed => {
             writeln!(out, "{summary}; complete").map_err(io_failure)?;

@@ -125,7 +125,7 @@ pub fn run(cmd: ConfigCommand, out: &mut dyn Write) -> Result<(), Failure> {
 /// none (the rig's `end_effector` alone); connect checks again from the arm's own
 /// joints and end effector.
 fn franka_reach(rig: &softtouch_schemas::RigConfig) -> Result<Option<String>, String> {
-    use softtouch_drivers::franka::{FrankaConfig, reach};
+    use softtouch_drivers::franka::{FrankaConfig, MotionLimits, reach};
     let Some(config) = FrankaConfig::for_rig(rig) else {
         return Ok(None);
     };
@@ -144,7 +144,7 @@ fn franka_reach(rig: &softtouch_schemas::RigConfig) -> Result<Option<String>, St
         reach::Robot::Fr3,
         &start,
         &config.route,
-        config.limits.rot_speed_rad_s,
+        config.motion_margin.map_or(config.limits, |m| MotionLimits::for_robot(reach::Robot::Fr3, m)).rot_speed_rad_s,
     )
     .map_err(|e| format!("{e} (checked against the FR3 from its ready joints; connect checks again from the arm's own)"))?;
     Ok(Some(format!(

@@ -29,7 +29,8 @@ pub use config::{ConfigError, ConfigSource};
 pub use geometry::{ArmPose, ContactPose, Range};
 pub use rig::{
     ArmDevice, CameraDevice, FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM,
-    FRANKA_JOINT_TORQUE_LIMITS_NM, ForceSensorDevice, GripperDevice, Payload, Realtime, RigConfig,
+    FRANKA_DEFAULT_MOTION_MARGIN, FRANKA_JOINT_TORQUE_LIMITS_NM, ForceSensorDevice, GripperDevice,
+    Payload, Realtime, RigConfig,
 };
 pub use sample::{FrameFormat, FrameMeta, Sample, SampleStatus};
 pub use scene::{Effect, GustComponent, Medium, RodShape, RodSpec, SceneSpec};

@@ -48,6 +48,10 @@ pub enum EventKind {
     LeaseTakenOver,
     /// The devices could not be set up or started: nothing was collected.
     StartFailed,
+    /// The order a rod's block of samples is visited in (its fingerprint).
+    VisitPlan,
+    /// Where the samples' time went: per phase, over the samples of a job.
+    PhaseTimes,
 }
 
 impl EventKind {
@@ -75,6 +79,8 @@ impl EventKind {
             Self::GuardStop => "guard_stop",
             Self::LeaseTakenOver => "lease_taken_over",
             Self::StartFailed => "start_failed",
+            Self::VisitPlan => "visit_plan",
+            Self::PhaseTimes => "phase_times",
         }
     }
 }

@@ -127,12 +127,17 @@ impl FrankaSim {
         );
     }
 
-    /// The first line of its log that records an aborted motion.
+    /// The first line of its log that records an aborted motion: every reflex
+    /// franka-sim emulates logs "-- aborting the motion" (a motion limit, a
+    /// discontinuity of the joints' inverse kinematics, lost commands).
     #[must_use]
     pub(crate) fn aborted_a_motion(&self) -> Option<String> {
         let text = std::fs::read_to_string(&self.log).unwrap_or_default();
         text.lines()
-            .find(|l| l.contains("violation") && !l.contains("enforce"))
+            .find(|l| {
+                l.contains("aborting the motion")
+                    || (l.contains("violation") && !l.contains("enforce"))
+            })
             .map(str::to_owned)
     }
 }

@@ -90,6 +90,16 @@ impl Job<'_> {
                  camera: {dropped} frames dropped"
             ),
         );
+        if self.counters.phases.samples > 0 {
+            keep_log(
+                &self.events,
+                failed,
+                EventKind::PhaseTimes,
+                EventLevel::Info,
+                None,
+                self.counters.phases.table().trim_end(),
+            );
+        }
         if let Err(e) = ft_result {
             keep_log(
                 &self.events,
@@ -184,15 +194,46 @@ impl Job<'_> {
         (outcome, counters)
     }
 
-    /// Move home, recovering from reflexes on the way (with backoff, logged). Store
-    /// errors do not stop a retreat: they are kept for the sample loop.
+    /// Move home at the retreat speed, recovering from reflexes on the way (with
+    /// backoff, logged). Store errors do not stop a retreat: they are kept for the
+    /// sample loop.
     pub(super) async fn go_home(&mut self, index: Option<u64>) -> Result<(), DeviceError> {
-        let speed = self.plan.rig.procedure.retreat_speed_m_s;
-        let tries = self.plan.rig.procedure.max_attempts.max(1);
+        let home = self.home;
+        self.go_to(&home, false, index).await
+    }
+
+    /// The arm's pose at the retreat point of contact pose `pose`: its z and θ, home's
+    /// x (which the rig declares clear of the rod).
+    pub(super) fn retreat_pose(&self, pose: &ContactPose) -> ArmPose {
+        let w = &self.plan.rig.workspace;
+        ArmPose::from_contact(
+            &w.base_from_rod,
+            &ContactPose {
+                x_m: w.home.x_m,
+                ..*pose
+            },
+        )
+    }
+
+    /// Move to `target` clear of the rod (at the travel speed if `travel`, else the
+    /// retreat speed), recovering from reflexes on the way as [`Job::go_home`] does.
+    pub(super) async fn go_to(
+        &mut self,
+        target: &ArmPose,
+        travel: bool,
+        index: Option<u64>,
+    ) -> Result<(), DeviceError> {
+        let p = &self.plan.rig.procedure;
+        let speed = if travel {
+            p.travel_speed_m_s
+        } else {
+            p.retreat_speed_m_s
+        };
+        let tries = p.max_attempts.max(1);
         let mut n = 0;
         loop {
             n += 1;
-            match self.arm.move_to(&self.home, speed).await {
+            match self.arm.move_to(target, speed).await {
                 Ok(_) => return Ok(()),
                 Err(e) if e.is_fault() && n < tries => {
                     self.counters.arm_faults += 1;

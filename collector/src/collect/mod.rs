@@ -8,7 +8,9 @@
 //! - **settle**: wait the configured time;
 //! - **record**: ask the camera for the first frame after settling, and take the
 //!   force/torque readings in a window around that frame's time;
-//! - **retreat**: back home, where the rod can be changed.
+//! - **retreat**: out to the sample's retreat point (its z and θ, home's x), where the
+//!   next sample of the [`route`] begins; home between rods and after an error (with
+//!   `visit_order = "index"`, home after every sample).
 //!
 //! Faults: an arm reflex is recovered automatically with backoff and the sample tried
 //! again; a sensor fault, a bad window or a frame timeout retries the sample; when the
@@ -33,6 +35,8 @@
 //! - [`devices`]: the devices of a collection, built from the rig config;
 //! - [`sampler`]: contact poses and the rod schedule;
 //! - [`window`]: the force/torque stream and a sample's label window;
+//! - [`route`]: the order a rod's block is visited in, and the retreat points;
+//! - [`phases`]: where a sample's time goes;
 //! - [`rods`]: changing the rod (an operator, or the simulator);
 //! - [`bench`](mod@bench): what collection costs, and where its time goes.
 
@@ -41,9 +45,11 @@ pub mod bench_out;
 pub mod devices;
 pub mod disk;
 mod finish;
+pub mod phases;
 pub mod plan;
 mod procedure;
 pub mod rods;
+pub mod route;
 pub mod sampler;
 pub mod window;
 
@@ -57,8 +63,8 @@ use rods::RodChanger;
 use sampler::PoseSampler;
 pub use softtouch_drivers::GuardTrip;
 use softtouch_drivers::{Arm, Camera, Clock, DeviceError, TokioClock};
-use softtouch_schemas::rig::{FT_BUFFER_S, Tare};
-use softtouch_schemas::{ArmPose, SampleStatus, TimestampNs};
+use softtouch_schemas::rig::{FT_BUFFER_S, Tare, VisitOrder};
+use softtouch_schemas::{ArmPose, ContactPose, SampleStatus, TimestampNs};
 use std::time::Duration;
 use tokio::sync::watch;
 use window::{FtStream, WindowRules};
@@ -94,6 +100,8 @@ pub struct Counters {
     pub frame_timeouts: u64,
     /// Windows refused (any reason) before retrying.
     pub bad_windows: u64,
+    /// Where the samples' time went.
+    pub phases: phases::PhaseTimes,
 }
 
 /// Where progress goes (a bar on a terminal, log lines otherwise).
@@ -353,11 +361,23 @@ impl<'a> Job<'a> {
     ) -> Result<(Outcome, u64), CollectError> {
         let plan: &'a CollectPlan = self.plan;
         let sampler = PoseSampler::new(plan.seed, plan.scene.poses.clone());
+        let order = plan.rig.procedure.visit_order;
+        let visits = route::visits(
+            order,
+            &sampler,
+            &plan.scene.poses,
+            &plan.rods,
+            plan.end_index,
+            plan.indices(),
+        );
         let max_failures = plan.rig.procedure.max_consecutive_failures;
         let mut consecutive_failures = 0u32;
         let mut current_rod: Option<&str> = None;
-        let mut indices = plan.indices().peekable();
-        let mut index = indices.peek().copied().unwrap_or(plan.end_index);
+        let mut index = visits
+            .first()
+            .and_then(|v| v.todo.first().copied())
+            .unwrap_or(plan.end_index);
+        self.next_index = index;
         if let Err(e) = self.go_home(None).await {
             let reason = format!("cannot move the arm home before starting: {e}");
             return Ok((Outcome::SafeStop { reason }, index));
@@ -368,49 +388,96 @@ impl<'a> Job<'a> {
             let reason = format!("cannot zero the force/torque sensor at home: {e}");
             return Ok((Outcome::SafeStop { reason }, index));
         }
+        // A run resumed within a block starts where the uninterrupted run was: at the
+        // retreat point of the sample before it in the plan.
+        if order == VisitOrder::Planned
+            && let Some(v) = visits.first()
+            && let Some(prev) = v.todo.first().and_then(|&i| v.before(i))
+            && let Err(e) = self
+                .go_to(&self.retreat_pose(&sampler.pose(prev)), true, None)
+                .await
+        {
+            let reason = format!(
+                "cannot move the arm to the retreat point of sample {prev}, where the run continues: {e}"
+            );
+            return Ok((Outcome::SafeStop { reason }, index));
+        }
         self.check_store()?;
         self.continue_run_time().await?;
-        for i in indices {
-            index = i;
-            self.next_index = i;
-            if *self.stop.borrow() > 0 {
-                return Ok((Outcome::Stopped, index));
-            }
-            let rod = plan.rods.rod_for(index);
-            if current_rod != Some(rod) {
-                if let Err(e) = rods.change_rod(rod).await {
-                    let reason = format!("cannot change to rod `{rod}`: {e}");
+        for visit in &visits {
+            let Some(&first) = visit.todo.first() else {
+                continue;
+            };
+            let rod = plan.rods.rod_for(first);
+            self.events.log(
+                EventKind::VisitPlan,
+                EventLevel::Info,
+                Some(first),
+                &format!(
+                    "rod `{rod}`, samples {}..{}: {} order (fingerprint {}); {} to take, from sample {first}",
+                    visit.block.start,
+                    visit.block.end,
+                    order.as_str(),
+                    visit.fingerprint(),
+                    visit.todo.len()
+                ),
+            )?;
+            for &i in &visit.todo {
+                index = i;
+                self.next_index = i;
+                if *self.stop.borrow() > 0 {
+                    return Ok((Outcome::Stopped, index));
+                }
+                let rod = plan.rods.rod_for(index);
+                if current_rod != Some(rod) {
+                    // The rod is changed with the arm at home (where a block's last
+                    // sample ends; not so after a gap).
+                    if current_rod.is_some()
+                        && let Err(e) = self.go_home(Some(index)).await
+                    {
+                        let reason = format!("cannot move the arm home to change the rod: {e}");
+                        return Ok((Outcome::SafeStop { reason }, index));
+                    }
+                    if let Err(e) = rods.change_rod(rod).await {
+                        let reason = format!("cannot change to rod `{rod}`: {e}");
+                        return Ok((Outcome::SafeStop { reason }, index));
+                    }
+                    let message = format!("rod `{rod}` in place");
+                    self.events.log(
+                        EventKind::RodChange,
+                        EventLevel::Info,
+                        Some(index),
+                        &message,
+                    )?;
+                    progress.note(&message);
+                    current_rod = Some(rod);
+                }
+                let last_of_block = visit.order.last() == Some(&i);
+                match self
+                    .sample(index, rod, sampler.pose(index), last_of_block)
+                    .await?
+                {
+                    SampleEnd::Stored(SampleStatus::Ok) => consecutive_failures = 0,
+                    SampleEnd::Stored(SampleStatus::Rejected(_)) => consecutive_failures += 1,
+                    SampleEnd::Interrupted => return Ok((Outcome::Stopped, index)),
+                    SampleEnd::Fatal(reason) => {
+                        return Ok((Outcome::SafeStop { reason }, index));
+                    }
+                }
+                // A retreat's store error, met where the job would not stop for it.
+                self.check_store()?;
+                // Renewed per sample; refused (and the job stopped) if another process
+                // took the lease over meanwhile.
+                if let Some(lease) = &plan.lease {
+                    self.store.heartbeat(plan.run_id, lease)?;
+                }
+                progress.sample_done(index, &self.counters);
+                if consecutive_failures >= max_failures {
+                    let reason = format!(
+                        "{consecutive_failures} samples in a row failed (limit procedure.max_consecutive_failures = {max_failures})"
+                    );
                     return Ok((Outcome::SafeStop { reason }, index));
                 }
-                let message = format!("rod `{rod}` in place");
-                self.events.log(
-                    EventKind::RodChange,
-                    EventLevel::Info,
-                    Some(index),
-                    &message,
-                )?;
-                progress.note(&message);
-                current_rod = Some(rod);
-            }
-            match self.sample(index, rod, sampler.pose(index)).await? {
-                SampleEnd::Stored(SampleStatus::Ok) => consecutive_failures = 0,
-                SampleEnd::Stored(SampleStatus::Rejected(_)) => consecutive_failures += 1,
-                SampleEnd::Interrupted => return Ok((Outcome::Stopped, index)),
-                SampleEnd::Fatal(reason) => return Ok((Outcome::SafeStop { reason }, index)),
-            }
-            // A retreat's store error, met where the job would not stop for it.
-            self.check_store()?;
-            // Renewed per sample; refused (and the job stopped) if another process took
-            // the lease over meanwhile.
-            if let Some(lease) = &plan.lease {
-                self.store.heartbeat(plan.run_id, lease)?;
-            }
-            progress.sample_done(index, &self.counters);
-            if consecutive_failures >= max_failures {
-                let reason = format!(
-                    "{consecutive_failures} samples in a row failed (limit procedure.max_consecutive_failures = {max_failures})"
-                );
-                return Ok((Outcome::SafeStop { reason }, index));
             }
         }
         Ok((Outcome::Completed, plan.end_index))

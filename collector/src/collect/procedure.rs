@@ -6,7 +6,7 @@ use super::{CollectError, Job, recovery_backoff};
 use crate::store::{EventKind, EventLevel};
 use softtouch_drivers::{Clock as _, DeviceError, Frame};
 use softtouch_drivers::{ForceGuard, GuardTrip};
-use softtouch_schemas::rig::Tare;
+use softtouch_schemas::rig::{Tare, VisitOrder};
 use softtouch_schemas::sample::RejectReason;
 use softtouch_schemas::{
     ArmPose, ContactPose, DurationNs, FtReading, Sample, SampleStatus, TimestampNs, Wrench,
@@ -52,6 +52,18 @@ enum AttemptError {
     Interrupted,
 }
 
+impl AttemptError {
+    /// What a failed move means for the attempt: a fault is recovered, a refused
+    /// command is a bug or a bad config, anything else a lost link.
+    fn of_arm(e: DeviceError) -> Self {
+        match e {
+            e if e.is_fault() => Self::ArmFault(e),
+            e @ DeviceError::InvalidCommand { .. } => Self::Unsafe(e.to_string()),
+            e => Self::ArmLink(e),
+        }
+    }
+}
+
 /// A finished attempt: the pieces of a sample.
 struct Taken {
     measured: Option<ContactPose>,
@@ -67,12 +79,41 @@ impl Job<'_> {
         *self.stop.borrow() >= 2
     }
 
-    /// Take sample `index`, retrying as the procedure allows, and store it.
+    /// Nanoseconds on the rig's clock since `t0`.
+    fn since(&self, t0: TimestampNs) -> u64 {
+        self.clock.now().0.saturating_sub(t0.0)
+    }
+
+    /// Take sample `index`, retrying as the procedure allows, and store it; its time
+    /// is added to the run's [`PhaseTimes`](super::phases::PhaseTimes). The arm ends
+    /// at the pose's retreat point in a planned order, or at home where `home_after`
+    /// (the block's last sample: the rod is changed at home) or the order is index.
     pub(super) async fn sample(
         &mut self,
         index: u64,
         rod: &str,
         pose: ContactPose,
+        home_after: bool,
+    ) -> Result<SampleEnd, CollectError> {
+        let t0 = self.clock.now();
+        let before = self.counters.phases;
+        let end = self.take_sample(index, rod, pose, home_after).await;
+        if matches!(end, Ok(SampleEnd::Stored(_))) {
+            self.counters.phases.samples += 1;
+            self.counters.phases.total_ns += self.since(t0);
+        } else {
+            // Only stored samples count, each with all of its phases.
+            self.counters.phases = before;
+        }
+        end
+    }
+
+    async fn take_sample(
+        &mut self,
+        index: u64,
+        rod: &str,
+        pose: ContactPose,
+        home_after: bool,
     ) -> Result<SampleEnd, CollectError> {
         let max_attempts = self.plan.rig.procedure.max_attempts;
         let mut recoveries = 0u32;
@@ -82,18 +123,33 @@ impl Job<'_> {
                 self.counters.retries += 1;
             }
             let result = self.attempt(pose).await;
-            // Always end an attempt at home, whatever happened.
-            // (A reflex is recovered below first.)
+            // End every attempt clear of the rod: at its retreat point where the plan
+            // goes on from there, else at home (a reflex is recovered below first). A
+            // block ends at home, so a run resumed at the next block starts where the
+            // uninterrupted run was.
             if !matches!(
                 result,
                 Err(AttemptError::ArmLink(_)
                     | AttemptError::Interrupted
                     | AttemptError::ArmFault(_))
-            ) && let Err(e) = self.go_home(Some(index)).await
-            {
-                return Ok(SampleEnd::Fatal(format!(
-                    "cannot retreat home after sample {index}: {e}"
-                )));
+            ) {
+                let t0 = self.clock.now();
+                let planned = self.plan.rig.procedure.visit_order == VisitOrder::Planned;
+                let (back, to) = if planned && result.is_ok() && !home_after {
+                    let clear = self.retreat_pose(&pose);
+                    (
+                        self.go_to(&clear, true, Some(index)).await,
+                        "its retreat point",
+                    )
+                } else {
+                    (self.go_home(Some(index)).await, "home")
+                };
+                self.counters.phases.retreat_ns += self.since(t0);
+                if let Err(e) = back {
+                    return Ok(SampleEnd::Fatal(format!(
+                        "cannot retreat to {to} after sample {index}: {e}"
+                    )));
+                }
             }
             match result {
                 Ok(taken) => match taken.stats.reject {
@@ -333,61 +389,28 @@ impl Job<'_> {
         Ok(SampleEnd::Stored(status))
     }
 
-    /// One try: approach, settle, record. Leaves the arm wherever it ended.
-    ///
-    /// The approach runs along the straight line to the target, its last
-    /// `procedure.slow_approach_m` at `slow_approach_speed_m_s`.
-    async fn attempt(&mut self, pose: ContactPose) -> Result<Taken, AttemptError> {
-        let w = &self.plan.rig.workspace;
-        let p = &self.plan.rig.procedure;
-        let l = &self.plan.rig.limits;
-        let target = ArmPose::from_contact(&w.base_from_rod, &pose);
-        // Every command is checked before it reaches the arm.
-        if !pose.is_finite() || !w.contains_contact(&pose) || !w.contains_arm(&target) {
-            return Err(AttemptError::Unsafe(format!(
-                "pose {pose:?} (flange at {:?} m) lies outside the workspace; not sent",
-                target.translation_m
-            )));
-        }
-        if self.forced() {
-            return Err(AttemptError::Interrupted);
-        }
-
-        // Zero the sensor at home, clear of the rod: the label then carries neither the
-        // sensor's offset nor the drift from before this attempt.
-        if p.tare_for(self.plan.scene.medium) == Tare::PerSample {
-            self.ft.bias().await.map_err(AttemptError::Sensor)?;
-        }
-
-        // approach, guarded
-        let limits = ForceGuard {
-            max_force_n: l.max_force_n,
-            max_torque_nm: l.max_torque_nm,
-            stale: Duration::from_secs_f64(p.ft_stale_s),
-        };
-        // The last stretch slowly: a contact there trips the guard at low speed.
-        let from = match self.arm.state().await {
-            Ok(s) => s.base_from_finger,
-            Err(e) if e.is_fault() => return Err(AttemptError::ArmFault(e)),
-            Err(e) => return Err(AttemptError::ArmLink(e)),
-        };
-        let legs = approach_legs(&from, &target, p);
+    /// The moves `legs` in turn, raced against the force guard `limits`; how long each
+    /// took on the rig's clock. A trip stops the arm (the caller logs what happened).
+    async fn guarded(
+        &mut self,
+        legs: &[(ArmPose, f64)],
+        limits: &ForceGuard,
+    ) -> Result<Vec<u64>, AttemptError> {
+        let clock = self.clock;
         let arm = &mut self.arm;
-        let guard = self.ft.guard(&limits);
-        let approach = async {
-            let mut reached = None;
+        let mut took = Vec::with_capacity(legs.len());
+        let guard = self.ft.guard(limits);
+        let moves = async {
             for (pose, speed_m_s) in legs {
-                reached = Some(arm.move_to(&pose, speed_m_s).await?);
+                let t0 = clock.now();
+                arm.move_to(pose, *speed_m_s).await?;
+                took.push(clock.now().0.saturating_sub(t0.0));
             }
-            reached.ok_or_else(|| DeviceError::InvalidCommand {
-                device: "arm".into(),
-                message: "an approach with no move".into(),
-            })
+            Ok::<(), DeviceError>(())
         };
         let moved = tokio::select! {
-            moved = approach => moved,
+            moved = moves => moved,
             trip = guard => {
-                // Stop first; the caller logs what happened.
                 let stop_failed = self.arm.stop().await.err();
                 return Err(match trip {
                     GuardTrip::OverLimit(reading) => AttemptError::ForceLimit {
@@ -398,16 +421,86 @@ impl Job<'_> {
                 });
             }
         };
-        match moved {
-            Ok(_) => {}
-            Err(e) if e.is_fault() => return Err(AttemptError::ArmFault(e)),
-            Err(e @ DeviceError::InvalidCommand { .. }) => {
-                return Err(AttemptError::Unsafe(e.to_string()));
+        moved.map_err(AttemptError::of_arm)?;
+        Ok(took)
+    }
+
+    /// One try: approach, settle, record. Leaves the arm wherever it ended.
+    ///
+    /// The approach runs along the straight line to the target, its last
+    /// `procedure.slow_approach_m` at `slow_approach_speed_m_s`.
+    async fn attempt(&mut self, pose: ContactPose) -> Result<Taken, AttemptError> {
+        // The plan outlives the job's borrows: its settings stay usable across them.
+        let plan = self.plan;
+        let w = &plan.rig.workspace;
+        let p = &plan.rig.procedure;
+        let l = &plan.rig.limits;
+        let target = ArmPose::from_contact(&w.base_from_rod, &pose);
+        let planned = p.visit_order == VisitOrder::Planned;
+        let clear = self.retreat_pose(&pose);
+        // Every command is checked before it reaches the arm.
+        if !pose.is_finite()
+            || !w.contains_contact(&pose)
+            || !w.contains_arm(&target)
+            || (planned && !w.contains_arm(&clear))
+        {
+            return Err(AttemptError::Unsafe(format!(
+                "pose {pose:?} (flange at {:?} m, its retreat point at {:?} m) lies outside the workspace; not sent",
+                target.translation_m, clear.translation_m
+            )));
+        }
+        if self.forced() {
+            return Err(AttemptError::Interrupted);
+        }
+
+        let limits = ForceGuard {
+            max_force_n: l.max_force_n,
+            max_torque_nm: l.max_torque_nm,
+            stale: Duration::from_secs_f64(p.ft_stale_s),
+        };
+        // Travel clear of the rod to this pose's retreat point (a few millimetres and
+        // a small turn from the last one, in a planned order), guarded as the approach
+        // is: a retreat point that is not clear of the rod stops the arm.
+        if planned {
+            let took = self
+                .guarded(&[(clear, p.travel_speed_m_s)], &limits)
+                .await?;
+            self.counters.phases.travel_ns += took.iter().sum::<u64>();
+        }
+
+        // Zero the sensor clear of the rod (home, or the retreat point): the label then
+        // carries neither the sensor's offset nor the drift from before this attempt.
+        if p.tare_for(self.plan.scene.medium) == Tare::PerSample {
+            let t0 = self.clock.now();
+            self.ft.bias().await.map_err(AttemptError::Sensor)?;
+            self.counters.phases.tare_ns += self.since(t0);
+        }
+
+        // approach, guarded; the last stretch slowly: a contact there trips the guard
+        // at low speed.
+        let from = if planned {
+            clear
+        } else {
+            match self.arm.state().await {
+                Ok(s) => s.base_from_finger,
+                Err(e) if e.is_fault() => return Err(AttemptError::ArmFault(e)),
+                Err(e) => return Err(AttemptError::ArmLink(e)),
             }
-            Err(e) => return Err(AttemptError::ArmLink(e)),
+        };
+        let legs = approach_legs(&from, &target, p);
+        let took = self.guarded(&legs, &limits).await?;
+        // The last leg is the slow one unless the slow end is off.
+        let slow_last = p.slow_approach_m > 0.0;
+        for (k, ns) in took.iter().enumerate() {
+            if slow_last && k + 1 == took.len() {
+                self.counters.phases.slow_approach_ns += ns;
+            } else {
+                self.counters.phases.approach_ns += ns;
+            }
         }
 
         // settle
+        let t0 = self.clock.now();
         tokio::time::sleep(Duration::from_secs_f64(p.settle_s)).await;
         if self.forced() {
             return Err(AttemptError::Interrupted);
@@ -424,8 +517,10 @@ impl Job<'_> {
             Err(e) if e.is_fault() => return Err(AttemptError::ArmFault(e)),
             Err(e) => return Err(AttemptError::ArmLink(e)),
         };
+        self.counters.phases.settle_ns += self.since(t0);
 
         // record: the first frame after settling, and the readings around its time
+        let t0 = self.clock.now();
         let timeout_ms = (p.frame_timeout_s * 1000.0).ceil() as u64;
         let frame = self
             .camera
@@ -440,6 +535,7 @@ impl Job<'_> {
             .await
             .map_err(AttemptError::Sensor)?;
         let readings = self.ft.take_window(start, end);
+        self.counters.phases.record_ns += self.since(t0);
         let mut stats = window_stats(&readings, frame.meta.t, &self.rules);
         // No reading reached the window's end in time: the stream stalled and the
         // window is cut short, whatever it holds.

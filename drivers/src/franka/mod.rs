@@ -73,6 +73,8 @@ pub struct MotionLimits {
     pub brake_accel_m_s2: f64,
     /// Translational jerk when a move is aborted, m/s³.
     pub brake_jerk_m_s3: f64,
+    /// Translational speed a move is held to, m/s (a faster request is slowed).
+    pub max_speed_m_s: f64,
 }
 
 impl Default for MotionLimits {
@@ -89,11 +91,47 @@ impl Default for MotionLimits {
             // own 0.5 m/s² and 20 m/s³.
             brake_accel_m_s2: 1.5,
             brake_jerk_m_s3: 200.0,
+            max_speed_m_s: MAX_SPEED_M_S,
         }
     }
 }
 
+/// A robot's Cartesian limits (libfranka's `rate_limiting.h`; franka-sim enforces the
+/// same): `(velocity m/s, acceleration m/s², jerk m/s³, rotational velocity rad/s,
+/// rotational acceleration rad/s², rotational jerk rad/s³)`.
+#[must_use]
+pub const fn cartesian_limits(robot: reach::Robot) -> [f64; 6] {
+    match robot {
+        reach::Robot::Fr3 => [3.0, 9.0, 4500.0, 2.5, 17.0, 8500.0],
+        reach::Robot::Fer => [1.7, 13.0, 6500.0, 2.5, 25.0, 12500.0],
+    }
+}
+
 impl MotionLimits {
+    /// `margin` (in (0, 1]; anything else is taken as the default) of `robot`'s
+    /// Cartesian limits. An abort brakes as the default does (1.5 m/s², 200 m/s³: what
+    /// one FER accepted), or softer where the joints need it (`run_move`).
+    #[must_use]
+    pub fn for_robot(robot: reach::Robot, margin: f64) -> Self {
+        let m = if margin.is_finite() && margin > 0.0 && margin <= 1.0 {
+            margin
+        } else {
+            softtouch_schemas::FRANKA_DEFAULT_MOTION_MARGIN
+        };
+        let [v, a, j, rv, ra, rj] = cartesian_limits(robot);
+        let d = Self::default();
+        Self {
+            accel_m_s2: a * m,
+            jerk_m_s3: j * m,
+            rot_speed_rad_s: rv * m,
+            rot_accel_rad_s2: ra * m,
+            rot_jerk_rad_s3: rj * m,
+            brake_accel_m_s2: d.brake_accel_m_s2,
+            brake_jerk_m_s3: d.brake_jerk_m_s3,
+            max_speed_m_s: (v * m).min(MAX_SPEED_M_S),
+        }
+    }
+
     /// The limits an aborted move brakes with: the brake's translation, the move's
     /// rotation (no braking rotation has been measured on a Panda).
     #[must_use]
@@ -133,6 +171,9 @@ pub struct FrankaConfig {
     /// The route to check against the robot's joint ranges and velocity limits at
     /// connect, from the joints the arm is at ([`reach`]); empty: none.
     pub route: Vec<reach::Leg>,
+    /// `Some(m)`: at connect, `limits` become `m` of the Cartesian limits of the robot
+    /// the FCI version names ([`MotionLimits::for_robot`]); `None`: `limits` as given.
+    pub motion_margin: Option<f64>,
 }
 
 impl FrankaConfig {
@@ -147,6 +188,7 @@ impl FrankaConfig {
             end_effector,
             payload,
             joint_torque_thresholds_nm,
+            motion_margin,
         } = d
         else {
             return None;
@@ -164,6 +206,9 @@ impl FrankaConfig {
                 .unwrap_or(softtouch_schemas::FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM),
             limits: MotionLimits::default(),
             route: Vec::new(),
+            motion_margin: Some(
+                motion_margin.unwrap_or(softtouch_schemas::FRANKA_DEFAULT_MOTION_MARGIN),
+            ),
         })
     }
 
@@ -323,7 +368,10 @@ pub fn path_limits(
         if v.is_finite() { v } else { 1e6 }
     };
     franka::OtgLimits {
-        max_velocity: per(speed_m_s.min(MAX_SPEED_M_S), l.rot_speed_rad_s),
+        max_velocity: per(
+            speed_m_s.min(l.max_speed_m_s).min(MAX_SPEED_M_S),
+            l.rot_speed_rad_s,
+        ),
         max_acceleration: per(l.accel_m_s2, l.rot_accel_rad_s2),
         max_jerk: per(l.jerk_m_s3, l.rot_jerk_rad_s3),
     }
@@ -485,14 +533,53 @@ fn run_move(
     target: &ArmPose,
     speed: f64,
     limits: &MotionLimits,
+    joints: &JointCheck,
     job: &mut MoveJob<'_>,
 ) -> Result<(), DeviceError> {
     let start = robot.read_once().map_err(err)?;
     let from = ArmPose::from_matrix(&start.O_T_EE_c);
     let dist = from.distance_to(target);
     let angle = from.angle_to(target);
-    let path = path_limits(dist, angle, speed, limits);
-    let brake_path = path_limits(dist, angle, speed, &limits.braking());
+    let mut path = path_limits(dist, angle, speed, limits);
+    let mut brake_path = path_limits(dist, angle, speed, &limits.braking());
+    // Slowed (or refused) here where a joint would turn faster, or speed up or jerk
+    // harder, than its limits allow: the robot would abort the motion (FR3: velocity
+    // limits that depend on the joint's position).
+    if let Some((kin, robot_kind)) = joints {
+        let scale = reach::path_scale(
+            kin,
+            *robot_kind,
+            &start.q,
+            &from,
+            target,
+            [path.max_velocity, path.max_acceleration, path.max_jerk],
+        )
+        .map_err(|e| DeviceError::InvalidCommand {
+            device: DEVICE.into(),
+            message: format!("move refused before it was sent: {e}"),
+        })?;
+        if scale.velocity < 1.0 || scale.acceleration < 1.0 || scale.jerk < 1.0 {
+            tracing::debug!(
+                "franka: move {} slowed to {:.0} % of its speed, {:.0} % of its acceleration and {:.0} % of its jerk to keep every joint within {:.0} % of its limits",
+                job.generation,
+                scale.velocity * 100.0,
+                scale.acceleration * 100.0,
+                scale.jerk * 100.0,
+                reach::VELOCITY_MARGIN * 100.0
+            );
+            path.max_velocity *= scale.velocity;
+            path.max_acceleration *= scale.acceleration;
+            path.max_jerk *= scale.jerk;
+        }
+        // Where the joints held the move's acceleration or jerk down, a brake harder
+        // than that would break the same limits.
+        if scale.acceleration < 1.0 {
+            brake_path.max_acceleration = brake_path.max_acceleration.min(path.max_acceleration);
+        }
+        if scale.jerk < 1.0 {
+            brake_path.max_jerk = brake_path.max_jerk.min(path.max_jerk);
+        }
+    }
     let mut otg = franka::Otg::new(0.0, path).map_err(err)?;
     otg.set_target(1.0).map_err(err)?;
     let mut seed: Option<ArmPose> = None;
@@ -539,10 +626,15 @@ fn run_move(
         .map_err(err)
 }
 
+/// The kinematics each move is checked with against the joints' velocity limits
+/// (`None`: not checked, as in tests of the control loop alone).
+type JointCheck = Option<(reach::Kinematics, reach::Robot)>;
+
 fn worker(
     robot: franka::Robot,
     rx: mpsc::Receiver<Cmd>,
     limits: MotionLimits,
+    joints: JointCheck,
     cancel: Arc<Cancel>,
     clock: Arc<dyn Clock>,
     feed: FeedTx,
@@ -580,7 +672,7 @@ fn worker(
                     clock: clock.as_ref(),
                 };
                 let began = std::time::Instant::now();
-                let moved = run_move(&robot, &target, speed, &limits, &mut job);
+                let moved = run_move(&robot, &target, speed, &limits, &joints, &mut job);
                 // Where a sample's time goes on a robot: each move's speed and duration
                 // (`RUST_LOG=softtouch_drivers::franka=debug`).
                 tracing::debug!(
@@ -695,17 +787,12 @@ fn configure(robot: &franka::Robot, config: &FrankaConfig) -> Result<(), DeviceE
         .map_err(err)
 }
 
-/// The route of `config` from the joints the arm is at, against the limits of the robot
-/// the FCI version names; refused before any motion.
-fn check_reach(robot: &franka::Robot, config: &FrankaConfig) -> Result<(), DeviceError> {
-    if config.route.is_empty() {
-        return Ok(());
-    }
+/// The arm's kinematics with its end effector as the robot reports it: its `O_T_EE`
+/// against the model's flange at its joints. On a robot this is `F_T_EE`; a simulator
+/// whose reported frame is not the documented flange (franka-sim's link7, TESTING.md)
+/// is taken at its word.
+fn robot_kinematics(robot: &franka::Robot) -> Result<(reach::Kinematics, [f64; 7]), DeviceError> {
     let s = robot.read_once().map_err(err)?;
-    let kind = reach::Robot::of(robot.fci_version());
-    // The end effector as the robot reports it: its O_T_EE against the model's flange
-    // at its joints. On a robot this is F_T_EE; a simulator whose reported frame is
-    // not the documented flange (franka-sim's link7, TESTING.md) is taken at its word.
     let kin = reach::Kinematics::new(IDENTITY);
     let flange = kin.pose(&s.q);
     let reported = ArmPose::from_matrix(&s.O_T_EE);
@@ -713,27 +800,35 @@ fn check_reach(robot: &franka::Robot, config: &FrankaConfig) -> Result<(), Devic
     let told = ArmPose::from_matrix(&s.F_T_EE);
     if f_t_ee.distance_to(&told) > 1e-3 || f_t_ee.angle_to(&told) > 0.01 {
         tracing::warn!(
-            "franka: the robot's O_T_EE is {:.1} mm and {:.2} rad from its model's flange · F_T_EE: the reach check takes the pose it reports",
+            "franka: the robot's O_T_EE is {:.1} mm and {:.2} rad from its model's flange · F_T_EE: the reach and joint speed checks take the pose it reports",
             f_t_ee.distance_to(&told) * 1000.0,
             f_t_ee.angle_to(&told)
         );
     }
-    let kin = kin.with_end_effector(f_t_ee.to_matrix());
-    reach::check_route(
-        &kin,
-        kind,
-        &s.q,
-        &config.route,
-        config.limits.rot_speed_rad_s,
-    )
-    .map(|_| ())
-    .map_err(|e| DeviceError::InvalidCommand {
-        device: DEVICE.into(),
-        message: format!(
-            "the rig's workspace is beyond the {}'s limits from its joints now, refused before any motion: {e}",
-            kind.name()
-        ),
-    })
+    Ok((kin.with_end_effector(f_t_ee.to_matrix()), s.q))
+}
+
+/// The route of `config` from the joints `q` the arm is at, against the limits of
+/// `kind`; refused before any motion.
+fn check_reach(
+    kin: &reach::Kinematics,
+    kind: reach::Robot,
+    q: &[f64; 7],
+    config: &FrankaConfig,
+    limits: &MotionLimits,
+) -> Result<(), DeviceError> {
+    if config.route.is_empty() {
+        return Ok(());
+    }
+    reach::check_route(kin, kind, q, &config.route, limits.rot_speed_rad_s)
+        .map(|_| ())
+        .map_err(|e| DeviceError::InvalidCommand {
+            device: DEVICE.into(),
+            message: format!(
+                "the rig's workspace is beyond the {}'s limits from its joints now, refused before any motion: {e}",
+                kind.name()
+            ),
+        })
 }
 
 /// Whether the robot reports the stiffness frame at the end effector (`EE_T_K` the
@@ -806,12 +901,44 @@ impl FrankaArm {
                         return;
                     }
                 };
-                let set = configure(&robot, &config).and_then(|()| check_reach(&robot, &config));
-                let ok = set.is_ok();
-                let _ = ready_tx.send(set);
-                if ok {
-                    worker(robot, rx, config.limits, cancel2, clock2, feed_tx);
-                }
+                // The robot's own Cartesian limits, by the FCI version it answered with.
+                let kind = reach::Robot::of(robot.fci_version());
+                let limits = config
+                    .motion_margin
+                    .map_or(config.limits, |m| MotionLimits::for_robot(kind, m));
+                let set = configure(&robot, &config)
+                    .and_then(|()| robot_kinematics(&robot))
+                    .and_then(|(kin, q)| {
+                        check_reach(&kin, kind, &q, &config, &limits)?;
+                        Ok(kin)
+                    });
+                let kin = match set {
+                    Ok(kin) => {
+                        let _ = ready_tx.send(Ok(()));
+                        kin
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e));
+                        return;
+                    }
+                };
+                tracing::info!(
+                    "franka: {} moves at {:.2} m/s, {:.1} m/s², {:.2} rad/s, {:.1} rad/s² at most",
+                    kind.name(),
+                    limits.max_speed_m_s,
+                    limits.accel_m_s2,
+                    limits.rot_speed_rad_s,
+                    limits.rot_accel_rad_s2
+                );
+                worker(
+                    robot,
+                    rx,
+                    limits,
+                    Some((kin, kind)),
+                    cancel2,
+                    clock2,
+                    feed_tx,
+                );
             })
             .map_err(|e| DeviceError::Link {
                 device: DEVICE.into(),

@@ -292,6 +292,146 @@ pub fn check_route(
     Ok(q)
 }
 
+/// How much of a move's planned path limits its joints allow ([`path_scale`]): each
+/// in (0, 1], 1 where the move is within the joints' limits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathScale {
+    /// Share of the path's velocity.
+    pub velocity: f64,
+    /// Share of the path's acceleration.
+    pub acceleration: f64,
+    /// Share of the path's jerk.
+    pub jerk: f64,
+}
+
+/// Joint acceleration and jerk limits `(rad/s², rad/s³)` of `robot` (libfranka's, as
+/// franka-rs ports them: the FR3's uniform, the Panda's per joint).
+#[must_use]
+pub const fn joint_rate_limits(robot: Robot) -> ([f64; 7], [f64; 7]) {
+    match robot {
+        Robot::Fr3 => (
+            franka::rate_limiting::MAX_JOINT_ACCELERATION,
+            franka::rate_limiting::MAX_JOINT_JERK,
+        ),
+        Robot::Fer => (
+            franka::rate_limiting::fer::MAX_JOINT_ACCELERATION,
+            franka::rate_limiting::fer::MAX_JOINT_JERK,
+        ),
+    }
+}
+
+/// The shares of a straight move's path limits (the path parameter s, 0 at `from` and
+/// 1 at `to`: velocity `s_dot` per second, acceleration `s_ddot`, jerk `s_dddot`) at
+/// which every joint stays within [`VELOCITY_MARGIN`] of its velocity limit (at its
+/// position: the FR3's depend on it), acceleration limit and jerk limit, followed from
+/// joints `q0` (whose end effector is at or near `from`). A joint's rates are its path
+/// derivatives times the path's: `q̇ = q'·ṡ`, `q̈ = q'·s̈ + q''·ṡ²`,
+/// `q⃛ ≈ q'·s⃛ + 3·q''·ṡ·s̈`. The robot aborts a motion whose inverse kinematics
+/// breaks these (FR3: `cartesian_motion_generator_joint_velocity_discontinuity` past
+/// 10 rad/s², `..._acceleration_discontinuity` past 5000 rad/s³); the move is slowed
+/// instead. What would break a joint's range, or a pose out of reach, is an error:
+/// the move is refused.
+pub fn path_scale(
+    kin: &Kinematics,
+    robot: Robot,
+    q0: &[f64; 7],
+    from: &ArmPose,
+    to: &ArmPose,
+    path: [f64; 3],
+) -> Result<PathScale, String> {
+    let [s_dot, s_ddot, s_dddot] = path.map(f64::abs);
+    let (dist, angle) = (from.distance_to(to), from.angle_to(to));
+    if !(dist.is_finite() && angle.is_finite() && path.iter().all(|v| v.is_finite())) {
+        return Err(format!("a move to {to:?} is not finite"));
+    }
+    let (q_min, q_max) = robot.position_limits();
+    let (acc_max, jerk_max) = joint_rate_limits(robot);
+    let steps = ((dist / 0.002).max(angle / 0.01).ceil() as usize).clamp(1, 1000);
+    let ds = 1.0 / steps as f64;
+    // The joints at the commanded start: the measured ones are off it where the arm
+    // presses against something (impedance control), and a first step from them would
+    // read as a jump.
+    let Some(mut q) = kin.solve(from, q0) else {
+        return Err(format!(
+            "the arm cannot reach its own commanded pose {:?} m from its joints",
+            from.translation_m
+        ));
+    };
+    let mut worst_v = 0.0f64;
+    // Largest |q'| and |q''| of each joint along the path.
+    let (mut d1, mut d2) = ([0.0f64; 7], [0.0f64; 7]);
+    let mut last_d1: Option<[f64; 7]> = None;
+    for k in 1..=steps {
+        let pose = from.slerp(to, k as f64 * ds);
+        let Some(next) = kin.solve(&pose, &q) else {
+            return Err(format!(
+                "the arm cannot reach {:?} m on the way to {:?} m (out of reach or through a singularity)",
+                pose.translation_m, to.translation_m
+            ));
+        };
+        let (lower, upper) = robot.velocity_limits(&q);
+        let mut dq = [0.0; 7];
+        for j in 0..7 {
+            if next[j] < q_min[j] || next[j] > q_max[j] {
+                return Err(format!(
+                    "joint {} would be at {:.3} rad, outside the {}'s range [{:.4}, {:.4}] rad",
+                    j + 1,
+                    next[j],
+                    robot.name(),
+                    q_min[j],
+                    q_max[j]
+                ));
+            }
+            dq[j] = (next[j] - q[j]) / ds;
+            d1[j] = d1[j].max(dq[j].abs());
+            if let Some(prev) = last_d1 {
+                d2[j] = d2[j].max(((dq[j] - prev[j]) / ds).abs());
+            }
+            let v = dq[j] * s_dot;
+            let limit = if v >= 0.0 { upper[j] } else { -lower[j] };
+            if limit > 0.0 {
+                worst_v = worst_v.max(v.abs() / (limit * VELOCITY_MARGIN));
+            } else if v.abs() > 1e-9 {
+                // At a range's end the limit towards it is zero: no speed is safe.
+                return Err(format!(
+                    "joint {} at {:.3} rad cannot turn further that way (the {}'s limit there is 0 rad/s)",
+                    j + 1,
+                    q[j],
+                    robot.name()
+                ));
+            }
+        }
+        last_d1 = Some(dq);
+        q = next;
+    }
+    let velocity = if worst_v > 1.0 { 1.0 / worst_v } else { 1.0 };
+    let v = s_dot * velocity;
+    // The share of `want` that joint j allows, given what the curvature takes.
+    let share = |want: f64, room: f64, g1: f64| -> f64 {
+        if want <= 0.0 || g1 * want <= room {
+            1.0
+        } else {
+            // The curvature alone may take the whole limit: crawl rather than stop.
+            (room / (g1 * want)).clamp(0.05, 1.0)
+        }
+    };
+    let (mut acceleration, mut jerk) = (1.0f64, 1.0f64);
+    for j in 0..7 {
+        let a_room = acc_max[j] * VELOCITY_MARGIN - d2[j] * v * v;
+        acceleration = acceleration.min(share(s_ddot, a_room, d1[j]));
+    }
+    let a = s_ddot * acceleration;
+    for j in 0..7 {
+        let j_room = jerk_max[j] * VELOCITY_MARGIN - 3.0 * d2[j] * v * a;
+        jerk = jerk.min(share(s_dddot, j_room, d1[j]));
+    }
+    Ok(PathScale {
+        velocity,
+        acceleration,
+        jerk,
+    })
+}
+
 /// The route a collection takes through `w`, as far as reach goes: home, then each
 /// corner of the workspace (x, z and θ at their ends, θ = 0 too) and back home, the
 /// approach at `approach_m_s` and the way home at `retreat_m_s`. Poses are the finger's

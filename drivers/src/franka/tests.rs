@@ -18,6 +18,7 @@ async fn hardware_arm() -> FrankaArm {
         payload: None,
         joint_torque_thresholds_nm: softtouch_schemas::FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM,
         limits: MotionLimits::default(),
+        motion_margin: None,
         route: Vec::new(),
     };
     FrankaArm::connect(config, Arc::new(crate::TokioClock::new()))
@@ -44,6 +45,7 @@ fn a_rigs_franka_table_becomes_the_connect_settings() {
             inertia_kg_m2: [0.0; 9],
         })),
         joint_torque_thresholds_nm: None,
+        motion_margin: None,
     };
     let c = FrankaConfig::from_rig(&d).expect("a franka table");
     assert!((c.reflex_torque_nm - 3.0).abs() < 1e-12, "0.1 m x 30 N");
@@ -152,6 +154,7 @@ fn the_end_effector_and_payload_are_checked_against_what_the_robot_reports() {
         payload: Some((0.35, [0.0, 0.0, 0.06], [0.0; 9])),
         joint_torque_thresholds_nm: softtouch_schemas::FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM,
         limits: MotionLimits::default(),
+        motion_margin: None,
         route: Vec::new(),
     };
     assert_eq!(
@@ -314,4 +317,33 @@ async fn hardware_an_aborted_move_brakes_within_a_millimetre_and_a_half() {
     eprintln!("{overshoot_mm:.2} mm after the stop");
     assert!(overshoot_mm <= 1.5, "{overshoot_mm:.2} mm");
     arm.move_to(&start, 0.05).await.expect("back");
+}
+
+#[test]
+fn moves_use_the_margin_of_the_robots_own_cartesian_limits() {
+    use super::reach::Robot;
+    let fr3 = MotionLimits::for_robot(Robot::Fr3, 0.3);
+    assert!((fr3.max_speed_m_s - 0.9).abs() < 1e-12);
+    assert!((fr3.accel_m_s2 - 2.7).abs() < 1e-12);
+    assert!((fr3.rot_speed_rad_s - 0.75).abs() < 1e-12);
+    // The brake is the one measured on a FER, whatever the margin.
+    assert!((fr3.brake_accel_m_s2 - MotionLimits::default().brake_accel_m_s2).abs() < 1e-12);
+    assert!((fr3.brake_jerk_m_s3 - MotionLimits::default().brake_jerk_m_s3).abs() < 1e-12);
+    let fer = MotionLimits::for_robot(Robot::Fer, 1.0);
+    assert!((fer.max_speed_m_s - 1.7).abs() < 1e-12);
+    assert!((fer.rot_accel_rad_s2 - 25.0).abs() < 1e-12);
+    // A margin out of (0, 1] is the default one.
+    for bad in [0.0, -1.0, 2.0, f64::NAN] {
+        assert_eq!(
+            MotionLimits::for_robot(Robot::Fr3, bad),
+            MotionLimits::for_robot(Robot::Fr3, softtouch_schemas::FRANKA_DEFAULT_MOTION_MARGIN)
+        );
+    }
+    // A request above the limit is slowed to it: the path's speed is the limit's.
+    let p = path_limits(0.1, 0.0, 1.7, &fr3);
+    assert!(
+        (p.max_velocity * 0.1 - 0.9).abs() < 1e-9,
+        "{}",
+        p.max_velocity
+    );
 }

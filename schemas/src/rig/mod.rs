@@ -84,8 +84,18 @@ pub enum ArmDevice {
         /// Absent: [`FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM`].
         #[serde(default, skip_serializing_if = "Option::is_none")]
         joint_torque_thresholds_nm: Option<[f64; 7]>,
+        /// The share of the robot's Cartesian velocity, acceleration and jerk limits
+        /// (FR3 or Panda, by the FCI version it answers with) that moves use, in
+        /// (0, 1]. Absent: [`FRANKA_DEFAULT_MOTION_MARGIN`].
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        motion_margin: Option<f64>,
     },
 }
+
+/// Default of the Franka's `motion_margin`: moves use 30 % of the robot's Cartesian
+/// limits (FR3: 0.9 m/s, 2.7 m/s², 0.75 rad/s; Panda: 0.51 m/s, 3.9 m/s²), which
+/// franka-sim's enforced limits pass with room for the robot's own inverse kinematics.
+pub const FRANKA_DEFAULT_MOTION_MARGIN: f64 = 0.3;
 
 /// The Panda's and FR3's joint torque limits, N·m (FCI documentation, "Robot and
 /// interface specifications": τ_max).
@@ -351,6 +361,40 @@ pub struct Procedure {
     /// `per-sample`. Absent: what suits the scene's medium ([`Tare::for_medium`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tare: Option<Tare>,
+    /// The order the samples of a rod's block are taken in: `planned` (default: a tour
+    /// that sorts the poses into bands of θ and sweeps z back and forth within each,
+    /// visiting each pose from its neighbour's retreat point) or `index` (index order,
+    /// every sample from home and back, as before). Either way pose `i` is the same.
+    #[serde(default)]
+    pub visit_order: VisitOrder,
+    /// Speed of the moves clear of the rod (out of a contact to the retreat point, and
+    /// between retreat points), m/s; a Franka moves at most its `motion_margin` share
+    /// of its limit. Absent: [`DEFAULT_TRAVEL_SPEED_M_S`].
+    #[serde(default = "default_travel_speed_m_s")]
+    pub travel_speed_m_s: f64,
+}
+
+/// The order a block's samples are taken in ([`Procedure::visit_order`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum VisitOrder {
+    /// A planned tour (bands of θ, z back and forth), from retreat point to retreat
+    /// point; home only between rods and after an error.
+    #[default]
+    Planned,
+    /// Index order, each sample from home and back home.
+    Index,
+}
+
+impl VisitOrder {
+    /// Name as in the config.
+    #[must_use]
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            Self::Planned => "planned",
+            Self::Index => "index",
+        }
+    }
 }
 
 /// When the force/torque sensor is zeroed (tared, "biased"): always at home, clear of
@@ -475,6 +519,15 @@ const fn default_slow_approach_m() -> f64 {
 
 const fn default_slow_approach_speed_m_s() -> f64 {
     DEFAULT_SLOW_APPROACH_SPEED_M_S
+}
+
+/// Default of [`Procedure::travel_speed_m_s`], m/s: within an FR3's 0.9 m/s at the
+/// default motion margin; the moves between neighbouring poses are short, so their
+/// acceleration, not this speed, sets how long they take.
+pub const DEFAULT_TRAVEL_SPEED_M_S: f64 = 0.5;
+
+const fn default_travel_speed_m_s() -> f64 {
+    DEFAULT_TRAVEL_SPEED_M_S
 }
 
 const fn default_ft_stale_s() -> f64 {

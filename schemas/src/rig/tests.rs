@@ -287,3 +287,57 @@ fn a_grasp_section_reads_and_is_checked_against_the_reach_box() {
         assert!(toml::from_str::<GraspSetup>(&bad).is_err(), "{bad}");
     }
 }
+
+#[test]
+fn the_visit_order_travel_speed_and_motion_margin_are_read_and_checked() {
+    let rig = crate::defaults::rig();
+    assert_eq!(rig.procedure.visit_order, VisitOrder::Planned);
+    assert!((rig.procedure.travel_speed_m_s - DEFAULT_TRAVEL_SPEED_M_S).abs() < 1e-12);
+    let text = crate::defaults::RIG_TOML
+        .replace("visit_order = \"planned\"", "visit_order = \"index\"")
+        .replace("travel_speed_m_s = 0.5", "travel_speed_m_s = 0.8");
+    let parsed: RigConfig = toml::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(parsed.procedure.visit_order, VisitOrder::Index);
+    assert!((parsed.procedure.travel_speed_m_s - 0.8).abs() < 1e-12);
+    assert_eq!(parsed.procedure.visit_order.as_str(), "index");
+    // An unknown order names the ones there are.
+    let bad =
+        crate::defaults::RIG_TOML.replace("visit_order = \"planned\"", "visit_order = \"random\"");
+    let e = toml::from_str::<RigConfig>(&bad).map_err(|e| e.to_string());
+    assert!(
+        e.as_ref()
+            .is_err_and(|m| m.contains("planned") && m.contains("index")),
+        "{e:?}"
+    );
+    for speed in [0.0, -1.0, 2.0, f64::NAN] {
+        let mut r = rig.clone();
+        r.procedure.travel_speed_m_s = speed;
+        assert_eq!(refused(&r), ["procedure.travel_speed_m_s"], "{speed}");
+    }
+    let franka = |margin: Option<f64>| ArmDevice::Franka {
+        address: "172.16.0.2".into(),
+        reflex_force_n: 30.0,
+        reflex_torque_nm: None,
+        realtime: Realtime::Enforce,
+        end_effector: None,
+        payload: None,
+        joint_torque_thresholds_nm: None,
+        motion_margin: margin,
+    };
+    for (margin, ok) in [
+        (None, true),
+        (Some(0.3), true),
+        (Some(1.0), true),
+        (Some(0.0), false),
+        (Some(1.5), false),
+        (Some(f64::INFINITY), false),
+    ] {
+        let mut r = rig.clone();
+        r.arm = franka(margin);
+        let got = refused(&r);
+        assert_eq!(got.is_empty(), ok, "{margin:?}: {got:?}");
+        if !ok {
+            assert_eq!(got, ["arm.motion_margin"]);
+        }
+    }
+}

@@ -17,8 +17,18 @@ impl Validate for RigConfig {
                 end_effector,
                 payload,
                 joint_torque_thresholds_nm,
+                motion_margin,
             } => {
                 non_empty(c, "arm.address", address);
+                if let Some(m) = motion_margin {
+                    c.within(
+                        "arm.motion_margin",
+                        *m,
+                        0.01,
+                        1.0,
+                        "(a share of the robot's limits)",
+                    );
+                }
                 if let Some(t) = joint_torque_thresholds_nm
                     && let Err(e) = check_joint_thresholds(t)
                 {
@@ -262,6 +272,13 @@ impl Validate for RigConfig {
         c.within(
             "procedure.retreat_speed_m_s",
             p.retreat_speed_m_s,
+            1e-4,
+            FRANKA_MAX_SPEED_M_S,
+            "m/s",
+        );
+        c.within(
+            "procedure.travel_speed_m_s",
+            p.travel_speed_m_s,
             1e-4,
             FRANKA_MAX_SPEED_M_S,
             "m/s",

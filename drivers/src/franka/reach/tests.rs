@@ -166,3 +166,50 @@ fn a_route_that_does_not_move_and_one_with_a_nan_pose() {
     assert!(fer_min[5] < fr3_min[5], "joint 6 reaches lower on a Panda");
     assert_eq!(Robot::of(franka::FciVersion::V10), Robot::Fr3);
 }
+
+#[test]
+fn a_move_too_fast_for_a_joint_is_slowed_to_its_limits_and_one_out_of_reach_refused() {
+    let kin = flange();
+    let q0 = SIM_HOME_Q;
+    let from = kin.pose(&q0);
+    // A turn of 1 rad about the flange's own axis is mostly joint 7: at 6 rad/s of path
+    // speed (joint 7's limit is 5.26 rad/s) it must be slowed to 80 % of the FR3's
+    // limit there, and 20 rad/s² (joint 7's limit is 10) to within 80 % of 10.
+    let turn = from.compose(&ArmPose::from_translation_yaw([0.0; 3], 1.0));
+    let s =
+        path_scale(&kin, Robot::Fr3, &q0, &from, &turn, [6.0, 20.0, 1000.0]).expect("reachable");
+    let (lower, upper) = Robot::Fr3.velocity_limits(&q0);
+    let allowed = VELOCITY_MARGIN * upper[6].min(-lower[6]);
+    assert!(
+        s.velocity < 1.0 && 6.0 * s.velocity <= allowed + 0.05,
+        "{s:?}"
+    );
+    assert!(6.0 * s.velocity > 0.5 * allowed, "slowed too far: {s:?}");
+    let a = 20.0 * s.acceleration;
+    assert!(a <= 8.0 + 1e-9 && a > 4.0, "{s:?}");
+    assert!((s.jerk - 1.0).abs() < 1e-12, "{s:?}");
+    // Slowly, the same move needs no slowing; nor does staying put.
+    let slow = path_scale(&kin, Robot::Fr3, &q0, &from, &turn, [0.2, 1.0, 100.0]).expect("ok");
+    assert_eq!(
+        slow,
+        PathScale {
+            velocity: 1.0,
+            acceleration: 1.0,
+            jerk: 1.0
+        }
+    );
+    let still = path_scale(&kin, Robot::Fer, &q0, &from, &from, [5.0, 50.0, 5000.0]).expect("ok");
+    assert!((still.velocity - 1.0).abs() < 1e-12, "{still:?}");
+    // Out of reach, and NaN: refused, never a scale.
+    let far = ArmPose {
+        translation_m: [2.0, 0.0, 0.5],
+        ..from
+    };
+    assert!(path_scale(&kin, Robot::Fr3, &q0, &from, &far, [0.1, 1.0, 10.0]).is_err());
+    let nan = ArmPose {
+        translation_m: [f64::NAN, 0.0, 0.5],
+        ..from
+    };
+    assert!(path_scale(&kin, Robot::Fr3, &q0, &from, &nan, [0.1, 1.0, 10.0]).is_err());
+    assert!(path_scale(&kin, Robot::Fr3, &q0, &from, &turn, [f64::NAN, 1.0, 10.0]).is_err());
+}
