@@ -389,13 +389,14 @@ impl<'a> Job<'a> {
             return Ok((Outcome::SafeStop { reason }, index));
         }
         // A run resumed within a block starts where the uninterrupted run was: at the
-        // retreat point of the sample before it in the plan.
+        // retreat point of the sample before it in the plan (checked against the
+        // workspace as every sample's is; one outside it is never sent).
         if order == VisitOrder::Planned
             && let Some(v) = visits.first()
             && let Some(prev) = v.todo.first().and_then(|&i| v.before(i))
-            && let Err(e) = self
-                .go_to(&self.retreat_pose(&sampler.pose(prev)), true, None)
-                .await
+            && let clear = self.retreat_pose(&sampler.pose(prev))
+            && plan.rig.workspace.contains_arm(&clear)
+            && let Err(e) = self.go_to(&clear, true, None).await
         {
             let reason = format!(
                 "cannot move the arm to the retreat point of sample {prev}, where the run continues: {e}"
