@@ -7,6 +7,14 @@
 #
 #   bash scripts/test-postgres.sh                 # the PostgreSQL tier, as CI runs it
 #   bash scripts/test-postgres.sh --test faults   # other `cargo test` arguments instead
+#   SOFTTOUCH_PG_LOCALE=C bash scripts/test-postgres.sh ...   # a byte-order cluster
+#
+# The cluster's collation is ICU's en-US unless SOFTTOUCH_PG_LOCALE says otherwise
+# (`C`, or another ICU locale): most servers sort text by a language's rules, not by
+# bytes as SQLite does, and the store must give the same order and hashes on both.
+# The role `softtouch_pw` logs in over TCP with a password only (scram-sha-256), so
+# that the secrets test (tests/postgres.rs) sees a server that checks one; every other
+# user is trusted, as a throwaway server's may be.
 #
 # Against a server of your own instead: SOFTTOUCH_TEST_POSTGRES=postgres://USER@HOST/postgres
 # cargo test --release ... (the user needs CREATEDB: every test makes a database of its own).
@@ -44,7 +52,15 @@ stop() {
     rm -rf "$DIR"
 }
 trap stop EXIT
-as_db_user "'$BIN/initdb' -D '$DIR/data' -U postgres --auth=trust -E UTF8 >/dev/null"
+LOCALE=${SOFTTOUCH_PG_LOCALE:-en-US}
+if [ "$LOCALE" = C ]; then
+    locale_args="--locale=C"
+else
+    locale_args="--locale=C.UTF-8 --locale-provider=icu --icu-locale=$LOCALE"
+fi
+as_db_user "'$BIN/initdb' -D '$DIR/data' -U postgres --auth=trust -E UTF8 $locale_args >/dev/null"
+# Before the trust lines: pg_hba.conf is read top down, the first match wins.
+as_db_user "sed -i '1i host all softtouch_pw 127.0.0.1/32 scram-sha-256' '$DIR/data/pg_hba.conf'"
 # Another process may take the port between the look and the start: try another.
 for attempt in 1 2 3; do
     PORT=$(free_port)
@@ -55,10 +71,11 @@ for attempt in 1 2 3; do
     [ "$attempt" -lt 3 ] || { cat "$DIR/log" >&2; exit 1; }
 done
 export SOFTTOUCH_TEST_POSTGRES="postgres://postgres@127.0.0.1:$PORT/postgres"
-echo "PostgreSQL $("$BIN/postgres" --version | awk '{print $3}') on port $PORT"
+export SOFTTOUCH_TEST_POSTGRES_PASSWORD_ROLE=softtouch_pw
+echo "PostgreSQL $("$BIN/postgres" --version | awk '{print $3}') on port $PORT, collation $LOCALE"
 # --workspace, as the README's test command: the same features, so nothing is rebuilt.
 if [ $# -eq 0 ]; then
-    cargo test --release --workspace --lib -- store_tests grasp:: results:: grasp_calibration::
+    cargo test --release --workspace --lib -- store_tests grasp:: results:: grasp_calibration:: copy::
     cargo test --release --workspace --test collect --test dataset --test faults \
         --test resume --test postgres
 else

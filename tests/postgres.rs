@@ -417,3 +417,253 @@ fn help_never_prints_the_database_url_from_the_environment() {
     assert!(help.contains("SOFTTOUCH_DB"), "{help}");
     assert!(!help.contains("hunter2"), "{help}");
 }
+
+/// Issue 52: `db copy` of a store two rigs are collecting into, taken again and again
+/// while they run, ends (after the rigs finish and one last copy) with every sample,
+/// frame and window of both runs equal by sha256. The source is PostgreSQL in the
+/// PostgreSQL tier, a SQLite file otherwise; the copy a SQLite file.
+#[test]
+fn db_copy_of_two_live_rigs_ends_with_every_sample_frame_and_window_equal() {
+    let dir = tempdir();
+    let d = dir.path();
+    ok(&softtouch(d, &["db", "init"]));
+    let source = db_arg(&d.join("softtouch.db"));
+    let dest = d.join("copy.db").display().to_string();
+    let mut rigs: Vec<_> = (0..2)
+        .map(|i| {
+            common::command(d)
+                .args([
+                    "collect",
+                    "--samples",
+                    "60",
+                    "--seed",
+                    &(60 + i).to_string(),
+                ])
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap_or_else(|e| panic!("{e}"))
+        })
+        .collect();
+    // Copy back to back while they collect; the copy after both have ended is the last.
+    let mut copies = Vec::new();
+    loop {
+        let finished = rigs
+            .iter_mut()
+            .all(|rig| rig.try_wait().ok().flatten().is_some());
+        let out = softtouch_file(d, &["db", "copy", "--from", &source, "--to", &dest]);
+        ok(&out);
+        copies.push(text(&out.stderr));
+        if finished {
+            break;
+        }
+    }
+    for rig in rigs {
+        let out = rig.wait_with_output().unwrap_or_else(|e| panic!("{e}"));
+        assert!(out.status.success(), "{}", text(&out.stderr));
+    }
+    // Some copy met a run mid-collection and a later one added to it.
+    let grew = copies
+        .iter()
+        .flat_map(|c| c.lines())
+        .filter(|l| l.contains("(copied before): samples +") && !l.contains("samples +0 "))
+        .count();
+    assert!(
+        grew > 0 && copies.len() >= 3,
+        "{} copies, none added to a run copied before:\n{}",
+        copies.len(),
+        copies.join("\n---\n")
+    );
+    runtime().block_on(async {
+        let from = common::open_store(&d.join("softtouch.db")).await;
+        let to = Store::open_existing(d.join("copy.db"))
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        let seeds = |s: &Store| {
+            let s = s.clone();
+            async move {
+                let mut out = Vec::new();
+                for run in s.runs().await.unwrap_or_else(|e| panic!("{e}")) {
+                    let seed = s
+                        .run_record(run.run_id)
+                        .await
+                        .unwrap_or_else(|e| panic!("{e}"))
+                        .seed;
+                    out.push((seed, run_digest(&s, run.run_id).await));
+                }
+                out.sort();
+                out
+            }
+        };
+        let a = seeds(&from).await;
+        assert_eq!(a.len(), 2);
+        assert!(a.iter().all(|(_, (n, _))| *n == 60), "{a:?}");
+        assert_eq!(seeds(&to).await, a, "the copy differs from its source");
+        from.close().await;
+        to.close().await;
+    });
+}
+
+/// Issue 52: a password given in the URL is never printed (stdout, stderr, the log
+/// file, `--help`), and is taken, as libpq takes it, from `PGPASSWORD`, `PGPASSFILE`
+/// or `~/.pgpass` when the URL has none. Needs a server that checks the role's
+/// password (`scripts/test-postgres.sh` sets up `softtouch_pw` so).
+#[test]
+fn a_password_never_shows_and_is_taken_from_pgpassword_or_a_password_file() {
+    use sqlx::Connection as _;
+    let (Ok(server), Ok(role)) = (
+        std::env::var(softtouch_collector::testing::TEST_POSTGRES_ENV),
+        std::env::var("SOFTTOUCH_TEST_POSTGRES_PASSWORD_ROLE"),
+    ) else {
+        eprintln!(
+            "needs SOFTTOUCH_TEST_POSTGRES and a role the server checks by password \
+             (SOFTTOUCH_TEST_POSTGRES_PASSWORD_ROLE; scripts/test-postgres.sh sets both)"
+        );
+        return;
+    };
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |t| t.subsec_nanos());
+    let secret = format!("Se{}cr{nanos}et", std::process::id());
+    let database = format!("pw_{}_{nanos}", std::process::id());
+    runtime().block_on(async {
+        let mut conn = sqlx::PgConnection::connect(&server)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        for statement in [
+            format!(
+                "DO $$ BEGIN CREATE ROLE {role} LOGIN CREATEDB; \
+                 EXCEPTION WHEN duplicate_object THEN NULL; END $$"
+            ),
+            format!("ALTER ROLE {role} PASSWORD '{secret}'"),
+            format!("CREATE DATABASE {database} OWNER {role}"),
+        ] {
+            sqlx::raw_sql(sqlx::AssertSqlSafe(statement))
+                .execute(&mut conn)
+                .await
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        let _ = conn.close().await;
+    });
+    let host = server
+        .split_once('@')
+        .and_then(|(_, rest)| rest.split('/').next())
+        .unwrap_or_else(|| panic!("{server}: expected postgres://USER@HOST:PORT/DB"));
+    let with_password = format!("postgres://{role}:{secret}@{host}/{database}");
+    let without = format!("postgres://{role}@{host}/{database}");
+    let dir = tempdir();
+    let d = dir.path();
+    let run = |args: &[&str], env: &[(&str, &str)]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_softtouch"))
+            .args(args)
+            .current_dir(d)
+            .env_remove("SOFTTOUCH_DB")
+            .env_remove("PGPASSWORD")
+            .env_remove("PGPASSFILE")
+            .env_remove("RUST_LOG")
+            // No ~/.pgpass of the user running the tests.
+            .env("HOME", d)
+            .envs(env.iter().copied())
+            .output()
+            .unwrap_or_else(|e| panic!("{e}"))
+    };
+    let unseen = |out: &std::process::Output, what: &str| {
+        for stream in [text(&out.stdout), text(&out.stderr)] {
+            assert!(
+                !stream.contains(&secret),
+                "{what} shows the password:\n{stream}"
+            );
+        }
+    };
+    // The password in the URL: verbs that work, and verbs that fail.
+    let url = with_password.as_str();
+    for (args, code) in [
+        (
+            vec!["--db", url, "collect", "--samples", "2", "--seed", "5"],
+            0,
+        ),
+        (vec!["--db", url, "status"], 0),
+        (vec!["--db", url, "runs"], 0),
+        (vec!["db", "copy", "--from", url, "--to", "copy.db"], 0),
+        (vec!["--db", url, "collect", "--resume", "99"], 2),
+        (vec!["db", "copy", "--from", url, "--to", url], 1),
+        (
+            vec![
+                &format!("--db={url}"),
+                "dataset",
+                "create",
+                "x",
+                "--runs",
+                "9",
+                "--split",
+                "6:2:2",
+            ],
+            2,
+        ),
+    ] {
+        let out = run(&args, &[]);
+        let what = args.join(" ").replace(&secret, "SECRET");
+        assert_eq!(
+            out.status.code(),
+            Some(code),
+            "{what}: {}",
+            text(&out.stderr)
+        );
+        unseen(&out, &what);
+    }
+    // Debug logging too: the command line is logged, the driver logs its own.
+    let out = run(&["--db", url, "runs"], &[("RUST_LOG", "debug")]);
+    ok(&out);
+    unseen(&out, "runs with RUST_LOG=debug");
+    let malformed = format!("postgres://{role}:{secret}@/x");
+    let out = run(&["--db", &malformed, "runs"], &[]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    unseen(&out, "a malformed URL");
+    let wrong = format!("postgres://{role}:not-{secret}-either@{host}/{database}");
+    let out = run(&["--db", &wrong, "runs"], &[]);
+    fails_with(&out, 2, "the server refused the login");
+    assert!(
+        !text(&out.stderr).contains("either"),
+        "{}",
+        text(&out.stderr)
+    );
+    for verb in ["collect", "db", "train", "runs"] {
+        let out = run(&[verb, "--help"], &[("SOFTTOUCH_DB", url)]);
+        ok(&out);
+        unseen(&out, &format!("{verb} --help"));
+    }
+    // The log file the collection wrote: its start line, password shown as ***.
+    let log = std::fs::read_to_string(d.join("softtouch.log")).unwrap_or_else(|e| panic!("{e}"));
+    assert!(!log.contains(&secret), "the log holds the password:\n{log}");
+    assert!(log.contains(&format!("{role}:***@{host}")), "{log}");
+    // No password anywhere: refused, by the server (it checks this role's password).
+    fails_with(
+        &run(&["--db", &without, "runs"], &[]),
+        2,
+        "the server refused the login",
+    );
+    // From PGPASSWORD, from PGPASSFILE, from ~/.pgpass (HOME is the test's folder).
+    ok(&run(
+        &["--db", &without, "runs"],
+        &[("PGPASSWORD", &secret)],
+    ));
+    // A password file others may read is ignored, as libpq ignores it: 0600.
+    let line = format!("{host}:*:{role}:{secret}\n");
+    let private = |path: &Path| {
+        use std::os::unix::fs::PermissionsExt as _;
+        std::fs::write(path, &line).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600))
+            .unwrap_or_else(|e| panic!("{e}"));
+    };
+    let passfile = d.join("lab.pgpass");
+    private(&passfile);
+    let passfile = passfile.display().to_string();
+    let out = run(
+        &["--db", &without, "collect", "--samples", "1", "--seed", "6"],
+        &[("PGPASSFILE", &passfile)],
+    );
+    ok(&out);
+    unseen(&out, "collect with PGPASSFILE");
+    private(&d.join(".pgpass"));
+    ok(&run(&["--db", &without, "runs"], &[]));
+}

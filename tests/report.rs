@@ -364,6 +364,10 @@ fn an_empty_database_gives_a_page_saying_which_verbs_to_run() {
     ok(&softtouch(d, &["db", "init"]));
     let said = ok(&softtouch(d, &["report", "--out", "empty.html"]));
     assert!(said.contains("0 runs, 0 datasets, 0 models"), "{said}");
+    // The .db alone remains (a read-only reader's empty log and shared memory gone).
+    for left in ["softtouch.db-wal", "softtouch.db-shm"] {
+        assert!(!d.join(left).exists(), "{left} left behind by report");
+    }
     let (_, html) = parse(&d.join("empty.html"));
     let todo = select(&html, ".todo").join("\n");
     for verb in [
@@ -604,6 +608,13 @@ fn bad_input_exits_2_naming_what_is_wrong() {
         "is the database itself",
     );
     assert!(!d.join("r.html").exists(), "nothing written on bad input");
+    // A folder is no database: bad input, named as such.
+    std::fs::create_dir(d.join("lab")).unwrap_or_else(|e| panic!("{e}"));
+    fails_with(
+        &softtouch(d, &["--db", "lab", "report", "--out", "r.html"]),
+        2,
+        "lab is a folder, not a database file",
+    );
     // An empty file is no database: named as such, and left empty.
     std::fs::write(d.join("other.db"), b"").unwrap_or_else(|e| panic!("{e}"));
     fails_with(

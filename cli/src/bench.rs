@@ -101,8 +101,8 @@ a new database of its own (softtouch_bench_PID_RIGS), left there for a look.")]
         #[arg(long, value_delimiter = ',', default_value = "1,2,4")]
         rigs: Vec<usize>,
         /// A PostgreSQL server to run the several-rigs table on too.
-        #[arg(long)]
-        postgres: Option<String>,
+        #[arg(long, value_parser = crate::DbTargetParser)]
+        postgres: Option<softtouch_store::DbTarget>,
     },
 }
 
@@ -200,9 +200,9 @@ pub async fn run(
                 )));
             }
             let server = postgres
-                .map(|url| match url.parse::<softtouch_store::DbTarget>() {
-                    Ok(softtouch_store::DbTarget::Postgres(url)) => Ok(url),
-                    _ => Err(Failure::BadInput(anyhow!(
+                .map(|target| match target {
+                    softtouch_store::DbTarget::Postgres(url) => Ok(url.expose().to_owned()),
+                    softtouch_store::DbTarget::File(_) => Err(Failure::BadInput(anyhow!(
                         "--postgres: expected postgres://USER@HOST[:PORT]/DATABASE"
                     ))),
                 })

@@ -1,4 +1,4 @@
-//! `softtouch db init`, `softtouch db copy`.
+//! `softtouch db init`, `softtouch db copy`, `softtouch db new-identity`.
 
 use super::{Failure, io_failure};
 use clap::Subcommand;
@@ -26,12 +26,19 @@ pub enum DbCommand {
     Copy {
         /// The store to read (a path or postgres:// URL); never written to except its
         /// identity, made once.
-        #[arg(long)]
+        #[arg(long, value_parser = crate::DbTargetParser)]
         from: DbTarget,
         /// The store to write (created and migrated if it is a new file).
-        #[arg(long)]
+        #[arg(long, value_parser = crate::DbTargetParser)]
         to: DbTarget,
     },
+    /// Give this store an identity of its own for `db copy`. A copied database file or
+    /// a restored backup keeps its original's identity; once it has been written on its
+    /// own, `db copy` refuses it ("not as it was copied from this store before"). After
+    /// this, everything it holds is copied as new objects (even those its original
+    /// copied before: the destination then holds them twice).
+    #[command(after_help = "Example:\n  softtouch --db rig2-restored.db db new-identity")]
+    NewIdentity,
 }
 
 pub async fn run(cmd: DbCommand, db: &DbTarget, out: &mut dyn Write) -> Result<(), Failure> {
@@ -49,6 +56,18 @@ pub async fn run(cmd: DbCommand, db: &DbTarget, out: &mut dyn Write) -> Result<(
             .map_err(io_failure)
         }
         DbCommand::Copy { from, to } => copy(&from, &to, out).await,
+        DbCommand::NewIdentity => {
+            let store = Store::open_existing(db).await?;
+            let result = store.new_identity().await;
+            store.close().await;
+            let (old, new) = result?;
+            writeln!(
+                out,
+                "{}: identity {old} → {new}; `db copy` now copies it as a store of its own",
+                db.display()
+            )
+            .map_err(io_failure)
+        }
     }
 }
 

@@ -110,7 +110,11 @@ fn init_logging(cli: &Cli) -> Option<tracing_appender::non_blocking::WorkerGuard
 fn main() -> ExitCode {
     let cli = Cli::parse(); // exits 2 on bad arguments, 0 on --help
     let _log_guard = init_logging(&cli);
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    // The command line as logged: a URL's password as ***.
+    let args: Vec<String> = std::env::args_os()
+        .skip(1)
+        .map(|a| softtouch_store::target::redact_words(&a.to_string_lossy()))
+        .collect();
     tracing::info!(
         version = env!("CARGO_PKG_VERSION"),
         pid = std::process::id(),
@@ -158,7 +162,14 @@ fn fold_write_ahead_log(db: &softtouch_store::DbTarget) {
     let Some(path) = db.file() else {
         return;
     };
-    if softtouch_store::file::db_size(path).wal_bytes == 0 {
+    // A reader (`report`, opened read-only) leaves an empty `-wal` and a `-shm` it may
+    // not remove: a connection of our own that closes last removes them.
+    let beside = |suffix: &str| {
+        let mut p = path.as_os_str().to_owned();
+        p.push(suffix);
+        PathBuf::from(p).exists()
+    };
+    if !beside("-wal") && !beside("-shm") {
         return;
     }
     let Ok(rt) = tokio::runtime::Builder::new_current_thread()

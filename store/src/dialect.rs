@@ -9,11 +9,15 @@
 //! what is written).
 //!
 //! What is rewritten for PostgreSQL:
-//! - placeholders: `?` becomes `$1`, `$2`, … in order; `?NNN` becomes `$NNN`;
+//! - placeholders: `?NNN` becomes `$NNN`, and `?` one more than the largest number
+//!   so far (SQLite's rule), so `?2, ?` is `$2, $3` on both;
+//! - byte order: `COLLATE BINARY` (SQLite's default) becomes `COLLATE "C"`, so that
+//!   an `ORDER BY` of text is the same on both engines whatever the server's
+//!   collation;
 //! - "now" as text: the store's ISO-8601 UTC timestamps
 //!   ([`crate::rows::now_sql`]) become `to_char(clock_timestamp() …)` of the same
 //!   format;
-//! - nothing inside a quoted string or identifier.
+//! - nothing inside a quoted string or identifier, or a comment (`--`, `/* */`).
 //!
 //! What is written portably instead (both engines accept it): `ON CONFLICT … DO
 //! NOTHING`, `RETURNING`, `COALESCE`, `CASE`, `CAST(… AS BIGINT)` around `SUM` (which
@@ -125,8 +129,11 @@ impl Dialect {
     }
 }
 
-/// SQLite's text in PostgreSQL's spelling: placeholders numbered, "now" rewritten,
-/// quoted text left alone.
+/// SQLite's text in PostgreSQL's spelling: placeholders numbered as SQLite numbers
+/// them, "now" and byte-order collation rewritten, quoted text and comments left alone.
+///
+/// Numbering follows SQLite's rule: `?NNN` is parameter NNN, and a bare `?` is one
+/// more than the largest number given so far (`?2, ?` is `$2, $3`).
 #[must_use]
 pub fn to_postgres(text: &str) -> String {
     let mut text = std::borrow::Cow::Borrowed(text);
@@ -136,36 +143,81 @@ pub fn to_postgres(text: &str) -> String {
         }
     }
     let mut out = String::with_capacity(text.len() + 16);
-    let mut next = 0u32;
-    let mut quote: Option<char> = None;
+    let mut largest = 0u64;
     let mut chars = text.chars().peekable();
     while let Some(c) = chars.next() {
-        match quote {
-            Some(q) => {
+        match c {
+            // Quoted text and identifiers (SQLite also quotes with ` and [ ]).
+            '\'' | '"' | '`' | '[' => {
+                let close = if c == '[' { ']' } else { c };
                 out.push(c);
-                if c == q {
-                    quote = None;
-                }
-            }
-            None if c == '\'' || c == '"' => {
-                quote = Some(c);
-                out.push(c);
-            }
-            None if c == '?' => {
-                out.push('$');
-                if chars.peek().is_some_and(char::is_ascii_digit) {
-                    while let Some(d) = chars.next_if(char::is_ascii_digit) {
-                        out.push(d);
+                for d in chars.by_ref() {
+                    out.push(d);
+                    if d == close {
+                        break;
                     }
-                } else {
-                    next += 1;
-                    out.push_str(&next.to_string());
                 }
             }
-            None => out.push(c),
+            '-' if chars.peek() == Some(&'-') => {
+                out.push(c);
+                for d in chars.by_ref() {
+                    out.push(d);
+                    if d == '\n' {
+                        break;
+                    }
+                }
+            }
+            '/' if chars.peek() == Some(&'*') => {
+                out.push(c);
+                out.extend(chars.next());
+                let mut previous = ' ';
+                for d in chars.by_ref() {
+                    out.push(d);
+                    if previous == '*' && d == '/' {
+                        break;
+                    }
+                    previous = d;
+                }
+            }
+            '?' => {
+                let mut digits = String::new();
+                while let Some(d) = chars.next_if(char::is_ascii_digit) {
+                    digits.push(d);
+                }
+                let number = if digits.is_empty() {
+                    largest.saturating_add(1)
+                } else {
+                    digits.parse().unwrap_or(u64::MAX)
+                };
+                largest = largest.max(number);
+                out.push('$');
+                out.push_str(&number.to_string());
+            }
+            'C' | 'c' if starts_with_word(&chars, c, "COLLATE BINARY") => {
+                // Byte order: SQLite's BINARY, PostgreSQL's "C" (a server's default
+                // collation, e.g. en_US.UTF-8, orders `a-b` and `a.b` otherwise).
+                for _ in 1.."COLLATE BINARY".len() {
+                    chars.next();
+                }
+                out.push_str("COLLATE \"C\"");
+            }
+            _ => out.push(c),
         }
     }
     out
+}
+
+/// Whether `first` followed by `rest` spells `word` (ASCII, any case).
+fn starts_with_word(
+    rest: &std::iter::Peekable<std::str::Chars<'_>>,
+    first: char,
+    word: &str,
+) -> bool {
+    std::iter::once(first)
+        .chain(rest.clone())
+        .take(word.len())
+        .map(|c| c.to_ascii_uppercase())
+        .eq(word.chars())
 }
 
 #[cfg(test)]
@@ -204,6 +256,45 @@ mod tests {
                 .count(),
             1
         );
+    }
+
+    #[test]
+    fn numbered_and_bare_placeholders_mix_as_sqlite_numbers_them() {
+        // SQLite: a bare ? is one more than the largest number assigned so far.
+        assert_eq!(to_postgres("?2, ?"), "$2, $3");
+        assert_eq!(to_postgres("?, ?5, ?, ?1, ?"), "$1, $5, $6, $1, $7");
+        assert_eq!(to_postgres("?3 ?3"), "$3 $3");
+    }
+
+    #[test]
+    fn comments_are_left_alone() {
+        assert_eq!(
+            to_postgres("SELECT ? -- is it? yes\nFROM t /* a ? here */ WHERE x = ?"),
+            "SELECT $1 -- is it? yes\nFROM t /* a ? here */ WHERE x = $2"
+        );
+        // Unterminated: the rest is comment.
+        assert_eq!(to_postgres("SELECT ? /* open ?"), "SELECT $1 /* open ?");
+        assert_eq!(to_postgres("SELECT ? -- ?"), "SELECT $1 -- ?");
+        // Not comments: a lone - or /.
+        assert_eq!(to_postgres("SELECT 1 - ?, 2 / ?"), "SELECT 1 - $1, 2 / $2");
+        assert_eq!(
+            to_postgres("SELECT `a?`, [b?] FROM t WHERE c = ?"),
+            "SELECT `a?`, [b?] FROM t WHERE c = $1"
+        );
+    }
+
+    #[test]
+    fn byte_order_collation_is_spelled_for_postgres() {
+        assert_eq!(
+            to_postgres("SELECT name FROM t ORDER BY name COLLATE BINARY, id"),
+            "SELECT name FROM t ORDER BY name COLLATE \"C\", id"
+        );
+        assert_eq!(
+            to_postgres("ORDER BY n collate binary"),
+            "ORDER BY n COLLATE \"C\""
+        );
+        assert_eq!(to_postgres("'COLLATE BINARY'"), "'COLLATE BINARY'");
+        assert_eq!(to_postgres("COLLATE"), "COLLATE");
     }
 
     #[test]

@@ -52,7 +52,7 @@ pub fn inspect(path: &Path) -> Result<DbFile, StoreError> {
         Err(e) => return Err(io(e)),
     };
     if file.metadata().map_err(io)?.is_dir() {
-        return Err(io(std::io::Error::other("a folder, not a file")));
+        return Err(StoreError::Folder(path.to_owned()));
     }
     let mut head = Vec::with_capacity(16);
     file.by_ref().take(16).read_to_end(&mut head).map_err(io)?;
@@ -255,7 +255,10 @@ mod tests {
         assert!(matches!(inspect(&p("short"))?, DbFile::NotSqlite { .. }));
         write("db", b"SQLite format 3\0 and then pages");
         assert_eq!(inspect(&p("db"))?, DbFile::Sqlite);
-        assert!(inspect(dir.path()).is_err(), "a folder is no database");
+        assert!(
+            matches!(inspect(dir.path()), Err(e @ StoreError::Folder(_)) if e.is_bad_input()),
+            "a folder is no database"
+        );
         Ok(())
     }
 

@@ -213,6 +213,12 @@ pub enum StoreError {
         /// Where, and what was found instead of what was expected.
         why: String,
     },
+    /// A folder where a database file was expected.
+    #[error(
+        "{} is a folder, not a database file: pass --db with a file's path (e.g. {}/softtouch.db)",
+        .0.display(), .0.display()
+    )]
+    Folder(PathBuf),
     /// No database where one must be.
     #[error("no database at {}: create it with `softtouch db init` (or pass --db PATH)", .0.display())]
     NoDatabase(PathBuf),
@@ -260,6 +266,7 @@ impl StoreError {
             self,
             Self::NoSuchRun(_)
                 | Self::NoDatabase(_)
+                | Self::Folder(_)
                 | Self::EmptyFile { .. }
                 | Self::NotADatabase { .. }
                 | Self::Refused { .. }
@@ -335,11 +342,21 @@ pub struct EventRow {
 }
 
 /// The store.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct Store {
     pool: AnyPool,
     dialect: Dialect,
     target: DbTarget,
+}
+
+/// By hand: the target as shown (no password), and nothing of the pool's settings.
+impl std::fmt::Debug for Store {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Store")
+            .field("dialect", &self.dialect)
+            .field("target", &self.target.display().to_string())
+            .finish_non_exhaustive()
+    }
 }
 
 fn to_i64(what: &'static str, v: u64) -> Result<i64, StoreError> {
@@ -476,7 +493,9 @@ impl Store {
             .await
             .map_err(query_err("creating a database"))?;
         let _ = conn.close().await;
-        Ok(DbTarget::Postgres(target::with_database(server_url, name)))
+        Ok(DbTarget::Postgres(
+            target::with_database(server_url, name).into(),
+        ))
     }
 
     /// Where the database is.

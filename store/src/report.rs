@@ -238,7 +238,7 @@ async fn run_data(db: &ReadOnly, row: RunRow) -> Result<RunData, ReadError> {
     let id = row.counts.run_id;
     let rejects: Vec<(String, i64)> = sqlx::query_as(db.dialect.sql(
         "SELECT COALESCE(reject_reason, '?'), COUNT(*) FROM samples
-         WHERE run_id = ? AND status = 'rejected' GROUP BY 1 ORDER BY 2 DESC, 1",
+         WHERE run_id = ? AND status = 'rejected' GROUP BY 1 ORDER BY 2 DESC, COALESCE(reject_reason, '?') COLLATE BINARY",
     ))
     .bind(id)
     .fetch_all(&db.pool)

@@ -263,12 +263,13 @@ pub(crate) async fn tables_of(
     d: Dialect,
     result_id: i64,
 ) -> Result<Vec<(String, String)>, StoreError> {
-    let rows =
-        sqlx::query(d.sql("SELECT name, csv FROM result_tables WHERE result_id = ? ORDER BY name"))
-            .bind(result_id)
-            .fetch_all(pool)
-            .await
-            .map_err(query_err("reading a result's tables"))?;
+    let rows = sqlx::query(d.sql(
+        "SELECT name, csv FROM result_tables WHERE result_id = ? ORDER BY name COLLATE BINARY",
+    ))
+    .bind(result_id)
+    .fetch_all(pool)
+    .await
+    .map_err(query_err("reading a result's tables"))?;
     Ok(rows.iter().map(|r| (r.get(0), r.get(1))).collect())
 }
 
@@ -278,9 +279,9 @@ pub(crate) async fn figures_of(
     d: Dialect,
     result_id: i64,
 ) -> Result<Vec<(String, Vec<u8>)>, StoreError> {
-    let rows = sqlx::query(
-        d.sql("SELECT name, png FROM result_figures WHERE result_id = ? ORDER BY name"),
-    )
+    let rows = sqlx::query(d.sql(
+        "SELECT name, png FROM result_figures WHERE result_id = ? ORDER BY name COLLATE BINARY",
+    ))
     .bind(result_id)
     .fetch_all(pool)
     .await

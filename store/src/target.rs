@@ -7,7 +7,14 @@
 //! - `sqlite:PATH` or `sqlite://PATH`: that file.
 //! - anything else: a file path, as it always was.
 //!
-//! Whatever prints a target prints [`DbTarget::display`], which never shows a password.
+//! A password never prints: the URL is held in [`PgUrl`], whose `Debug` and `Display`
+//! show it with the password as `***` ([`redact`]); only [`PgUrl::expose`] hands the
+//! text to the driver. Whatever prints a target prints [`DbTarget::display`].
+//!
+//! On a shared host, leave the password out of the URL (every user reads a process's
+//! command line in `/proc/*/cmdline`): the driver takes it, as libpq does, from
+//! `PGPASSWORD` or from the password file (`PGPASSFILE`, else `~/.pgpass`, lines of
+//! `host:port:database:user:password`).
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -18,9 +25,45 @@ use std::str::FromStr;
 pub enum DbTarget {
     /// A SQLite file.
     File(PathBuf),
-    /// A PostgreSQL server's URL, as given (password included: never print it, print
-    /// [`DbTarget::display`]).
-    Postgres(String),
+    /// A PostgreSQL server's URL, as given (a password in it prints as `***`).
+    Postgres(PgUrl),
+}
+
+/// A PostgreSQL URL that may hold a password: printed (`{}` or `{:?}`) only with the
+/// password as `***`; [`PgUrl::expose`] gives the text itself, for the driver alone.
+#[derive(Clone, PartialEq, Eq)]
+pub struct PgUrl(String);
+
+impl PgUrl {
+    /// The URL as given, password included: for connecting, never for printing.
+    #[must_use]
+    pub fn expose(&self) -> &str {
+        &self.0
+    }
+}
+
+impl From<String> for PgUrl {
+    fn from(url: String) -> Self {
+        Self(url)
+    }
+}
+
+impl From<&str> for PgUrl {
+    fn from(url: &str) -> Self {
+        Self(url.to_owned())
+    }
+}
+
+impl fmt::Debug for PgUrl {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_tuple("PgUrl").field(&redact(&self.0)).finish()
+    }
+}
+
+impl fmt::Display for PgUrl {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&redact(&self.0))
+    }
 }
 
 impl DbTarget {
@@ -47,7 +90,7 @@ impl DbTarget {
                 crate::file::sqlite_url(path, sqlite_mode),
                 crate::Dialect::Sqlite,
             ),
-            Self::Postgres(url) => (url.clone(), crate::Dialect::Postgres),
+            Self::Postgres(url) => (url.expose().to_owned(), crate::Dialect::Postgres),
         }
     }
 
@@ -66,7 +109,7 @@ impl fmt::Display for Shown<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self.0 {
             DbTarget::File(path) => write!(f, "{}", path.display()),
-            DbTarget::Postgres(url) => f.write_str(&redact(url)),
+            DbTarget::Postgres(url) => fmt::Display::fmt(url, f),
         }
     }
 }
@@ -75,6 +118,7 @@ impl fmt::Display for Shown<'_> {
 #[must_use]
 pub fn redact(url: &str) -> String {
     let (scheme, rest) = url.split_once("://").unwrap_or(("", url));
+    let has_scheme = url.contains("://");
     let authority_end = rest.find(['/', '?', '#']).unwrap_or(rest.len());
     let (authority, tail) = rest.split_at(authority_end);
     let authority = match authority.rsplit_once('@') {
@@ -99,11 +143,32 @@ pub fn redact(url: &str) -> String {
         }
         None => tail.to_owned(),
     };
-    if scheme.is_empty() {
-        format!("{authority}{tail}")
-    } else {
+    if has_scheme {
         format!("{scheme}://{authority}{tail}")
+    } else {
+        format!("{authority}{tail}")
     }
+}
+
+/// `text` (a command line, a message) with every URL's password as `***`: each word
+/// holding `://` is redacted from its scheme on (`--db=postgres://u:pw@h/d` keeps
+/// `--db=`).
+#[must_use]
+pub fn redact_words(text: &str) -> String {
+    text.split(' ')
+        .map(|word| match word.find("://") {
+            Some(at) => {
+                let scheme_start = word[..at]
+                    .char_indices()
+                    .rev()
+                    .find(|&(_, c)| !(c.is_ascii_alphanumeric() || matches!(c, '+' | '-' | '.')))
+                    .map_or(0, |(i, c)| i + c.len_utf8());
+                format!("{}{}", &word[..scheme_start], redact(&word[scheme_start..]))
+            }
+            None => word.to_owned(),
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// `url` naming the database `name` on the same server, with the same options.
@@ -143,7 +208,7 @@ impl FromStr for DbTarget {
                     redact(s)
                 ));
             }
-            return Ok(Self::Postgres(s.to_owned()));
+            return Ok(Self::Postgres(PgUrl(s.to_owned())));
         }
         if lower.starts_with("postgres:") || lower.starts_with("postgresql:") {
             return Err(format!(
@@ -249,9 +314,36 @@ mod tests {
         assert_eq!(redact("postgres://db/x"), "postgres://db/x");
         // A password holding '@' or ':' is cut at the last '@' of the authority.
         assert_eq!(redact("postgres://u:p@ss:w@h/d"), "postgres://u:***@h/d");
-        let shown = DbTarget::Postgres("postgres://u:pw@h/d".into())
-            .display()
-            .to_string();
-        assert_eq!(shown, "postgres://u:***@h/d");
+        let target = DbTarget::Postgres("postgres://u:pw@h/d".into());
+        assert_eq!(target.display().to_string(), "postgres://u:***@h/d");
+        // Unprintable by type: Debug of the target, and of anything holding it.
+        let debug = format!("{target:?} {:?}", Some(&target));
+        assert!(!debug.contains("pw@"), "{debug}");
+        assert!(debug.contains("u:***@h"), "{debug}");
+        let DbTarget::Postgres(url) = &target else {
+            unreachable!()
+        };
+        assert_eq!(url.to_string(), "postgres://u:***@h/d");
+        assert_eq!(url.expose(), "postgres://u:pw@h/d");
+    }
+
+    #[test]
+    fn command_lines_are_shown_without_passwords() {
+        assert_eq!(
+            redact_words("--db postgres://rig:hunter2@db/x collect --samples 3"),
+            "--db postgres://rig:***@db/x collect --samples 3"
+        );
+        assert_eq!(
+            redact_words("db copy --from=POSTGRESQL://a:b@h/d --to x.db"),
+            "db copy --from=POSTGRESQL://a:***@h/d --to x.db"
+        );
+        assert_eq!(
+            redact_words("--to postgres://h/d?password=p&sslmode=require"),
+            "--to postgres://h/d?password=***&sslmode=require"
+        );
+        assert_eq!(redact_words(""), "");
+        assert_eq!(redact_words("://"), "://");
+        assert_eq!(redact_words("a :// b"), "a :// b");
+        assert_eq!(redact_words("é://u:p@h"), "é://u:***@h");
     }
 }

@@ -63,7 +63,7 @@ pub(crate) async fn samples_in(db: &Path, run: i64) -> i64 {
                 .unwrap_or(0)
         }
         DbTarget::Postgres(url) => {
-            let Ok(mut conn) = sqlx::PgConnection::connect(&url).await else {
+            let Ok(mut conn) = sqlx::PgConnection::connect(url.expose()).await else {
                 return 0;
             };
             let n = sqlx::query_scalar("SELECT COUNT(*) FROM samples WHERE run_id = $1")
@@ -130,7 +130,7 @@ pub(crate) async fn open_store(db: &Path) -> softtouch_collector::store::Store {
 pub(crate) fn db_arg(db: &Path) -> String {
     match target_of(db) {
         DbTarget::File(path) => path.display().to_string(),
-        DbTarget::Postgres(url) => url,
+        DbTarget::Postgres(url) => url.expose().to_owned(),
     }
 }
 

@@ -1,24 +1,39 @@
 //! `softtouch db copy`: runs, datasets, models, grasp sessions, calibrations and results
 //! from one store into another, between any two engines, checked and never twice.
 //!
+//! - **One snapshot.** Everything is read from the source in one read transaction
+//!   (REPEATABLE READ on PostgreSQL; one read transaction on SQLite), so a run still
+//!   being collected is copied as it stood at one instant: a sample with its frame and
+//!   window, never a sample without them. The next copy takes what came since.
 //! - **Identities.** Ids are the destination's own (PostgreSQL's identities, SQLite's
 //!   rowids): several rigs' runs 1 never collide. The destination records each copied
 //!   object in `copied` (the source store's `uid`, the kind, the source id, the new id),
 //!   in the same transaction as the object, so a killed copy leaves each object whole or
 //!   absent, and a second copy skips what is there. A run copied while it was still
 //!   being collected gets its new samples, frames, windows and events on the next copy
-//!   (samples are keyed by their index), and its status and times refreshed.
+//!   (samples are keyed by their index), and its status, times and `rig_toml` (a
+//!   resume rewrites it) refreshed.
 //! - **Back again.** Copying B into A skips B's objects that B got from A: they map to
 //!   A's originals.
-//! - **Checked.** After each object, every table's rows for it are read back from both
-//!   stores and hashed (sha256 over every column but the ids, with references mapped),
-//!   frames and windows byte for byte; a difference is an error naming the table.
+//! - **Checked before commit.** Within the destination's transaction, the object's own
+//!   row and every child table's rows for it are read back and hashed (sha256 over
+//!   every column but the destination's ids, with references mapped), each row on its
+//!   own, and compared as sets with the snapshot's: the order a server's collation
+//!   gives text does not matter. A difference rolls the object back and names the table.
+//! - **Clones and rewound stores.** Stores are told apart by `store_identity.uid`. A
+//!   copied file or a restored backup has its original's uid; when it then differs from
+//!   what was copied from that uid (an object's fixed columns, or rows copied before),
+//!   the copy stops and says so: `softtouch db new-identity` gives such a store an
+//!   identity of its own.
 //! - **What is not copied:** leases (a live collector's, on its own store) and the
 //!   `copied` bookkeeping itself. A dataset or model whose name the destination already
-//!   uses for something else is skipped and reported (names are unique per store).
+//!   uses for something else is skipped and reported (names are unique per store); a
+//!   reference to something not copied (a model's skipped dataset) is left empty and
+//!   reported.
 //!
 //! The copier is generic over tables: it reads each row as typed cells and writes the
-//! same columns, so a column added by a migration is copied without touching this file.
+//! same columns (quoted: a name is never read as SQL), so a column added by a
+//! migration is copied without touching this file.
 
 use crate::{Dialect, Store, StoreError, query_err};
 use futures_util::TryStreamExt as _;
@@ -33,7 +48,8 @@ struct Child {
     table: &'static str,
     /// Selects the child rows of the object whose id is bound once.
     select_where: &'static str,
-    /// Row order, for hashing both sides alike.
+    /// Row order as written (byte order for text: `COLLATE BINARY`, which PostgreSQL
+    /// reads as `"C"`); the check compares rows as sets, whatever the order.
     order: &'static str,
     /// The conflict target of its natural key (re-copies add only what is new), or its
     /// own identity column and the kind it is recorded as in `copied`.
@@ -43,18 +59,21 @@ struct Child {
 }
 
 impl Child {
-    /// The child rows of object `parent` in `store`, in [`Child::order`].
+    /// The child rows of object `parent` on `conn`, in [`Child::order`].
     fn rows_of<'a>(
         &self,
-        store: &'a Store,
+        conn: &'a mut AnyConnection,
         parent: i64,
     ) -> futures_util::stream::BoxStream<'a, Result<AnyRow, sqlx::Error>> {
-        sqlx::query(store.dialect.sql_owned(format!(
+        let d = Dialect::of(conn);
+        sqlx::query(d.sql_owned(format!(
             "SELECT * FROM {} WHERE {} ORDER BY {}",
-            self.table, self.select_where, self.order
+            quoted(self.table),
+            self.select_where,
+            self.order
         )))
         .bind(parent)
-        .fetch(&store.pool)
+        .fetch(conn)
     }
 }
 
@@ -85,7 +104,13 @@ const KINDS: &[Kind] = &[
         id: "run_id",
         name: None,
         refs: &[("poses_from_run_id", "run")],
-        refresh: &["status", "updated_at", "finished_at", "time_base_ns"],
+        refresh: &[
+            "status",
+            "updated_at",
+            "finished_at",
+            "time_base_ns",
+            "rig_toml",
+        ],
         children: &[
             Child {
                 table: "samples",
@@ -182,7 +207,7 @@ const KINDS: &[Kind] = &[
             Child {
                 table: "grasp_trial_frames",
                 select_where: "trial_id IN (SELECT trial_id FROM grasp_trials WHERE session_id = ?)",
-                order: "trial_id, moment",
+                order: "trial_id, moment COLLATE BINARY",
                 key: ChildKey::Natural("(trial_id, moment)"),
                 refs: &[("trial_id", "trial")],
             },
@@ -199,14 +224,14 @@ const KINDS: &[Kind] = &[
             Child {
                 table: "result_tables",
                 select_where: "result_id = ?",
-                order: "name",
+                order: "name COLLATE BINARY",
                 key: ChildKey::Natural("(result_id, name)"),
                 refs: &[("result_id", "result")],
             },
             Child {
                 table: "result_figures",
                 select_where: "result_id = ?",
-                order: "name",
+                order: "name COLLATE BINARY",
                 key: ChildKey::Natural("(result_id, name)"),
                 refs: &[("result_id", "result")],
             },
@@ -334,12 +359,17 @@ fn add(list: &mut Vec<(String, u64)>, key: &str, n: u64) {
 /// Per kind: source id → destination id.
 type Maps = HashMap<&'static str, HashMap<i64, i64>>;
 
+/// Maps the reference columns `refs` of a row to the destination's ids. A reference to
+/// something not copied becomes NULL where the schema allows it (a run's
+/// `poses_from_run_id`, a model's `dataset_id`) and comes back as a line saying so;
+/// elsewhere it is an error.
 fn map_refs(
     cells: &mut Cells,
     refs: &[(&str, &str)],
     maps: &Maps,
     table: &str,
-) -> Result<(), StoreError> {
+) -> Result<Vec<String>, StoreError> {
+    let mut emptied = Vec::new();
     for (column, kind) in refs {
         let Some((_, cell)) = cells.iter_mut().find(|(c, _)| c == column) else {
             continue;
@@ -347,10 +377,12 @@ fn map_refs(
         if let Cell::Int(id) = cell {
             match maps.get(kind).and_then(|m| m.get(id)) {
                 Some(to) => *id = *to,
-                // A reference to something not copied (a run deleted since): none.
                 None if *column == "poses_from_run_id"
                     || *column == "dataset_id" && table == "models" =>
                 {
+                    emptied.push(format!(
+                        "{table}.{column} = {id}: that {kind} was not copied; left empty"
+                    ));
                     *cell = Cell::Null(AnyTypeInfoKind::BigInt);
                 }
                 None => {
@@ -362,7 +394,81 @@ fn map_refs(
             }
         }
     }
-    Ok(())
+    Ok(emptied)
+}
+
+/// A table or column name as SQL reads it: in double quotes, inner quotes doubled
+/// (both engines), so a name is never read as SQL.
+fn quoted(name: &str) -> String {
+    format!("\"{}\"", name.replace('"', "\"\""))
+}
+
+/// sha256 of a row's cells, leaving out the columns `skip`.
+fn row_digest(cells: &Cells, skip: &[&str]) -> [u8; 32] {
+    let mut h = Sha256::new();
+    for (column, cell) in cells {
+        if !skip.contains(&column.as_str()) {
+            h.update((column.len() as u64).to_le_bytes());
+            h.update(column.as_bytes());
+            cell.hash_into(&mut h);
+        }
+    }
+    h.finalize().into()
+}
+
+/// Whether two cells hold the same value (bit for bit; a NULL of any declared type is
+/// NULL).
+fn same(a: &Cell, b: &Cell) -> bool {
+    let digest = |c: &Cell| {
+        let mut h = Sha256::new();
+        c.hash_into(&mut h);
+        h.finalize()
+    };
+    digest(a) == digest(b)
+}
+
+/// The cells that differ between two rows (columns `skip` aside), as `column: a ≠ b`.
+fn differences(a: &Cells, b: &Cells, skip: &[&str]) -> Vec<String> {
+    let show = |c: &Cell| match c {
+        Cell::Null(_) => "NULL".to_owned(),
+        Cell::Int(v) => v.to_string(),
+        Cell::Real(v) => v.to_string(),
+        Cell::Text(v) if v.chars().count() > 40 => {
+            format!("{:?}…", v.chars().take(40).collect::<String>())
+        }
+        Cell::Text(v) => format!("{v:?}"),
+        Cell::Blob(v) => format!("{} bytes", v.len()),
+    };
+    a.iter()
+        .filter(|(column, _)| !skip.contains(&column.as_str()))
+        .filter_map(|(column, x)| {
+            let y = b.iter().find(|(c, _)| c == column).map(|(_, y)| y);
+            match y {
+                Some(y) if same(x, y) => None,
+                Some(y) => Some(format!("{column}: {} here, {} there", show(x), show(y))),
+                None => Some(format!("{column}: not at the destination")),
+            }
+        })
+        .collect()
+}
+
+/// The source, read as one snapshot for a whole copy.
+type Snapshot = sqlx::Transaction<'static, Any>;
+
+/// Why a copy stops at an object its source no longer holds as copied: the store is a
+/// clone or a restored backup of the one first copied under its uid.
+fn diverged(uid: &str, what: &str, why: &str) -> StoreError {
+    StoreError::Invalid {
+        what: "copy",
+        why: format!(
+            "{what} is not as it was copied from this store before ({why}). \
+             The destination had it from a store of the same identity ({uid}): this store \
+             is a copy of that one (a copied file, a restored backup) and has been written \
+             since, or was rewound. Nothing of it was written. If it is a copy, give it an \
+             identity of its own (`softtouch --db THIS_STORE db new-identity`) and copy \
+             again: its objects are then copied as new ones"
+        ),
+    }
 }
 
 impl Store {
@@ -371,24 +477,10 @@ impl Store {
     /// # Errors
     /// A query failure.
     pub async fn uid(&self) -> Result<String, StoreError> {
-        use std::hash::{BuildHasher as _, Hasher as _};
-        // A candidate, kept only where the store has none yet: 128 random bits from the standard library's randomly keyed hashers.
-        let mut words = [0u64; 2];
-        for (i, w) in words.iter_mut().enumerate() {
-            let mut h = std::collections::hash_map::RandomState::new().build_hasher();
-            h.write_u64(i as u64);
-            h.write_u128(
-                std::time::SystemTime::now()
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map_or(0, |d| d.as_nanos()),
-            );
-            *w = h.finish();
-        }
-        let uid = format!("{:016x}{:016x}", words[0], words[1]);
         sqlx::query(self.dialect.sql(
             "INSERT INTO store_identity (singleton, uid) VALUES (1, ?) ON CONFLICT (singleton) DO NOTHING",
         ))
-        .bind(&uid)
+        .bind(new_uid())
         .execute(&self.pool)
         .await
         .map_err(query_err("recording the store's identity"))?;
@@ -402,12 +494,34 @@ impl Store {
         .map_err(query_err("reading the store's identity"))
     }
 
+    /// Give this store a new identity for copies (a copied file or a restored backup
+    /// that has been written since, and is now a store of its own); the old and the
+    /// new uid. What it holds is then copied anywhere as new objects, even where its
+    /// original's copies are.
+    ///
+    /// # Errors
+    /// A query failure.
+    pub async fn new_identity(&self) -> Result<(String, String), StoreError> {
+        let old = self.uid().await?;
+        let new = new_uid();
+        sqlx::query(
+            self.dialect
+                .sql("UPDATE store_identity SET uid = ? WHERE singleton = 1"),
+        )
+        .bind(&new)
+        .execute(&self.pool)
+        .await
+        .map_err(query_err("giving the store a new identity"))?;
+        Ok((old, new))
+    }
+
     /// Copy everything this store holds into `to` (see the module's docs); `say` gets a
     /// line per object.
     ///
     /// # Errors
-    /// A query failure on either side, the two being one store, or a copy that does
-    /// not read back equal.
+    /// A query failure on either side, the two being one store, a source that is a
+    /// clone or a rewound copy of the store first copied under its identity, or a copy
+    /// that does not read back equal.
     pub async fn copy_into(
         &self,
         to: &Self,
@@ -418,7 +532,9 @@ impl Store {
         if from_uid == to_uid {
             return Err(StoreError::Invalid {
                 what: "copy",
-                why: "--from and --to are the same store".into(),
+                why: "--from and --to are the same store (or one is a copy of the other's \
+                      file: give it an identity of its own with `softtouch db new-identity`)"
+                    .into(),
             });
         }
         let mut report = CopyReport::default();
@@ -437,13 +553,22 @@ impl Store {
                 maps.entry(k).or_default().insert(s, d);
             }
         }
+        let begin = match self.dialect {
+            Dialect::Postgres => {
+                self.pool
+                    .begin_with("BEGIN ISOLATION LEVEL REPEATABLE READ, READ ONLY")
+                    .await
+            }
+            Dialect::Sqlite => self.pool.begin().await,
+        };
+        let mut source: Snapshot = begin.map_err(query_err("starting a snapshot of the source"))?;
         // What this store got from the destination: its own originals, not copied back.
         let back: Vec<(String, i64, i64)> = sqlx::query_as(
             self.dialect
                 .sql("SELECT kind, source_id, dest_id FROM copied WHERE source_uid = ?"),
         )
         .bind(&to_uid)
-        .fetch_all(&self.pool)
+        .fetch_all(&mut *source)
         .await
         .map_err(query_err("reading earlier copies"))?;
         let mut originals: HashMap<&'static str, HashMap<i64, i64>> = HashMap::new();
@@ -455,10 +580,11 @@ impl Store {
         }
         for kind in KINDS {
             let ids: Vec<i64> = sqlx::query_scalar(self.dialect.sql_owned(format!(
-                "SELECT {} FROM {} ORDER BY {}",
-                kind.id, kind.table, kind.id
+                "SELECT {id} FROM {} ORDER BY {id}",
+                quoted(kind.table),
+                id = quoted(kind.id),
             )))
-            .fetch_all(&self.pool)
+            .fetch_all(&mut *source)
             .await
             .map_err(query_err("listing what to copy"))?;
             for id in ids {
@@ -469,55 +595,116 @@ impl Store {
                     add(&mut report.already, kind.kind, 1);
                     continue;
                 }
-                self.copy_object(kind, id, to, &from_uid, &mut maps, &mut report, say)
-                    .await?;
+                let mut copy = ObjectCopy {
+                    source: &mut source,
+                    to,
+                    from_uid: &from_uid,
+                    maps: &mut maps,
+                    report: &mut report,
+                    say: &mut *say,
+                };
+                copy.object(kind, id).await?;
             }
         }
+        // Read only: nothing to commit.
+        let _ = source.rollback().await;
         Ok(report)
     }
+}
 
-    #[allow(
-        clippy::too_many_arguments,
-        reason = "one object's copy and its bookkeeping"
-    )]
-    async fn copy_object(
-        &self,
+/// A candidate identity: 128 random bits from the standard library's randomly keyed
+/// hashers and the clock.
+fn new_uid() -> String {
+    use std::hash::{BuildHasher as _, Hasher as _};
+    let mut words = [0u64; 2];
+    for (i, w) in words.iter_mut().enumerate() {
+        let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+        h.write_u64(i as u64);
+        h.write_u128(
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_nanos()),
+        );
+        *w = h.finish();
+    }
+    format!("{:016x}{:016x}", words[0], words[1])
+}
+
+/// One copy's state: the source's snapshot, the destination, and what is copied so far.
+struct ObjectCopy<'c, 's> {
+    source: &'c mut Snapshot,
+    to: &'c Store,
+    from_uid: &'c str,
+    maps: &'c mut Maps,
+    report: &'c mut CopyReport,
+    say: &'c mut (dyn FnMut(&str) + Send + 's),
+}
+
+impl ObjectCopy<'_, '_> {
+    /// The object's own row in the source's snapshot, its id left out and its
+    /// references mapped; and the references left empty.
+    async fn source_row(
+        &mut self,
         kind: &'static Kind,
         id: i64,
-        to: &Self,
-        from_uid: &str,
-        maps: &mut Maps,
-        report: &mut CopyReport,
-        say: &mut (dyn FnMut(&str) + Send),
-    ) -> Result<(), StoreError> {
-        let d = to.dialect;
-        let row = sqlx::query(self.dialect.sql_owned(format!(
+    ) -> Result<(Cells, Vec<String>), StoreError> {
+        let d = Dialect::of(self.source);
+        let row = sqlx::query(d.sql_owned(format!(
             "SELECT * FROM {} WHERE {} = ?",
-            kind.table, kind.id
+            quoted(kind.table),
+            quoted(kind.id)
         )))
         .bind(id)
-        .fetch_one(&self.pool)
+        .fetch_one(&mut **self.source)
         .await
         .map_err(query_err("reading an object to copy"))?;
         let mut cells = read_cells(&row)?;
         cells.retain(|(c, _)| c != kind.id);
-        map_refs(&mut cells, kind.refs, maps, kind.table)?;
+        let emptied = map_refs(&mut cells, kind.refs, self.maps, kind.table)?;
+        Ok((cells, emptied))
+    }
+
+    async fn object(&mut self, kind: &'static Kind, id: i64) -> Result<(), StoreError> {
+        let to = self.to;
+        let d = to.dialect;
+        let (cells, emptied) = self.source_row(kind, id).await?;
         let mut tx = to
             .pool
             .begin()
             .await
             .map_err(query_err("starting a copy"))?;
-        let existing = maps.get(kind.kind).and_then(|m| m.get(&id)).copied();
+        let existing = self.maps.get(kind.kind).and_then(|m| m.get(&id)).copied();
+        let what = format!("{} {id}", kind.kind);
         let dest_id = match existing {
             Some(dest) => {
+                // The same object as copied before? Its fixed columns say.
+                let there = dest_row(&mut tx, kind, dest).await?;
+                let Some(there) = there else {
+                    return Err(StoreError::Damaged {
+                        what: "copy",
+                        why: format!(
+                            "the destination recorded {what} as its {} {dest}, which is not there",
+                            kind.kind
+                        ),
+                    });
+                };
+                let mut fixed: Vec<&str> = kind.refresh.to_vec();
+                fixed.push(kind.id);
+                let changed = differences(&cells, &there, &fixed);
+                if !changed.is_empty() {
+                    return Err(diverged(self.from_uid, &what, &changed.join("; ")));
+                }
                 if !kind.refresh.is_empty() {
-                    let set: Vec<String> =
-                        kind.refresh.iter().map(|c| format!("{c} = ?")).collect();
+                    let set: Vec<String> = kind
+                        .refresh
+                        .iter()
+                        .map(|c| format!("{} = ?", quoted(c)))
+                        .collect();
                     let mut q = sqlx::query(d.sql_owned(format!(
                         "UPDATE {} SET {} WHERE {} = ?",
-                        kind.table,
+                        quoted(kind.table),
                         set.join(", "),
-                        kind.id
+                        quoted(kind.id)
                     )));
                     for c in kind.refresh {
                         if let Some((_, cell)) = cells.iter().find(|(n, _)| n == c) {
@@ -529,7 +716,7 @@ impl Store {
                         .await
                         .map_err(query_err("refreshing a copied object"))?;
                 }
-                add(&mut report.already, kind.kind, 1);
+                add(&mut self.report.already, kind.kind, 1);
                 dest
             }
             None => {
@@ -537,8 +724,10 @@ impl Store {
                     && let Some((_, Cell::Text(name))) = cells.iter().find(|(c, _)| c == name_col)
                 {
                     let taken: Option<i64> = sqlx::query_scalar(d.sql_owned(format!(
-                        "SELECT {} FROM {} WHERE {name_col} = ?",
-                        kind.id, kind.table
+                        "SELECT {} FROM {} WHERE {} = ?",
+                        quoted(kind.id),
+                        quoted(kind.table),
+                        quoted(name_col)
                     )))
                     .bind(name.clone())
                     .fetch_optional(&mut *tx)
@@ -546,47 +735,64 @@ impl Store {
                     .map_err(query_err("looking for a name"))?;
                     if taken.is_some() {
                         let why = format!(
-                            "{} `{name}`: the destination has another of that name; not copied",
-                            kind.kind
+                            "{what} `{name}`: the destination has another of that name; not copied"
                         );
-                        say(&why);
-                        report.skipped.push(why);
+                        (self.say)(&why);
+                        self.report.skipped.push(why);
                         return Ok(());
                     }
                 }
-                let dest = insert_returning(&mut tx, d, kind.table, kind.id, cells).await?;
-                record(&mut tx, d, from_uid, kind.kind, id, dest).await?;
-                maps.entry(kind.kind).or_default().insert(id, dest);
-                add(&mut report.new, kind.kind, 1);
+                for line in &emptied {
+                    let why = format!("{what}: {line}");
+                    (self.say)(&why);
+                    self.report.skipped.push(why);
+                }
+                let dest = insert_returning(&mut tx, d, kind.table, kind.id, cells.clone()).await?;
+                record(&mut tx, d, self.from_uid, kind.kind, id, dest).await?;
+                self.maps.entry(kind.kind).or_default().insert(id, dest);
+                add(&mut self.report.new, kind.kind, 1);
                 dest
             }
         };
         let mut written = Vec::new();
         for child in kind.children {
-            let n = self
-                .copy_children(child, id, &mut tx, d, from_uid, maps)
-                .await?;
+            let n = self.copy_children(child, id, &mut tx).await?;
             written.push((child.table, n));
         }
-        tx.commit().await.map_err(query_err("committing a copy"))?;
-        // Read back and compare, table by table.
-        let mut checked = Vec::new();
+        // Read back within the transaction and compare, before anything is committed.
+        let there = dest_row(&mut tx, kind, dest_id).await?.unwrap_or_default();
+        let changed = differences(&cells, &there, &[kind.id]);
+        if !changed.is_empty() {
+            return Err(StoreError::Damaged {
+                what: "copy",
+                why: format!(
+                    "{} of {what} does not read back as written: {}",
+                    kind.table,
+                    changed.join("; ")
+                ),
+            });
+        }
+        let mut checked = vec![(kind.table, 1)];
         for child in kind.children {
-            let n = self.check_children(child, id, dest_id, to, maps).await?;
-            add(&mut report.checked, child.table, n);
+            let n = self
+                .check_children(child, id, dest_id, &mut tx, existing.is_some(), &what)
+                .await?;
             checked.push((child.table, n));
         }
+        tx.commit().await.map_err(query_err("committing a copy"))?;
+        for (table, n) in &checked {
+            add(&mut self.report.checked, table, *n);
+        }
         for (table, n) in &written {
-            add(&mut report.rows, table, *n);
+            add(&mut self.report.rows, table, *n);
         }
         let detail: Vec<String> = written
             .iter()
-            .zip(&checked)
+            .zip(&checked[1..])
             .map(|((t, n), (_, c))| format!("{t} +{n} ({c} checked)"))
             .collect();
-        say(&format!(
-            "{} {id} → {dest_id}{}{}",
-            kind.kind,
+        (self.say)(&format!(
+            "{what} → {dest_id}{}{}",
             if existing.is_some() {
                 " (copied before)"
             } else {
@@ -602,15 +808,13 @@ impl Store {
     }
 
     async fn copy_children(
-        &self,
+        &mut self,
         child: &Child,
         parent: i64,
         tx: &mut AnyConnection,
-        d: Dialect,
-        from_uid: &str,
-        maps: &mut Maps,
     ) -> Result<u64, StoreError> {
-        let mut rows = child.rows_of(self, parent);
+        let d = Dialect::of(tx);
+        let mut rows = child.rows_of(self.source, parent);
         let mut n = 0u64;
         while let Some(row) = rows
             .try_next()
@@ -620,7 +824,7 @@ impl Store {
             let mut cells = read_cells(&row)?;
             match child.key {
                 ChildKey::Natural(conflict) => {
-                    map_refs(&mut cells, child.refs, maps, child.table)?;
+                    map_refs(&mut cells, child.refs, self.maps, child.table)?;
                     let done = insert(
                         d,
                         child.table,
@@ -640,14 +844,18 @@ impl Store {
                     else {
                         continue;
                     };
-                    if maps.get(kind).is_some_and(|m| m.contains_key(&source_id)) {
+                    if self
+                        .maps
+                        .get(kind)
+                        .is_some_and(|m| m.contains_key(&source_id))
+                    {
                         continue;
                     }
                     cells.retain(|(c, _)| c != id_col);
-                    map_refs(&mut cells, child.refs, maps, child.table)?;
+                    map_refs(&mut cells, child.refs, self.maps, child.table)?;
                     let dest = insert_returning(tx, d, child.table, id_col, cells).await?;
-                    record(tx, d, from_uid, kind, source_id, dest).await?;
-                    maps.entry(kind).or_default().insert(source_id, dest);
+                    record(tx, d, self.from_uid, kind, source_id, dest).await?;
+                    self.maps.entry(kind).or_default().insert(source_id, dest);
                     n += 1;
                 }
             }
@@ -655,59 +863,99 @@ impl Store {
         Ok(n)
     }
 
-    /// Hash a child table's rows of the object on both sides (references mapped, ids
-    /// left out) and compare; the rows checked.
+    /// Each of a child table's rows of the object, hashed on both sides (references
+    /// mapped, the destination's ids left out), compared as sets; the rows checked.
     async fn check_children(
-        &self,
+        &mut self,
         child: &Child,
         parent: i64,
         dest_parent: i64,
-        to: &Self,
-        maps: &Maps,
+        tx: &mut AnyConnection,
+        copied_before: bool,
+        what: &str,
     ) -> Result<u64, StoreError> {
-        let mut ours = Sha256::new();
-        let mut theirs = Sha256::new();
-        let skip = match child.key {
-            ChildKey::Identity(id_col, _) => Some(id_col),
-            ChildKey::Natural(_) => None,
+        let skip: &[&str] = match &child.key {
+            ChildKey::Identity(id_col, _) => std::slice::from_ref(id_col),
+            ChildKey::Natural(_) => &[],
         };
-        let mut n = 0u64;
-        for (store, parent, hash, mapped) in [
-            (self, parent, &mut ours, true),
-            (to, dest_parent, &mut theirs, false),
-        ] {
-            let mut rows = child.rows_of(store, parent);
-            let mut count = 0u64;
+        let mut ours = Vec::new();
+        {
+            let mut rows = child.rows_of(self.source, parent);
+            while let Some(row) = rows
+                .try_next()
+                .await
+                .map_err(query_err("reading rows to check"))?
+            {
+                let mut cells = read_cells(&row)?;
+                map_refs(&mut cells, child.refs, self.maps, child.table)?;
+                ours.push(row_digest(&cells, skip));
+            }
+        }
+        let mut theirs = Vec::new();
+        {
+            let mut rows = child.rows_of(tx, dest_parent);
             while let Some(row) = rows
                 .try_next()
                 .await
                 .map_err(query_err("reading copied rows back"))?
             {
-                let mut cells = read_cells(&row)?;
-                if let Some(id_col) = skip {
-                    cells.retain(|(c, _)| c != id_col);
-                }
-                if mapped {
-                    map_refs(&mut cells, child.refs, maps, child.table)?;
-                }
-                for (_, cell) in &cells {
-                    cell.hash_into(hash);
-                }
-                count += 1;
+                theirs.push(row_digest(&read_cells(&row)?, skip));
             }
-            n = count;
         }
-        if ours.finalize() != theirs.finalize() {
-            return Err(StoreError::Damaged {
+        ours.sort_unstable();
+        theirs.sort_unstable();
+        if ours == theirs {
+            return Ok(ours.len() as u64);
+        }
+        let only_here = ours
+            .iter()
+            .filter(|h| theirs.binary_search(h).is_err())
+            .count();
+        let only_there = theirs
+            .iter()
+            .filter(|h| ours.binary_search(h).is_err())
+            .count();
+        let counts = format!(
+            "{} rows here, {} there; {only_here} only here, {only_there} only there",
+            ours.len(),
+            theirs.len()
+        );
+        Err(if copied_before {
+            diverged(
+                self.from_uid,
+                &format!("{} of {what}", child.table),
+                &counts,
+            )
+        } else {
+            StoreError::Damaged {
                 what: "copy",
                 why: format!(
-                    "{} of {parent} does not read back as written (sha256 differs)",
+                    "{} of {what} does not read back as written (sha256 differs: {counts})",
                     child.table
                 ),
-            });
-        }
-        Ok(n)
+            }
+        })
     }
+}
+
+/// The object `id`'s row at the destination (inside the copy's transaction), its
+/// columns as stored.
+async fn dest_row(
+    tx: &mut AnyConnection,
+    kind: &Kind,
+    id: i64,
+) -> Result<Option<Cells>, StoreError> {
+    let d = Dialect::of(tx);
+    let row = sqlx::query(d.sql_owned(format!(
+        "SELECT * FROM {} WHERE {} = ?",
+        quoted(kind.table),
+        quoted(kind.id)
+    )))
+    .bind(id)
+    .fetch_optional(&mut *tx)
+    .await
+    .map_err(query_err("reading a copied object back"))?;
+    row.as_ref().map(read_cells).transpose()
 }
 
 fn kind_name(kind: &str) -> Option<&'static str> {
@@ -719,7 +967,7 @@ fn kind_name(kind: &str) -> Option<&'static str> {
 }
 
 fn columns_and_marks(cells: &Cells) -> (String, String) {
-    let columns: Vec<&str> = cells.iter().map(|(c, _)| c.as_str()).collect();
+    let columns: Vec<String> = cells.iter().map(|(c, _)| quoted(c)).collect();
     let marks = vec!["?"; cells.len()].join(", ");
     (columns.join(", "), marks)
 }
@@ -728,7 +976,8 @@ fn columns_and_marks(cells: &Cells) -> (String, String) {
 fn insert(d: Dialect, table: &str, cells: Cells, tail: &str) -> Query<'static> {
     let (columns, marks) = columns_and_marks(&cells);
     let mut q = sqlx::query(d.sql_owned(format!(
-        "INSERT INTO {table} ({columns}) VALUES ({marks}) {tail}"
+        "INSERT INTO {} ({columns}) VALUES ({marks}) {tail}",
+        quoted(table)
     )));
     for (_, cell) in cells {
         q = bind(q, cell);
@@ -743,7 +992,7 @@ async fn insert_returning(
     id_col: &str,
     cells: Cells,
 ) -> Result<i64, StoreError> {
-    insert(d, table, cells, &format!("RETURNING {id_col}"))
+    insert(d, table, cells, &format!("RETURNING {}", quoted(id_col)))
         .fetch_one(&mut *tx)
         .await
         .map_err(query_err("copying an object"))?
@@ -771,3 +1020,6 @@ async fn record(
     .map_err(query_err("recording a copy"))?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests;
