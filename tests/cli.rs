@@ -421,9 +421,10 @@ fn collect_says_the_disk_it_needs_status_the_size_per_sample_and_the_db_file_alo
     let d = dir.path();
     let db = d.join("softtouch.db");
     let out = common::ok(&softtouch(d, &["collect", "--samples", "3", "--seed", "1"]));
-    // No samples yet: the figure is assumed, and said to be.
+    // No samples yet: a frame of the scene is rendered and encoded, the rest assumed.
     assert!(
-        out.contains("disk: about 660 kB for 3 samples (220 kB a sample, assumed until this database holds samples);"),
+        out.contains("kB for 3 samples (")
+            && out.contains(" kB a sample: its frame one of scene `on-land` rendered and encoded, the rest assumed until the database holds samples);"),
         "{out}"
     );
     let status = common::ok(&softtouch(d, &["status"]));
@@ -433,7 +434,12 @@ fn collect_says_the_disk_it_needs_status_the_size_per_sample_and_the_db_file_alo
     assert!(first.ends_with(" a sample"), "{status}");
     // A second run measures on the database itself.
     let out = common::ok(&softtouch(d, &["collect", "--samples", "2", "--seed", "2"]));
-    assert!(out.contains("measured over the 3 samples stored"), "{out}");
+    assert!(
+        out.contains(
+            "its frame measured over 3 of scene `on-land`, the rest measured over 3 samples"
+        ),
+        "{out}"
+    );
     // The `.db` file alone holds every commit once the binary has exited.
     assert_eq!(softtouch_collector::store::file::db_size(&db).wal_bytes, 0);
     let backup = d.join("backup.db");

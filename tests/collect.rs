@@ -803,6 +803,17 @@ fn a_water_run_with_poses_from_a_land_run_repeats_its_poses_and_rods_pose_by_pos
         out.contains("run 2 pairs with run 1: 12 samples in both, every rod and pose the same"),
         "{out}"
     );
+    // Its disk is said before it starts, from a frame of the water scene (no frame of
+    // it stored yet): nearly three times a dry sample.
+    let disk = out
+        .lines()
+        .find(|l| l.starts_with("disk: about "))
+        .unwrap_or_else(|| panic!("no disk line in: {out}"));
+    assert!(
+        disk.contains("for 12 samples (")
+            && disk.contains("its frame one of scene `underwater` rendered and encoded"),
+        "{disk}"
+    );
     let status = ok(&softtouch(dir.path(), &["status", "2"]));
     assert!(status.contains("poses and rods of run 1"), "{status}");
     runtime().block_on(async {

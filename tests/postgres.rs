@@ -619,6 +619,27 @@ fn a_password_never_shows_and_is_taken_from_pgpassword_or_a_password_file() {
     let out = run(&["--db", &malformed, "runs"], &[]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
     unseen(&out, "a malformed URL");
+    // A mistyped option: the driver ignores it with a warning, shown without its value.
+    let typo = format!("postgres://{role}@{host}/{database}?passwd={secret}");
+    let out = run(&["--db", &typo, "runs"], &[("RUST_LOG", "debug")]);
+    fails_with(&out, 2, "the server refused the login");
+    unseen(&out, "a mistyped password option");
+    // A malformed password-file line (no database field): the driver's warning quotes
+    // the line; it is not shown.
+    let malformed_file = d.join("bad.pgpass");
+    std::fs::write(&malformed_file, format!("{host}:{role}:{secret}\n"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        std::fs::set_permissions(&malformed_file, std::fs::Permissions::from_mode(0o600))
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+    let out = run(
+        &["--db", &without, "runs"],
+        &[("PGPASSFILE", &malformed_file.display().to_string())],
+    );
+    fails_with(&out, 2, "the server refused the login");
+    unseen(&out, "a malformed password file");
     let wrong = format!("postgres://{role}:not-{secret}-either@{host}/{database}");
     let out = run(&["--db", &wrong, "runs"], &[]);
     fails_with(&out, 2, "the server refused the login");

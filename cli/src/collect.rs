@@ -154,10 +154,19 @@ pub async fn run_collect(
             db.display()
         )));
     }
-    // The disk a run takes is said, and checked, before anything is written.
-    let stored = stored_samples(db).await?;
-    if args.resume.is_none() && args.samples.unwrap_or(0) > 0 {
-        check_disk(db, stored, args.samples.unwrap_or(0), out)?;
+    // The disk a run takes is said, and checked, before anything is written. A request
+    // the plan below refuses (a bad scene, a missing --poses-from run) is left to it.
+    if args.resume.is_none()
+        && let Ok(resolved) =
+            softtouch_collector::configs::resolve(args.rig.as_deref(), args.scene.as_deref())
+    {
+        let samples = match args.poses_from {
+            Some(source) => planned_samples(db, source).await?,
+            None => args.samples.unwrap_or(0),
+        };
+        if samples > 0 {
+            check_disk(db, &resolved.scene, samples, out).await?;
+        }
     }
     let store = SyncStore::open(db)?;
     let plan = if let Some(run_id) = args.resume {
@@ -185,7 +194,7 @@ pub async fn run_collect(
 
     let run_id = plan.run_id;
     if args.resume.is_some()
-        && let Err(e) = check_disk(db, stored, plan.remaining(), out)
+        && let Err(e) = check_disk(db, &plan.scene, plan.remaining(), out).await
     {
         store.close();
         return Err(e);
@@ -259,36 +268,55 @@ pub async fn run_collect(
     }
 }
 
-/// Samples the database at `db` holds (0 when there is no database yet).
-async fn stored_samples(db: &softtouch_store::DbTarget) -> Result<u64, Failure> {
+/// What the database at `db` holds, for the disk estimate of a run of `scene` (nothing
+/// when there is no database yet).
+async fn footprint(
+    db: &softtouch_store::DbTarget,
+    scene: &softtouch_schemas::SceneSpec,
+) -> Result<softtouch_collector::collect::disk::Footprint, Failure> {
     if let Some(path) = db.file()
         && softtouch_store::file::inspect(path)? != softtouch_store::file::DbFile::Sqlite
     {
+        return Ok(softtouch_collector::collect::disk::Footprint::default());
+    }
+    let store = softtouch_store::Store::open_existing(db).await?;
+    let held = async {
+        Ok::<_, softtouch_store::StoreError>(softtouch_collector::collect::disk::Footprint {
+            samples: store.stored_samples().await?,
+            total_bytes: store.database_bytes().await?,
+            frames: store.frame_bytes(None).await?,
+            scene_frames: store.frame_bytes(Some(&scene.name)).await?,
+        })
+    }
+    .await;
+    store.close().await;
+    Ok(held?)
+}
+
+/// The samples a `--poses-from` run will take: its source's plan (0 when the source is
+/// not there: the plan says so).
+async fn planned_samples(db: &softtouch_store::DbTarget, source: i64) -> Result<u64, Failure> {
+    if db.file().is_some_and(|path| !path.is_file()) {
         return Ok(0);
     }
     let store = softtouch_store::Store::open_existing(db).await?;
-    let n = store.stored_samples().await;
+    let record = store.run_record(source).await;
     store.close().await;
-    Ok(n?)
+    Ok(record.map_or(0, |r| u64::try_from(r.samples_planned).unwrap_or(0)))
 }
 
-/// Says what the run will take on disk and refuses one that would not fit.
-fn check_disk(
+/// Says what the run will take on disk and refuses one that would not fit (on a
+/// server, says it: its disk is its administrator's to watch).
+async fn check_disk(
     db: &softtouch_store::DbTarget,
-    stored: u64,
+    scene: &softtouch_schemas::SceneSpec,
     samples: u64,
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
-    let Some(path) = db.file() else {
-        // The server's disk is not this machine's to measure: its administrator's.
-        return writeln!(
-            out,
-            "disk: on the PostgreSQL server {} (not checked from here)",
-            db.display()
-        )
-        .map_err(io_failure);
-    };
-    let disk = softtouch_collector::collect::disk::plan(path, stored, samples)?;
+    use softtouch_collector::collect::disk;
+    let held = footprint(db, scene).await?;
+    let per_sample = disk::sample_bytes(&held, scene).map_err(|e| Failure::Runtime(anyhow!(e)))?;
+    let disk = disk::DiskPlan::new(db.file(), per_sample, samples)?;
     if !disk.fits() {
         return Err(Failure::Runtime(anyhow!(
             "not enough disk for {samples} samples beside {}: {}; free some space, collect fewer (--samples) or use a database elsewhere (--db)",

@@ -12,6 +12,7 @@ use softtouch_cli::{self as cli, Cli, Command};
 use std::ffi::OsString;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use tracing_subscriber::filter::{FilterExt as _, filter_fn};
 use tracing_subscriber::layer::SubscriberExt as _;
 use tracing_subscriber::util::SubscriberInitExt as _;
 use tracing_subscriber::{EnvFilter, Layer as _};
@@ -63,13 +64,21 @@ fn filter(default: &str) -> EnvFilter {
     EnvFilter::try_from_default_env().unwrap_or_else(|_| default.into())
 }
 
+/// Whether an event may be written anywhere: not the PostgreSQL driver's option
+/// parser's events that carry what the user wrote (an unrecognised URL option's value,
+/// a malformed password-file line: either may be a password), whatever `RUST_LOG` asks.
+fn shows_no_secret(meta: &tracing::Metadata<'_>) -> bool {
+    !(meta.target().starts_with("sqlx_postgres::options")
+        && (meta.fields().field("value").is_some() || meta.fields().field("line").is_some()))
+}
+
 /// Install the subscribers; the guard flushes the log file when dropped.
 fn init_logging(cli: &Cli) -> Option<tracing_appender::non_blocking::WorkerGuard> {
     // Colour only for a person at a terminal, never into a file or a pipe.
     let stderr = tracing_subscriber::fmt::layer()
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_writer(std::io::stderr)
-        .with_filter(filter(STDERR_FILTER));
+        .with_filter(filter(STDERR_FILTER).and(filter_fn(shows_no_secret)));
     let path = log_path(&cli.db);
     let file = if wants_log_file(cli) {
         match std::fs::OpenOptions::new()
@@ -95,7 +104,7 @@ fn init_logging(cli: &Cli) -> Option<tracing_appender::non_blocking::WorkerGuard
             let layer = tracing_subscriber::fmt::layer()
                 .with_ansi(false)
                 .with_writer(writer)
-                .with_filter(filter(FILE_FILTER));
+                .with_filter(filter(FILE_FILTER).and(filter_fn(shows_no_secret)));
             (Some(layer), Some(guard))
         }
         None => (None, None),

@@ -565,6 +565,37 @@ impl Store {
         Ok(u64::try_from(n).unwrap_or(0))
     }
 
+    /// Frames stored and their bytes: over every run, or over the runs of the scene
+    /// named `scene_name` (what a sample of that scene will take, for the disk estimate).
+    ///
+    /// # Errors
+    /// The query fails.
+    pub async fn frame_bytes(&self, scene_name: Option<&str>) -> Result<(u64, u64), StoreError> {
+        // LENGTH of a blob reads its size, not its bytes, on both engines.
+        let (n, bytes): (i64, i64) =
+            match scene_name {
+                None => sqlx::query_as(self.dialect.sql(
+                    "SELECT COUNT(*), CAST(COALESCE(SUM(LENGTH(data)), 0) AS BIGINT) FROM frames",
+                ))
+                .fetch_one(&self.pool)
+                .await,
+                Some(scene) => {
+                    sqlx::query_as(self.dialect.sql(
+                        "SELECT COUNT(*), CAST(COALESCE(SUM(LENGTH(f.data)), 0) AS BIGINT)
+                 FROM frames f JOIN runs r ON r.run_id = f.run_id WHERE r.scene_name = ?",
+                    ))
+                    .bind(scene)
+                    .fetch_one(&self.pool)
+                    .await
+                }
+            }
+            .map_err(query_err("measuring the stored frames"))?;
+        Ok((
+            u64::try_from(n).unwrap_or(0),
+            u64::try_from(bytes).unwrap_or(0),
+        ))
+    }
+
     /// Append a sample with its frame and raw window, in one transaction.
     ///
     /// Idempotent on `(run, sample.index)`: if that sample is already stored nothing

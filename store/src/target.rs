@@ -114,7 +114,8 @@ impl fmt::Display for Shown<'_> {
     }
 }
 
-/// `url` with the password (in the user part, or a `password=` option) as `***`.
+/// `url` with the password (in the user part, or an option whose name holds `pass`:
+/// `password=`, a mistyped `passwd=`) as `***`.
 #[must_use]
 pub fn redact(url: &str) -> String {
     let (scheme, rest) = url.split_once("://").unwrap_or(("", url));
@@ -133,7 +134,9 @@ pub fn redact(url: &str) -> String {
             let query: Vec<String> = query
                 .split('&')
                 .map(|pair| match pair.split_once('=') {
-                    Some((key, _)) if key.eq_ignore_ascii_case("password") => {
+                    // `password`, and anything like it (`passwd`, `pass`): better a
+                    // hidden option than a shown secret.
+                    Some((key, _)) if key.to_ascii_lowercase().contains("pass") => {
                         format!("{key}=***")
                     }
                     _ => pair.to_owned(),
@@ -312,6 +315,10 @@ mod tests {
             "postgres://rig@db/x?password=***&application_name=a"
         );
         assert_eq!(redact("postgres://db/x"), "postgres://db/x");
+        assert_eq!(
+            redact("postgres://db/x?PassWd=pw&sslmode=require"),
+            "postgres://db/x?PassWd=***&sslmode=require"
+        );
         // A password holding '@' or ':' is cut at the last '@' of the authority.
         assert_eq!(redact("postgres://u:p@ss:w@h/d"), "postgres://u:***@h/d");
         let target = DbTarget::Postgres("postgres://u:pw@h/d".into());
