@@ -388,6 +388,21 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
         stdout.contains("σ = 5 mm, land"),
         "the table of what ran: {stdout}"
     );
+    // What a person reads: the stop names a trial, not a sample.
+    let stderr = String::from_utf8_lossy(&done.stderr);
+    assert!(
+        stderr.contains("SIGTERM: stopping after this trial"),
+        "{stderr}"
+    );
+    // `results` lists a session's trial ids as a range a person reads.
+    let listed = ok(&softtouch(d, &["results", "list"]));
+    assert!(!listed.contains("..="), "{listed}");
+    assert!(
+        listed.lines().any(|l| l.contains("–")
+            && l.split_whitespace()
+                .any(|w| w.contains('–') && w.split('–').all(|n| n.parse::<u64>().is_ok()))),
+        "{listed}"
+    );
 
     // Bad input: exit 2, saying what is known.
     fails_with(

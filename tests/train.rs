@@ -52,6 +52,17 @@ fn train_store_list_and_evaluate_a_model() {
     for needle in ["Fx", "Tz", "mean", "image MSE", "[0, 2)", "[480, 600)"] {
         assert!(from_store.contains(needle), "`{needle}` in {from_store}");
     }
+    // Only the split scored is preprocessed.
+    assert!(from_store.contains(": 0 train, 0 val, "), "{from_store}");
+    // A mistyped split is refused before anything is read or preprocessed.
+    let typo = softtouch(d, &["eval", "air-svae", "--split", "tst"]);
+    fails_with(&typo, 2, "'tst'");
+    assert!(
+        common::text(&typo.stderr).contains("test, val, train, all"),
+        "{}",
+        common::text(&typo.stderr)
+    );
+    assert!(!common::text(&typo.stdout).contains("preprocessed"));
     let from_file = ok(&softtouch(d, &["eval", "air.stm", "--dataset", "air"]));
     let metrics = |s: &str| {
         s.lines()

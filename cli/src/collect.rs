@@ -219,7 +219,7 @@ pub async fn run_collect(
     .map_err(io_failure)?;
 
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
-    let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx));
+    let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx, "sample"));
     let mut progress = progress_reporter(plan.remaining());
     let started = Instant::now();
     let (outcome, counters) =

@@ -1,6 +1,6 @@
 //! `softtouch eval` and `softtouch models`.
 
-use super::{Failure, io_failure, open_existing, train::load};
+use super::{Failure, io_failure, open_existing, train::load_where};
 use anyhow::anyhow;
 use clap::Args;
 use softtouch_lab::models;
@@ -16,13 +16,45 @@ pub struct EvalArgs {
     /// The dataset (default: the one a stored model was trained on).
     #[arg(long)]
     pub dataset: Option<String>,
-    /// Which split: test, val, train or all.
-    #[arg(long, default_value = "test")]
-    pub split: String,
+    /// Which split: test, val, train or all (only its images are preprocessed).
+    #[arg(long, value_enum, default_value_t = EvalSplit::Test)]
+    pub split: EvalSplit,
     /// Folder for `MODEL-SPLIT-eval.png`, predicted against true per axis (created if
     /// missing).
     #[arg(long, default_value = "eval-out")]
     pub out: std::path::PathBuf,
+}
+
+/// A dataset's split to score: checked by clap before anything is read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum EvalSplit {
+    /// The test split.
+    Test,
+    /// The validation split.
+    Val,
+    /// The training split.
+    Train,
+    /// Every member.
+    All,
+}
+
+impl EvalSplit {
+    /// As typed and printed.
+    #[must_use]
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            Self::Test => "test",
+            Self::Val => "val",
+            Self::Train => "train",
+            Self::All => "all",
+        }
+    }
+
+    /// Whether a member of split `split` is scored.
+    #[must_use]
+    pub fn takes(self, split: &str) -> bool {
+        self == Self::All || split == self.as_str()
+    }
 }
 
 pub async fn run_eval(
@@ -60,22 +92,25 @@ pub async fn run_eval(
             "a model file needs --dataset NAME to evaluate on"
         )));
     };
-    let splits = load(&store, &dataset, &artifact.header.config.preprocess, out).await?;
-    let examples = match args.split.as_str() {
-        "test" => splits.test,
-        "val" => splits.val,
-        "train" => splits.train,
-        "all" => [splits.train, splits.val, splits.test].concat(),
-        other => {
-            return Err(Failure::BadInput(anyhow!(
-                "--split {other}: expected test, val, train or all"
-            )));
-        }
+    let split = args.split;
+    let splits = load_where(
+        &store,
+        &dataset,
+        &artifact.header.config.preprocess,
+        &|s| split.takes(s),
+        out,
+    )
+    .await?;
+    let examples = match split {
+        EvalSplit::Test => splits.test,
+        EvalSplit::Val => splits.val,
+        EvalSplit::Train => splits.train,
+        EvalSplit::All => [splits.train, splits.val, splits.test].concat(),
     };
     if examples.is_empty() {
         return Err(Failure::BadInput(anyhow!(
             "the {} split of {dataset} is empty",
-            args.split
+            split.as_str()
         )));
     }
     let h = &artifact.header;
@@ -89,7 +124,7 @@ pub async fn run_eval(
         h.config.latent,
         h.config.preprocess.size_px,
         h.config.preprocess.size_px,
-        args.split
+        split.as_str()
     )
     .map_err(io_failure)?;
     write!(out, "{}", metrics.render()).map_err(io_failure)?;
@@ -111,7 +146,7 @@ pub async fn run_eval(
             .collect();
         std::fs::create_dir_all(&args.out)
             .map_err(|e| Failure::Runtime(anyhow!("{}: {e}", args.out.display())))?;
-        let png = args.out.join(format!("{name}-{}-eval.png", args.split));
+        let png = args.out.join(format!("{name}-{}-eval.png", split.as_str()));
         let panels: Vec<softtouch_collector::plot::PredictedPanel<'_>> = (0..6)
             .map(|axis| {
                 (
@@ -130,7 +165,7 @@ pub async fn run_eval(
             &format!(
                 "{}: predicted against true, {dataset} {} split ({} samples)",
                 args.model,
-                args.split,
+                split.as_str(),
                 examples.len()
             ),
             &panels,

@@ -271,7 +271,7 @@ async fn follow_on_rig(
     let cal = run.calibration;
     writeln!(
         out,
-        "calibrated: reached counts {} (open) and {} (closed); stroke {}..={} at {:.4} mm per count",
+        "calibrated: reached counts {} (open) and {} (closed); stroke {}–{} at {:.4} mm per count",
         cal.open_reached,
         cal.closed_reached,
         cal.stroke.open_count,

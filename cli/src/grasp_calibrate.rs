@@ -135,7 +135,7 @@ pub async fn run(
     if let Some(e) = ends {
         writeln!(
             out,
-            "ends: counts {}..={} at {:.4} mm per count",
+            "ends: counts {}–{} at {:.4} mm per count",
             e.stroke.open_count, e.stroke.closed_count, e.stroke.mm_per_count
         )
         .map_err(w)?;

@@ -197,8 +197,9 @@ fn print_header(
     let w = io_failure;
     writeln!(
         out,
-        "{what} {id}: model `{model}` (sha256 {}), seed {seed}, {planned} trials planned, {} stored, {todo} to run",
+        "{what} {id}: model `{model}` (sha256 {}), seed {seed}, {planned} {} planned, {} stored, {todo} to run",
         &sha256[..12.min(sha256.len())],
+        if planned == 1 { "trial" } else { "trials" },
         planned - todo,
     )
     .map_err(w)?;
@@ -481,7 +482,7 @@ async fn run_sim_on(
     // The first Ctrl-C, SIGTERM or SIGHUP finishes the trial in hand and ends with the
     // summary of what ran (exit 0); a second stops at once.
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
-    let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx));
+    let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx, "trial"));
     let ran = run_trials(&store, &session, &todo, &stop_rx, &mut on_trial).await;
     signals.abort();
     bar.finish_and_clear();
@@ -604,7 +605,7 @@ async fn run_on_rig(
                 .map_err(|e| TrialsError::Failed(format!("cannot write output: {e}")))
             };
         let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
-        let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx));
+        let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx, "trial"));
         let ran = run_rig_trials(
             &store,
             &session,

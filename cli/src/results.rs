@@ -107,10 +107,16 @@ async fn list(store: &softtouch_store::Store, out: &mut dyn Write) -> Result<(),
     .map_err(io_failure)?;
     for s in &sessions {
         let trials = store.grasp_trials(s.session_id).await?;
-        let ids = store
-            .grasp_trial_id_range(s.session_id)
-            .await?
-            .map_or_else(|| "-".into(), |(a, b)| format!("{a}..={b}"));
+        let ids = store.grasp_trial_id_range(s.session_id).await?.map_or_else(
+            || "-".into(),
+            |(a, b)| {
+                if a == b {
+                    a.to_string()
+                } else {
+                    format!("{a}–{b}")
+                }
+            },
+        );
         writeln!(
             out,
             "{:>4}  {:<18} {:<24} {:>7} {:>13}  {}",

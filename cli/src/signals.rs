@@ -48,10 +48,10 @@ const GATHER_ROUNDS: u32 = 25;
 #[cfg(unix)]
 const GATHER_STEP: std::time::Duration = std::time::Duration::from_millis(2);
 
-/// Count stop requests into `stop` (1: finish the sample, 2: stop at once): Ctrl-C
-/// (SIGINT), and on Unix SIGTERM and SIGHUP alike (a service manager, a closed
-/// terminal). Ends if no handler can be installed.
-pub(crate) async fn count_stop_signals(stop: tokio::sync::watch::Sender<u32>) {
+/// Count stop requests into `stop` (1: finish the `unit` in hand, a sample or a trial;
+/// 2: stop at once): Ctrl-C (SIGINT), and on Unix SIGTERM and SIGHUP alike (a service
+/// manager, a closed terminal). Ends if no handler can be installed.
+pub(crate) async fn count_stop_signals(stop: tokio::sync::watch::Sender<u32>, unit: &'static str) {
     #[cfg(unix)]
     let (mut term, mut hup) = {
         use tokio::signal::unix::{SignalKind, signal};
@@ -109,7 +109,7 @@ pub(crate) async fn count_stop_signals(stop: tokio::sync::watch::Sender<u32>) {
         for name in names {
             requests += 1;
             if requests == 1 {
-                eprintln!("\n{name}: stopping after this sample (again to stop the arm at once)");
+                eprintln!("\n{name}: stopping after this {unit} (again to stop the arm at once)");
             } else {
                 eprintln!("\n{name}: stopping the arm now");
             }

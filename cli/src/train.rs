@@ -152,9 +152,20 @@ pub(crate) async fn load(
     preprocess: &Preprocess,
     out: &mut dyn Write,
 ) -> Result<Splits, Failure> {
+    load_where(store, dataset, preprocess, &|_| true, out).await
+}
+
+/// [`load`] of the members whose split `keep` takes (the others are not decoded).
+pub(crate) async fn load_where(
+    store: &Store,
+    dataset: &str,
+    preprocess: &Preprocess,
+    keep: &(dyn Fn(&str) -> bool + Sync),
+    out: &mut dyn Write,
+) -> Result<Splits, Failure> {
     let started = Instant::now();
     let bar = progress_bar(0, true, "loading");
-    let splits = models::load_splits(store, dataset, preprocess, &|done, total| {
+    let splits = models::load_splits_where(store, dataset, preprocess, keep, &|done, total| {
         bar.set_length(total);
         bar.set_position(done);
     })

@@ -90,15 +90,20 @@ pub fn named_object(scene: &SceneSpec, name: &str) -> Result<GraspObject, GraspR
         .object(name)
         .map(GraspObject::from_spec)
         .ok_or_else(|| {
-            invalid(format!(
-                "--object {name}: the scene declares no such object (it has: {})",
-                scene
-                    .objects
-                    .iter()
-                    .map(|o| o.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
+            let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+            invalid(if names.is_empty() {
+                format!(
+                    "--object {name}: scene `{}` declares no objects ([[objects]]); \
+                     pass a grasp scene, e.g. --scene scenes/grasp.toml",
+                    scene.name
+                )
+            } else {
+                format!(
+                    "--object {name}: scene `{}` declares no such object (it has: {})",
+                    scene.name,
+                    names.join(", ")
+                )
+            })
         })
 }
 
@@ -273,4 +278,30 @@ pub fn write_text(path: &std::path::Path, text: &str) -> Result<(), GraspRunErro
 #[must_use]
 pub fn t_s(t: softtouch_schemas::TimestampNs) -> f64 {
     t.0 as f64 * 1e-9
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_unknown_object_is_named_with_the_scenes_objects_or_told_there_are_none() {
+        let grasp = grasp_scene().expect("the embedded grasp scene");
+        let e = named_object(&grasp, "vase")
+            .expect_err("no vase")
+            .to_string();
+        let first = &grasp.objects[0].name;
+        assert!(
+            e.contains("declares no such object (it has: ") && e.contains(first.as_str()),
+            "{e}"
+        );
+        // A collection scene has rods, no objects: no empty list, and what to pass.
+        let rods_only = softtouch_schemas::defaults::scene();
+        let e = named_object(&rods_only, "cylinder")
+            .expect_err("no objects")
+            .to_string();
+        assert!(e.contains("declares no objects ([[objects]])"), "{e}");
+        assert!(e.contains("--scene scenes/grasp.toml"), "{e}");
+        assert!(!e.contains("it has: )"), "{e}");
+    }
 }

@@ -688,17 +688,39 @@ impl ObjectCopy<'_, '_> {
                         ),
                     });
                 };
-                let mut fixed: Vec<&str> = kind.refresh.to_vec();
+                // Brought up to date: the refresh columns, and a reference left empty
+                // when it was copied (its object not copied then) that now maps.
+                let mut refreshed: Vec<&str> = kind.refresh.to_vec();
+                for (column, _) in kind.refs {
+                    let empty_there = there
+                        .iter()
+                        .any(|(c, v)| c == column && matches!(v, Cell::Null(_)));
+                    let set_here = cells
+                        .iter()
+                        .any(|(c, v)| c == column && !matches!(v, Cell::Null(_)));
+                    if empty_there && set_here {
+                        refreshed.push(column);
+                    }
+                }
+                let mut fixed = refreshed.clone();
                 fixed.push(kind.id);
                 let changed = differences(&cells, &there, &fixed);
                 if !changed.is_empty() {
                     return Err(diverged(self.from_uid, &what, &changed.join("; ")));
                 }
-                if !kind.refresh.is_empty() {
-                    let set: Vec<String> = kind
-                        .refresh
+                let values: Vec<(&str, Cell)> = refreshed
+                    .iter()
+                    .filter_map(|c| {
+                        cells
+                            .iter()
+                            .find(|(n, _)| n == c)
+                            .map(|(_, v)| (*c, v.clone()))
+                    })
+                    .collect();
+                if !values.is_empty() {
+                    let set: Vec<String> = values
                         .iter()
-                        .map(|c| format!("{} = ?", quoted(c)))
+                        .map(|(c, _)| format!("{} = ?", quoted(c)))
                         .collect();
                     let mut q = sqlx::query(d.sql_owned(format!(
                         "UPDATE {} SET {} WHERE {} = ?",
@@ -706,10 +728,8 @@ impl ObjectCopy<'_, '_> {
                         set.join(", "),
                         quoted(kind.id)
                     )));
-                    for c in kind.refresh {
-                        if let Some((_, cell)) = cells.iter().find(|(n, _)| n == c) {
-                            q = bind(q, cell.clone());
-                        }
+                    for (_, cell) in values {
+                        q = bind(q, cell);
                     }
                     q.bind(dest)
                         .execute(&mut *tx)

@@ -216,3 +216,73 @@ async fn a_copied_store_written_on_its_own_is_refused_until_it_has_an_identity_o
         s.close().await;
     }
 }
+
+#[tokio::test]
+async fn a_models_dataset_skipped_for_its_name_is_said_and_linked_once_it_is_copied() {
+    let dir = tempfile::tempdir().expect("test step");
+    let rig = file_store(dir.path(), "rig.db").await;
+    let fleet = fleet(dir.path()).await;
+    let dataset = |store: &Store, name: &'static str| {
+        let store = store.clone();
+        async move {
+            sqlx::query(store.dialect().sql(
+                "INSERT INTO datasets (name, definition_json, seed, split_ratio, sample_count, \
+                 software_version, schema_version, created_at) \
+                 VALUES (?, '{}', 1, '1:0:0', 1, 'test', 1, '2026-11-28T00:00:00Z')",
+            ))
+            .bind(name)
+            .execute(store.pool())
+            .await
+            .expect("a dataset");
+        }
+    };
+    dataset(&rig, "both").await;
+    sqlx::query(
+        "INSERT INTO models (name, dataset_id, dataset_name, kind, config_json, train_json, \
+         metrics_json, history_json, artifact, software_version, created_at) \
+         VALUES ('m', 1, 'both', 'svae', '{}', '{}', '{}', '[]', zeroblob(32), 'test', \
+         '2026-11-28T00:00:00Z')",
+    )
+    .execute(rig.pool())
+    .await
+    .expect("a model");
+    // The fleet already has a dataset of that name: the rig's is skipped, and the
+    // model is copied without it, said.
+    dataset(&fleet, "both").await;
+    let first = copy(&rig, &fleet).await.expect("copied");
+    assert_eq!(first.new, vec![("model".to_owned(), 1)], "{first:?}");
+    assert!(
+        first.skipped.iter().any(|s| s.contains("dataset 1 `both`"))
+            && first.skipped.iter().any(|s| s.contains(
+                "model 1: models.dataset_id = 1: that dataset was not copied; left empty"
+            )),
+        "{:?}",
+        first.skipped
+    );
+    // The name freed at the destination: the dataset is copied, and the model linked
+    // to it (not taken for a clone's).
+    sqlx::query(
+        fleet
+            .dialect()
+            .sql("UPDATE datasets SET name = 'both-fleet' WHERE name = 'both'"),
+    )
+    .execute(fleet.pool())
+    .await
+    .expect("renamed");
+    let second = copy(&rig, &fleet).await.expect("copied again");
+    assert_eq!(second.new, vec![("dataset".to_owned(), 1)], "{second:?}");
+    let linked: Option<i64> = sqlx::query_scalar(
+        fleet
+            .dialect()
+            .sql("SELECT m.dataset_id FROM models m JOIN datasets d ON d.dataset_id = m.dataset_id WHERE d.name = 'both'"),
+    )
+    .fetch_optional(fleet.pool())
+    .await
+    .expect("read");
+    assert!(
+        linked.is_some(),
+        "the model's dataset is linked once copied"
+    );
+    rig.close().await;
+    fleet.close().await;
+}
