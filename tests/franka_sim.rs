@@ -178,6 +178,21 @@ fn count(db: &Path) -> i64 {
     runtime().block_on(common::samples_in(db, 1))
 }
 
+/// `collect` of `samples` with the folder's `rig.toml` and `scene.toml`, seed `seed`.
+fn collect_args<'a>(samples: &'a str, seed: &'a str) -> [&'a str; 9] {
+    [
+        "collect",
+        "--rig",
+        "rig.toml",
+        "--scene",
+        "scene.toml",
+        "--samples",
+        samples,
+        "--seed",
+        seed,
+    ]
+}
+
 /// Starts `softtouch ARGS` and waits until run 1 holds `at_least` samples.
 fn collect_until(dir: &Path, args: &[&str], at_least: i64, sim: &FrankaSim) -> std::process::Child {
     let mut child = common::command(dir)
@@ -370,17 +385,7 @@ fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
         return;
     };
     let samples = "24";
-    let args = [
-        "collect",
-        "--rig",
-        "rig.toml",
-        "--scene",
-        "scene.toml",
-        "--samples",
-        samples,
-        "--seed",
-        "11",
-    ];
+    let args = collect_args(samples, "11");
     let t0 = std::time::Instant::now();
     let mut child = collect_until(dir.path(), &args, 8, &sim);
     let _ = child.kill(); // SIGKILL, mid-sample wherever it is
@@ -410,20 +415,7 @@ fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
             ),
             "driver = \"sim\"\nreflex_force_n = 30.0",
         ));
-    let out = run(
-        sim_dir.path(),
-        &[
-            "collect",
-            "--rig",
-            "rig.toml",
-            "--scene",
-            "scene.toml",
-            "--samples",
-            samples,
-            "--seed",
-            "11",
-        ],
-    );
+    let out = run(sim_dir.path(), &collect_args(samples, "11"));
     ok(&out, &sim);
     let simulated = stored(&sim_dir.path().join("softtouch.db"), 1);
     assert_eq!(simulated.status, "completed");
@@ -507,20 +499,7 @@ fn timed_collect(sim: &FrankaSim, rig: &str, scene: &str, samples: u64) -> (f64,
     std::fs::write(dir.path().join("scene.toml"), scene).unwrap_or_else(|e| panic!("{e}"));
     let n = samples.to_string();
     let t0 = std::time::Instant::now();
-    let out = run(
-        dir.path(),
-        &[
-            "collect",
-            "--rig",
-            "rig.toml",
-            "--scene",
-            "scene.toml",
-            "--samples",
-            &n,
-            "--seed",
-            "5",
-        ],
-    );
+    let out = run(dir.path(), &collect_args(&n, "5"));
     let stdout = ok(&out, sim);
     let wall_s = t0.elapsed().as_secs_f64();
     (wall_s, stdout, stored(&dir.path().join("softtouch.db"), 1))
@@ -596,20 +575,7 @@ fn a_force_guard_trip_on_franka_sim_stops_the_arm_and_rejects_the_sample() {
     let Some((dir, sim)) = tier("max_force_n = 0.05\nmax_torque_nm = 0.8") else {
         return;
     };
-    let out = run(
-        dir.path(),
-        &[
-            "collect",
-            "--rig",
-            "rig.toml",
-            "--scene",
-            "scene.toml",
-            "--samples",
-            "2",
-            "--seed",
-            "3",
-        ],
-    );
+    let out = run(dir.path(), &collect_args("2", "3"));
     let said = format!("{}{}", text(&out.stdout), text(&out.stderr));
     let s = stored(&dir.path().join("softtouch.db"), 1);
     assert!(
@@ -638,22 +604,7 @@ fn sigterm_on_franka_sim_finishes_the_sample_and_leaves_the_arm_home() {
     let Some((dir, sim)) = tier(LIMITS) else {
         return;
     };
-    let child = collect_until(
-        dir.path(),
-        &[
-            "collect",
-            "--rig",
-            "rig.toml",
-            "--scene",
-            "scene.toml",
-            "--samples",
-            "200",
-            "--seed",
-            "4",
-        ],
-        2,
-        &sim,
-    );
+    let child = collect_until(dir.path(), &collect_args("200", "4"), 2, &sim);
     common::signal(&child, "TERM");
     let out = child.wait_with_output().expect("wait");
     assert!(
@@ -717,20 +668,7 @@ fn a_store_failure_on_franka_sim_ends_in_a_safe_stop_at_home() {
             .expect("trigger");
         store.close().await;
     });
-    let out = run(
-        dir.path(),
-        &[
-            "collect",
-            "--rig",
-            "rig.toml",
-            "--scene",
-            "scene.toml",
-            "--samples",
-            "6",
-            "--seed",
-            "5",
-        ],
-    );
+    let out = run(dir.path(), &collect_args("6", "5"));
     assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
     let s = stored(&db, 1);
     assert_eq!(s.status, "failed");
@@ -762,22 +700,7 @@ fn a_lost_robot_connection_ends_the_run_in_a_safe_stop() {
     let Some((dir, mut sim)) = tier(LIMITS) else {
         return;
     };
-    let child = collect_until(
-        dir.path(),
-        &[
-            "collect",
-            "--rig",
-            "rig.toml",
-            "--scene",
-            "scene.toml",
-            "--samples",
-            "200",
-            "--seed",
-            "6",
-        ],
-        1,
-        &sim,
-    );
+    let child = collect_until(dir.path(), &collect_args("200", "6"), 1, &sim);
     // Mid-move: samples are mostly moves.
     std::thread::sleep(Duration::from_millis(700));
     sim.kill();

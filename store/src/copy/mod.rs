@@ -648,17 +648,17 @@ impl ObjectCopy<'_, '_> {
         kind: &'static Kind,
         id: i64,
     ) -> Result<(Cells, Vec<String>), StoreError> {
-        let d = Dialect::of(self.source);
-        let row = sqlx::query(d.sql_owned(format!(
-            "SELECT * FROM {} WHERE {} = ?",
-            quoted(kind.table),
-            quoted(kind.id)
-        )))
-        .bind(id)
-        .fetch_one(&mut **self.source)
-        .await
-        .map_err(query_err("reading an object to copy"))?;
-        let mut cells = read_cells(&row)?;
+        let Some(mut cells) =
+            object_row(self.source, kind, id, "reading an object to copy").await?
+        else {
+            return Err(StoreError::Damaged {
+                what: "copy",
+                why: format!(
+                    "{} {id} is listed in the source but cannot be read",
+                    kind.kind
+                ),
+            });
+        };
         cells.retain(|(c, _)| c != kind.id);
         let emptied = map_refs(&mut cells, kind.refs, self.maps, kind.table)?;
         Ok((cells, emptied))
@@ -678,7 +678,7 @@ impl ObjectCopy<'_, '_> {
         let dest_id = match existing {
             Some(dest) => {
                 // The same object as copied before? Its fixed columns say.
-                let there = dest_row(&mut tx, kind, dest).await?;
+                let there = object_row(&mut tx, kind, dest, READ_BACK).await?;
                 let Some(there) = there else {
                     return Err(StoreError::Damaged {
                         what: "copy",
@@ -780,7 +780,9 @@ impl ObjectCopy<'_, '_> {
             written.push((child.table, n));
         }
         // Read back within the transaction and compare, before anything is committed.
-        let there = dest_row(&mut tx, kind, dest_id).await?.unwrap_or_default();
+        let there = object_row(&mut tx, kind, dest_id, READ_BACK)
+            .await?
+            .unwrap_or_default();
         let changed = differences(&cells, &there, &[kind.id]);
         if !changed.is_empty() {
             return Err(StoreError::Damaged {
@@ -898,32 +900,8 @@ impl ObjectCopy<'_, '_> {
             ChildKey::Identity(id_col, _) => std::slice::from_ref(id_col),
             ChildKey::Natural(_) => &[],
         };
-        let mut ours = Vec::new();
-        {
-            let mut rows = child.rows_of(self.source, parent);
-            while let Some(row) = rows
-                .try_next()
-                .await
-                .map_err(query_err("reading rows to check"))?
-            {
-                let mut cells = read_cells(&row)?;
-                map_refs(&mut cells, child.refs, self.maps, child.table)?;
-                ours.push(row_digest(&cells, skip));
-            }
-        }
-        let mut theirs = Vec::new();
-        {
-            let mut rows = child.rows_of(tx, dest_parent);
-            while let Some(row) = rows
-                .try_next()
-                .await
-                .map_err(query_err("reading copied rows back"))?
-            {
-                theirs.push(row_digest(&read_cells(&row)?, skip));
-            }
-        }
-        ours.sort_unstable();
-        theirs.sort_unstable();
+        let ours = child_digests(self.source, child, parent, skip, Some(self.maps)).await?;
+        let theirs = child_digests(tx, child, dest_parent, skip, None).await?;
         if ours == theirs {
             return Ok(ours.len() as u64);
         }
@@ -958,24 +936,55 @@ impl ObjectCopy<'_, '_> {
     }
 }
 
-/// The object `id`'s row at the destination (inside the copy's transaction), its
-/// columns as stored.
-async fn dest_row(
-    tx: &mut AnyConnection,
+/// What a read of the destination inside the copy's transaction is doing.
+const READ_BACK: &str = "reading a copied object back";
+
+/// The object `id`'s row on `conn` (the source's snapshot, or the destination inside
+/// the copy's transaction), its columns as stored.
+async fn object_row(
+    conn: &mut AnyConnection,
     kind: &Kind,
     id: i64,
+    doing: &'static str,
 ) -> Result<Option<Cells>, StoreError> {
-    let d = Dialect::of(tx);
+    let d = Dialect::of(conn);
     let row = sqlx::query(d.sql_owned(format!(
         "SELECT * FROM {} WHERE {} = ?",
         quoted(kind.table),
         quoted(kind.id)
     )))
     .bind(id)
-    .fetch_optional(&mut *tx)
+    .fetch_optional(&mut *conn)
     .await
-    .map_err(query_err("reading a copied object back"))?;
+    .map_err(query_err(doing))?;
     row.as_ref().map(read_cells).transpose()
+}
+
+/// sha256 of each of a child table's rows of `parent` on `conn` (columns `skip` left
+/// out; references mapped with `maps` for the source's rows), sorted: the rows as a
+/// set, whatever order the server gives.
+async fn child_digests(
+    conn: &mut AnyConnection,
+    child: &Child,
+    parent: i64,
+    skip: &[&str],
+    maps: Option<&Maps>,
+) -> Result<Vec<[u8; 32]>, StoreError> {
+    let mut digests = Vec::new();
+    let mut rows = child.rows_of(conn, parent);
+    while let Some(row) = rows
+        .try_next()
+        .await
+        .map_err(query_err("reading rows to check"))?
+    {
+        let mut cells = read_cells(&row)?;
+        if let Some(maps) = maps {
+            map_refs(&mut cells, child.refs, maps, child.table)?;
+        }
+        digests.push(row_digest(&cells, skip));
+    }
+    digests.sort_unstable();
+    Ok(digests)
 }
 
 fn kind_name(kind: &str) -> Option<&'static str> {
