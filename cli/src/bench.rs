@@ -101,7 +101,7 @@ a new database of its own (softtouch_bench_PID_RIGS), left there for a look.")]
         #[arg(long, value_delimiter = ',', default_value = "1,2,4")]
         rigs: Vec<usize>,
         /// A PostgreSQL server to run the several-rigs table on too.
-        #[arg(long, value_parser = crate::DbTargetParser)]
+        #[arg(long, value_parser = crate::db::DbTargetParser)]
         postgres: Option<softtouch_store::DbTarget>,
     },
 }

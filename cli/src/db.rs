@@ -5,6 +5,38 @@ use clap::Subcommand;
 use softtouch_store::{DbTarget, Store};
 use std::io::Write;
 
+/// Parses a `--db`, `--from` or `--to` into a [`softtouch_store::DbTarget`]. Not clap's
+/// `FromStr` parser: its error repeats the raw value ("invalid value 'postgres://u:PW@…'"),
+/// password and all; this one says only the store's own, redacted, reason.
+#[derive(Debug, Clone, Copy)]
+pub struct DbTargetParser;
+
+impl clap::builder::TypedValueParser for DbTargetParser {
+    type Value = softtouch_store::DbTarget;
+
+    fn parse_ref(
+        &self,
+        cmd: &clap::Command,
+        arg: Option<&clap::Arg>,
+        value: &std::ffi::OsStr,
+    ) -> Result<Self::Value, clap::Error> {
+        let name = arg
+            .and_then(clap::Arg::get_long)
+            .map_or_else(|| "the database".to_owned(), |long| format!("--{long}"));
+        let fail = |why: String| {
+            clap::Error::raw(
+                clap::error::ErrorKind::ValueValidation,
+                format!("{name}: {why}\n"),
+            )
+            .with_cmd(cmd)
+        };
+        let text = value
+            .to_str()
+            .ok_or_else(|| fail("not valid UTF-8".to_owned()))?;
+        text.parse().map_err(fail)
+    }
+}
+
 #[derive(Debug, Subcommand)]
 pub enum DbCommand {
     /// Create the database (or bring an existing one to this version's schema). A
@@ -26,10 +58,10 @@ pub enum DbCommand {
     Copy {
         /// The store to read (a path or postgres:// URL); never written to except its
         /// identity, made once.
-        #[arg(long, value_parser = crate::DbTargetParser)]
+        #[arg(long, value_parser = DbTargetParser)]
         from: DbTarget,
         /// The store to write (created and migrated if it is a new file).
-        #[arg(long, value_parser = crate::DbTargetParser)]
+        #[arg(long, value_parser = DbTargetParser)]
         to: DbTarget,
     },
     /// Give this store an identity of its own for `db copy`. A copied database file or

@@ -32,38 +32,6 @@ pub mod transfer;
 
 use clap::{Parser, Subcommand};
 
-/// Parses a `--db`, `--from` or `--to` into a [`softtouch_store::DbTarget`]. Not clap's
-/// `FromStr` parser: its error repeats the raw value ("invalid value 'postgres://u:PW@…'"),
-/// password and all; this one says only the store's own, redacted, reason.
-#[derive(Debug, Clone, Copy)]
-pub struct DbTargetParser;
-
-impl clap::builder::TypedValueParser for DbTargetParser {
-    type Value = softtouch_store::DbTarget;
-
-    fn parse_ref(
-        &self,
-        cmd: &clap::Command,
-        arg: Option<&clap::Arg>,
-        value: &std::ffi::OsStr,
-    ) -> Result<Self::Value, clap::Error> {
-        let name = arg
-            .and_then(clap::Arg::get_long)
-            .map_or_else(|| "the database".to_owned(), |long| format!("--{long}"));
-        let fail = |why: String| {
-            clap::Error::raw(
-                clap::error::ErrorKind::ValueValidation,
-                format!("{name}: {why}\n"),
-            )
-            .with_cmd(cmd)
-        };
-        let text = value
-            .to_str()
-            .ok_or_else(|| fail("not valid UTF-8".to_owned()))?;
-        text.parse().map_err(fail)
-    }
-}
-
 /// Exit code for success.
 pub const EXIT_OK: u8 = 0;
 /// Exit code for a runtime failure.
@@ -93,7 +61,7 @@ pub struct Cli {
         env = "SOFTTOUCH_DB",
         // --help would print the variable's value: a URL may hold a password.
         hide_env_values = true,
-        value_parser = DbTargetParser
+        value_parser = db::DbTargetParser
     )]
     pub db: softtouch_store::DbTarget,
 
