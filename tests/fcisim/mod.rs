@@ -120,11 +120,21 @@ impl FrankaSim {
     /// Asserts its log records no motion the simulator aborted (a limit the robot would
     /// have enforced).
     pub(crate) fn assert_no_abort(&self) {
-        let aborted = self.aborted_a_motion();
-        assert!(
-            aborted.is_none(),
-            "franka-sim aborted a motion: {aborted:?}"
-        );
+        if let Some(line) = self.aborted_a_motion() {
+            panic!(
+                "franka-sim aborted a motion: {line}\nits log up to there:\n{}",
+                self.log_before(&line, 40)
+            );
+        }
+    }
+
+    /// Up to `n` lines of its log that come before `line`, and `line`.
+    #[must_use]
+    pub(crate) fn log_before(&self, line: &str, n: usize) -> String {
+        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
+        let lines: Vec<&str> = text.lines().collect();
+        let at = lines.iter().position(|l| *l == line).unwrap_or(lines.len());
+        lines[at.saturating_sub(n)..(at + 1).min(lines.len())].join("\n")
     }
 
     /// The first line of its log that records an aborted motion: every reflex

@@ -423,6 +423,12 @@ impl Brake {
         }
     }
 
+    /// Whether it comes to rest at or before path position `end` (the move's target).
+    #[must_use]
+    pub fn stops_before(&self, end: f64) -> bool {
+        self.state_at(self.duration()).0 <= end + 1e-12
+    }
+
     /// How long braking takes, s.
     #[must_use]
     pub fn duration(&self) -> f64 {
@@ -546,13 +552,14 @@ fn run_move(
     // harder, than its limits allow: the robot would abort the motion (FR3: velocity
     // limits that depend on the joint's position).
     if let Some((kin, robot_kind)) = joints {
-        let scale = reach::path_scale(
+        let (scale, brake_scale) = reach::path_and_brake_scales(
             kin,
             *robot_kind,
             &start.q,
             &from,
             target,
             [path.max_velocity, path.max_acceleration, path.max_jerk],
+            [brake_path.max_acceleration, brake_path.max_jerk],
         )
         .map_err(|e| DeviceError::InvalidCommand {
             device: DEVICE.into(),
@@ -571,19 +578,15 @@ fn run_move(
             path.max_acceleration *= scale.acceleration;
             path.max_jerk *= scale.jerk;
         }
-        // Where the joints held the move's acceleration or jerk down, a brake harder
-        // than that would break the same limits.
-        if scale.acceleration < 1.0 {
-            brake_path.max_acceleration = brake_path.max_acceleration.min(path.max_acceleration);
-        }
-        if scale.jerk < 1.0 {
-            brake_path.max_jerk = brake_path.max_jerk.min(path.max_jerk);
-        }
+        // An abort brakes within the same joint limits as the move.
+        brake_path.max_acceleration *= brake_scale.acceleration;
+        brake_path.max_jerk *= brake_scale.jerk;
     }
     let mut otg = franka::Otg::new(0.0, path).map_err(err)?;
     otg.set_target(1.0).map_err(err)?;
     let mut seed: Option<ArmPose> = None;
     let mut brake: Option<Brake> = None;
+    let mut aborted = false;
     let target = *target;
     robot
         .control_cartesian_pose(
@@ -595,15 +598,22 @@ fn run_move(
                     job.feed
                         .send_replace(Some((job.clock.now(), ArmPose::from_matrix(&state.O_T_EE))));
                 }
-                // An abort ramps down within the limits; the motion ends at rest.
-                if brake.is_none() && job.cancel.is_cancelled(job.generation) {
-                    brake = Some(Brake::new(
+                // An abort ramps down within the limits; the motion ends at rest. A brake
+                // that would only stop past the target is not used: cut off there, it
+                // would ask for an instant stop (a reflex); the move's own plan, already
+                // slowing, stops at the target sooner and within the move's limits.
+                if !aborted && job.cancel.is_cancelled(job.generation) {
+                    aborted = true;
+                    let b = Brake::new(
                         otg.position(),
                         otg.velocity(),
                         otg.acceleration(),
                         brake_path.max_acceleration,
                         brake_path.max_jerk,
-                    ));
+                    );
+                    if b.stops_before(1.0) {
+                        brake = Some(b);
+                    }
                 }
                 let (s, done) = match brake.as_mut() {
                     Some(b) => (b.step(dt.as_secs_f64()).clamp(0.0, 1.0), b.finished()),

@@ -76,6 +76,15 @@ impl Robot {
 /// inverse kinematics is not the one here, and its OTG overshoots the cruise speed.
 pub const VELOCITY_MARGIN: f64 = 0.8;
 
+/// The share of each joint acceleration and jerk limit a planned move may use. The
+/// robot judges a Cartesian pose stream on the joint acceleration and jerk of its own
+/// inverse kinematics of each commanded pose, differenced at 1 kHz; its redundancy
+/// resolution is not the one here, and a cycle lost under load is differenced against
+/// an extrapolation. With 0.8 the estimate here bounded joint 4 at 8 rad/s² on a move
+/// franka-sim measured at 10.9 rad/s² and aborted (FR3 limit 10; seen once in CI on
+/// a busy 2-core machine, 2026-11-28): 0.5 leaves twice the room.
+pub const RATE_MARGIN: f64 = 0.5;
+
 /// The FR3's and Panda's "ready" joints (libfranka's examples): where `config check`
 /// starts when no arm tells it where it is.
 pub const READY_Q: [f64; 7] = [
@@ -323,7 +332,8 @@ pub const fn joint_rate_limits(robot: Robot) -> ([f64; 7], [f64; 7]) {
 /// The shares of a straight move's path limits (the path parameter s, 0 at `from` and
 /// 1 at `to`: velocity `s_dot` per second, acceleration `s_ddot`, jerk `s_dddot`) at
 /// which every joint stays within [`VELOCITY_MARGIN`] of its velocity limit (at its
-/// position: the FR3's depend on it), acceleration limit and jerk limit, followed from
+/// position: the FR3's depend on it) and within [`RATE_MARGIN`] of its acceleration
+/// and jerk limits, followed from
 /// joints `q0` (whose end effector is at or near `from`). A joint's rates are its path
 /// derivatives times the path's: `q̇ = q'·ṡ`, `q̈ = q'·s̈ + q''·ṡ²`,
 /// `q⃛ ≈ q'·s⃛ + 3·q''·ṡ·s̈`. The robot aborts a motion whose inverse kinematics
@@ -339,7 +349,30 @@ pub fn path_scale(
     to: &ArmPose,
     path: [f64; 3],
 ) -> Result<PathScale, String> {
+    path_and_brake_scales(kin, robot, q0, from, to, path, [path[1], path[2]]).map(|(p, _)| p)
+}
+
+/// [`path_scale`], and the shares of a brake's acceleration and jerk (`brake`, per
+/// second², per second³ of the path parameter) from any point of the move at its
+/// scaled speed: an abort brakes within the same joint limits as the move, from one
+/// walk of the path.
+///
+/// # Errors
+/// As [`path_scale`].
+pub fn path_and_brake_scales(
+    kin: &Kinematics,
+    robot: Robot,
+    q0: &[f64; 7],
+    from: &ArmPose,
+    to: &ArmPose,
+    path: [f64; 3],
+    brake: [f64; 2],
+) -> Result<(PathScale, PathScale), String> {
     let [s_dot, s_ddot, s_dddot] = path.map(f64::abs);
+    let [b_ddot, b_dddot] = brake.map(f64::abs);
+    if !(b_ddot.is_finite() && b_dddot.is_finite()) {
+        return Err(format!("a brake on the way to {to:?} is not finite"));
+    }
     let (dist, angle) = (from.distance_to(to), from.angle_to(to));
     if !(dist.is_finite() && angle.is_finite() && path.iter().all(|v| v.is_finite())) {
         return Err(format!("a move to {to:?} is not finite"));
@@ -415,21 +448,34 @@ pub fn path_scale(
             (room / (g1 * want)).clamp(0.05, 1.0)
         }
     };
-    let (mut acceleration, mut jerk) = (1.0f64, 1.0f64);
-    for j in 0..7 {
-        let a_room = acc_max[j] * VELOCITY_MARGIN - d2[j] * v * v;
-        acceleration = acceleration.min(share(s_ddot, a_room, d1[j]));
-    }
-    let a = s_ddot * acceleration;
-    for j in 0..7 {
-        let j_room = jerk_max[j] * VELOCITY_MARGIN - 3.0 * d2[j] * v * a;
-        jerk = jerk.min(share(s_dddot, j_room, d1[j]));
-    }
-    Ok(PathScale {
-        velocity,
-        acceleration,
-        jerk,
-    })
+    // The shares of an acceleration and a jerk at the (scaled) speed v.
+    let rates = |want_a: f64, want_j: f64| -> (f64, f64) {
+        let (mut acceleration, mut jerk) = (1.0f64, 1.0f64);
+        for j in 0..7 {
+            let a_room = acc_max[j] * RATE_MARGIN - d2[j] * v * v;
+            acceleration = acceleration.min(share(want_a, a_room, d1[j]));
+        }
+        let a = want_a * acceleration;
+        for j in 0..7 {
+            let j_room = jerk_max[j] * RATE_MARGIN - 3.0 * d2[j] * v * a;
+            jerk = jerk.min(share(want_j, j_room, d1[j]));
+        }
+        (acceleration, jerk)
+    };
+    let (acceleration, jerk) = rates(s_ddot, s_dddot);
+    let (brake_acceleration, brake_jerk) = rates(b_ddot, b_dddot);
+    Ok((
+        PathScale {
+            velocity,
+            acceleration,
+            jerk,
+        },
+        PathScale {
+            velocity: 1.0,
+            acceleration: brake_acceleration,
+            jerk: brake_jerk,
+        },
+    ))
 }
 
 /// The route a collection takes through `w`, as far as reach goes: home, then each

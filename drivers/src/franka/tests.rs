@@ -347,3 +347,43 @@ fn moves_use_the_margin_of_the_robots_own_cartesian_limits() {
         p.max_velocity
     );
 }
+
+/// Aborted near the end of a move planned with a harder jerk than the brake's, a brake
+/// would come to rest only past the target (cut off there, it would be an instant
+/// stop, which the robot answers with a reflex): `stops_before` tells it, and the
+/// move's own plan is left to stop at the target. Earlier in the move the brake stops
+/// short of the target.
+#[test]
+fn a_brake_that_would_pass_the_target_is_told_apart() {
+    let limits = MotionLimits::for_robot(reach::Robot::Fr3, 0.3);
+    let fast = path_limits(0.05, 0.0, 0.5, &limits);
+    let gentle = path_limits(0.05, 0.0, 0.5, &limits.braking());
+    let mut otg = franka::Otg::new(0.0, fast).expect("otg");
+    otg.set_target(1.0).expect("target");
+    let (mut short, mut past) = (0, 0);
+    for _ in 0..10_000 {
+        let s = otg.step(1e-3);
+        if s >= 1.0 - 1e-12 && otg.velocity().abs() < 1e-12 {
+            break;
+        }
+        let b = Brake::new(
+            s,
+            otg.velocity(),
+            otg.acceleration(),
+            gentle.max_acceleration,
+            gentle.max_jerk,
+        );
+        let rest = b.state_at(b.duration()).0;
+        if b.stops_before(1.0) {
+            assert!(rest <= 1.0 + 1e-12, "{rest}");
+            short += 1;
+        } else {
+            assert!(rest > 1.0, "{rest}");
+            past += 1;
+        }
+    }
+    assert!(
+        short > 10 && past > 0,
+        "{short} short of the target, {past} past it"
+    );
+}
