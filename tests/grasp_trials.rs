@@ -473,6 +473,24 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
         2,
         "--sigma-mm",
     );
+    // A target the loop could never hold is refused before a session is stored.
+    let sessions = || {
+        runtime().block_on(count(
+            &d.join("softtouch.db"),
+            "SELECT COUNT(*) FROM grasp_sessions",
+        ))
+    };
+    let before = sessions();
+    fails_with(
+        &trials(d, &["--model", "air-svae", "--target-n", "20"]),
+        2,
+        "--target-n 20: expected a force in (0, 9.9) N",
+    );
+    assert_eq!(
+        sessions(),
+        before,
+        "a session was stored for a refused target"
+    );
     // On a rig: the rig file must say where to grasp, and each object needs its
     // calibration on that rig with that model, before any session is stored.
     let plain = std::fs::read_to_string(concat!(

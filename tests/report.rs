@@ -162,6 +162,16 @@ fn the_page_parses_has_every_section_and_shows_the_databases_numbers() {
     assert_eq!(value(&html, "run-1-events"), run[3].to_string());
     assert_eq!(value(&html, "run-1-seed"), "4");
     assert_eq!(run[4], 4);
+    // Its pace, by one definition each (accepted samples per hour of run clock and of
+    // wall clock), is what `status` prints.
+    let status = ok(&softtouch(d, &["status"]));
+    let said = format!(
+        "ok samples/h: {} run clock (first frame to last), {} wall clock (start to last update)",
+        value(&html, "run-1-rate"),
+        value(&html, "run-1-wall-rate")
+    );
+    assert!(status.contains(&said), "`{said}` in:\n{status}");
+    assert_ne!(value(&html, "run-1-rate"), "–");
     // The summary: the accepted samples, the best model's R² as stored.
     assert_eq!(value(&html, "summary-ok"), run[0].to_string());
     let best: f64 = runtime().block_on(async {

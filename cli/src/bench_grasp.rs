@@ -75,12 +75,9 @@ fn check(args: &BenchGraspArgs) -> Result<(), Failure> {
     }
     settings::TOLERANCE_N.check_all("--tolerances", &args.tolerances)?;
     settings::FPS_HZ.check_all("--fps", &args.fps)?;
-    if !(args.target.is_finite() && args.target > 0.0) {
-        return bad(format!(
-            "--target {}: expected a force above 0 N",
-            args.target
-        ));
-    }
+    // Held under each tolerance of the grid: the widest leaves the least room.
+    let widest = args.tolerances.iter().copied().fold(0.0, f64::max);
+    settings::check_target_n("--target", args.target, widest)?;
     settings::duration_s(false).check("--hold-s", args.hold_s)?;
     Ok(())
 }

@@ -370,16 +370,13 @@ pub async fn run_status(
     let mut any = false;
     for r in runs.iter().filter(|r| run.is_none_or(|id| id == r.run_id)) {
         any = true;
-        let hours = r.hours;
         let done = r.ok + r.rejected;
-        let rate = if hours > 0.0 {
-            format!(
-                "{:.0} samples/h (wall clock, start to last update)",
-                done as f64 / hours
-            )
-        } else {
-            "-".into()
-        };
+        let per_h = |v: Option<f64>| v.map_or_else(|| "–".to_owned(), |v| format!("{v:.0}"));
+        let rate = format!(
+            "ok samples/h: {} run clock (first frame to last), {} wall clock (start to last update)",
+            per_h(r.ok_per_run_clock_hour()),
+            per_h(r.ok_per_wall_hour())
+        );
         text.push_str(&format!(
             "run {} [{}] scene {} ({}): {done}/{} samples, {} ok, {} rejected, {} retries, {} faults; {rate}; updated {}\n",
             r.run_id, r.status, r.scene_name, r.medium, r.samples_planned, r.ok, r.rejected, r.retried, r.faults, r.updated_at

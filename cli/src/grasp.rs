@@ -138,9 +138,14 @@ async fn follow(
             return follow_on_rig(&args, &rig, db, out).await;
         }
     }
-    let scene = scene_for(c, false)?;
+    let scene = scene_for(c)?;
     let object = object_for(&scene, args.object.as_deref())?;
     let largest = args.targets.iter().copied().fold(0.0, f64::max);
+    // Ctrl-C, SIGTERM or SIGHUP ends the loop after its cycle, the fingers open; the
+    // table and files then show what ran. Watched before the calibration, so that a
+    // signal during it ends the verb the same way (after the calibration, which is
+    // stored whole) instead of killing it with the database open.
+    let signals = super::signals::SignalWatch::start();
     let (model, calibrated) =
         load_model_calibrate_and_pause(c, db, &scene, &object, largest).await?;
     let settings = FollowSettings {
@@ -149,9 +154,6 @@ async fn follow(
         hold_s: args.hold_s,
     };
     let name = object.name.clone();
-    // Ctrl-C, SIGTERM or SIGHUP ends the loop after its cycle, the fingers open; the
-    // table and files then show what ran.
-    let signals = super::signals::SignalWatch::start();
     let (setup, cycles, stopped) = follow_sim(
         &settings,
         &model,
@@ -325,7 +327,14 @@ fn print_follow(
     out_dir: &Path,
     out: &mut dyn Write,
 ) -> Result<([PathBuf; 2], String), Failure> {
-    let opt = |v: Option<f64>| v.map_or_else(|| "never".to_owned(), |s| format!("{s:.3}"));
+    // A rise the hold never made is said apart from one it had no need of (a step
+    // smaller than δ), and a settle not made by the end of the hold as such.
+    let rise = |m: &softtouch_grasp::HoldMetrics| match m.rise_time_s {
+        Some(s) => format!("{s:.3}"),
+        None if m.started_within(tolerance_n) => "within δ".to_owned(),
+        None => "not reached".to_owned(),
+    };
+    let settle = |v: Option<f64>| v.map_or_else(|| "not yet".to_owned(), |s| format!("{s:.3}"));
     writeln!(
         out,
         "{:>8} {:>9} {:>10} {:>11} {:>11} {:>9} {:>13} {:>10}",
@@ -348,8 +357,8 @@ fn print_follow(
                 out,
                 "{:>8.2} {:>9} {:>10} {:>11.3} {:>11.3} {:>9.3} {:>13} {:>10}",
                 target,
-                opt(m.rise_time_s),
-                opt(m.settling_time_s),
+                rise(&m),
+                settle(m.settling_time_s),
                 m.overshoot_n,
                 m.steady_state_error_n,
                 m.rms_error_n,
@@ -360,21 +369,44 @@ fn print_follow(
         }
         .map_err(io_failure)?;
     }
+    let said = |word: &str| {
+        rows.iter()
+            .filter_map(|r| r.estimate)
+            .any(|m| rise(&m) == word || settle(m.settling_time_s) == word)
+    };
+    for (word, meaning) in [
+        (
+            "within δ",
+            "rise s within δ: the force started within δ of the target, a step too small to time a rise",
+        ),
+        (
+            "not reached",
+            "rise s not reached: the force never came 90 % of the way to the target",
+        ),
+        (
+            "not yet",
+            "settle s not yet: the force was still outside δ at the end of the hold",
+        ),
+    ] {
+        if said(word) {
+            writeln!(out, "{meaning}").map_err(io_failure)?;
+        }
+    }
     create_out_dir(out_dir)?;
     let csv = out_dir.join("grasp-follow.csv");
     write_follow_csv(&csv, cycles)?;
     let metrics = out_dir.join("grasp-follow-metrics.csv");
     write_follow_metrics_csv(&metrics, &rows)?;
+    // A stop before the first cycle leaves nothing to draw: the CSVs say so (headers
+    // only) and no chart is written.
     let png = out_dir.join("grasp-follow.png");
-    write_follow_png(&png, cycles)?;
-    writeln!(
-        out,
-        "wrote {}, {} and {}",
-        csv.display(),
-        metrics.display(),
-        png.display()
-    )
-    .map_err(io_failure)?;
+    let drawn = if cycles.is_empty() {
+        " (no cycle ran: no chart)".to_owned()
+    } else {
+        write_follow_png(&png, cycles)?;
+        format!(" and {}", png.display())
+    };
+    writeln!(out, "wrote {}, {}{drawn}", csv.display(), metrics.display(),).map_err(io_failure)?;
     let summary = rows
         .iter()
         .map(|r| {

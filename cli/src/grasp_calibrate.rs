@@ -25,7 +25,8 @@ pub struct CalibrateArgs {
     /// the record, matched by `grasp follow --rig … --object`).
     #[arg(long)]
     pub object: Option<String>,
-    /// Scene file (simulated grasp); default: the built-in scene.
+    /// Scene file (simulated grasp); default: the built-in grasp scene
+    /// (`scenes/grasp.toml`), its first object unless --object names another.
     #[arg(long, conflicts_with = "rig")]
     pub scene: Option<PathBuf>,
     /// Rig file with a real Hand-E and finger camera: the ends are calibrated first
@@ -51,12 +52,9 @@ pub async fn run(
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
     softtouch_lab::grasp::settings::FPS_HZ.check("--fps", args.fps)?;
-    if !(args.target.is_finite() && args.target > 0.0 && args.target <= 20.0) {
-        return Err(bad(format!(
-            "--target {}: expected a force in (0, 20] N",
-            args.target
-        )));
-    }
+    // The loop's own tolerance δ (the default the verbs run with).
+    let tolerance_n = softtouch_grasp::StepperConfig::default().tolerance_n;
+    softtouch_lab::grasp::settings::check_target_n("--target", args.target, tolerance_n)?;
     let top_n = top_for(args.target);
     let store = open_existing(db).await?;
     let bytes = softtouch_lab::models::force_artifact(&store, &args.model).await?;
@@ -113,7 +111,12 @@ pub async fn run(
         row.mm_per_count = ends.stroke.mm_per_count;
         (row, Some(ends))
     } else {
-        let scene = softtouch_collector::configs::resolve(None, args.scene.as_deref())?.scene;
+        // The grasp scene unless told otherwise, as every grasp verb: its objects are
+        // the ones `follow`, `disturb`, `twist` and `trials` hold.
+        let scene = match args.scene.as_deref() {
+            None => softtouch_lab::grasp::soft::grasp_scene()?,
+            Some(path) => softtouch_collector::configs::resolve(None, Some(path))?.scene,
+        };
         let object = object_for(&scene, args.object.as_deref())?;
         let row = calibrate_sim_row(
             &args.model,

@@ -18,8 +18,8 @@ pub struct LoopArgs {
     /// Stored model whose estimate closes the loop.
     #[arg(long)]
     pub model: String,
-    /// Scene file (medium, effects, `[[objects]]`); default: the built-in scene
-    /// (`follow`) or `scenes/grasp.toml` (`disturb`, `twist`).
+    /// Scene file (medium, effects, `[[objects]]`); default: the built-in grasp scene
+    /// (`scenes/grasp.toml`).
     #[arg(long)]
     pub scene: Option<PathBuf>,
     /// Gain K, N/mm; default: 0.75 × Λ_max from the latest stiffness calibration of
@@ -90,15 +90,13 @@ pub(super) fn check_duration(flag: &str, v: f64, zero_allowed: bool) -> Result<(
     Ok(())
 }
 
-/// The scene of `--scene`, else the embedded default (`follow`) or grasp scene.
-pub(super) fn scene_for(
-    c: &LoopArgs,
-    grasp_default: bool,
-) -> Result<softtouch_schemas::SceneSpec, Failure> {
-    if c.scene.is_none() && grasp_default {
-        return Ok(grasp_scene()?);
+/// The scene of `--scene`, else the built-in grasp scene (every grasp verb, and
+/// `grasp calibrate`, default to it: one calibration serves them all).
+pub(super) fn scene_for(c: &LoopArgs) -> Result<softtouch_schemas::SceneSpec, Failure> {
+    match c.scene.as_deref() {
+        None => Ok(grasp_scene()?),
+        Some(path) => Ok(softtouch_collector::configs::resolve(None, Some(path))?.scene),
     }
-    Ok(softtouch_collector::configs::resolve(None, c.scene.as_deref())?.scene)
 }
 
 /// The stored model's bytes and the calibration of `object` it runs with (the latest

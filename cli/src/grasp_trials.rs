@@ -423,6 +423,24 @@ async fn run_sim_on(
     out: &mut dyn Write,
 ) -> Result<SimRun, Failure> {
     let store = store.clone();
+    // The first Ctrl-C, SIGTERM or SIGHUP finishes the trial in hand (or the session's
+    // start and calibrations, then none) and ends with the summary of what ran (exit
+    // 0); a second stops at once. Watched from the first instruction, so that no
+    // signal kills the verb with the database open.
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
+    let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx, "trial"));
+    let ran = run_session(&store, args, &stop_rx, out).await;
+    signals.abort();
+    ran
+}
+
+async fn run_session(
+    store: &softtouch_store::Store,
+    args: TrialsArgs,
+    stop_rx: &tokio::sync::watch::Receiver<u32>,
+    out: &mut dyn Write,
+) -> Result<SimRun, Failure> {
+    let store = store.clone();
     let session = match args.resume {
         Some(id) => resume_session(&store, id, args.model.as_deref()).await?,
         None => {
@@ -479,12 +497,7 @@ async fn run_sim_on(
         })
         .map_err(|e| TrialsError::Failed(format!("cannot write output: {e}")))
     };
-    // The first Ctrl-C, SIGTERM or SIGHUP finishes the trial in hand and ends with the
-    // summary of what ran (exit 0); a second stops at once.
-    let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
-    let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx, "trial"));
-    let ran = run_trials(&store, &session, &todo, &stop_rx, &mut on_trial).await;
-    signals.abort();
+    let ran = run_trials(&store, &session, &todo, stop_rx, &mut on_trial).await;
     bar.finish_and_clear();
     let ran = match ran {
         Err(TrialsError::Interrupted) => {

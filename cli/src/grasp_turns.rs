@@ -7,21 +7,21 @@ use std::io::Write;
 use std::path::Path;
 
 use clap::Args;
-use softtouch_grasp::{ControllerConfig, WristConfig};
+use softtouch_grasp::WristConfig;
 use softtouch_schemas::Medium;
 
 use super::Failure;
 use super::grasp_loop::{
-    LoopArgs, bad, check_duration, create_out_dir, grasp_failure, load_model_calibrate_and_pause,
-    loop_settings, print_setup, scene_for,
+    LoopArgs, bad, check_duration, create_out_dir, load_model_calibrate_and_pause, loop_settings,
+    print_setup, scene_for,
 };
 use super::io_failure;
 use softtouch_lab::grasp::disturb::{
     DisturbSettings, disturb_rows, disturb_sim, write_disturb_csv, write_disturb_png,
 };
-use softtouch_lab::grasp::soft::{named_object, projections};
+use softtouch_lab::grasp::soft::named_object;
 use softtouch_lab::grasp::twist::{
-    TwistSettings, twist_rows, twist_sim, write_twist_csv, write_twist_png,
+    TwistSettings, twist_rows, twist_sim, write_twist_csv, write_twist_metrics_csv, write_twist_png,
 };
 
 /// Options of `grasp disturb`.
@@ -127,12 +127,17 @@ pub(super) async fn disturb(
             args.phase_s, args.turn_s
         )));
     }
-    let scene = scene_for(c, true)?;
+    let scene = scene_for(c)?;
     let target = args.target.unwrap_or(match scene.medium {
         Medium::Air => 0.4,
         Medium::Water => 1.6,
     });
     let object = named_object(&scene, &args.object)?;
+    softtouch_lab::grasp::settings::check_target_n("--target", target, loop_settings.tolerance_n)?;
+    // Ctrl-C, SIGTERM or SIGHUP ends the loop after its cycle, the fingers open; the
+    // table and files then show what ran. Watched before the calibration (see `grasp
+    // follow`).
+    let signals = super::signals::SignalWatch::start();
     let (model, calibrated) =
         load_model_calibrate_and_pause(c, db, &scene, &object, target).await?;
     let settings = DisturbSettings {
@@ -143,9 +148,6 @@ pub(super) async fn disturb(
         turn_s: args.turn_s,
         phase_s: args.phase_s,
     };
-    // Ctrl-C, SIGTERM or SIGHUP ends the loop after its cycle, the fingers open; the
-    // table and files then show what ran.
-    let signals = super::signals::SignalWatch::start();
     let run = disturb_sim(
         &settings,
         &model,
@@ -220,8 +222,13 @@ pub(super) async fn disturb(
     let csv = c.out_dir.join("grasp-disturb.csv");
     write_disturb_csv(&csv, &run)?;
     let png = c.out_dir.join("grasp-disturb.png");
-    write_disturb_png(&png, &run)?;
-    writeln!(out, "wrote {} and {}", csv.display(), png.display()).map_err(w)?;
+    let drawn = if run.cycles.is_empty() {
+        " (no cycle ran: no chart)".to_owned()
+    } else {
+        write_disturb_png(&png, &run)?;
+        format!(" and {}", png.display())
+    };
+    writeln!(out, "wrote {}{drawn}", csv.display()).map_err(w)?;
     let rows = disturb_rows(&run, &settings);
     let worst = rows
         .iter()
@@ -280,13 +287,18 @@ pub(super) async fn twist(
     wrist
         .validate()
         .map_err(|e| bad(format!("--wrist-gain / --wrist-deadband-nmm: {e}")))?;
-    let scene = scene_for(c, true)?;
+    let scene = scene_for(c)?;
     let object = named_object(&scene, &args.object)?;
     // The same config check as the loop's, before anything is built.
-    ControllerConfig::new(projections().map_err(grasp_failure)?[0])
-        .stepper
-        .check_target(args.target)
-        .map_err(grasp_failure)?;
+    softtouch_lab::grasp::settings::check_target_n(
+        "--target",
+        args.target,
+        loop_settings.tolerance_n,
+    )?;
+    // Ctrl-C, SIGTERM or SIGHUP ends the run in hand after its cycle (fingers open)
+    // and skips the next; the table and files show what ran. Watched before the
+    // calibration (see `grasp follow`).
+    let signals = super::signals::SignalWatch::start();
     let (model, calibrated) =
         load_model_calibrate_and_pause(c, db, &scene, &object, args.target).await?;
     let settings = TwistSettings {
@@ -298,9 +310,6 @@ pub(super) async fn twist(
         hold_s: args.hold_s,
         wrist,
     };
-    // Ctrl-C, SIGTERM or SIGHUP ends the run in hand after its cycle (fingers open)
-    // and skips the next; the table and files show what ran.
-    let signals = super::signals::SignalWatch::start();
     let (setup, runs, stopped) = twist_sim(
         &settings,
         &model,
@@ -322,18 +331,31 @@ pub(super) async fn twist(
         args.object, args.turn_deg, args.target
     )
     .map_err(w)?;
+    let rows = twist_rows(&runs);
     writeln!(
         out,
-        "{:>14} {:>14} {:>15} {:>16} {:>15} {:>14}",
-        "wrist loop", "τz RMS N·mm", "true τz RMS", "true τz peak", "true F RMS N", "wrist max °"
+        "numbers count from the first turn ({} s after the grasp; the settle before it is left out)",
+        args.settle_s
     )
     .map_err(w)?;
-    let rows = twist_rows(&runs);
+    writeln!(
+        out,
+        "{:>14} {:>8} {:>14} {:>15} {:>16} {:>15} {:>14}",
+        "wrist loop",
+        "cycles",
+        "τz RMS N·mm",
+        "true τz RMS",
+        "true τz peak",
+        "true F RMS N",
+        "wrist max °"
+    )
+    .map_err(w)?;
     for row in &rows {
         writeln!(
             out,
-            "{:>14} {:>14.3} {:>15.3} {:>16.3} {:>15.3} {:>14.2}",
+            "{:>14} {:>8} {:>14.3} {:>15.3} {:>16.3} {:>15.3} {:>14.2}",
             if row.wrist_loop { "on" } else { "off" },
+            row.cycles_scored,
             row.tz_rms_nmm,
             row.true_tz_rms_nmm,
             row.true_tz_peak_nmm,
@@ -345,14 +367,21 @@ pub(super) async fn twist(
     create_out_dir(&c.out_dir)?;
     let csv = c.out_dir.join("grasp-twist.csv");
     write_twist_csv(&csv, &runs)?;
+    let metrics = c.out_dir.join("grasp-twist-metrics.csv");
+    write_twist_metrics_csv(&metrics, &rows)?;
     let png = c.out_dir.join("grasp-twist.png");
-    write_twist_png(&png, &runs)?;
-    writeln!(out, "wrote {} and {}", csv.display(), png.display()).map_err(w)?;
+    let drawn = if runs.iter().all(|r| r.cycles.is_empty()) {
+        " (no cycle ran: no chart)".to_owned()
+    } else {
+        write_twist_png(&png, &runs)?;
+        format!(" and {}", png.display())
+    };
+    writeln!(out, "wrote {}, {}{drawn}", csv.display(), metrics.display()).map_err(w)?;
     let summary = rows
         .iter()
         .map(|r| {
             format!(
-                "wrist loop {}: true τz RMS {:.3} N·mm",
+                "wrist loop {}: true τz RMS {:.3} N·mm from the first turn",
                 if r.wrist_loop { "on" } else { "off" },
                 r.true_tz_rms_nmm
             )
@@ -368,6 +397,7 @@ pub(super) async fn twist(
         .setting("stopped_by", stopped)
         .scene_hash(super::grasp_loop::scene_hash(&scene, c))
         .table(&csv)
+        .table(&metrics)
         .store(db, summary, out)
         .await
         .map(drop)

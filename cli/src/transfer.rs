@@ -375,7 +375,8 @@ fn plot_r2(png: &Path, scored: &[Scored]) -> Result<(), Failure> {
             y_label: "R², dimensionless",
             groups: &groups,
             series: &series,
-            y_range: (lowest.max(-5.0) - 0.05, 1.45),
+            // Beyond −5 a bar ends at the axis, labelled with its value.
+            y_range: (lowest.max(-5.0) - 0.05, 1.05),
             y_labels_up_to: Some(1.0),
         },
         (1100, 520),

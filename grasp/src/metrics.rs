@@ -5,7 +5,10 @@
 pub struct HoldMetrics {
     /// The target, N.
     pub target_n: f64,
-    /// 10 % → 90 % of the way from the first sample to the target, s (`None`: never).
+    /// The first sample's force, N (where the step starts).
+    pub start_n: f64,
+    /// 10 % → 90 % of the way from the first sample to the target, s (`None`: never;
+    /// [`HoldMetrics::started_within`] tells a step smaller than δ, which has no rise).
     pub rise_time_s: Option<f64>,
     /// From the first sample until the force enters the δ band for good, s (`None`:
     /// the last sample is still outside).
@@ -18,6 +21,15 @@ pub struct HoldMetrics {
     pub rms_error_n: f64,
     /// Samples used (non-finite ones are skipped).
     pub samples: usize,
+}
+
+impl HoldMetrics {
+    /// Whether the hold started within `tolerance_n` of its target: a step smaller
+    /// than δ, which has nothing to rise through.
+    #[must_use]
+    pub fn started_within(&self, tolerance_n: f64) -> bool {
+        (self.target_n - self.start_n).abs() <= tolerance_n
+    }
 }
 
 /// The numbers for samples `(t_s, force_n)` of one hold; `None` without finite samples.
@@ -67,6 +79,7 @@ pub fn hold_metrics(
         (s.iter().map(|(_, f)| (f - target_n).powi(2)).sum::<f64>() / s.len() as f64).sqrt();
     Some(HoldMetrics {
         target_n,
+        start_n: f0,
         rise_time_s,
         settling_time_s,
         overshoot_n,
@@ -114,5 +127,21 @@ mod tests {
         assert!((m.overshoot_n - 0.4).abs() < 1e-12);
         assert_eq!(m.settling_time_s, Some(0.2));
         assert!(hold_metrics(&[(0.0, f64::NAN)], 1.0, 0.1).is_none());
+    }
+
+    #[test]
+    fn a_step_smaller_than_delta_is_told_from_a_rise_never_made() {
+        // Starts 0.05 N under a 0.4 N target with δ = 0.1 and wanders inside the band
+        // without ever reaching 90 % of the step: no rise, and none was needed.
+        let s = [(0.0, 0.35), (0.1, 0.37), (0.2, 0.36), (0.3, 0.38)];
+        let m = hold_metrics(&s, 0.4, 0.1).expect("samples");
+        assert_eq!(m.rise_time_s, None);
+        assert!(m.started_within(0.1));
+        assert_eq!(m.settling_time_s, Some(0.0));
+        // A real step that stalls half way: no rise, and it was needed.
+        let s = [(0.0, 0.0), (0.1, 0.5), (0.2, 1.0), (0.3, 1.0)];
+        let m = hold_metrics(&s, 2.0, 0.1).expect("samples");
+        assert_eq!(m.rise_time_s, None);
+        assert!(!m.started_within(0.1));
     }
 }

@@ -181,6 +181,19 @@ async fn a_closed_loop_grasp_holds_and_an_open_width_that_misses_is_a_miss() {
         .find(|r| r.true_n.is_some_and(|f| f > 0.05))
         .map(|r| r.t);
     assert_eq!(Some(held.snapshots[0].t), first_touch);
+    // The confirmation time is on the trace's clock (its first cycle is 0), at the
+    // confirming cycle's frame: the viewer's marker, its title, the CSV and the
+    // confirmed frame's caption are one number.
+    let confirmed = held
+        .snapshots
+        .iter()
+        .find(|s| s.moment == Moment::Confirmed)
+        .expect("a confirmed frame");
+    assert_eq!(
+        held.confirmed_after_ns,
+        Some(confirmed.t.0 - held.trace[0].t.0),
+        "{held:?}"
+    );
     let wide = trial(cylinder(), Mode::Open, 45.0, 1.5).await;
     assert_eq!(
         wide.verdict,

@@ -177,10 +177,6 @@ pub struct RunRow {
     pub rig_toml: String,
     /// Its scene, as run (TOML).
     pub scene_toml: String,
-    /// Run clock of the first frame, ns.
-    pub first_t_ns: Option<i64>,
-    /// Run clock of the last frame, ns.
-    pub last_t_ns: Option<i64>,
 }
 
 /// Everything the Runs section shows of one run.
@@ -210,7 +206,7 @@ pub async fn runs(db: &ReadOnly, only: Option<&[i64]>) -> Result<Vec<RunData>, R
     let rows = sqlx::query_as::<_, RunRow>(db.dialect.sql(concat!(
         "SELECT ",
         run_counts_columns!(),
-        ", r.software_version, r.rig_toml, r.scene_toml, s.first_t_ns, s.last_t_ns",
+        ", r.software_version, r.rig_toml, r.scene_toml",
         run_counts_from!(),
         " ORDER BY r.run_id"
     )))

@@ -67,7 +67,8 @@ macro_rules! run_counts_columns {
          COALESCE(s.retried, 0) AS retried,
          COALESCE(e.events, 0) AS events, COALESCE(e.faults, 0) AS faults,
          r.created_at, r.updated_at,
-         (julianday(r.updated_at) - julianday(r.created_at)) * 24.0 AS hours"
+         (julianday(r.updated_at) - julianday(r.created_at)) * 24.0 AS hours,
+         s.first_t_ns, s.last_t_ns"
     };
 }
 
@@ -120,6 +121,29 @@ pub struct RunSummary {
     pub updated_at: String,
     /// Hours from creation to the last change.
     pub hours: f64,
+    /// Run clock of the first stored frame, ns.
+    pub first_t_ns: Option<i64>,
+    /// Run clock of the last stored frame, ns.
+    pub last_t_ns: Option<i64>,
+}
+
+impl RunSummary {
+    /// Accepted samples per hour of run clock, from the first stored frame to the last:
+    /// the rig's pace (on the simulated rig, virtual time). `None` before two frames.
+    /// `status`, `runs` and the report show this one definition.
+    #[must_use]
+    pub fn ok_per_run_clock_hour(&self) -> Option<f64> {
+        let span_h = (self.last_t_ns? - self.first_t_ns?) as f64 / 3.6e12;
+        (span_h > 0.0).then(|| self.ok as f64 / span_h)
+    }
+
+    /// Accepted samples per hour of wall clock, from the run's creation to its last
+    /// change (pauses, resumes and, on the simulated rig, how fast this computer is,
+    /// included). `None` before any time has passed.
+    #[must_use]
+    pub fn ok_per_wall_hour(&self) -> Option<f64> {
+        (self.hours > 0.0).then(|| self.ok as f64 / self.hours)
+    }
 }
 
 /// What a run recorded about itself: enough to resume or replay it.

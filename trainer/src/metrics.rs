@@ -315,7 +315,13 @@ impl Metrics {
                 ("force", "N", &self.force_error_by_range),
                 ("torque", "N·mm", &self.torque_error_by_range),
             ] {
-                let _ = writeln!(s, "{title} error std by |{title}| range:");
+                // Each sample gives one value per axis: n counts axis values, pooled
+                // over the three axes, not samples.
+                let _ = writeln!(
+                    s,
+                    "{title} error std by |{title}| range (n: axis values, {} samples × 3 axes pooled):",
+                    self.samples
+                );
                 for b in bins.iter() {
                     let range = match b.upper {
                         Some(upper) => format!("[{}, {upper})", b.lower),

@@ -1,5 +1,6 @@
 //! Grouped bar charts: one drawing for the PNG files and the report's figures.
 
+use super::legend::{Item, Swatch, split_off};
 use super::{FONT_FAMILY, PALETTE, PlotError, draw_err, format_tick_in, register_font};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -36,7 +37,7 @@ pub struct BarChart<'a> {
     pub series: &'a [BarSeries],
     /// The y range.
     pub y_range: (f64, f64),
-    /// Tick labels above this are left blank (the range's headroom holds the legend,
+    /// Tick labels above this are left blank (the range's headroom holds the notes,
     /// not values: a rate axis labelled only up to 1).
     pub y_labels_up_to: Option<f64>,
 }
@@ -53,10 +54,8 @@ pub struct BarLook {
     pub label_areas_px: (u32, u32),
     /// Tick label and axis description sizes, px.
     pub text_px: (u32, u32),
-    /// Legend text size, px, and its box's border darkness (0–1).
-    pub legend: (u32, f64),
-    /// Whether the legend sits at the upper left (else the upper right).
-    pub legend_left: bool,
+    /// Legend text size, px (the legend is a strip of its own above the plot).
+    pub legend_px: u32,
     /// Whether the light mesh lines are drawn.
     pub light_mesh: bool,
 }
@@ -68,8 +67,7 @@ impl BarLook {
         margin_px: 12,
         label_areas_px: (40, 64),
         text_px: (13, 15),
-        legend: (14, 1.0),
-        legend_left: false,
+        legend_px: 14,
         light_mesh: true,
     };
     /// The report's inline figure.
@@ -78,8 +76,7 @@ impl BarLook {
         margin_px: 10,
         label_areas_px: (40, 58),
         text_px: (12, 13),
-        legend: (12, 0.3),
-        legend_left: true,
+        legend_px: 12,
         light_mesh: false,
     };
 }
@@ -100,8 +97,24 @@ pub fn draw_bars<DB: DrawingBackend>(
     let (y0, y1) = chart.y_range;
     let n = chart.groups.len().max(1);
     root.fill(&WHITE).map_err(e)?;
-    let mut ctx = ChartBuilder::on(root)
-        .caption(chart.title, (FONT_FAMILY, look.title_px))
+    // The legend sits in a strip of its own between the title and the plot, so that it
+    // never covers a bar.
+    let below_title = root
+        .titled(chart.title, (FONT_FAMILY, look.title_px))
+        .map_err(e)?;
+    let items: Vec<Item> = chart
+        .series
+        .iter()
+        .enumerate()
+        .map(|(i, s)| Item {
+            label: s.label.clone(),
+            colour: PALETTE[i % PALETTE.len()],
+            swatch: Swatch::Box,
+        })
+        .collect();
+    let left_px = (look.margin_px + look.label_areas_px.1) as i32;
+    let plot_area = split_off(&below_title, &items, look.legend_px, left_px).map_err(e)?;
+    let mut ctx = ChartBuilder::on(&plot_area)
         .margin(look.margin_px)
         .x_label_area_size(look.label_areas_px.0)
         .y_label_area_size(look.label_areas_px.1)
@@ -144,23 +157,33 @@ pub fn draw_bars<DB: DrawingBackend>(
     let slot = 0.8 / chart.series.len().max(1) as f64;
     for (si, s) in chart.series.iter().enumerate() {
         let colour = PALETTE[si % PALETTE.len()];
-        let mut labelled = false;
         for (gi, bar) in s.bars.iter().enumerate() {
             let x0 = gi as f64 + 0.1 + si as f64 * slot;
             let (x1, xc) = (x0 + slot * 0.9, x0 + slot * 0.45);
             if let Some((v, lo, hi)) = bar.filter(|b| b.0.is_finite()) {
-                let drawn = ctx
-                    .draw_series(std::iter::once(Rectangle::new(
-                        // From zero (a negative value hangs below it).
-                        [(x0, 0.0_f64.clamp(y0, y1)), (x1, v.clamp(y0, y1))],
-                        colour.filled(),
+                ctx.draw_series(std::iter::once(Rectangle::new(
+                    // From zero (a negative value hangs below it).
+                    [(x0, 0.0_f64.clamp(y0, y1)), (x1, v.clamp(y0, y1))],
+                    colour.filled(),
+                )))
+                .map_err(e)?;
+                // A value beyond the axis is drawn to its end and labelled with itself.
+                if !(y0..=y1).contains(&v) {
+                    let (at, anchor) = if v > y1 {
+                        (y1 - 0.01 * (y1 - y0), VPos::Top)
+                    } else {
+                        (y0 + 0.01 * (y1 - y0), VPos::Bottom)
+                    };
+                    let style = (FONT_FAMILY, look.text_px.0)
+                        .into_font()
+                        .color(&WHITE)
+                        .pos(Pos::new(HPos::Center, anchor));
+                    ctx.draw_series(std::iter::once(Text::new(
+                        format_tick_in(v, (y1 - y0) / 10.0),
+                        (xc, at),
+                        style,
                     )))
                     .map_err(e)?;
-                if !labelled {
-                    labelled = true;
-                    drawn.label(s.label.as_str()).legend(move |(x, y)| {
-                        Rectangle::new([(x, y - 5), (x + 14, y + 5)], colour.filled())
-                    });
                 }
                 if lo.is_finite() && hi.is_finite() {
                     let (lo, hi) = (lo.clamp(y0, y1), hi.clamp(y0, y1));
@@ -203,17 +226,6 @@ pub fn draw_bars<DB: DrawingBackend>(
             }
         }
     }
-    ctx.configure_series_labels()
-        .position(if look.legend_left {
-            SeriesLabelPosition::UpperLeft
-        } else {
-            SeriesLabelPosition::UpperRight
-        })
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(look.legend.1))
-        .label_font((FONT_FAMILY, look.legend.0))
-        .draw()
-        .map_err(e)?;
     root.present().map_err(e)
 }
 

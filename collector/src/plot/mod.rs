@@ -14,6 +14,7 @@
 mod bars;
 mod heatmap;
 mod histogram;
+pub mod legend;
 #[cfg(test)]
 mod tests;
 mod text;
@@ -89,8 +90,8 @@ pub(crate) fn draw_err<E: std::fmt::Display>(path: &Path) -> impl Fn(E) -> PlotE
     }
 }
 
-/// A short tick label for `v` on an axis spanning `span` (`-5`, `0.5`, `2.25`,
-/// `1.2e-4`: no trailing zeros), with enough decimals that
+/// A short tick label for `v` on an axis spanning `span` (`−5`, `0.5`, `2.25`,
+/// `1.2e−4`: no trailing zeros, minus signs as U+2212), with enough decimals that
 /// neighbouring ticks (about a tenth of the span apart) read differently: an R² axis
 /// from 0.9971 to 0.9983 needs four, where two would label every tick "1".
 pub fn format_tick_in(v: f64, span: f64) -> String {
@@ -107,7 +108,7 @@ pub fn format_tick_in(v: f64, span: f64) -> String {
         } else {
             1
         };
-        return format!("{v:.digits$e}");
+        return format!("{v:.digits$e}").replace('-', "\u{2212}");
     }
     let needed = if usable {
         (-step.log10()).ceil().clamp(0.0, 8.0) as usize
@@ -121,5 +122,11 @@ pub fn format_tick_in(v: f64, span: f64) -> String {
     } else {
         text
     };
-    if text == "-0" { "0".into() } else { text }
+    if text == "-0" {
+        "0".into()
+    } else {
+        // The typographic minus (U+2212, in the bundled font): a hyphen is shorter and
+        // thinner, and a row of negative ticks ("-500 -400 -300") reads like ranges.
+        text.replace('-', "\u{2212}")
+    }
 }

@@ -17,12 +17,12 @@ fn ticks_are_short() {
         .into_iter()
         .map(|v| format_tick_in(v, f64::INFINITY))
         .collect();
-    assert_eq!(got, ["-5", "0.5", "2.25", "0", "-1.0e-4", "150", "12.5"]);
+    assert_eq!(got, ["−5", "0.5", "2.25", "0", "−1.0e−4", "150", "12.5"]);
     // A zero tick the axis arithmetic left at -5.6e-17 on a 0.4-wide axis is 0, and a
     // real small value on a small axis keeps its digits.
     assert_eq!(format_tick_in(-5.6e-17, 0.4), "0");
     assert_eq!(format_tick_in(-2.8e-17, 0.6), "0");
-    assert_eq!(format_tick_in(0.002, 0.01), "2.0e-3");
+    assert_eq!(format_tick_in(0.002, 0.01), "2.0e−3");
 }
 
 #[test]
@@ -37,7 +37,7 @@ fn ticks_on_a_narrow_axis_differ() {
         .into_iter()
         .map(|v| format_tick_in(v, 6e-3))
         .collect();
-    assert_eq!(mse, ["1.5e-3", "2.0e-3", "2.5e-3"]);
+    assert_eq!(mse, ["1.5e−3", "2.0e−3", "2.5e−3"]);
     // A wide axis keeps its short labels; a degenerate span falls back to them.
     assert_eq!(format_tick_in(150.0, 400.0), "150");
     assert_eq!(format_tick_in(0.5, 0.0), "0.5");

@@ -1,5 +1,6 @@
 //! x–y charts: one drawing for the PNG files and the report's figures.
 
+use super::legend::{Item, Swatch, split_off};
 use super::{FONT_FAMILY, PALETTE, PlotError, draw_err, format_tick_in, register_font};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -62,10 +63,9 @@ pub struct XyLook {
     pub swatches: bool,
     /// Points of a points-only series drawn translucent (a dense scatter).
     pub translucent_points: bool,
-    /// Legend text size, px (0: no legend); its box's border darkness (0–1); whether it
-    /// sits at the lower right (else plotters' default); whether a single series gets
-    /// one.
-    pub legend: (u32, f64, bool, bool),
+    /// Legend text size, px (0: no legend), and whether a single series gets one. The
+    /// legend is a strip of its own above the plot ([`super::legend`]).
+    pub legend: (u32, bool),
 }
 
 impl XyLook {
@@ -79,7 +79,7 @@ impl XyLook {
         marker_px: 3,
         swatches: false,
         translucent_points: false,
-        legend: (14, 1.0, false, true),
+        legend: (14, true),
     };
     /// The report's inline figure.
     pub const PAGE: Self = Self {
@@ -91,7 +91,7 @@ impl XyLook {
         marker_px: 2,
         swatches: true,
         translucent_points: true,
-        legend: (12, 0.3, true, false),
+        legend: (12, false),
     };
 }
 
@@ -142,8 +142,31 @@ pub fn draw_xy<DB: DrawingBackend>(
 ) -> Result<(), String> {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(e)?;
-    let mut ctx = ChartBuilder::on(root)
-        .caption(chart.title, (FONT_FAMILY, look.title_px))
+    let titled = root
+        .titled(chart.title, (FONT_FAMILY, look.title_px))
+        .map_err(e)?;
+    let (legend_px, single) = look.legend;
+    let items: Vec<Item> = if single || chart.series.len() > 1 {
+        chart
+            .series
+            .iter()
+            .enumerate()
+            .map(|(i, s)| Item {
+                label: s.label.clone(),
+                colour: PALETTE[i % PALETTE.len()],
+                swatch: match (look.swatches, s.style) {
+                    (true, _) => Swatch::Box,
+                    (false, SeriesStyle::Points) => Swatch::Dot,
+                    (false, _) => Swatch::Line,
+                },
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let left_px = (look.margin_px + look.label_areas_px.1) as i32;
+    let plot_area = split_off(&titled, &items, legend_px, left_px).map_err(e)?;
+    let mut ctx = ChartBuilder::on(&plot_area)
         .margin(look.margin_px)
         .x_label_area_size(look.label_areas_px.0)
         .y_label_area_size(look.label_areas_px.1)
@@ -177,21 +200,9 @@ pub fn draw_xy<DB: DrawingBackend>(
             .copied()
             .filter(|(x, y)| x.is_finite() && y.is_finite())
             .collect();
-        let swatch = move |(x, y): (i32, i32)| {
-            Rectangle::new([(x, y - 4), (x + 12, y + 4)], colour.filled())
-        };
         if matches!(s.style, SeriesStyle::Line | SeriesStyle::LinePoints) {
-            let drawn = ctx
-                .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
-                .map_err(e)?
-                .label(s.label.as_str());
-            if look.swatches {
-                drawn.legend(swatch);
-            } else {
-                drawn.legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
-                });
-            }
+            ctx.draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
+                .map_err(e)?;
         }
         if matches!(s.style, SeriesStyle::Points | SeriesStyle::LinePoints) {
             let r = look.marker_px;
@@ -200,37 +211,16 @@ pub fn draw_xy<DB: DrawingBackend>(
             } else {
                 colour.filled()
             };
-            let drawn = if look.swatches {
+            if look.swatches {
                 ctx.draw_series(pts.into_iter().map(|p| Circle::new(p, r, style)))
-                    .map_err(e)?
+                    .map_err(e)?;
             } else {
                 ctx.draw_series(PointSeries::of_element(pts, r, style, &|c, s, st| {
                     EmptyElement::at(c) + Circle::new((0, 0), s, st)
                 }))
-                .map_err(e)?
-            };
-            if s.style == SeriesStyle::Points {
-                let drawn = drawn.label(s.label.as_str());
-                if look.swatches {
-                    drawn.legend(swatch);
-                } else {
-                    drawn.legend(move |(x, y)| Circle::new((x + 9, y), 3, colour.filled()));
-                }
+                .map_err(e)?;
             }
         }
-    }
-    let (legend_px, border, lower_right, single) = look.legend;
-    // A legend text size of 0: no legend (the caller says what the colours are).
-    if legend_px > 0 && (single || chart.series.len() > 1) {
-        let mut labels = ctx.configure_series_labels();
-        labels
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK.mix(border))
-            .label_font((FONT_FAMILY, legend_px));
-        if lower_right {
-            labels.position(SeriesLabelPosition::LowerRight);
-        }
-        labels.draw().map_err(e)?;
     }
     Ok(())
 }
@@ -334,7 +324,7 @@ pub fn predicted_grid(
         let look = XyLook {
             marker_px: 2,
             translucent_points: true,
-            legend: (XyLook::PNG.legend.0, XyLook::PNG.legend.1, false, false),
+            legend: (XyLook::PNG.legend.0, false),
             ..XyLook::PNG
         };
         draw_xy(area, &chart, &look, (lo, hi, lo, hi), true).map_err(&fail)?;
@@ -372,7 +362,7 @@ pub fn time_grid(
         };
         // No legend box over the traces: the title names the colours.
         let look = XyLook {
-            legend: (0, 1.0, false, false),
+            legend: (0, false),
             ..XyLook::PNG
         };
         draw_xy(area, &chart, &look, ranges, false).map_err(&fail)?;
@@ -422,6 +412,16 @@ pub fn two_panel_chart(
     for (area, (series, y_label), points) in [(upper, top, &all_top), (lower, bottom, &all_bottom)]
     {
         let (y0, y1) = bounds(points, 1);
+        let items: Vec<Item> = series
+            .iter()
+            .enumerate()
+            .map(|(i, s)| Item {
+                label: s.label.clone(),
+                colour: PALETTE[i % PALETTE.len()],
+                swatch: Swatch::Line,
+            })
+            .collect();
+        let area = split_off(&area, &items, 13, 74).map_err(|e| fail(e.to_string()))?;
         let mut ctx = ChartBuilder::on(&area)
             .margin(10)
             .x_label_area_size(40)
@@ -444,18 +444,8 @@ pub fn two_panel_chart(
                 .filter(|(x, y)| x.is_finite() && y.is_finite())
                 .collect();
             ctx.draw_series(LineSeries::new(pts, colour.stroke_width(2)))
-                .map_err(|e| fail(e.to_string()))?
-                .label(s.label.as_str())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
-                });
+                .map_err(|e| fail(e.to_string()))?;
         }
-        ctx.configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font((FONT_FAMILY, 13))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
     }
     root.present().map_err(|e| fail(e.to_string()))?;
     Ok(())

@@ -507,7 +507,8 @@ pub struct TrialResult {
     pub peak_estimate_n: Option<f64>,
     /// The largest true force, N (simulation).
     pub peak_true_n: Option<f64>,
-    /// When the closed loop confirmed its force (ns after the trial's start).
+    /// When the closed loop confirmed its force: ns after the trial's first cycle (the
+    /// trace's and the frames' time origin), at the frame of the confirming cycle.
     pub confirmed_after_ns: Option<u64>,
     /// Every cycle.
     pub trace: Vec<TraceRow>,

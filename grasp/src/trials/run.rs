@@ -90,7 +90,6 @@ where
     )?;
     let mut run = Run {
         clock: Arc::clone(&clock),
-        start: clock.now(),
         trace: Vec::new(),
         lifted: false,
         confirmed_after_ns: None,
@@ -159,7 +158,6 @@ where
 /// The state of one trial while it runs.
 pub(super) struct Run {
     pub(super) clock: Arc<dyn Clock>,
-    pub(super) start: TimestampNs,
     pub(super) trace: Vec<TraceRow>,
     pub(super) lifted: bool,
     pub(super) confirmed_after_ns: Option<u64>,
@@ -357,7 +355,7 @@ impl Run {
         let mut window: std::collections::VecDeque<(TimestampNs, Option<f64>)> =
             std::collections::VecDeque::new();
         let confirm_ns = trial.confirm.as_nanos() as u64;
-        loop {
+        let confirmed_at = loop {
             let c = ctl.cycle(trial.target_n).await?;
             self.record(&c);
             window.push_back((c.t, c.estimate_n));
@@ -372,7 +370,7 @@ impl Run {
                 .is_some_and(|(t, _)| c.t.0.saturating_sub(t.0) >= confirm_ns);
             let estimates: Vec<Option<f64>> = window.iter().map(|(_, e)| *e).collect();
             if spans && super::confirmed(&estimates, trial.target_n, tolerance_n, trial.dither_n) {
-                break;
+                break c.t;
             }
             if elapsed_ns(self.clock.as_ref(), close_start) > trial.close_timeout.as_nanos() as u64
             {
@@ -380,8 +378,11 @@ impl Run {
                 self.last_status = Some(self.status_of(&c));
                 return Ok(());
             }
-        }
-        self.confirmed_after_ns = Some(elapsed_ns(self.clock.as_ref(), self.start));
+        };
+        // On the trace's clock (its first cycle is 0), where the viewer, the CSV and the
+        // frames' times all read it.
+        let first = self.trace.first().map_or(confirmed_at.0, |r| r.t.0);
+        self.confirmed_after_ns = Some(confirmed_at.0.saturating_sub(first));
         self.snap(Moment::Confirmed);
         lift.start_lift(&trial.lift).await?;
         self.lifted = true;

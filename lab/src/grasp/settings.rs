@@ -102,6 +102,38 @@ pub const fn duration_s(zero_allowed: bool) -> Setting {
     }
 }
 
+/// A target grip force, N, as every verb takes it (`grasp trials --target-n`, `follow
+/// --targets`, `disturb`/`twist --target`, `calibrate --target`, `bench grasp`): above
+/// 0 (the finger only pushes) and below where the estimate saturates, less δ
+/// (`tolerance_n`), as the loop's stepper checks it. Checked before anything is stored.
+///
+/// # Errors
+/// A target the loop could never hold, naming `flag`, the value and the interval.
+pub fn check_target_n(flag: &str, target_n: f64, tolerance_n: f64) -> Result<f64, SettingError> {
+    let stepper = softtouch_grasp::StepperConfig {
+        tolerance_n,
+        ..softtouch_grasp::StepperConfig::default()
+    };
+    stepper
+        .check_target(target_n)
+        .map(|()| target_n)
+        .map_err(|e| {
+            let expected = match e {
+                softtouch_grasp::GraspError::UnreachableTarget {
+                    reachable_n: [lo, hi],
+                    why,
+                    ..
+                } => format!("a force in ({}, {}) N ({why})", readable(lo), readable(hi)),
+                other => other.to_string(),
+            };
+            SettingError {
+                flag: flag.to_owned(),
+                value: readable(target_n),
+                expected,
+            }
+        })
+}
+
 /// Sensorised fingers the loop reads: 1 or 2.
 ///
 /// # Errors
@@ -156,6 +188,23 @@ mod tests {
         assert_eq!(
             check_fingers(3).map_err(|e| e.to_string()),
             Err("--fingers 3: expected 1 or 2 sensorised fingers".into())
+        );
+    }
+
+    #[test]
+    fn a_target_force_has_one_interval_for_every_verb() {
+        assert_eq!(check_target_n("--target-n", 1.5, 0.1), Ok(1.5));
+        for bad in [0.0, -1.0, 20.0, 9.9, f64::NAN, f64::INFINITY] {
+            let e = check_target_n("--target-n", bad, 0.1).expect_err("refused");
+            assert_eq!(e.flag, "--target-n");
+            assert!(e.expected.starts_with("a force in (0, 9.9) N"), "{e}");
+        }
+        // δ is taken off the top: a wider tolerance leaves less room.
+        let e = check_target_n("--targets", 9.5, 0.6).expect_err("refused");
+        assert!(
+            e.to_string()
+                .starts_with("--targets 9.5: expected a force in (0, 9.4) N"),
+            "{e}"
         );
     }
 }

@@ -10,8 +10,8 @@ use std::time::Duration;
 
 use softtouch_drivers::TokioClock;
 use softtouch_grasp::{
-    Controller, ControllerConfig, ExitAction, GainCheck, GraspError, Projection, StepperConfig,
-    check_gain, check_tolerance, one_count_force_n,
+    Controller, ControllerConfig, ExitAction, GainCheck, GraspError, Projection, check_gain,
+    check_tolerance, one_count_force_n,
 };
 use softtouch_schemas::config::{ConfigSource, parse_toml};
 use softtouch_schemas::{ArmPose, SceneSpec};
@@ -198,14 +198,9 @@ pub async fn prepare(
 ) -> Result<Prepared, GraspRunError> {
     // The targets first: K is derived from them, so a bad target must not read as a
     // bad K (a flag the user never gave).
-    let probe = StepperConfig {
-        tolerance_n: settings.tolerance_n,
-        ..StepperConfig::default()
-    };
     for t in targets_n {
-        probe
-            .check_target(*t)
-            .map_err(|e| invalid(format!("--targets: {e}")))?;
+        super::settings::check_target_n("--targets", *t, settings.tolerance_n)
+            .map_err(|e| invalid(e.to_string()))?;
     }
     // Λ is measured up to half again the largest target.
     let top_n = super::calibration::top_for(targets_n.iter().copied().fold(0.0, f64::max));

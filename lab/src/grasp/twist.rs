@@ -127,11 +127,17 @@ pub async fn twist_sim(
     Ok((setup, runs, stopped))
 }
 
-/// One run's numbers, N·mm for torques.
+/// One run's numbers, N·mm for torques. Every number counts from the first turn (the
+/// settle before it is left out): the terminal, the stored summary,
+/// `grasp-twist-metrics.csv` and the report all show these, computed here once.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TwistRow {
     /// Whether the wrist loop ran.
     pub wrist_loop: bool,
+    /// When the scored part starts (the first turn), s on the CSV's clock.
+    pub scored_from_s: f64,
+    /// Cycles in the scored part.
+    pub cycles_scored: usize,
     /// RMS of the estimated τz from the first turn on, N·mm.
     pub tz_rms_nmm: f64,
     /// RMS of the true τz, N·mm.
@@ -178,6 +184,8 @@ pub fn twist_rows(runs: &[TwistRun]) -> Vec<TwistRow> {
             .collect();
         TwistRow {
             wrist_loop: i == 1,
+            scored_from_s: t_s(run.from),
+            cycles_scored: run.cycles.iter().filter(|cy| cy.t >= run.from).count(),
             tz_rms_nmm: rms(&est),
             true_tz_rms_nmm: rms(&tru),
             true_tz_peak_nmm: tru.iter().fold(0.0_f64, |m, t| m.max(t.abs())),
@@ -190,6 +198,31 @@ pub fn twist_rows(runs: &[TwistRun]) -> Vec<TwistRow> {
         }
     };
     (0..runs.len()).map(row).collect()
+}
+
+/// The header of `grasp-twist-metrics.csv`.
+pub const TWIST_METRICS_HEADER: &str = "wrist_loop,scored_from_s,cycles_scored,tz_rms_nmm,true_tz_rms_nmm,true_tz_peak_nmm,true_force_rms_n,wrist_max_deg";
+
+/// `grasp-twist-metrics.csv`: each run's numbers ([`twist_rows`]), one line a run.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_twist_metrics_csv(path: &Path, rows: &[TwistRow]) -> Result<(), GraspRunError> {
+    let mut text = format!("{TWIST_METRICS_HEADER}\n");
+    for r in rows {
+        text.push_str(&format!(
+            "{},{},{},{},{},{},{},{}\n",
+            if r.wrist_loop { "on" } else { "off" },
+            r.scored_from_s,
+            r.cycles_scored,
+            r.tz_rms_nmm,
+            r.true_tz_rms_nmm,
+            r.true_tz_peak_nmm,
+            r.true_force_rms_n,
+            r.wrist_max_deg
+        ));
+    }
+    write_text(path, &text)
 }
 
 /// `grasp-twist.csv`: one line per cycle of each run.

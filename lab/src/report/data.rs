@@ -2,8 +2,8 @@
 //! progress curves thinned for the page, and a config's fingerprint.
 
 pub(crate) use crate::store::report::{
-    DatasetData, MAX_TIMELINE, ModelRow, ReadOnly, RunData, RunRow, artifact, datasets, frame,
-    models, now, open_read_only, test_members,
+    DatasetData, MAX_TIMELINE, ModelRow, ReadOnly, RunData, artifact, datasets, frame, models, now,
+    open_read_only, test_members,
 };
 use softtouch_collector::dataset::export::sha256_hex;
 

@@ -5,6 +5,7 @@
 
 use super::ReportError;
 use plotters::prelude::*;
+use softtouch_collector::plot::legend::{Item, Swatch, split_off};
 use softtouch_collector::plot::{
     BarChart, BarLook, BarSeries, BinnedPanel, FONT_FAMILY, HistLook, PALETTE, Series, XyChart,
     XyLook, draw_bars, draw_histograms, draw_xy, finite_bounds, format_tick_in, pad, register_font,
@@ -175,7 +176,7 @@ fn draw_bar_chart(chart: &BarChart<'_>, size: Size) -> Result<String, ReportErro
 pub(crate) type RateValues = (String, Vec<Option<(f64, f64, f64)>>, Vec<Option<String>>);
 
 /// Success rates (0 to 1) as grouped bars with their intervals as whiskers; the axis is
-/// labelled up to 1, the headroom above holds the notes and the legend.
+/// labelled up to 1, the headroom above holds the notes (n).
 pub(crate) fn rate_bars(
     title: &str,
     x_label: &str,
@@ -200,7 +201,8 @@ pub(crate) fn rate_bars(
             y_label: "success rate (Wilson 95 %)",
             groups: categories,
             series: &series,
-            y_range: (0.0, 1.2 + 0.1 * series.len() as f64),
+            // Room above 1 for the bars' notes (n); the legend has a strip of its own.
+            y_range: (0.0, 1.08),
             y_labels_up_to: Some(1.0),
         },
         size,
@@ -225,8 +227,17 @@ pub(crate) fn timeline(
         let e = |e: DrawingAreaErrorKind<_>| e.to_string();
         let draw = || -> Result<(), String> {
             root.fill(&WHITE).map_err(e)?;
-            let mut ctx = ChartBuilder::on(&root)
-                .caption(title, (FONT_FAMILY, 17))
+            let titled = root.titled(title, (FONT_FAMILY, 17)).map_err(e)?;
+            let items: Vec<Item> = LEVELS
+                .iter()
+                .map(|(level, colour)| Item {
+                    label: (*level).to_owned(),
+                    colour: *colour,
+                    swatch: Swatch::Box,
+                })
+                .collect();
+            let plot = split_off(&titled, &items, 12, 160).map_err(e)?;
+            let mut ctx = ChartBuilder::on(&plot)
                 .margin(10)
                 .x_label_area_size(40)
                 .y_label_area_size(150)
@@ -251,11 +262,7 @@ pub(crate) fn timeline(
                 .light_line_style(WHITE)
                 .draw()
                 .map_err(e)?;
-            for (level, colour) in [
-                ("info", PALETTE[0]),
-                ("warn", PALETTE[1]),
-                ("error", PALETTE[5]),
-            ] {
+            for &(level, colour) in &LEVELS {
                 ctx.draw_series(
                     events
                         .iter()
@@ -268,25 +275,21 @@ pub(crate) fn timeline(
                             )
                         }),
                 )
-                .map_err(e)?
-                .label(level)
-                .legend(move |(x, y)| {
-                    Rectangle::new([(x, y - 4), (x + 12, y + 4)], colour.filled())
-                });
-            }
-            ctx.configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK.mix(0.3))
-                .label_font((FONT_FAMILY, 12))
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()
                 .map_err(e)?;
+            }
             root.present().map_err(|e| e.to_string())
         };
         draw().map_err(draw_err(title))?;
     }
     Ok(svg)
 }
+
+/// The timeline's event levels and their colours.
+const LEVELS: [(&str, RGBColor); 3] = [
+    ("info", PALETTE[0]),
+    ("warn", PALETTE[1]),
+    ("error", PALETTE[5]),
+];
 
 /// Evenly spaced picks of at most `max` out of `n` (all when `n ≤ max`), in order.
 #[must_use]
@@ -365,6 +368,6 @@ mod tests {
         assert_eq!(format_tick_in(0.5, 1.0), "0.5");
         assert_eq!(format_tick_in(-0.0, 1.0), "0");
         assert_eq!(format_tick_in(1234.0, 2000.0), "1234");
-        assert_eq!(format_tick_in(0.0001, 0.001), "1.0e-4");
+        assert_eq!(format_tick_in(0.0001, 0.001), "1.0e−4");
     }
 }

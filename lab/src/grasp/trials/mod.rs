@@ -34,7 +34,12 @@ use softtouch_schemas::defaults::{
     GRASP_SCENE_TOML as LAND_TOML, GRASP_WATER_SCENE_TOML as WATER_TOML,
 };
 
-/// The paper's overall success rates (Figure 4): (medium, mode) → rate.
+/// The grasp-point perturbation σ of the paper's success rates, mm (Figure 4): its
+/// rates are shown beside this σ's rows only.
+pub const PAPER_SIGMA_MM: f64 = 5.0;
+
+/// The paper's overall success rates (Figure 4, σ = [`PAPER_SIGMA_MM`]): (medium, mode)
+/// → rate.
 #[must_use]
 pub fn paper_rate(medium: Medium, mode: Mode) -> f64 {
     match (medium, mode) {
@@ -184,7 +189,7 @@ impl Default for TrialPlan {
             objects: Vec::new(),
             modes: vec!["open".into(), "closed".into()],
             trials: 10,
-            sigmas_mm: vec![5.0],
+            sigmas_mm: vec![PAPER_SIGMA_MM],
             fps: 120.0,
             target_n: 1.5,
             tolerance_n: 0.1,
@@ -223,8 +228,8 @@ impl TrialPlan {
     /// The first setting out of range.
     pub fn checked(mut self) -> Result<Self, TrialsError> {
         settings::FPS_HZ.check("--fps", self.fps)?;
-        above_zero("a value", 50.0, "N").check("--target-n", self.target_n)?;
         settings::TOLERANCE_N.check("--tolerance", self.tolerance_n)?;
+        settings::check_target_n("--target-n", self.target_n, self.tolerance_n)?;
         above_zero("a value", 60.0, "s").check("--confirm-s", self.confirm_s)?;
         above_zero("a value", 600.0, "s").check("--close-timeout-s", self.close_timeout_s)?;
         above_zero("a value", 500.0, "mm").check("--lift-mm", self.lift_mm)?;

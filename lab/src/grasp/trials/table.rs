@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use softtouch_grasp::{FailReason, Mode, Z_95, wilson_interval};
 use softtouch_schemas::Medium;
 
-use super::{TrialPlan, TrialsError, medium_name, paper_rate};
+use super::{PAPER_SIGMA_MM, TrialPlan, TrialsError, medium_name, paper_rate};
 use crate::store::GraspTrialRow;
 use softtouch_collector::plot::{BarChart, BarSeries, bar_chart};
 
@@ -17,6 +17,8 @@ use softtouch_collector::plot::{BarChart, BarSeries, bar_chart};
 pub struct Cell {
     /// Which σ of the plan.
     pub sigma_index: u32,
+    /// That σ, mm.
+    pub sigma_mm: f64,
     /// Which scene of the session.
     pub scene_index: u32,
     /// The scene's medium.
@@ -41,11 +43,11 @@ impl Cell {
     pub fn rate(&self) -> Option<f64> {
         (self.trials > 0).then(|| self.held as f64 / self.trials as f64)
     }
-    /// The paper's overall rate, for the rows of every object together.
+    /// The paper's overall rate, for the rows of every object together at the paper's
+    /// σ ([`PAPER_SIGMA_MM`]): at another σ it has none to compare with.
     #[must_use]
     pub fn paper(&self) -> Option<f64> {
-        self.object
-            .is_none()
+        (self.object.is_none() && (self.sigma_mm - PAPER_SIGMA_MM).abs() < 1e-9)
             .then(|| paper_rate(self.medium, self.mode))
     }
 }
@@ -95,6 +97,7 @@ pub fn summarise(
                     }
                     cells.push(Cell {
                         sigma_index: si,
+                        sigma_mm: plan.sigmas_mm[si as usize],
                         scene_index: ci,
                         medium: *medium,
                         object: object.cloned(),
@@ -364,8 +367,8 @@ pub fn write_bars(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), T
             y_label: "success rate (held/n)",
             groups: &names,
             series: &series,
-            // Headroom above 100 % for the legend, its ticks unlabelled.
-            y_range: (0.0, 1.3),
+            // Room above 100 % for the bars' notes (n), with no tick there.
+            y_range: (0.0, 1.08),
             y_labels_up_to: Some(1.0),
         },
         ((180 * names.len() as u32).clamp(640, 2400), 520),
@@ -417,8 +420,8 @@ pub fn write_sweep(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), 
             y_label: "success rate (held/n)",
             groups: &groups,
             series: &series,
-            // Headroom above 100 % for the legend, its ticks unlabelled.
-            y_range: (0.0, 1.3),
+            // Room above 100 % for the bars' notes (n), with no tick there.
+            y_range: (0.0, 1.08),
             y_labels_up_to: Some(1.0),
         },
         (
@@ -495,5 +498,24 @@ mod tests {
             .collect();
         assert!(paired(&plan, &[Medium::Air], &open_only).is_empty());
         assert!(paired(&plan, &[Medium::Air], &[]).is_empty());
+    }
+
+    #[test]
+    fn the_papers_rates_stand_beside_the_papers_sigma_only() {
+        let plan = TrialPlan {
+            sigmas_mm: vec![0.0, 5.0, 8.0],
+            ..TrialPlan::default()
+        };
+        let cells = summarise(&plan, &[Medium::Air, Medium::Water], &[]).expect("cells");
+        for c in &cells {
+            let expected = (c.object.is_none() && (c.sigma_mm - 5.0).abs() < 1e-12)
+                .then(|| paper_rate(c.medium, c.mode));
+            assert_eq!(c.paper(), expected, "{c:?}");
+            assert_eq!(
+                c.sigma_mm.to_bits(),
+                plan.sigmas_mm[c.sigma_index as usize].to_bits()
+            );
+        }
+        assert_eq!(cells.iter().filter(|c| c.paper().is_some()).count(), 4);
     }
 }

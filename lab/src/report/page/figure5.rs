@@ -180,6 +180,20 @@ fn twist_part(r: &StoredResult) -> Result<Markup, ReportError> {
         let truth = cycles.num("tz_true_nmm").ok();
         let mut rows = Vec::new();
         let mut series = Vec::new();
+        // The numbers as the verb computed and printed them (from the first turn on);
+        // results stored before that table existed are scored over every cycle.
+        let metrics = Columns::of(r, "grasp-twist-metrics.csv").ok();
+        let scored = match &metrics {
+            Some(m) => {
+                let (state, n) = (m.text("wrist_loop")?, m.num("cycles_scored")?);
+                let (e, t) = (m.num("tz_rms_nmm")?, m.num("true_tz_rms_nmm")?);
+                for i in 0..state.len() {
+                    rows.push(((*state[i]).to_owned(), n[i] as usize, e[i], t[i]));
+                }
+                "from the first turn on (the settle before it left out)"
+            }
+            None => "over every cycle",
+        };
         for state in ["off", "on"] {
             let idx: Vec<usize> = (0..t.len()).filter(|&i| loops[i] == state).collect();
             if idx.is_empty() {
@@ -196,23 +210,26 @@ fn twist_part(r: &StoredResult) -> Result<Markup, ReportError> {
                 &ts,
                 &pick(shown),
             ));
-            rows.push((
-                state,
-                idx.len(),
-                rms(pick(&est).into_iter()),
-                truth
-                    .as_deref()
-                    .map_or(f64::NAN, |tr| rms(pick(tr).into_iter())),
-            ));
+            if metrics.is_none() {
+                rows.push((
+                    state.to_owned(),
+                    idx.len(),
+                    rms(pick(&est).into_iter()),
+                    truth
+                        .as_deref()
+                        .map_or(f64::NAN, |tr| rms(pick(tr).into_iter())),
+                ));
+            }
         }
-        Ok((rows, series))
+        Ok((rows, series, scored))
     };
-    let (rows, series) = match read() {
+    let (rows, series, scored) = match read() {
         Ok(x) => x,
         Err(e) => return Ok(html! { (prov(r)) (unreadable("the twist", &e)) }),
     };
     Ok(html! {
         (prov(r))
+        p { "τz RMS " (scored) "." }
         table {
             tr { th.l { "wrist loop" } th { "cycles" } th { "estimated τz RMS N·mm" } th { "true τz RMS N·mm" } }
             @for (state, n, e, t) in &rows {

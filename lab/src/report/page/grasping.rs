@@ -279,14 +279,24 @@ fn trial_figure(
         .fold((0.0_f64, 0.0_f64), |(a, b), v| {
             (a.min(f64::from(v)), b.max(f64::from(v)))
         });
-    for f in t
+    // The confirmation is marked where the loop confirmed (the stored time the CSV and
+    // the position chart's title give); its frame is the newest at that moment.
+    let confirmed = r.confirmed_after_s.or_else(|| {
+        t.frames
+            .iter()
+            .find(|f| f.moment == "confirmed")
+            .map(|f| f.t_s)
+    });
+    let lifted = t
         .frames
         .iter()
-        .filter(|f| f.moment == "confirmed" || f.moment == "lifted")
-    {
+        .find(|f| f.moment == "lifted")
+        .map(|f| f.t_s);
+    for (moment, at) in [("confirmed", confirmed), ("lifted", lifted)] {
+        let Some(at) = at else { continue };
         force.push(Series {
-            label: f.moment.clone(),
-            points: vec![(f.t_s, lo), (f.t_s, hi.max(lo + 0.1))],
+            label: format!("{moment} ({at:.2} s)"),
+            points: vec![(at, lo), (at, hi.max(lo + 0.1))],
             style: SeriesStyle::Line,
         });
     }

@@ -233,14 +233,15 @@ fn summary_section(c: &Content) -> Markup {
                         Some(g) => {
                             "Latest grasp session (" a href=(format!("#grasp-session-{}", g.session.session_id)) { (g.session.session_id) } ", " (g.kind()) ", model " code { (g.session.model) } "): "
                             (g.cells.iter().filter(|cell| cell.object.is_none()).map(|cell| format!(
-                                "{} {} {}/{} ({})",
+                                "σ {} mm {} {} {}/{} ({})",
+                                cell.sigma_mm,
                                 crate::report::grasp::medium(cell.medium),
                                 cell.mode.as_str(),
                                 cell.held,
                                 cell.trials,
                                 cell.rate().map_or_else(|| "–".to_owned(), |r| format!("{:.0} %, Wilson [{:.0}, {:.0}] %", 100.0 * r, 100.0 * cell.interval[0], 100.0 * cell.interval[1]))
                             )).collect::<Vec<_>>().join("; "))
-                            "; the paper: land 44 → 100 %, water 30 → 90 % (open → closed)."
+                            "; the paper at σ 5 mm: land 44 → 100 %, water 30 → 90 % (open → closed)."
                         }
                         None => { "No grasp trials yet: " code { "softtouch grasp trials --model NAME" } "." }
                     }

@@ -20,7 +20,7 @@ pub(super) fn runs_section(c: &Content) -> Result<Markup, ReportError> {
                     tr {
                         th { "run" } th.l { "status" } th.l { "scene" } th.l { "medium" } th { "seed" }
                         th { "planned" } th { "ok" } th { "rejected" } th { "retried" } th { "accepted, %" }
-                        th { "rate, ok samples/h (run clock)" } th { "wall time, h" } th { "events" } th { "warnings + errors" }
+                        th { "ok samples/h, run clock" } th { "ok samples/h, wall clock" } th { "wall time, h" } th { "events" } th { "warnings + errors" }
                     }
                     @for d in &c.runs {
                         @let r = &d.row;
@@ -37,7 +37,8 @@ pub(super) fn runs_section(c: &Content) -> Result<Markup, ReportError> {
                             td data-k=(format!("run-{id}-rejected")) { (r.counts.rejected) }
                             td data-k=(format!("run-{id}-retried")) { (r.counts.retried) }
                             td { @if taken > 0 { (f(100.0 * r.counts.ok as f64 / taken as f64, 1)) } @else { "–" } }
-                            td data-k=(format!("run-{id}-rate")) { (run_rate(r).map_or_else(|| "–".into(), |v| f(v, 0))) }
+                            td data-k=(format!("run-{id}-rate")) { (r.counts.ok_per_run_clock_hour().map_or_else(|| "–".into(), |v| f(v, 0))) }
+                            td data-k=(format!("run-{id}-wall-rate")) { (r.counts.ok_per_wall_hour().map_or_else(|| "–".into(), |v| f(v, 0))) }
                             td { (f(r.counts.hours, 3)) }
                             td data-k=(format!("run-{id}-events")) { (r.counts.events) }
                             td { (r.counts.faults) }
@@ -52,16 +53,11 @@ pub(super) fn runs_section(c: &Content) -> Result<Markup, ReportError> {
     })
 }
 
-/// Accepted samples per hour of run clock, from the first frame to the last.
-pub(super) fn run_rate(r: &crate::report::data::RunRow) -> Option<f64> {
-    let span_h = (r.last_t_ns? - r.first_t_ns?) as f64 / 3.6e12;
-    (span_h > 0.0).then(|| r.counts.ok as f64 / span_h)
-}
-
 pub(super) fn run_detail(d: &RunData) -> Result<Markup, ReportError> {
     let r = &d.row;
     let id = r.counts.run_id;
     let origin = r
+        .counts
         .first_t_ns
         .into_iter()
         .chain(d.timeline.iter().map(|e| e.0))
