@@ -490,12 +490,24 @@ async fn cut_run(store: &Store, run: i64, from: i64) {
 }
 
 #[test]
-fn rod_names_with_commas_quotes_and_unicode_survive_collection_status_and_resume() {
+fn rod_names_with_spaces_quotes_and_unicode_survive_collection_status_and_resume() {
     let dir = tempdir();
-    let comma = "circle, 10 mm";
+    // A comma is refused: `--rods` takes names comma-separated.
+    let with_comma =
+        defaults::SCENE_TOML.replace("name = \"circle-10\"", "name = \"circle, 10 mm\"");
+    std::fs::write(dir.path().join("comma.toml"), with_comma).unwrap_or_else(|e| panic!("{e}"));
+    fails_with(
+        &softtouch(
+            dir.path(),
+            &["collect", "--scene", "comma.toml", "--samples", "1"],
+        ),
+        2,
+        "field `rods[0].name`: `circle, 10 mm` contains a comma: names are given comma-separated (--objects, --rods)",
+    );
+    let comma = "circle; 10 mm";
     let quoted = "sq \"q\" ü";
     let scene = defaults::SCENE_TOML
-        .replace("name = \"circle-10\"", "name = \"circle, 10 mm\"")
+        .replace("name = \"circle-10\"", "name = \"circle; 10 mm\"")
         .replace("name = \"square-10\"", "name = \"sq \\\"q\\\" ü\"");
     assert_ne!(scene, defaults::SCENE_TOML);
     std::fs::write(dir.path().join("scene.toml"), scene).unwrap_or_else(|e| panic!("{e}"));
@@ -537,7 +549,7 @@ fn rod_names_with_commas_quotes_and_unicode_survive_collection_status_and_resume
     let status = ok(&softtouch(dir.path(), &["status", "1"]));
     assert!(
         status.contains(
-            r#"rods ["circle, 10 mm","sq \"q\" ü","triangle-12","hexagon-10","oval-12"], 2 samples each"#
+            r#"rods ["circle; 10 mm","sq \"q\" ü","triangle-12","hexagon-10","oval-12"], 2 samples each"#
         ),
         "{status}"
     );

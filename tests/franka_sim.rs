@@ -787,7 +787,7 @@ async fn grasp_trials_on_the_rig_lift_and_set_down_through_fci() {
     let bytes = softtouch_lab::models::force_artifact(&store, MODEL)
         .await
         .expect("model");
-    let scene = load_scenes(&[]).expect("scenes").remove(0);
+    let scene = load_scenes(&[], &[]).expect("scenes").remove(0);
     let object = GraspObject::from_spec(scene.object(OBJECT).expect("cylinder"));
     // The gripper as the FR3's flange points at franka-sim's home keyframe (down,
     // turned 45° about its axis), in front of the robot.

@@ -200,7 +200,7 @@ async fn a_rig_session_runs_judges_stops_and_ends_safe_on_the_simulated_rig() {
     let bytes = softtouch_lab::models::force_artifact(&store, MODEL)
         .await
         .expect("model");
-    let scene = load_scenes(&[]).expect("scenes").remove(0);
+    let scene = load_scenes(&[], &[]).expect("scenes").remove(0);
     let object = GraspObject::from_spec(scene.object(OBJECT).expect("cylinder"));
     // The open-loop width squeezes the 30 mm cylinder by 8 mm (the tiny model's
     // estimate shows a grip well above the rig judge's least force there).

@@ -617,3 +617,113 @@ fn several_models_run_the_same_trials_and_their_spread_is_printed() {
         "no model named `nope`",
     );
 }
+
+#[test]
+fn a_scene_value_is_set_or_swept_over_the_same_trials() {
+    let dir = tempdir();
+    let d = dir.path();
+    let db = d.join("softtouch.db");
+    tiny_model(d);
+    let rt = runtime();
+    let base = [
+        "--model",
+        "air-svae",
+        "--scene",
+        "grasp-water",
+        "--objects",
+        "bottle",
+        "--modes",
+        "open",
+        "--trials",
+        "3",
+        "--seed",
+        "4",
+    ];
+    let with = |extra: &[&str]| {
+        let mut args = base.to_vec();
+        args.extend_from_slice(extra);
+        trials(d, &args)
+    };
+    // Refused before anything is stored, each naming what is wrong.
+    for (extra, says) in [
+        (
+            ["--set", "objects.vase.wet_friction=0.2"],
+            "no scene has `objects.vase.wet_friction`",
+        ),
+        (["--set", "objects.bottle.wet_friction=-1"], "wet_friction"),
+        (["--set", "effects.object_flow.period_s=0"], "period_s"),
+        (
+            ["--sweep", "objects.bottle.wet_friction=0.1"],
+            "at least two values",
+        ),
+        (
+            ["--sweep", "objects.bottle.wet_friction=0.1,abc"],
+            "wet_friction",
+        ),
+        (["--sweep", "sigma_mm=1,x"], "not a number of mm"),
+    ] {
+        fails_with(&with(&extra), 2, says);
+    }
+    let sessions = "SELECT COUNT(*) FROM grasp_sessions";
+    assert_eq!(rt.block_on(count(&db, sessions)), 0, "nothing stored");
+
+    // The bottle's wet friction swept: the same perturbations at each value, and the
+    // physics, not the draw, deciding (nothing lifts a bottle without friction).
+    let out = ok(&with(&["--sweep", "objects.bottle.wet_friction=0.0,2.0"]));
+    for needle in [
+        "water (scene 0; objects.bottle.wet_friction = 0.0)",
+        "water (scene 1; objects.bottle.wet_friction = 2.0)",
+        "success against objects.bottle.wet_friction (σ = 5 mm, all objects):",
+        "first value held in at least 90 % of trials",
+    ] {
+        assert!(out.contains(needle), "`{needle}` in:\n{out}");
+    }
+    let rows = rt.block_on(session_rows(&db, 1));
+    assert_eq!(rows.len(), 6, "{rows:?}");
+    let (at_zero, at_two) = rows.split_at(3);
+    for (a, b) in at_zero.iter().zip(at_two) {
+        assert_eq!(
+            (a.3, a.4.to_bits(), a.5.to_bits()),
+            (b.3, b.4.to_bits(), b.5.to_bits())
+        );
+    }
+    assert!(at_zero.iter().all(|r| r.7 == 0), "{at_zero:?}");
+    let csv = std::fs::read_to_string(d.join("g/grasp-trials-sweep.csv")).expect("sweep csv");
+    assert!(csv.starts_with(
+        "path,value,sigma_mm,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi"
+    ));
+    // 2 values × (bottle, all) × 1 mode.
+    assert_eq!(csv.lines().count(), 1 + 4, "{csv}");
+    assert!(
+        csv.contains("objects.bottle.wet_friction,0.0,5,water,all,open,3,0,0,"),
+        "{csv}"
+    );
+    let png = std::fs::read(d.join("g/grasp-trials-sweep.png")).expect("png");
+    assert!(png.starts_with(b"\x89PNG"));
+
+    // --set of one value runs as the sweep's trials at that value, bit for bit.
+    ok(&with(&["--set", "objects.bottle.wet_friction=2.0"]));
+    let set = rt.block_on(session_rows(&db, 2));
+    assert_eq!(set, at_two.to_vec());
+    // Each session stored the scenes it ran: the value is in them.
+    let scenes: String = rt.block_on(async {
+        let options = sqlx::sqlite::SqliteConnectOptions::new()
+            .filename(&db)
+            .read_only(true);
+        let mut conn = sqlx::ConnectOptions::connect(&options).await.expect("open");
+        sqlx::query_scalar("SELECT scenes_json FROM grasp_sessions WHERE session_id = 2")
+            .fetch_one(&mut conn)
+            .await
+            .expect("scenes")
+    });
+    assert!(scenes.contains("\"wet_friction\":2.0"), "{scenes}");
+
+    // The report shows success against the value.
+    let html = common::report_page(d);
+    let page = html.html();
+    assert!(
+        page.contains("success against objects.bottle.wet_friction (objects pooled)"),
+        "no sweep figure"
+    );
+    assert!(page.contains("water, objects.bottle.wet_friction = 2.0"));
+}

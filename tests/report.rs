@@ -439,7 +439,7 @@ async fn grasp_session(db: &Path) -> i64 {
         trials: 2,
         ..TrialPlan::default()
     };
-    let scenes = load_scenes(&[]).unwrap_or_else(|e| panic!("{e}"));
+    let scenes = load_scenes(&[], &[]).unwrap_or_else(|e| panic!("{e}"));
     let id = store
         .create_grasp_session(
             "m",
@@ -475,7 +475,8 @@ async fn grasp_session(db: &Path) -> i64 {
             success: reason.is_none(),
             reason: reason.map(str::to_owned),
             detail: None,
-            confirmed_after_s: None,
+            // The slip confirmed its force first (and then lost the object).
+            confirmed_after_s: (reason == Some("slip")).then_some(0.9),
             wall_s: 0.25,
         };
         let n = if reason == Some("refused") { 0 } else { 40 };
@@ -486,8 +487,8 @@ async fn grasp_session(db: &Path) -> i64 {
             measured_count: (0..n).map(|i| 100 + i as u8).collect(),
             request_count: (0..n).map(|i| 101 + i as u8).collect(),
             // The held open trials' frames at contact and end: a 2×2 PNG each.
-            frames: if reason.is_none() {
-                ["contact", "end"]
+            frames: match reason {
+                None => ["contact", "end"]
                     .iter()
                     .enumerate()
                     .map(|(i, m)| softtouch_store::TraceFrame {
@@ -495,9 +496,13 @@ async fn grasp_session(db: &Path) -> i64 {
                         t_s: i as f64,
                         png: tiny_png(),
                     })
-                    .collect()
-            } else {
-                Vec::new()
+                    .collect(),
+                Some("slip") => vec![softtouch_store::TraceFrame {
+                    moment: "confirmed".into(),
+                    t_s: 0.9,
+                    png: tiny_png(),
+                }],
+                Some(_) => Vec::new(),
             },
         };
         store
@@ -569,13 +574,33 @@ fn the_grasping_section_shows_each_stored_session_and_draws_chosen_trials() {
             .filter_map(|e| e.value().attr("src").map(str::to_owned))
             .collect()
     };
-    assert_eq!(srcs.len(), 2, "{srcs:?}");
+    assert_eq!(srcs.len(), 3, "{srcs:?}");
     assert!(
         srcs.iter()
             .all(|s| s.starts_with("data:image/png;base64,iVBORw0KGgo"))
     );
     let captions = select(&html, "section#grasping figcaption");
-    assert_eq!(captions, ["contact, 0.00 s", "end, 1.00 s"]);
+    assert_eq!(
+        captions,
+        ["contact, 0.00 s", "end, 1.00 s", "confirmed, 0.90 s"]
+    );
+    // A trial's confirmation time is one number: its stored value (the rows CSV's
+    // `confirmed_after_s`) is the viewer's position title, the force chart's marker
+    // and the confirmed frame's caption.
+    let viewers = select(&html, "section#grasping div.trial");
+    let slip = viewers
+        .iter()
+        .find(|v| v.contains("cylinder closed #0"))
+        .unwrap_or_else(|| panic!("the slip is drawn: {viewers:?}"));
+    for said in [
+        "confirmed after 0.90 s",
+        "confirmed (0.90 s)",
+        "confirmed, 0.90 s",
+    ] {
+        assert!(slip.contains(said), "`{said}` in: {slip}");
+    }
+    // The estimate is drawn as its mean over 0.1 s with its range, never raw.
+    assert!(slip.contains("estimate, mean over 0.1 s") && slip.contains("estimate, its range"));
 }
 
 #[test]

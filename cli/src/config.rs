@@ -100,6 +100,10 @@ pub fn run(cmd: ConfigCommand, out: &mut dyn Write) -> Result<(), Failure> {
         }
         ConfigCommand::Check { rig, scene } => {
             let resolved = configs::resolve(rig.as_deref(), scene.as_deref())?;
+            // The objects as the simulated grasp takes them (a floating one refused).
+            softtouch_sim::check_scene_objects(&resolved.scene).map_err(|e| {
+                Failure::BadInput(anyhow::anyhow!("{}: {e}", resolved.scene_source))
+            })?;
             if let Some(reach) = franka_reach(&resolved.rig).map_err(|e| {
                 Failure::BadInput(anyhow::anyhow!("{}: arm: {e}", resolved.rig_source))
             })? {

@@ -11,12 +11,14 @@ use clap::Args;
 use softtouch_grasp::Mode;
 use softtouch_schemas::Medium;
 
+use super::grasp_loop::bad;
 use super::{Failure, io_failure, open_existing};
 use softtouch_lab::grasp::trials::table::{Cell, Paired, paired, summarise, write_outputs};
 use softtouch_lab::grasp::trials::{
     TrialPlan, TrialTiming, TrialsError, load_scenes, medium_name, resume_session, run_trials,
-    start_session,
+    start_session, swept_scenes,
 };
+use softtouch_schemas::overrides::{Override, Sweep};
 
 /// Options of `grasp trials`.
 #[derive(Debug, Clone, Args)]
@@ -47,6 +49,18 @@ pub struct TrialsArgs {
     /// against σ; replaces --sigma-mm.
     #[arg(long, value_delimiter = ',')]
     pub sweep_sigma: Vec<f64>,
+    /// Set one value of every scene that has it for this session, validated as the
+    /// file is (repeatable): `--set objects.bottle.wet_friction=0.2`,
+    /// `--set effects.object_flow.mean_m_s=0.1`. Lists of tables are entered by an
+    /// entry's name, kind or index. The session stores the scenes as set.
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    pub set: Vec<Override>,
+    /// Run the same trials (same perturbations) at each value of one scene value, and
+    /// print, store and plot success against it: `--sweep
+    /// objects.bottle.wet_friction=0.05,0.1,0.2`. `--sweep sigma_mm=0,2,5` sweeps the
+    /// perturbation σ (as --sweep-sigma).
+    #[arg(long, value_name = "PATH=V1,V2,…", conflicts_with = "sweep_sigma")]
+    pub sweep: Option<Sweep>,
     /// Modes, comma-separated: open, closed.
     #[arg(long, value_delimiter = ',', default_value = "open,closed")]
     pub modes: Vec<String>,
@@ -58,7 +72,7 @@ pub struct TrialsArgs {
     #[arg(
         long,
         conflicts_with_all = [
-            "model", "scene", "objects", "trials", "sigma_mm", "sweep_sigma", "modes", "seed",
+            "model", "scene", "objects", "trials", "sigma_mm", "sweep_sigma", "set", "sweep", "modes", "seed",
             "fps", "target_n", "tolerance", "confirm_s", "close_timeout_s", "lift_mm",
             "hold_s", "open_width_mm",
         ]
@@ -92,30 +106,54 @@ pub struct TrialsArgs {
     /// Rig file: run the trials on its real arm, Hand-E and finger camera at the grasp
     /// poses, widths, lifts and set-down places of its `[grasp]` section (the scene
     /// flags do not apply). With --resume: the rig of the stored session.
-    #[arg(long, conflicts_with_all = ["scene", "open_width_mm", "lift_mm"])]
+    #[arg(long, conflicts_with_all = ["scene", "open_width_mm", "lift_mm", "set", "sweep"])]
     pub rig: Option<PathBuf>,
     /// On a rig: take the rig judge's verdict without asking the operator (the
     /// operator still confirms each return of the object to its place).
     #[arg(long, requires = "rig")]
     pub no_confirm: bool,
-    /// Folder for `grasp-trials.csv`, `grasp-trials-rows.csv`, `grasp-trials.png` and,
-    /// with --sweep-sigma, `grasp-trials-sigma.png`.
+    /// Folder for `grasp-trials.csv`, `grasp-trials-rows.csv`, `grasp-trials.png`,
+    /// with --sweep-sigma `grasp-trials-sigma.png`, and with --sweep
+    /// `grasp-trials-sweep.csv` and `grasp-trials-sweep.png`.
     #[arg(long, default_value = "grasp-out")]
     pub out_dir: PathBuf,
 }
 
 impl TrialsArgs {
+    /// The σ of the session: --sweep-sigma, --sweep sigma_mm=…, or --sigma-mm.
+    fn sigmas_mm(&self) -> Result<Vec<f64>, Failure> {
+        match &self.sweep {
+            Some(s) if s.path == "sigma_mm" => s
+                .values
+                .iter()
+                .map(|v| {
+                    v.as_float()
+                        .or_else(|| v.as_integer().map(|i| i as f64))
+                        .ok_or_else(|| {
+                            bad(format!(
+                                "--sweep sigma_mm: `{}` is not a number of mm",
+                                softtouch_schemas::overrides::shown(v)
+                            ))
+                        })
+                })
+                .collect(),
+            _ if !self.sweep_sigma.is_empty() => Ok(self.sweep_sigma.clone()),
+            _ => Ok(vec![self.sigma_mm]),
+        }
+    }
+
+    /// The sweep of a scene value (not σ, which is the plan's own).
+    fn scene_sweep(&self) -> Option<&Sweep> {
+        self.sweep.as_ref().filter(|s| s.path != "sigma_mm")
+    }
+
     /// The session's settings from the flags (checked when the session starts).
-    fn plan(&self) -> TrialPlan {
-        TrialPlan {
+    fn plan(&self) -> Result<TrialPlan, Failure> {
+        Ok(TrialPlan {
             objects: self.objects.clone(),
             modes: self.modes.clone(),
             trials: self.trials,
-            sigmas_mm: if self.sweep_sigma.is_empty() {
-                vec![self.sigma_mm]
-            } else {
-                self.sweep_sigma.clone()
-            },
+            sigmas_mm: self.sigmas_mm()?,
             fps: self.fps,
             target_n: self.target_n,
             tolerance_n: self.tolerance,
@@ -125,7 +163,7 @@ impl TrialsArgs {
             hold_s: self.hold_s,
             open_width_mm: self.open_width_mm,
             ..TrialPlan::default()
-        }
+        })
     }
 }
 
@@ -445,8 +483,13 @@ async fn run_session(
         Some(id) => resume_session(&store, id, args.model.as_deref()).await?,
         None => {
             // Settings are checked before the scenes are read or anything is stored.
-            let plan = args.plan().checked()?;
-            let scenes = load_scenes(&args.scene)?;
+            let mut plan = args.plan()?.checked()?;
+            let mut scenes = load_scenes(&args.scene, &args.set)?;
+            if let Some(sweep) = args.scene_sweep() {
+                let (swept, stored) = swept_scenes(&scenes, sweep)?;
+                scenes = swept;
+                plan.sweep = Some(stored);
+            }
             let model = args.model.clone().unwrap_or_default();
             start_session(&store, &model, args.seed, plan, scenes).await?
         }
@@ -539,6 +582,7 @@ async fn run_session(
     let media: Vec<Medium> = session.scenes.iter().map(|s| s.medium).collect();
     let table = summarise(&session.plan, &media, &rows)?;
     print_table(&table, &session.plan, out)?;
+    print_sweep(&table, &session.plan, out)?;
     print_paired(&paired(&session.plan, &media, &rows), &session.plan, out)?;
     let written = write_outputs(&args.out_dir, &table, &rows, &session.plan)?;
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
@@ -575,7 +619,7 @@ async fn run_on_rig(
     let session = match args.resume {
         Some(id) => resume_rig_session(&store, id, args.model.as_deref(), &rig).await?,
         None => {
-            let plan = args.plan().checked()?;
+            let plan = args.plan()?.checked()?;
             let model = args.model.clone().unwrap_or_default();
             start_rig_session(&store, &model, args.seed, plan, &rig).await?
         }
@@ -654,6 +698,7 @@ async fn run_on_rig(
     let rows = store.grasp_trials(session.id).await?;
     let table = summarise(&session.plan, &session.media(), &rows)?;
     print_table(&table, &session.plan, out)?;
+    print_sweep(&table, &session.plan, out)?;
     print_paired(
         &paired(&session.plan, &session.media(), &rows),
         &session.plan,
@@ -677,9 +722,14 @@ fn print_table(cells: &[Cell], plan: &TrialPlan, out: &mut dyn Write) -> Result<
     for c in cells {
         if last != Some((c.sigma_index, c.scene_index)) {
             last = Some((c.sigma_index, c.scene_index));
+            let swept = plan
+                .sweep
+                .as_ref()
+                .and_then(|s| Some(format!("; {} = {}", s.path, s.value_of(c.scene_index)?)))
+                .unwrap_or_default();
             writeln!(
                 out,
-                "\nσ = {} mm, {} (scene {}):\n{:<14} {:<7} {:>7} {:>6} {:>15} {:>7}  failures",
+                "\nσ = {} mm, {} (scene {}{swept}):\n{:<14} {:<7} {:>7} {:>6} {:>15} {:>7}  failures",
                 plan.sigmas_mm[c.sigma_index as usize],
                 medium_name(c.medium),
                 c.scene_index,
@@ -718,6 +768,100 @@ fn print_table(cells: &[Cell], plan: &TrialPlan, out: &mut dyn Write) -> Result<
     Ok(())
 }
 
+/// A scene sweep's summary: success against the value per medium and mode (all
+/// objects), then per object, medium and mode the first value held in at least 90 %
+/// of its trials.
+fn print_sweep(cells: &[Cell], plan: &TrialPlan, out: &mut dyn Write) -> Result<(), Failure> {
+    let Some(sweep) = &plan.sweep else {
+        return Ok(());
+    };
+    let w = io_failure;
+    for (si, sigma) in plan.sigmas_mm.iter().enumerate() {
+        writeln!(
+            out,
+            "\nsuccess against {} (σ = {sigma} mm, all objects):\n{:>10} {:<7} {:<7} {:>7} {:>6} {:>15}  failures",
+            sweep.path, "value", "medium", "mode", "held/n", "rate", "Wilson 95%"
+        )
+        .map_err(w)?;
+        let here = |c: &&Cell| c.sigma_index as usize == si;
+        for c in cells.iter().filter(here).filter(|c| c.object.is_none()) {
+            let failures: Vec<String> = c
+                .reasons
+                .iter()
+                .filter(|(_, n)| **n > 0)
+                .map(|(r, n)| format!("{r} {n}"))
+                .collect();
+            writeln!(
+                out,
+                "{:>10} {:<7} {:<7} {:>7} {:>6} {:>15}  {}",
+                sweep.value_of(c.scene_index).unwrap_or("?"),
+                medium_name(c.medium),
+                c.mode.as_str(),
+                format!("{}/{}", c.held, c.trials),
+                pct(c.rate()),
+                format!(
+                    "[{:.0}%, {:.0}%]",
+                    100.0 * c.interval[0],
+                    100.0 * c.interval[1]
+                ),
+                failures.join(", ")
+            )
+            .map_err(w)?;
+        }
+        writeln!(
+            out,
+            "first value held in at least 90 % of trials (σ = {sigma} mm; values in the order swept):"
+        )
+        .map_err(w)?;
+        let mut keys: Vec<(String, u32, Mode)> = Vec::new();
+        for c in cells.iter().filter(here) {
+            let key = (
+                c.object.clone().unwrap_or_else(|| "all".into()),
+                c.scene_index % sweep.per_value.max(1),
+                c.mode,
+            );
+            if !keys.contains(&key) {
+                keys.push(key);
+            }
+        }
+        for (object, base, mode) in &keys {
+            let mine: Vec<&Cell> = cells
+                .iter()
+                .filter(here)
+                .filter(|c| {
+                    c.object.clone().unwrap_or_else(|| "all".into()) == *object
+                        && c.scene_index % sweep.per_value.max(1) == *base
+                        && c.mode == *mode
+                })
+                .collect();
+            let Some(medium) = mine.first().map(|c| medium_name(c.medium)) else {
+                continue;
+            };
+            let first = mine
+                .iter()
+                .find(|c| c.trials > 0 && c.held * 10 >= c.trials * 9)
+                .map_or_else(
+                    || "none".to_owned(),
+                    |c| {
+                        format!(
+                            "{} ({}/{})",
+                            sweep.value_of(c.scene_index).unwrap_or("?"),
+                            c.held,
+                            c.trials
+                        )
+                    },
+                );
+            writeln!(
+                out,
+                "  {object:<14} {medium:<7} {:<7} {first}",
+                mode.as_str()
+            )
+            .map_err(w)?;
+        }
+    }
+    Ok(())
+}
+
 /// Open against closed on the same perturbations, with McNemar's exact test.
 fn print_paired(pairs: &[Paired], plan: &TrialPlan, out: &mut dyn Write) -> Result<(), Failure> {
     if pairs.is_empty() {
@@ -735,7 +879,10 @@ fn print_paired(pairs: &[Paired], plan: &TrialPlan, out: &mut dyn Write) -> Resu
             out,
             "{:>6} {:<7} {:>6} {:>6} {:>10} {:>12} {:>8} {:>9.4}",
             plan.sigmas_mm[p.sigma_index as usize],
-            medium_name(p.medium),
+            match plan.sweep.as_ref().and_then(|s| s.value_of(p.scene_index)) {
+                Some(v) => format!("{} at {v}", medium_name(p.medium)),
+                None => medium_name(p.medium).to_owned(),
+            },
             p.pairs,
             p.both,
             p.open_only,

@@ -166,18 +166,41 @@ where
 {
     let fail = |field: String, err: &toml::de::Error| {
         let line = err.span().map(|span| line_of(text, span.start));
+        let mut message = cut(err.message().trim());
+        // A duplicate key: say which (the parser gives only its line).
+        if message.contains("duplicate key")
+            && let Some(key) = line
+                .and_then(|l| text.lines().nth(l.saturating_sub(1)))
+                .and_then(duplicate_key_in)
+        {
+            message = format!("{message} `{}`", cut(&key));
+        }
         ConfigError {
             file: source.clone(),
             problems: vec![Problem {
                 field,
                 line,
-                message: err.message().trim().to_owned(),
+                message,
             }],
         }
     };
     let de = toml::Deserializer::parse(text).map_err(|e| fail(String::new(), &e))?;
     let value: T = serde_path_to_error::deserialize(de).map_err(|e| {
         let field = field_path(e.path());
+        let message = e.inner().message().trim().to_owned();
+        // Inside an entry of a list of tagged tables (`[[effects]]`) serde sees the
+        // entry only as a whole: find the field and the entry's own line.
+        if let Some((field, line)) = entry_problem(text, &field, &message) {
+            let line = line.or_else(|| e.inner().span().map(|span| line_of(text, span.start)));
+            return ConfigError {
+                file: source.clone(),
+                problems: vec![Problem {
+                    field,
+                    line,
+                    message: cut(&message),
+                }],
+            };
+        }
         fail(field, e.inner())
     })?;
     let mut check = Check::default();
@@ -208,6 +231,92 @@ pub fn to_toml<T: serde::Serialize>(value: &T) -> String {
     // Our config types are plain structs of numbers, strings, arrays and tables: they
     // always serialise. Fall back to a TOML comment rather than panic if one day not.
     toml::to_string_pretty(value).unwrap_or_else(|e| format!("# cannot serialise config: {e}\n"))
+}
+
+/// A message cut to a few lines (a value of 20 000 characters is not echoed whole).
+fn cut(s: &str) -> String {
+    const MAX: usize = 300;
+    if s.chars().count() > MAX {
+        format!(
+            "{}… ({} characters in all)",
+            s.chars().take(MAX).collect::<String>(),
+            s.chars().count()
+        )
+    } else {
+        s.to_owned()
+    }
+}
+
+/// The first key given twice on one line (`{ a = 1, a = 2 }`), if any.
+fn duplicate_key_in(line: &str) -> Option<String> {
+    let mut seen: Vec<&str> = Vec::new();
+    for part in line.split([',', '{']) {
+        let Some((key, _)) = part.split_once('=') else {
+            continue;
+        };
+        let key = key.trim().trim_matches('"');
+        if key.is_empty() {
+            continue;
+        }
+        if seen.contains(&key) {
+            return Some(key.to_owned());
+        }
+        seen.push(key);
+    }
+    None
+}
+
+/// For a problem placed at a whole entry of a list of tables (`effects[12]`): the
+/// field inside it the message points at, where it can be told (a missing field in a
+/// list of tables inside the entry, an empty list), and the line of the entry's own
+/// `[[key]]` header. `None` for any other problem.
+fn entry_problem(text: &str, field: &str, message: &str) -> Option<(String, Option<usize>)> {
+    let (key, rest) = field.split_once('[')?;
+    let index: usize = rest.strip_suffix(']')?.parse().ok()?;
+    if key.contains(['.', '[']) {
+        return None;
+    }
+    let table: toml::Table = text.parse().ok()?;
+    let entry = table.get(key)?.as_array()?.get(index)?.as_table()?;
+    let header = format!("[[{key}]]");
+    let line = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| l.trim_start().starts_with(&header))
+        .nth(index)
+        .map(|(i, _)| i + 1);
+    let quoted = |m: &str| m.split('`').nth(1).map(str::to_owned);
+    let mut inner = None;
+    if message.starts_with("missing field") {
+        let missing = quoted(message)?;
+        // In a list of tables inside the entry, an item that lacks it.
+        for (k, v) in entry {
+            if let Some(items) = v.as_array() {
+                for (i, item) in items.iter().enumerate() {
+                    if item.as_table().is_some_and(|t| !t.contains_key(&missing)) {
+                        inner = Some(format!("{k}[{i}].{missing}"));
+                    }
+                }
+            }
+        }
+        inner = inner.or(Some(missing));
+    } else if message.starts_with("invalid length 0") {
+        inner = entry
+            .iter()
+            .find(|(_, v)| v.as_array().is_some_and(Vec::is_empty))
+            .map(|(k, _)| k.clone());
+    } else if let Some(unknown) = message.strip_prefix("unknown field ").and_then(quoted) {
+        inner = Some(unknown);
+    }
+    let kind = entry
+        .get("kind")
+        .and_then(toml::Value::as_str)
+        .map_or_else(String::new, |k| format!(" ({k})"));
+    let at = match inner {
+        Some(f) => format!("{key}[{index}]{kind}.{f}"),
+        None => format!("{key}[{index}]{kind}"),
+    };
+    Some((at, line))
 }
 
 fn field_path(path: &serde_path_to_error::Path) -> String {

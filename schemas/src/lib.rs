@@ -19,6 +19,7 @@
 pub mod config;
 pub mod defaults;
 pub mod geometry;
+pub mod overrides;
 pub mod rig;
 pub mod sample;
 pub mod scene;

@@ -103,7 +103,9 @@ pub struct ObjectSpec {
     /// Volume of fluid displaced, m³ (buoyancy; default: from the geometry).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub volume_m3: Option<f64>,
-    /// Drag coefficient C_d of the object in a fluid (default 1.0).
+    /// Drag coefficient C_d of the object in a fluid (default: by its section, from
+    /// White's tables: a sphere 0.47, a circle or oval 1.2, a square 2.1, a triangle
+    /// 2.0, a hexagon 1.0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub drag_coefficient: Option<f64>,
     /// Area the fluid's drag acts on, m² (default: from the geometry).

@@ -15,6 +15,10 @@ pub enum SeriesStyle {
     Points,
     /// Lines and markers.
     LinePoints,
+    /// A translucent filled area: the points run along its upper edge and back along
+    /// its lower edge (a range around a line, where a dense trace would be a solid
+    /// block).
+    Band,
 }
 
 /// One labelled x–y series.
@@ -155,7 +159,7 @@ pub fn draw_xy<DB: DrawingBackend>(
                 label: s.label.clone(),
                 colour: PALETTE[i % PALETTE.len()],
                 swatch: match (look.swatches, s.style) {
-                    (true, _) => Swatch::Box,
+                    (true, _) | (_, SeriesStyle::Band) => Swatch::Box,
                     (false, SeriesStyle::Points) => Swatch::Dot,
                     (false, _) => Swatch::Line,
                 },
@@ -200,6 +204,11 @@ pub fn draw_xy<DB: DrawingBackend>(
             .copied()
             .filter(|(x, y)| x.is_finite() && y.is_finite())
             .collect();
+        if s.style == SeriesStyle::Band {
+            ctx.draw_series(std::iter::once(Polygon::new(pts, colour.mix(0.3).filled())))
+                .map_err(e)?;
+            continue;
+        }
         if matches!(s.style, SeriesStyle::Line | SeriesStyle::LinePoints) {
             ctx.draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
                 .map_err(e)?;

@@ -3,7 +3,7 @@
 //! position and estimate ([`RigJudge`]), and an operator confirming or correcting
 //! another judge ([`OperatorJudge`]).
 
-use super::{FailReason, Judge, Mode, Observation, Verdict};
+use super::{FailReason, Judge, Observation, Verdict};
 use crate::GraspError;
 use softtouch_drivers::ObjectStatus;
 
@@ -28,8 +28,9 @@ pub enum ObjectState {
 
 /// The verdict on a trial from where the object ended ([`ObjectState`]) and what the
 /// trial saw: an object the fingers never touched (true force at most [`TOUCH_N`]) is
-/// a miss rather than a slip, and one never lifted is a timeout of the loop (or, open
-/// loop, a miss when untouched).
+/// a miss, whatever else happened (a closed loop that closed on nothing never confirms
+/// either, but what failed is the reach, not the loop); one touched and never lifted is
+/// a timeout of the loop.
 #[must_use]
 pub fn physics_verdict(state: ObjectState, seen: &Observation) -> Verdict {
     let touched = seen.peak_true_n.is_some_and(|f| f > TOUCH_N);
@@ -39,10 +40,8 @@ pub fn physics_verdict(state: ObjectState, seen: &Observation) -> Verdict {
         ObjectState::Absent => Verdict::Failed(FailReason::Miss),
         ObjectState::Slipped if !touched => Verdict::Failed(FailReason::Miss),
         ObjectState::Slipped => Verdict::Failed(FailReason::Slip),
-        // Never lifted: the loop did not confirm its force.
-        ObjectState::Resting if !touched && seen.mode == Mode::Open => {
-            Verdict::Failed(FailReason::Miss)
-        }
+        ObjectState::Resting if !touched => Verdict::Failed(FailReason::Miss),
+        // Touched, never lifted: the loop did not confirm its force.
         ObjectState::Resting => Verdict::Failed(FailReason::Timeout),
     }
 }
@@ -154,6 +153,7 @@ impl<J: Judge, R: std::io::BufRead + Send, W: std::io::Write + Send> Judge
 
 #[cfg(test)]
 mod tests {
+    use super::super::Mode;
     use super::*;
     use softtouch_drivers::GripperStatus;
     use softtouch_schemas::TimestampNs;
@@ -183,6 +183,24 @@ mod tests {
         closed_count: 250,
         closed_margin: 3,
     };
+
+    #[test]
+    fn an_object_never_touched_is_a_miss_in_either_mode() {
+        for mode in [Mode::Open, Mode::Closed] {
+            let mut untouched = seen(false, 250, None, None);
+            untouched.mode = mode;
+            untouched.peak_true_n = Some(0.0);
+            assert_eq!(
+                physics_verdict(ObjectState::Resting, &untouched),
+                Verdict::Failed(FailReason::Miss),
+                "{mode:?}"
+            );
+            let mut touched = untouched;
+            touched.peak_true_n = Some(1.0);
+            let expected = Verdict::Failed(FailReason::Timeout);
+            assert_eq!(physics_verdict(ObjectState::Resting, &touched), expected);
+        }
+    }
 
     #[tokio::test]
     async fn the_rig_judge_reads_position_and_estimate() {

@@ -112,8 +112,9 @@ pub(crate) type BarValues = (String, Vec<f64>, Vec<Option<String>>);
 
 /// Grouped bars: one group per category, one bar per series (`(label, values,
 /// notes)`, a value per category; non-finite values leave a gap; a note, such as the
-/// bar's n, written above it), from zero to a little above the highest value: the
-/// PNG charts' drawing
+/// bar's n, written above it), from zero to a little above the highest value and
+/// down to the lowest value or `floor`, whichever is higher (a value below `floor` is
+/// drawn to the axis's end and labelled with itself): the PNG charts' drawing
 /// ([`softtouch_collector::plot::draw_bars`]) in the page's look.
 pub(crate) fn bars(
     title: &str,
@@ -121,9 +122,17 @@ pub(crate) fn bars(
     y_label: &str,
     categories: &[String],
     series: &[BarValues],
+    floor: f64,
     size: Size,
 ) -> Result<String, ReportError> {
     register_font().map_err(|e| draw_err(title)(e.to_string()))?;
+    let low = series
+        .iter()
+        .flat_map(|(_, v, _)| v.iter().copied())
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, f64::min)
+        .max(floor.min(0.0));
+    let bottom = if low < 0.0 { low * 1.1 } else { 0.0 };
     let top = series
         .iter()
         .flat_map(|(_, v, _)| v.iter().copied())
@@ -154,7 +163,7 @@ pub(crate) fn bars(
             y_label,
             groups: categories,
             series: &series,
-            y_range: (0.0, top),
+            y_range: (bottom, top),
             y_labels_up_to: None,
         },
         size,

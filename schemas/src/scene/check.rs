@@ -3,13 +3,13 @@
 
 use super::*;
 
-/// Why an object's name cannot be used, if it cannot: the grasp verbs take object
-/// names comma-separated (`--objects a,b`) and print them in tables and CSV files.
-/// (Rod names are free text: no verb picks a rod by name from a list.)
+/// Why an object's or a rod's name cannot be used, if it cannot: the verbs take them
+/// comma-separated (`--objects a,b`, `--rods a,b`) and print them in tables and CSV
+/// files.
 pub(crate) fn name_problem(name: &str) -> Option<String> {
     if name.contains(',') {
         return Some(format!(
-            "`{name}` contains a comma: names are given comma-separated (--objects), so this one could never be chosen"
+            "`{name}` contains a comma: names are given comma-separated (--objects, --rods), so this one could never be chosen"
         ));
     }
     if let Some(ch) = name.chars().find(|ch| ch.is_control()) {
@@ -25,10 +25,19 @@ pub(crate) fn name_problem(name: &str) -> Option<String> {
     None
 }
 
+/// The lightest fluid a scene may declare, kg/m³ (air is 1.2): a density of 0 would
+/// declare an effect that does nothing.
+const FLUID_DENSITY_MIN_KG_M3: f64 = 1.0;
+
 impl Validate for SceneSpec {
     fn validate(&self, c: &mut Check) {
         if self.name.trim().is_empty() {
             c.fail("name", "expected a non-empty name");
+        } else if let Some(ch) = self.name.chars().find(|ch| ch.is_control()) {
+            c.fail(
+                "name",
+                format!("contains the control character {ch:?}: expected printable text"),
+            );
         }
         c.range("poses.x_m", &self.poses.x_m, "m");
         c.range("poses.z_m", &self.poses.z_m, "m");
@@ -46,6 +55,9 @@ impl Validate for SceneSpec {
         for (i, rod) in self.rods.iter().enumerate() {
             if rod.name.trim().is_empty() {
                 c.fail(format!("rods[{i}].name"), "expected a non-empty name");
+            } else if let Some(why) = name_problem(&rod.name) {
+                // `--rods` takes them comma-separated, as `--objects` does objects.
+                c.fail(format!("rods[{i}].name"), why);
             }
             if !names.insert(rod.name.as_str()) {
                 c.fail(
@@ -142,7 +154,8 @@ impl Validate for SceneSpec {
                 match o.profile {
                     Some(p) => {
                         let top = p.height_m(o.width_m);
-                        c.within(&f("grasp_height_m"), h, 0.0, top, "m");
+                        // At the tray itself the fingers would close on the tray.
+                        c.within(&f("grasp_height_m"), h, 1e-3, top, "m");
                     }
                     None => c.fail(
                         f("grasp_height_m"),
@@ -258,7 +271,7 @@ impl Effect {
             } => c.within(
                 &f("fluid_density_kg_m3"),
                 *fluid_density_kg_m3,
-                0.0,
+                FLUID_DENSITY_MIN_KG_M3,
                 20_000.0,
                 "kg/m³",
             ),
@@ -272,7 +285,7 @@ impl Effect {
                 c.within(
                     &f("fluid_density_kg_m3"),
                     *fluid_density_kg_m3,
-                    0.0,
+                    FLUID_DENSITY_MIN_KG_M3,
                     20_000.0,
                     "kg/m³",
                 );

@@ -63,7 +63,7 @@ mod object;
 mod tests;
 mod touch;
 
-pub use object::{GraspObject, spheroid_added_mass};
+pub use object::{GraspObject, default_drag_coefficient, spheroid_added_mass};
 
 use super::SimError;
 use super::contact::{Contact, ContactParams, FingerGeometry};
@@ -208,6 +208,27 @@ fn rest_shift_m(effects: &Effects, obj: &GraspObject) -> f64 {
     }
 }
 
+/// Checks every object a scene declares as [`soft_grasp`] would on its own: each
+/// valid, and none lighter than the fluid where the scene declares `object_buoyancy`
+/// (what `config check` reports before any run).
+///
+/// # Errors
+/// The first object refused, by name.
+pub fn check_scene_objects(scene: &SceneSpec) -> Result<(), SimError> {
+    let rho = scene.effects.iter().find_map(|e| match e {
+        softtouch_schemas::Effect::ObjectBuoyancy {
+            fluid_density_kg_m3,
+        } => Some(*fluid_density_kg_m3),
+        _ => None,
+    });
+    for spec in &scene.objects {
+        let object = GraspObject::from_spec(spec);
+        object.validate()?;
+        object.sinks_in(rho)?;
+    }
+    Ok(())
+}
+
 /// Builds a soft grasp of `object` in `scene` (its medium and effects), the cameras at
 /// `fps`, seeded by `seed`, on `clock`. The object starts between the open fingers,
 /// resting on its support.
@@ -218,6 +239,16 @@ pub fn soft_grasp(
     seed: u64,
     clock: TokioClock,
 ) -> Result<SoftGrasp, SimError> {
+    // The scene as a file is checked (a scene built in code, or with values set from
+    // the command line, too): a gust period of 0 divides, a NaN current has no physics.
+    let mut check = softtouch_schemas::config::Check::default();
+    softtouch_schemas::config::Validate::validate(scene, &mut check);
+    if let Some(p) = check.problems().first() {
+        return Err(SimError::InvalidParameter(format!(
+            "scene `{}`: field `{}`: {}",
+            scene.name, p.field, p.message
+        )));
+    }
     object.validate()?;
     if !(fps.is_finite() && (1.0..=1000.0).contains(&fps)) {
         return Err(SimError::InvalidParameter(format!(
@@ -230,6 +261,7 @@ pub fn soft_grasp(
     // Finger 1's camera draws its own seeded streams.
     let first = Scene::new(&spec, seed, Arc::clone(&model));
     let effects = first.effects.clone();
+    object.sinks_in(effects.object_buoyancy_kg_m3)?;
     // Wet contact: the object grips with its friction in water (and only then).
     let mut object = object;
     if effects.wet_contact {

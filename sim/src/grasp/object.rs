@@ -91,7 +91,7 @@ impl GraspObject {
             grasp_height_m: 0.0,
             grasp_width_m: 0.0,
             volume_m3: 0.0,
-            drag_coefficient: 1.0,
+            drag_coefficient: default_drag_coefficient(RodShape::Circle, None),
             drag_area_m2: 0.0,
             flow_area_m2: 0.0,
             wet_friction: None,
@@ -120,6 +120,7 @@ impl GraspObject {
             width_m,
             size_m: width_m,
             aspect,
+            drag_coefficient: default_drag_coefficient(shape, Some(profile)),
             ..Self::cylinder(name, width_m)
         };
         o.fill_defaults(None, None, None, None);
@@ -143,7 +144,9 @@ impl GraspObject {
             grasp_height_m: 0.0,
             grasp_width_m: 0.0,
             volume_m3: 0.0,
-            drag_coefficient: spec.drag_coefficient.unwrap_or(1.0),
+            drag_coefficient: spec
+                .drag_coefficient
+                .unwrap_or_else(|| default_drag_coefficient(spec.shape, spec.profile)),
             drag_area_m2: 0.0,
             flow_area_m2: 0.0,
             wet_friction: spec.wet_friction,
@@ -225,7 +228,8 @@ impl GraspObject {
             Some(p) => p.height_m(self.width_m),
             None => w,
         };
-        let diameter = (4.0 * self.volume_m3 / (std::f64::consts::PI * length)).sqrt();
+        // A spheroid's volume is π/6·L·D² (a sphere's π/6·D³), not a cylinder's π/4·L·D².
+        let diameter = (6.0 * self.volume_m3 / (std::f64::consts::PI * length)).sqrt();
         let (along, across) = spheroid_added_mass(length / diameter);
         self.added_mass_xz = match self.profile {
             Some(_) => [across, along],
@@ -252,6 +256,32 @@ impl GraspObject {
         } else {
             1.0
         }
+    }
+
+    /// Refuses an object lighter than the fluid it displaces (`fluid_density_kg_m3`,
+    /// where the scene declares `object_buoyancy`): the simulator stands objects on the
+    /// tray and does not model one floating up from it.
+    ///
+    /// # Errors
+    /// The object floats: its mass, volume and density against the fluid's.
+    pub fn sinks_in(&self, fluid_density_kg_m3: Option<f64>) -> Result<(), SimError> {
+        let Some(rho) = fluid_density_kg_m3 else {
+            return Ok(());
+        };
+        let displaced_kg = rho * self.volume_m3;
+        // Neutrally buoyant (to rounding) rests on the tray with no weight: modelled.
+        if displaced_kg <= self.mass_kg * (1.0 + 1e-9) {
+            return Ok(());
+        }
+        Err(SimError::InvalidParameter(format!(
+            "object `{}`: {:.1} g in {:.1} cm³ ({:.0} kg/m³) floats in this scene's fluid ({rho} kg/m³: buoyancy {:.3} N against a weight of {:.3} N); the simulator stands objects on the tray and does not model a floating one: declare the mass it has in the fluid (soaked, or weighted down) in its mass_kg",
+            self.name,
+            self.mass_kg * 1e3,
+            self.volume_m3 * 1e6,
+            self.mass_kg / self.volume_m3,
+            displaced_kg * crate::G_M_S2,
+            self.mass_kg * crate::G_M_S2,
+        )))
     }
 
     pub(crate) fn validate(&self) -> Result<(), SimError> {
@@ -487,6 +517,29 @@ impl GraspObject {
     fn touches_at(&self, k: usize, grip: &Grip) -> bool {
         let finger = super::super::FingerGeometry::default();
         super::touch::reaches_finger(&finger, self, k, grip)
+    }
+}
+
+/// The drag coefficient C_d of an object with no `drag_coefficient` of its own, by
+/// its section, in the subcritical range a grasp's currents and lifts reach (a 30 mm
+/// object at 0.01–0.3 m/s in water: Re ≈ 300–9 000). F. M. White, *Fluid Mechanics*
+/// (7th ed., 2011), Table 7.2 (two-dimensional bodies, Re ≥ 10⁴, a face towards the
+/// flow: a circle 1.2, a square 2.1, an equilateral triangle 2.0, a hexagon 1.0) and
+/// Table 7.3 (a sphere, 10³ < Re < 2·10⁵: 0.47); an oval is taken as its circle. The
+/// same C_d serves a current across the object and its lift along its axis (the
+/// simulator has one per object): the lift's is a short body's end-on value, which
+/// the tables put lower (a 2:1 cylinder end-on 0.85), so the lift's drag is on the high
+/// side. A scene overrides it per object with `drag_coefficient`.
+#[must_use]
+pub fn default_drag_coefficient(shape: RodShape, profile: Option<ObjectProfile>) -> f64 {
+    if matches!(profile, Some(ObjectProfile::Sphere {})) {
+        return 0.47;
+    }
+    match shape {
+        RodShape::Circle | RodShape::Oval => 1.2,
+        RodShape::Square => 2.1,
+        RodShape::Triangle => 2.0,
+        RodShape::Hexagon => 1.0,
     }
 }
 

@@ -597,6 +597,14 @@ impl State {
         };
         let t_s = t.0 as f64 * 1e-9;
         let u = self.flow.as_ref().map_or(0.0, |f| f.speed_m_s(t_s));
+        // A current that is not a number has no physical outcome: an error, never a
+        // shift solved to the end of the reach.
+        if !u.is_finite() {
+            return Err(SimError::InvalidParameter(format!(
+                "object `{}`: the current at {t_s:.3} s is not finite ({u} m/s)",
+                obj.name
+            )));
+        }
         let lifted = self.lift.is_some_and(|l| t >= l.t0);
         match self.effects.support_friction {
             // On its support: friction and inertia decide where it goes.
@@ -644,7 +652,15 @@ impl State {
             // The fluid the object carries along adds to the inertia, not the weight.
             let added_kg = self.added_mass_kg(&obj, 1);
             let load = obj.mass_kg * (G_M_S2 + a) + added_kg * a - buoyancy_n + drag_n;
-            if load.is_nan() || load.abs() > capacity_n {
+            // A load or a grip that is not a number is a fault of the inputs, not a
+            // slip (nor a hold: NaN compares false).
+            if !(load.is_finite() && capacity_n.is_finite()) {
+                return Err(SimError::InvalidParameter(format!(
+                    "object `{}` on the lift: the load ({load} N) or the friction's capacity ({capacity_n} N) is not finite",
+                    obj.name
+                )));
+            }
+            if load.abs() > capacity_n {
                 return self.lose(HoldState::Slipped { t });
             }
             self.hold = HoldState::Held;

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use softtouch_grasp::{FailReason, Mode, Z_95, wilson_interval};
 use softtouch_schemas::Medium;
 
-use super::{PAPER_SIGMA_MM, TrialPlan, TrialsError, medium_name, paper_rate};
+use super::{PAPER_SIGMA_MM, SceneSweep, TrialPlan, TrialsError, medium_name, paper_rate};
 use crate::store::GraspTrialRow;
 use softtouch_collector::plot::{BarChart, BarSeries, bar_chart};
 
@@ -216,7 +216,130 @@ pub fn write_outputs(
         write_sweep(&sweep, cells, plan)?;
         written.push(sweep);
     }
+    if let Some(sweep) = &plan.sweep {
+        let csv = dir.join("grasp-trials-sweep.csv");
+        write_value_sweep_csv(&csv, cells, plan, sweep)?;
+        let png = dir.join("grasp-trials-sweep.png");
+        write_value_sweep(&png, cells, plan, sweep)?;
+        written.extend([csv, png]);
+    }
     Ok(written)
+}
+
+/// `grasp-trials-sweep.csv`: one line per swept value, σ, medium, object (and all) and
+/// mode, with the Wilson 95 % interval and the failures.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_value_sweep_csv(
+    path: &Path,
+    cells: &[Cell],
+    plan: &TrialPlan,
+    sweep: &SceneSweep,
+) -> Result<(), TrialsError> {
+    let mut text = String::from(
+        "path,value,sigma_mm,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,slip,crush,miss,timeout,device_fault,refused\n",
+    );
+    let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
+    for c in cells {
+        let Some(value) = sweep.value_of(c.scene_index) else {
+            continue;
+        };
+        let r = |k: &str| c.reasons.get(k).copied().unwrap_or(0);
+        text.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            csv_field(&sweep.path),
+            csv_field(value),
+            plan.sigmas_mm
+                .get(c.sigma_index as usize)
+                .map_or_else(String::new, |s| format!("{s}")),
+            medium_name(c.medium),
+            csv_field(c.object.as_deref().unwrap_or("all")),
+            c.mode.as_str(),
+            c.trials,
+            c.held,
+            opt(c.rate()),
+            c.interval[0],
+            c.interval[1],
+            r("slip"),
+            r("crush"),
+            r("miss"),
+            r("timeout"),
+            r("device_fault"),
+            r("refused"),
+        ));
+    }
+    write_file(path, &text)
+}
+
+/// Success against the swept value (all objects, the first σ): one bar per medium and
+/// mode at each value, with its Wilson interval and n.
+///
+/// # Errors
+/// The chart cannot be drawn or written.
+pub fn write_value_sweep(
+    path: &Path,
+    cells: &[Cell],
+    plan: &TrialPlan,
+    sweep: &SceneSweep,
+) -> Result<(), TrialsError> {
+    let pooled: Vec<&Cell> = cells
+        .iter()
+        .filter(|c| c.object.is_none() && c.sigma_index == 0)
+        .collect();
+    // A series per base scene (medium) and mode.
+    let mut keys: Vec<(u32, Medium, Mode)> = Vec::new();
+    for c in &pooled {
+        let base = c.scene_index % sweep.per_value.max(1);
+        if !keys.iter().any(|k| k.0 == base && k.2 == c.mode) {
+            keys.push((base, c.medium, c.mode));
+        }
+    }
+    let groups: Vec<String> = sweep.values.clone();
+    let series: Vec<BarSeries> = keys
+        .iter()
+        .map(|(base, medium, mode)| {
+            let cell = |v: usize| {
+                pooled.iter().find(|c| {
+                    c.scene_index % sweep.per_value.max(1) == *base
+                        && c.mode == *mode
+                        && sweep.value_index(c.scene_index) == Some(v)
+                })
+            };
+            BarSeries {
+                label: format!("{} {} loop", medium_name(*medium), mode.as_str()),
+                bars: (0..groups.len())
+                    .map(|i| cell(i).and_then(|c| Some((c.rate()?, c.interval[0], c.interval[1]))))
+                    .collect(),
+                reference: vec![None; groups.len()],
+                notes: (0..groups.len())
+                    .map(|i| cell(i).map(|c| format!("n={}", c.trials)))
+                    .collect(),
+            }
+        })
+        .collect();
+    let sigma = plan.sigmas_mm.first().copied().unwrap_or(f64::NAN);
+    let title = format!(
+        "Grasp success against {} (all objects, σ {sigma} mm; Wilson 95 %)",
+        sweep.path
+    );
+    bar_chart(
+        path,
+        &BarChart {
+            title: &title,
+            x_label: Some(&sweep.path),
+            y_label: "success rate (held/n)",
+            groups: &groups,
+            series: &series,
+            y_range: (0.0, 1.08),
+            y_labels_up_to: Some(1.0),
+        },
+        (
+            (60 * (groups.len() * keys.len().max(1)) as u32 + 240).clamp(720, 2400),
+            520,
+        ),
+    )
+    .map_err(|e| TrialsError::Failed(e.to_string()))
 }
 
 fn write_file(path: &Path, text: &str) -> Result<(), TrialsError> {

@@ -79,7 +79,7 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
                 @let object = c.object.clone().unwrap_or_else(|| "all".into());
                 tr {
                     td { (sigma(c.sigma_index)) }
-                    td.l { (medium(c.medium)) }
+                    td.l { (scene_label(g, c.medium, c.scene_index)) }
                     td.l { @if c.object.is_none() { b { "all" } } @else { (object) } }
                     td.l { (c.mode.as_str()) }
                     td data-k=(format!("grasp-{id}-{}-{}-{}-{}", c.sigma_index, c.scene_index, object, c.mode.as_str())) { (c.held) "/" (c.trials) }
@@ -97,14 +97,14 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
                 tr { th { "σ mm" } th.l { "medium" } th { "pairs" } th { "held both" } th { "open only" } th { "closed only" } th { "neither" } th { "McNemar p" } }
                 @for p in &pairs {
                     tr {
-                        td { (sigma(p.sigma_index)) } td.l { (medium(p.medium)) } td { (p.pairs) } td { (p.both) }
+                        td { (sigma(p.sigma_index)) } td.l { (scene_label(g, p.medium, p.scene_index)) } td { (p.pairs) } td { (p.both) }
                         td { (p.open_only) } td { (p.closed_only) } td { (p.neither) }
                         td data-k=(format!("grasp-{id}-{}-{}-mcnemar", p.sigma_index, p.scene_index)) { (format!("{:.4}", p.p)) }
                     }
                 }
             }
         }
-        div.figs { (rates_figure(g, false)?) (rates_figure(g, true)?) }
+        div.figs { (rates_figure(g, false)?) (rates_figure(g, true)?) (sweep_figure(g)?) }
         (wall_time(g))
         @if !figures.is_empty() {
             p.note {
@@ -116,8 +116,74 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
     })
 }
 
-/// Success per object (the first σ), or per σ (all objects pooled; drawn only with
-/// more than one σ), one bar per medium and mode, with its Wilson interval and n.
+/// A scene's medium, and in a swept session the value it ran at.
+fn scene_label(g: &GraspData, m: softtouch_schemas::Medium, scene_index: u32) -> String {
+    match g
+        .plan
+        .as_ref()
+        .and_then(|p| p.sweep.as_ref())
+        .and_then(|s| Some((s.path.as_str(), s.value_of(scene_index)?)))
+    {
+        Some((path, v)) => format!("{}, {path} = {v}", medium(m)),
+        None => medium(m).to_owned(),
+    }
+}
+
+/// In a session that swept a scene value: success against it (all objects, the first
+/// σ), one bar per medium and mode with its Wilson interval and n.
+fn sweep_figure(g: &GraspData) -> Result<Markup, ReportError> {
+    let Some(sweep) = g.plan.as_ref().and_then(|p| p.sweep.as_ref()) else {
+        return Ok(html! {});
+    };
+    let per = sweep.per_value.max(1);
+    let pooled: Vec<&crate::grasp::trials::table::Cell> = g
+        .cells
+        .iter()
+        .filter(|c| c.object.is_none() && c.sigma_index == 0)
+        .collect();
+    let mut keys: Vec<(u32, softtouch_schemas::Medium, softtouch_grasp::Mode)> = Vec::new();
+    for c in &pooled {
+        if !keys
+            .iter()
+            .any(|k| k.0 == c.scene_index % per && k.2 == c.mode)
+        {
+            keys.push((c.scene_index % per, c.medium, c.mode));
+        }
+    }
+    let series: Vec<svg::RateValues> = keys
+        .iter()
+        .map(|(base, m, mode)| {
+            let mut values = vec![None; sweep.values.len()];
+            let mut notes = vec![None; sweep.values.len()];
+            for c in pooled
+                .iter()
+                .filter(|c| c.scene_index % per == *base && c.mode == *mode)
+            {
+                let (Some(i), Some(rate)) = (sweep.value_index(c.scene_index), c.rate()) else {
+                    continue;
+                };
+                values[i] = Some((rate, c.interval[0], c.interval[1]));
+                notes[i] = Some(format!("n={}", c.trials));
+            }
+            (format!("{} {}", medium(*m), mode.as_str()), values, notes)
+        })
+        .collect();
+    let width = (220 + 90 * sweep.values.len() * keys.len().max(1)).clamp(460, 1100) as u32;
+    Ok(figure(Some(svg::rate_bars(
+        &format!(
+            "Session {}: success against {} (objects pooled)",
+            g.session.session_id, sweep.path
+        ),
+        &sweep.path,
+        &sweep.values,
+        &series,
+        (width, 340),
+    )?)))
+}
+
+/// Success per object (the first σ, and in a swept session the first value), or per
+/// σ (all objects pooled; drawn only with more than one σ), one bar per medium and
+/// mode, with its Wilson interval and n.
 fn rates_figure(g: &GraspData, by_sigma: bool) -> Result<Markup, ReportError> {
     let sigmas: Vec<u32> = {
         let mut v: Vec<u32> = g.cells.iter().map(|c| c.sigma_index).collect();
@@ -134,10 +200,15 @@ fn rates_figure(g: &GraspData, by_sigma: bool) -> Result<Markup, ReportError> {
         .cells
         .iter()
         .filter(|c| {
+            let first_value = g
+                .plan
+                .as_ref()
+                .and_then(|p| p.sweep.as_ref())
+                .is_none_or(|s| s.value_index(c.scene_index) == Some(0));
             if by_sigma {
-                c.object.is_none()
+                c.object.is_none() && first_value
             } else {
-                c.sigma_index == first
+                c.sigma_index == first && first_value
             }
         })
         .collect();
@@ -229,6 +300,50 @@ fn wall_time(g: &GraspData) -> Markup {
     }
 }
 
+/// Points of a chart, (x, y).
+type Points = Vec<(f64, f64)>;
+
+/// The window the trial viewer averages the estimate over, s.
+const ESTIMATE_WINDOW_S: f64 = 0.1;
+
+/// `values` against `t_s` in windows of `window_s`: each window's mean at its mean
+/// time, and the band of each window's least to greatest value (the upper edge forward,
+/// the lower edge back). Non-finite values are left out; a window with none has no
+/// point. Empty input gives empty output.
+fn windowed_mean_and_range(t_s: &[f32], values: &[f32], window_s: f64) -> (Points, Points) {
+    // (window index, Σt, Σv, n, min, max), in time order.
+    let mut windows: Vec<(i64, f64, f64, u32, f64, f64)> = Vec::new();
+    for (&t, &v) in t_s.iter().zip(values) {
+        let (t, v) = (f64::from(t), f64::from(v));
+        if !(t.is_finite() && v.is_finite()) || window_s <= 0.0 {
+            continue;
+        }
+        #[allow(clippy::cast_possible_truncation)] // a trace lasts seconds
+        let k = (t / window_s).floor() as i64;
+        match windows.last_mut() {
+            Some(w) if w.0 == k => {
+                w.1 += t;
+                w.2 += v;
+                w.3 += 1;
+                w.4 = w.4.min(v);
+                w.5 = w.5.max(v);
+            }
+            _ => windows.push((k, t, v, 1, v, v)),
+        }
+    }
+    let at = |w: &(i64, f64, f64, u32, f64, f64)| w.1 / f64::from(w.3);
+    let mean = windows
+        .iter()
+        .map(|w| (at(w), w.2 / f64::from(w.3)))
+        .collect();
+    let band = windows
+        .iter()
+        .map(|w| (at(w), w.5))
+        .chain(windows.iter().rev().map(|w| (at(w), w.4)))
+        .collect();
+    (mean, band)
+}
+
 /// One trial's trace: the estimate (and the truth, on the simulator) against time with
 /// the target band, and the commanded and measured positions.
 fn trial_figure(
@@ -255,11 +370,22 @@ fn trial_figure(
             .map(|(x, y)| (f64::from(*x), f64::from(*y)))
             .collect()
     };
-    let mut force = vec![Series {
-        label: "estimate".into(),
-        points: pts(&t.estimate_n),
-        style: SeriesStyle::Line,
-    }];
+    // The closed loop dithers by a count around F_ref, and the estimate with it, frame
+    // by frame: drawn raw, 120 points a second fill a solid block. Its mean over
+    // 0.1 s is the trace a person follows; its range over the same windows the band.
+    let (mean, band) = windowed_mean_and_range(&t.t_s, &t.estimate_n, ESTIMATE_WINDOW_S);
+    let mut force = vec![
+        Series {
+            label: format!("estimate, mean over {} s", ESTIMATE_WINDOW_S),
+            points: mean,
+            style: SeriesStyle::Line,
+        },
+        Series {
+            label: "estimate, its range".into(),
+            points: band,
+            style: SeriesStyle::Band,
+        },
+    ];
     if t.true_n.iter().any(|v| v.is_finite()) {
         force.push(Series {
             label: "true (simulator)".into(),
@@ -379,4 +505,51 @@ fn trial_figure(
             }
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::windowed_mean_and_range;
+
+    #[test]
+    fn a_dithering_estimate_becomes_its_mean_and_range() {
+        // 120 Hz for 0.5 s, alternating 1.9 and 2.1 N: five windows of mean 2 N.
+        let t: Vec<f32> = (0..60).map(|i| i as f32 / 120.0).collect();
+        let v: Vec<f32> = (0..60)
+            .map(|i| if i % 2 == 0 { 1.9 } else { 2.1 })
+            .collect();
+        let (mean, band) = windowed_mean_and_range(&t, &v, 0.1);
+        assert_eq!(mean.len(), 5);
+        assert!(mean.iter().all(|(_, m)| (m - 2.0).abs() < 1e-6), "{mean:?}");
+        assert!(mean.windows(2).all(|w| w[0].0 < w[1].0), "in time order");
+        assert_eq!(band.len(), 10);
+        assert!(band[..5].iter().all(|(_, hi)| (hi - 2.1).abs() < 1e-6));
+        assert!(band[5..].iter().all(|(_, lo)| (lo - 1.9).abs() < 1e-6));
+        // The band closes back along the lower edge.
+        assert!((band[5].0 - band[4].0).abs() < 1e-12 && (band[9].0 - band[0].0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn empty_constant_and_non_finite_traces() {
+        assert_eq!(
+            windowed_mean_and_range(&[], &[], 0.1),
+            (Vec::new(), Vec::new())
+        );
+        let (mean, band) = windowed_mean_and_range(&[0.0, 0.05, 0.2], &[1.0, 1.0, 1.0], 0.1);
+        assert_eq!(mean.len(), 2);
+        assert!(
+            mean.iter()
+                .chain(&band)
+                .all(|(_, v)| (v - 1.0).abs() < 1e-12)
+        );
+        let (mean, band) =
+            windowed_mean_and_range(&[0.0, 0.01, f32::NAN], &[f32::NAN, 3.0, 4.0], 0.1);
+        assert_eq!(mean, vec![(f64::from(0.01_f32), 3.0)]);
+        assert_eq!(band.len(), 2);
+        // No window: nothing drawn, never a division by zero.
+        assert_eq!(
+            windowed_mean_and_range(&[0.0], &[1.0], 0.0),
+            (Vec::new(), Vec::new())
+        );
+    }
 }

@@ -60,6 +60,10 @@ impl TransferRows {
     }
 }
 
+/// The lowest R² the land-to-water bars draw to (a model worse than the mean by more
+/// is labelled with its value at the axis's end).
+const R2_FLOOR: f64 = -1.0;
+
 fn transfer_part(r: &StoredResult) -> Result<Markup, ReportError> {
     let id = r.row.result_id;
     let main = r.row.model.clone().unwrap_or_default();
@@ -147,17 +151,41 @@ fn transfer_part(r: &StoredResult) -> Result<Markup, ReportError> {
         &[
             (
                 format!("{main} on land"),
-                (0..6).map(|i| r2("land", i).max(0.0)).collect(),
+                (0..6).map(|i| r2("land", i)).collect(),
                 vec![None; 6],
             ),
             (
                 format!("{main} on water"),
-                (0..6).map(|i| r2("water", i).max(0.0)).collect(),
+                (0..6).map(|i| r2("water", i)).collect(),
                 vec![None; 6],
             ),
         ],
+        R2_FLOOR,
         (560, 320),
     )?;
+    // Every model of the comparison, not only the one whose latents were paired.
+    let table_svg = if models.len() > 1 {
+        let mean = |on: &str| -> Vec<f64> {
+            models
+                .iter()
+                .map(|m| t.get("table", m, on, "", "r2_mean"))
+                .collect()
+        };
+        Some(svg::bars(
+            "Mean test R² of every model compared: land and water",
+            "model",
+            "R² (mean of 6 axes), dimensionless",
+            &models,
+            &[
+                ("on land".to_owned(), mean("land"), Vec::new()),
+                ("on water".to_owned(), mean("water"), Vec::new()),
+            ],
+            R2_FLOOR,
+            (560, 320),
+        )?)
+    } else {
+        None
+    };
     Ok(html! {
         (prov(r))
         table {
@@ -190,8 +218,8 @@ fn transfer_part(r: &StoredResult) -> Result<Markup, ReportError> {
                 }
             }
         }
-        p.note { "Bars from 0: an axis whose R² is below 0 (worse than predicting the mean) has no bar; the table gives its value." }
-        div.figs { (PreEscaped(bars_svg)) (figure(hist)) }
+        p.note { "Bars from 0; an R² below 0 is worse than predicting the mean and hangs below the axis; one below −1 is drawn to the axis's end and labelled with its value." }
+        div.figs { (PreEscaped(bars_svg)) (figure(table_svg)) (figure(hist)) }
     })
 }
 

@@ -246,6 +246,7 @@ pub(super) fn spread_figure(
         &format!("error std, {unit}"),
         &categories,
         &series,
+        0.0,
         (520, 300),
     )
 }
