@@ -564,7 +564,7 @@ fn the_grasping_section_shows_each_stored_session_and_draws_chosen_trials() {
     // Plus the success per object with its intervals (one σ: no σ figure).
     assert_eq!(select(&html, "section#grasping svg").len(), 7, "{section}");
     assert!(
-        text.contains("F_ref + δ"),
+        text.contains("F_ref ± δ"),
         "the closed loop's band is drawn"
     );
     // The success drawn has its frames, inline, with their moments.

@@ -437,9 +437,14 @@ pub fn two_panel_chart(
             .y_label_area_size(64)
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(|e| fail(e.to_string()))?;
+        // The shared tick labels: the font's minus (U+2212), no trailing zeros.
+        let x_tick = |v: &f64| format_tick_in(*v, x1 - x0);
+        let y_tick = |v: &f64| format_tick_in(*v, y1 - y0);
         ctx.configure_mesh()
             .x_desc("time (s)")
             .y_desc(y_label)
+            .x_label_formatter(&x_tick)
+            .y_label_formatter(&y_tick)
             .label_style((FONT_FAMILY, 13))
             .axis_desc_style((FONT_FAMILY, 15))
             .draw()

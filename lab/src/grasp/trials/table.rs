@@ -335,7 +335,10 @@ pub fn write_value_sweep(
             y_labels_up_to: Some(1.0),
         },
         (
-            (60 * (groups.len() * keys.len().max(1)) as u32 + 240).clamp(720, 2400),
+            // Wide enough for its bars and for its title (at most 12 px a character).
+            (60 * (groups.len() * keys.len().max(1)) as u32 + 240)
+                .max(12 * title.chars().count() as u32 + 80)
+                .clamp(720, 2400),
             520,
         ),
     )

@@ -427,16 +427,14 @@ fn trial_figure(
         });
     }
     if let Some(p) = g.plan.as_ref().filter(|_| r.key.mode == "closed") {
-        for (label, v) in [
-            ("F_ref + δ", p.target_n + p.tolerance_n),
-            ("F_ref − δ", p.target_n - p.tolerance_n),
-        ] {
-            force.push(Series {
-                label: label.into(),
-                points: vec![(0.0, v), (end, v)],
-                style: SeriesStyle::Line,
-            });
-        }
+        // The target's band, one series (the palette has six colours: seven series
+        // would give two the same).
+        let (lo, hi) = (p.target_n - p.tolerance_n, p.target_n + p.tolerance_n);
+        force.push(Series {
+            label: "F_ref ± δ".into(),
+            points: vec![(0.0, hi), (end, hi), (end, lo), (0.0, lo)],
+            style: SeriesStyle::Band,
+        });
     }
     let counts = |v: &[u8]| -> Vec<(f64, f64)> {
         t.t_s
