@@ -742,12 +742,6 @@ fn print_table(cells: &[Cell], plan: &TrialPlan, out: &mut dyn Write) -> Result<
             )
             .map_err(w)?;
         }
-        let failures: Vec<String> = c
-            .reasons
-            .iter()
-            .filter(|(_, n)| **n > 0)
-            .map(|(r, n)| format!("{r} {n}"))
-            .collect();
         writeln!(
             out,
             "{:<14} {:<7} {:>7} {:>6} {:>15} {:>7}  {}",
@@ -761,7 +755,7 @@ fn print_table(cells: &[Cell], plan: &TrialPlan, out: &mut dyn Write) -> Result<
                 100.0 * c.interval[1]
             ),
             pct(c.paper()),
-            failures.join(", ")
+            c.failures_text()
         )
         .map_err(w)?;
     }
@@ -785,12 +779,6 @@ fn print_sweep(cells: &[Cell], plan: &TrialPlan, out: &mut dyn Write) -> Result<
         .map_err(w)?;
         let here = |c: &&Cell| c.sigma_index as usize == si;
         for c in cells.iter().filter(here).filter(|c| c.object.is_none()) {
-            let failures: Vec<String> = c
-                .reasons
-                .iter()
-                .filter(|(_, n)| **n > 0)
-                .map(|(r, n)| format!("{r} {n}"))
-                .collect();
             writeln!(
                 out,
                 "{:>10} {:<7} {:<7} {:>7} {:>6} {:>15}  {}",
@@ -804,7 +792,7 @@ fn print_sweep(cells: &[Cell], plan: &TrialPlan, out: &mut dyn Write) -> Result<
                     100.0 * c.interval[0],
                     100.0 * c.interval[1]
                 ),
-                failures.join(", ")
+                c.failures_text()
             )
             .map_err(w)?;
         }

@@ -43,6 +43,17 @@ impl Cell {
     pub fn rate(&self) -> Option<f64> {
         (self.trials > 0).then(|| self.held as f64 / self.trials as f64)
     }
+    /// The failures that happened, `reason n` joined by commas (`crush 2, slip 9`), as
+    /// the terminal, the report and the sweep table print them.
+    #[must_use]
+    pub fn failures_text(&self) -> String {
+        self.reasons
+            .iter()
+            .filter(|(_, n)| **n > 0)
+            .map(|(r, n)| format!("{r} {n}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
     /// The paper's overall rate, for the rows of every object together at the paper's
     /// σ ([`PAPER_SIGMA_MM`]): at another σ it has none to compare with.
     #[must_use]

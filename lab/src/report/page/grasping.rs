@@ -86,7 +86,7 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
                     td { (pct(c.rate())) }
                     td.nw { "[" (format!("{:.0}", 100.0 * c.interval[0])) ", " (format!("{:.0}", 100.0 * c.interval[1])) "] %" }
                     td { (pct(c.paper())) }
-                    td.l { (c.reasons.iter().filter(|(_, n)| **n > 0).map(|(r, n)| format!("{r} {n}")).collect::<Vec<_>>().join(", ")) }
+                    td.l { (c.failures_text()) }
                 }
             }
         }
