@@ -6,7 +6,7 @@
 # removed on every exit. Needs Debian's `postgresql` package (initdb, pg_ctl).
 #
 #   bash scripts/test-postgres.sh                 # the PostgreSQL tier, as CI runs it
-#   bash scripts/test-postgres.sh --test faults   # other `cargo test` arguments instead
+#   bash scripts/test-postgres.sh --test end_to_end -- faults::   # other `cargo test` arguments instead
 #   SOFTTOUCH_PG_LOCALE=C bash scripts/test-postgres.sh ...   # a byte-order cluster
 #
 # The cluster's collation is ICU's en-US unless SOFTTOUCH_PG_LOCALE says otherwise
@@ -76,8 +76,8 @@ echo "PostgreSQL $("$BIN/postgres" --version | awk '{print $3}') on port $PORT, 
 # --workspace, as the README's test command: the same features, so nothing is rebuilt.
 if [ $# -eq 0 ]; then
     cargo test --release --workspace --lib -- store_tests grasp:: results:: grasp_calibration:: copy::
-    cargo test --release --workspace --test collect --test dataset --test faults \
-        --test resume --test postgres
+    cargo test --release --workspace --test end_to_end -- collect:: dataset:: faults:: \
+        resume:: postgres::
 else
     cargo test --release "$@"
 fi

@@ -1,8 +1,7 @@
 //! End-to-end tests of the `softtouch` CLI: the binary as a user runs it.
 
-mod common;
-#[path = "fcisim/mod.rs"]
-mod fcisim;
+use crate::common;
+use crate::fcisim;
 use common::{command, softtouch, tempdir, text};
 
 use softtouch_collector::store::RunStatus;

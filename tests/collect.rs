@@ -1,7 +1,7 @@
 //! End-to-end tests of `softtouch collect` on the simulated rig: a run's database,
 //! kill -9 and resume, and fault injection.
 
-mod common;
+use crate::common;
 use common::{fails_with, ok, runtime, softtouch, tempdir, text};
 
 use softtouch_collector::collect::sampler::PoseSampler;

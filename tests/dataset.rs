@@ -7,7 +7,7 @@
 //! each case folder holds a `data_frame.csv` and an `expected.txt` with the text the
 //! error must contain (images `img0.png` … `img3.png` are written beside it here).
 
-mod common;
+use crate::common;
 use common::{fails_with, ok, softtouch, tempdir, text};
 
 use softtouch_collector::dataset::export::sha256_hex;

@@ -8,7 +8,7 @@
 //! sample the job reported done is in the database. The process-level paths (SIGTERM,
 //! a second process resuming a leased run) run the `softtouch` binary.
 
-mod common;
+use crate::common;
 use common::{runtime, softtouch, tempdir, text};
 
 use async_trait::async_trait;

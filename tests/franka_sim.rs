@@ -6,13 +6,12 @@
 //!
 //! Wall clock (a real 1 kHz loop), one server per test, one test at a time:
 //! `#[ignore]`d, run by `.ci/run` as
-//! `cargo test --workspace --release --test franka_sim -- --ignored --test-threads=1`
+//! `cargo test --workspace --release --test end_to_end -- --ignored --test-threads=1 franka_sim::`
 //! with `SOFTTOUCH_FRANKA_SIM_PYTHON` set (TESTING.md, the franka-sim tier).
 
-mod common;
-mod fcisim;
-#[path = "../drivers/tests/common/pty.rs"]
-mod pty;
+use crate::common;
+use crate::fcisim;
+use crate::pty;
 
 use common::{runtime, tempdir, text};
 use fcisim::{FrankaSim, LIMITS, SIM_DEVICES, home_in_base, python, rig_toml, wait_until};

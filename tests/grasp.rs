@@ -2,7 +2,7 @@
 //! a small simulated collection closes the loop on the simulated soft-finger Hand-E;
 //! the verbs print their tables and write the CSV and the PNG; bad input exits 2.
 
-mod common;
+use crate::common;
 use common::{fails_with, ok, softtouch, tempdir, tiny_model};
 
 #[test]

@@ -16,9 +16,8 @@
 //! server stopping mid-trial. Needs `socat` (skipped with
 //! a message when missing; with `CI` set a missing socat fails the test).
 
-mod common;
-#[path = "../drivers/tests/common/pty.rs"]
-mod pty;
+use crate::common;
+use crate::pty;
 use pty::pty_pair;
 
 use common::{tempdir, tiny_model};

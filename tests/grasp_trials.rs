@@ -4,7 +4,7 @@
 //! kill -9 during the trials then a resume loses and doubles nothing, an open-loop
 //! width that misses is recorded as misses, and bad input exits 2 naming what is known.
 
-mod common;
+use crate::common;
 use common::{fails_with, ok, runtime, softtouch, tempdir, tiny_model};
 use std::path::Path;
 use std::process::{Command, Stdio};

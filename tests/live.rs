@@ -3,7 +3,7 @@
 //! never answers; `live` runs its scripted press on the simulated rig beside the
 //! simulated sensor; `bench grasp` writes its table, CSV and PNG.
 
-mod common;
+use crate::common;
 use common::{fails_with, ok, softtouch, tempdir, text, tiny_model};
 
 #[test]

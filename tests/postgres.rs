@@ -4,7 +4,7 @@
 //! `SOFTTOUCH_TEST_POSTGRES` set (`scripts/test-postgres.sh`, CI) each path stands for a
 //! database of its own on that server (see `common::target_of`).
 
-mod common;
+use crate::common;
 use common::{db_arg, fails_with, ok, on_postgres, runtime, softtouch, tempdir, text};
 
 use softtouch_collector::store::Store;
@@ -278,8 +278,9 @@ async fn run_digest(store: &Store, run: i64) -> (i64, String) {
 /// them at random moments, each killed rig resumed; then every run must equal the same
 /// seed collected without interruption (samples, labels, frames and windows bit for
 /// bit), with nothing lost and nothing twice. Heavy (4 × 3000 samples twice):
-/// `SOFTTOUCH_TEST_POSTGRES=… cargo test --release --test postgres -- --ignored kill_loop
-/// --nocapture` (or `bash scripts/test-postgres.sh --test postgres -- --ignored kill_loop`);
+/// `SOFTTOUCH_TEST_POSTGRES=… cargo test --release --test end_to_end -- --ignored
+/// postgres::kill_loop --nocapture` (or `bash scripts/test-postgres.sh --test end_to_end --
+/// --ignored postgres::kill_loop`);
 /// `SOFTTOUCH_KILL_LOOP=RIGS,SAMPLES,KILLS` scales it.
 #[test]
 #[ignore = "heavy: 4 rigs × 3000 samples, twice; see the doc comment"]

@@ -3,7 +3,7 @@
 //! database's numbers, escapes names and leaves the database untouched; an empty
 //! database gives a page of verbs to run; bad options exit 2.
 
-mod common;
+use crate::common;
 use common::{TINY, fails_with, ok, runtime, simulated_dataset, softtouch, tempdir};
 
 use scraper::{Html, Selector};

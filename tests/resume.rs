@@ -9,7 +9,7 @@
 //! Virtual time throughout; the kill -9 tests race the wall clock only in where the
 //! signal lands, and every landing must give the same bytes.
 
-mod common;
+use crate::common;
 use common::{ok, runtime, softtouch, tempdir, text};
 
 use softtouch_collector::collect::{

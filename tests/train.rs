@@ -2,7 +2,7 @@
 //! on a small simulated collection: the commands chain, the model is stored with its
 //! metrics and evaluates from the store or a file, and bad input exits 2.
 
-mod common;
+use crate::common;
 use common::{fails_with, ok, simulated_dataset, softtouch, tempdir};
 
 use std::path::Path;
@@ -229,7 +229,7 @@ fn sweeps_and_the_model_benchmark_write_tables_csv_and_png() {
 /// of the default scene, a 7:1:2 dataset, the default SVAE (α = 1, β = 0.1, 32×32,
 /// width 16, latent 32, 12 epochs); every test axis must reach R² ≥ 0.99. About
 /// 11 minutes on 2 cores (collection 4, preprocessing 1, training 6):
-/// `cargo test --release -p softtouch-collector --test train -- --ignored --nocapture`
+/// `cargo test --release --test end_to_end -- --ignored --nocapture train::full_size`
 #[test]
 #[ignore = "full-size training, ~11 min on 2 cores"]
 fn full_size_svae_reaches_r2_0_99_on_every_test_axis() {

@@ -2,7 +2,7 @@
 //! poses (`collect --poses-from`), a tiny model trained on each, the comparison printed
 //! and written as a CSV; unpaired datasets and bad options exit 2.
 
-mod common;
+use crate::common;
 use common::{TINY, fails_with, ok, softtouch, tempdir};
 use std::path::Path;
 

@@ -4,11 +4,10 @@ use super::{Failure, io_failure, open_existing};
 use anyhow::anyhow;
 use clap::Args;
 use softtouch_collector::collect::{
-    CollectPlan, Counters, NewRunRequest, Outcome, PlanError, Progress, Resumed, abandon,
-    build_run_devices, collect,
+    CollectPlan, NewRunRequest, Outcome, PlanError, Resumed, abandon, build_run_devices, collect,
 };
 use softtouch_store::SyncStore;
-use std::io::{IsTerminal as _, Write};
+use std::io::Write;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -64,51 +63,6 @@ pub struct CollectArgs {
     pub resume: Option<i64>,
 }
 
-struct BarProgress {
-    bar: indicatif::ProgressBar,
-}
-
-impl Progress for BarProgress {
-    fn sample_done(&mut self, _index: u64, c: &Counters) {
-        self.bar.inc(1);
-        self.bar.set_message(format!(
-            "ok {} rejected {} retries {}",
-            c.ok, c.rejected, c.retries
-        ));
-    }
-    fn note(&mut self, message: &str) {
-        self.bar.println(message);
-    }
-}
-
-/// Log lines for a log file or CI: at most one every 10 s, and the last.
-struct LineProgress {
-    started: Instant,
-    last: Instant,
-    done: u64,
-    total: u64,
-}
-
-impl Progress for LineProgress {
-    fn sample_done(&mut self, index: u64, c: &Counters) {
-        self.done += 1;
-        let now = Instant::now();
-        if now.duration_since(self.last).as_secs() >= 10 || self.done == self.total {
-            self.last = now;
-            let secs = now.duration_since(self.started).as_secs_f64().max(1e-9);
-            let rate = self.done as f64 / secs;
-            let eta = (self.total - self.done) as f64 / rate.max(1e-9);
-            eprintln!(
-                "sample {index}: {}/{} done ({:.1}/s, ETA {:.0} s), ok {} rejected {} retries {}",
-                self.done, self.total, rate, eta, c.ok, c.rejected, c.retries
-            );
-        }
-    }
-    fn note(&mut self, message: &str) {
-        eprintln!("{message}");
-    }
-}
-
 /// A planning error as a CLI failure: the exit code says whose fault it is.
 fn plan_failure(e: PlanError) -> Failure {
     match e {
@@ -117,28 +71,6 @@ fn plan_failure(e: PlanError) -> Failure {
         PlanError::Config(e) => e.into(),
         e if e.is_bad_input() => Failure::BadInput(e.into()),
         e => Failure::Runtime(e.into()),
-    }
-}
-
-/// A bar on a terminal, log lines otherwise.
-fn progress_reporter(total: u64) -> Box<dyn Progress> {
-    if std::io::stderr().is_terminal() {
-        let bar = indicatif::ProgressBar::new(total);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{elapsed_precise} [{bar:40}] {pos}/{len} samples {per_sec} ETA {eta} {msg}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        Box::new(BarProgress { bar })
-    } else {
-        let now = Instant::now();
-        Box::new(LineProgress {
-            started: now,
-            last: now,
-            done: 0,
-            total,
-        })
     }
 }
 
@@ -220,7 +152,7 @@ pub async fn run_collect(
 
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(0u32);
     let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx, "sample"));
-    let mut progress = progress_reporter(plan.remaining());
+    let mut progress = softtouch_collector::progress::collection_progress(plan.remaining());
     let started = Instant::now();
     let (outcome, counters) =
         collect(&store, &plan, devices, clock, stop_rx, progress.as_mut()).await;

@@ -327,71 +327,9 @@ fn print_follow(
     out_dir: &Path,
     out: &mut dyn Write,
 ) -> Result<([PathBuf; 2], String), Failure> {
-    // A rise the hold never made is said apart from one it had no need of (a step
-    // smaller than δ), and a settle not made by the end of the hold as such.
-    let rise = |m: &softtouch_grasp::HoldMetrics| match m.rise_time_s {
-        Some(s) => format!("{s:.3}"),
-        None if m.started_within(tolerance_n) => "within δ".to_owned(),
-        None => "not reached".to_owned(),
-    };
-    let settle = |v: Option<f64>| v.map_or_else(|| "not yet".to_owned(), |s| format!("{s:.3}"));
-    writeln!(
-        out,
-        "{:>8} {:>9} {:>10} {:>11} {:>11} {:>9} {:>13} {:>10}",
-        "target N",
-        "rise s",
-        "settle s",
-        "overshoot N",
-        "ss error N",
-        "RMS N",
-        "true ss err N",
-        "true RMS N"
-    )
-    .map_err(io_failure)?;
     let rows = follow_rows(cycles, targets, tolerance_n);
-    for row in &rows {
-        let target = row.target_n;
-        let tru = row.truth;
-        match row.estimate {
-            Some(m) => writeln!(
-                out,
-                "{:>8.2} {:>9} {:>10} {:>11.3} {:>11.3} {:>9.3} {:>13} {:>10}",
-                target,
-                rise(&m),
-                settle(m.settling_time_s),
-                m.overshoot_n,
-                m.steady_state_error_n,
-                m.rms_error_n,
-                tru.map_or_else(|| "-".into(), |t| format!("{:.3}", t.steady_state_error_n)),
-                tru.map_or_else(|| "-".into(), |t| format!("{:.3}", t.rms_error_n)),
-            ),
-            None => writeln!(out, "{target:>8.2} (no usable estimate)"),
-        }
+    softtouch_lab::grasp::follow::print_follow_table(&rows, tolerance_n, out)
         .map_err(io_failure)?;
-    }
-    let said = |word: &str| {
-        rows.iter()
-            .filter_map(|r| r.estimate)
-            .any(|m| rise(&m) == word || settle(m.settling_time_s) == word)
-    };
-    for (word, meaning) in [
-        (
-            "within δ",
-            "rise s within δ: the force started within δ of the target, a step too small to time a rise",
-        ),
-        (
-            "not reached",
-            "rise s not reached: the force never came 90 % of the way to the target",
-        ),
-        (
-            "not yet",
-            "settle s not yet: the force was still outside δ at the end of the hold",
-        ),
-    ] {
-        if said(word) {
-            writeln!(out, "{meaning}").map_err(io_failure)?;
-        }
-    }
     create_out_dir(out_dir)?;
     let csv = out_dir.join("grasp-follow.csv");
     write_follow_csv(&csv, cycles)?;

@@ -17,11 +17,13 @@ use super::grasp_loop::{
 };
 use super::io_failure;
 use softtouch_lab::grasp::disturb::{
-    DisturbSettings, disturb_rows, disturb_sim, write_disturb_csv, write_disturb_png,
+    DisturbSettings, disturb_rows, disturb_sim, disturb_summary, print_disturb_table,
+    write_disturb_csv, write_disturb_png,
 };
 use softtouch_lab::grasp::soft::named_object;
 use softtouch_lab::grasp::twist::{
-    TwistSettings, twist_rows, twist_sim, write_twist_csv, write_twist_metrics_csv, write_twist_png,
+    TwistSettings, print_twist_table, twist_rows, twist_sim, twist_summary, write_twist_csv,
+    write_twist_metrics_csv, write_twist_png,
 };
 
 /// Options of `grasp disturb`.
@@ -160,52 +162,13 @@ pub(super) async fn disturb(
     print_setup(&args.object, &run.setup, &loop_settings, out)?;
     super::grasp::print_stopped(run.stopped, &run.cycles, out)?;
     let w = io_failure;
-    let opt = |v: Option<f64>| v.map_or_else(|| "never".to_owned(), |s| format!("{s:.3}"));
     writeln!(
         out,
         "holding {target} N ({} medium) on `{}`",
         scene.medium, args.object
     )
     .map_err(w)?;
-    writeln!(
-        out,
-        "{:>5} {:>7} {:>6} {:>11} {:>10} {:>9} {:>12} {:>11} {:>10}",
-        "phase",
-        "turn °",
-        "yaw °",
-        "peak dev N",
-        "recover s",
-        "RMS N",
-        "true peak N",
-        "true rec s",
-        "true RMS N"
-    )
-    .map_err(w)?;
-    for (i, row) in disturb_rows(&run, &settings).iter().enumerate() {
-        let (turn, yaw) = (row.phase.turn_deg, row.phase.yaw_deg);
-        let r = row.truth;
-        let Some(e) = row.estimate else {
-            writeln!(
-                out,
-                "{:>5} {turn:>7.1} {yaw:>6.1} (no usable estimate)",
-                i + 1
-            )
-            .map_err(w)?;
-            continue;
-        };
-        writeln!(
-            out,
-            "{:>5} {turn:>7.1} {yaw:>6.1} {:>11.3} {:>10} {:>9.3} {:>12} {:>11} {:>10}",
-            i + 1,
-            e.peak_deviation_n,
-            opt(e.recovery_s),
-            e.rms_error_n,
-            r.map_or_else(|| "-".into(), |r| format!("{:.3}", r.peak_deviation_n)),
-            r.map_or_else(|| "-".into(), |r| opt(r.recovery_s)),
-            r.map_or_else(|| "-".into(), |r| format!("{:.3}", r.rms_error_n)),
-        )
-        .map_err(w)?;
-    }
+    print_disturb_table(&disturb_rows(&run, &settings), out).map_err(w)?;
     let flagged = run
         .cycles
         .iter()
@@ -229,21 +192,7 @@ pub(super) async fn disturb(
         format!(" and {}", png.display())
     };
     writeln!(out, "wrote {}{drawn}", csv.display()).map_err(w)?;
-    let rows = disturb_rows(&run, &settings);
-    let worst = rows
-        .iter()
-        .filter_map(|r| r.truth.or(r.estimate))
-        .map(|m| m.peak_deviation_n)
-        .fold(f64::NAN, f64::max);
-    let summary = format!(
-        "{target} N held through {} turns; largest force deviation {} N",
-        rows.len(),
-        if worst.is_finite() {
-            format!("{worst:.3}")
-        } else {
-            "-".into()
-        }
-    );
+    let summary = disturb_summary(&disturb_rows(&run, &settings), target);
     super::grasp_loop::loop_recorder("grasp disturb", c)
         .setting("object", args.object.as_str())
         .setting("target_n", target)
@@ -338,32 +287,7 @@ pub(super) async fn twist(
         args.settle_s
     )
     .map_err(w)?;
-    writeln!(
-        out,
-        "{:>14} {:>8} {:>14} {:>15} {:>16} {:>15} {:>14}",
-        "wrist loop",
-        "cycles",
-        "τz RMS N·mm",
-        "true τz RMS",
-        "true τz peak",
-        "true F RMS N",
-        "wrist max °"
-    )
-    .map_err(w)?;
-    for row in &rows {
-        writeln!(
-            out,
-            "{:>14} {:>8} {:>14.3} {:>15.3} {:>16.3} {:>15.3} {:>14.2}",
-            if row.wrist_loop { "on" } else { "off" },
-            row.cycles_scored,
-            row.tz_rms_nmm,
-            row.true_tz_rms_nmm,
-            row.true_tz_peak_nmm,
-            row.true_force_rms_n,
-            row.wrist_max_deg
-        )
-        .map_err(w)?;
-    }
+    print_twist_table(&rows, out).map_err(w)?;
     create_out_dir(&c.out_dir)?;
     let csv = c.out_dir.join("grasp-twist.csv");
     write_twist_csv(&csv, &runs)?;
@@ -377,17 +301,7 @@ pub(super) async fn twist(
         format!(" and {}", png.display())
     };
     writeln!(out, "wrote {}, {}{drawn}", csv.display(), metrics.display()).map_err(w)?;
-    let summary = rows
-        .iter()
-        .map(|r| {
-            format!(
-                "wrist loop {}: true τz RMS {:.3} N·mm from the first turn",
-                if r.wrist_loop { "on" } else { "off" },
-                r.true_tz_rms_nmm
-            )
-        })
-        .collect::<Vec<_>>()
-        .join("; ");
+    let summary = twist_summary(&rows);
     twist_recorder(&args)
         .setting("turn_deg", args.turn_deg)
         .setting("settle_s", args.settle_s)
@@ -412,8 +326,11 @@ async fn twist_rig(
     db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
+    use softtouch_lab::grasp::trials::experiment::open_rig_devices;
     use softtouch_lab::grasp::trials::rig::object_setup_on_rig;
-    use softtouch_lab::grasp::trials::rig::twist::{RigTwistSettings, twist_on_rig};
+    use softtouch_lab::grasp::trials::rig::twist::{
+        RigTwistSettings, twist_without_then_with_wrist,
+    };
     let c = &args.common;
     let wrist = WristConfig {
         gain_rad_per_nm_s: args.wrist_gain,
@@ -433,91 +350,41 @@ async fn twist_rig(
         .grasp
         .clone()
         .ok_or_else(|| bad("--rig: no [grasp] section".into()))?;
-    let mut devices = super::grasp_trials::open_rig_devices(&rig, rig_path, "twist").await?;
+    let mut devices = open_rig_devices(&rig, rig_path, "twist").await?;
     let mut operator = super::grasp_trials::terminal_operator(false);
     let signals = super::signals::SignalWatch::start();
-    let w = io_failure;
-    let mut rows = String::from("wrist_loop,t_s,estimate_n,torque_z_nmm,wrist_target_deg\n");
-    let mut summary = Vec::new();
-    writeln!(
+    let settings = RigTwistSettings {
+        object: args.object.clone(),
+        target_n: args.target,
+        duration_s: args.duration_s,
+        gain_over_lambda: 0.75,
+        wrist: Some(wrist),
+        wrist_step_rad: 0.05,
+        pregrasp_margin_mm: 6.0,
+    };
+    let pair = twist_without_then_with_wrist(
+        &grasp,
+        &rig.workspace,
+        &setup,
+        &mut devices,
+        &mut operator,
+        &bytes,
+        &settings,
+        || signals.request(),
         out,
-        "{:>11} {:>8} {:>13} {:>13}",
-        "wrist loop", "cycles", "τz RMS N·mm", "wrist max °"
     )
-    .map_err(w)?;
-    for with_wrist in [false, true] {
-        let settings = RigTwistSettings {
-            object: args.object.clone(),
-            target_n: args.target,
-            duration_s: args.duration_s,
-            gain_over_lambda: 0.75,
-            wrist: with_wrist.then_some(wrist),
-            wrist_step_rad: 0.05,
-            pregrasp_margin_mm: 6.0,
-        };
-        let run = twist_on_rig(
-            &grasp,
-            &rig.workspace,
-            &setup,
-            &mut devices,
-            &mut operator,
-            softtouch_trainer::Predictor::from_bytes(&bytes)?,
-            &settings,
-            signals.request(),
-        )
-        .await?;
-        let t0 = run.cycles.first().map_or(0, |cy| cy.t.0);
-        let tz: Vec<f64> = run.cycles.iter().filter_map(|cy| cy.torque_z_nm).collect();
-        let rms = if tz.is_empty() {
-            f64::NAN
-        } else {
-            (tz.iter().map(|t| (t * 1000.0).powi(2)).sum::<f64>() / tz.len() as f64).sqrt()
-        };
-        let wrist_max = run
-            .cycles
-            .iter()
-            .filter_map(|cy| cy.wrist_target_rad)
-            .fold(0.0_f64, |m, y| m.max(y.abs().to_degrees()));
-        for cy in &run.cycles {
-            let opt = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v}"));
-            rows.push_str(&format!(
-                "{},{},{},{},{}\n",
-                if with_wrist { "on" } else { "off" },
-                cy.t.0.saturating_sub(t0) as f64 * 1e-9,
-                opt(cy.estimate_n),
-                opt(cy.torque_z_nm.map(|t| t * 1000.0)),
-                opt(cy.wrist_target_rad.map(f64::to_degrees))
-            ));
-        }
-        summary.push(format!(
-            "wrist loop {}: estimated τz RMS {rms:.3} N·mm",
-            if with_wrist { "on" } else { "off" }
-        ));
-        writeln!(
-            out,
-            "{:>11} {:>8} {:>13.3} {:>13.2}",
-            if with_wrist { "on" } else { "off" },
-            run.cycles.len(),
-            rms,
-            wrist_max
-        )
-        .map_err(w)?;
-        if let Some(name) = run.stopped {
-            writeln!(out, "stopped by {name}: the runs after it are skipped").map_err(w)?;
-            break;
-        }
-    }
+    .await?;
     create_out_dir(&c.out_dir)?;
     let csv = c.out_dir.join("grasp-twist-rig.csv");
-    std::fs::write(&csv, rows)
+    std::fs::write(&csv, pair.csv)
         .map_err(|e| Failure::Runtime(anyhow::anyhow!("{}: {e}", csv.display())))?;
-    writeln!(out, "wrote {}", csv.display()).map_err(w)?;
+    writeln!(out, "wrote {}", csv.display()).map_err(io_failure)?;
     twist_recorder(&args)
         .setting("duration_s", args.duration_s)
         .setting("rig", rig_path.display().to_string())
         .rig_hash(softtouch_lab::grasp::calibration::rig_setup_hash(&rig).ok())
         .table(&csv)
-        .store(db, summary.join("; "), out)
+        .store(db, pair.summary.join("; "), out)
         .await
         .map(drop)
 }

@@ -2,6 +2,13 @@
 //! calling the collector and lab libraries and printing; exit codes. It holds no
 //! experiment, store or device logic of its own.
 //!
+//! **Verbs stay thin.** A verb parses, builds one settings value, calls one library
+//! function and prints; the experiment's branches (simulator or rig, one model or
+//! several, new or resumed) are the library's. Verbs grew into experiment hubs twice,
+//! so a test (`house_rules`, in every `cargo test` and CI) holds every file here to
+//! [`house_rules::LINES_PER_FILE`] lines; an exception must be listed there with its
+//! reason.
+//!
 //! Exit codes: 0 success; 1 runtime failure (a device, the database, I/O); 2 bad input
 //! (arguments, config or scene files, a missing database or run).
 
@@ -18,6 +25,8 @@ pub mod grasp_calibrate;
 pub mod grasp_loop;
 pub mod grasp_trials;
 pub mod grasp_turns;
+#[cfg(test)]
+pub(crate) mod house_rules;
 pub mod latent;
 pub mod live;
 pub mod report;
@@ -53,7 +62,7 @@ const EXIT_CODES: &str = "Exit codes: 0 success, 1 runtime failure (device, data
 )]
 pub struct Cli {
     /// The database: a SQLite file (the default), or a PostgreSQL server as
-    /// postgres://USER[:PASSWORD]@HOST[:PORT]/DATABASE[?sslmode=...] (see the README).
+    /// postgres://USER[:PASSWORD]@HOST[:PORT]/DATABASE[?sslmode=...] (docs/postgres.md).
     #[arg(
         long,
         global = true,

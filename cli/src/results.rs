@@ -109,13 +109,7 @@ async fn list(store: &softtouch_store::Store, out: &mut dyn Write) -> Result<(),
         let trials = store.grasp_trials(s.session_id).await?;
         let ids = store.grasp_trial_id_range(s.session_id).await?.map_or_else(
             || "-".into(),
-            |(a, b)| {
-                if a == b {
-                    a.to_string()
-                } else {
-                    format!("{a}–{b}")
-                }
-            },
+            |(a, b)| softtouch_lab::grasp::trials::table::id_span(a, b),
         );
         writeln!(
             out,
@@ -125,35 +119,11 @@ async fn list(store: &softtouch_store::Store, out: &mut dyn Write) -> Result<(),
             s.created_at,
             trials.len(),
             ids,
-            session_summary(&trials)
+            softtouch_lab::grasp::trials::table::session_summary(&trials)
         )
         .map_err(io_failure)?;
     }
     Ok(())
-}
-
-/// Successes per medium and mode, `air open 23/50, …`, refused trials left out.
-fn session_summary(trials: &[softtouch_store::GraspTrialRow]) -> String {
-    let mut cells: Vec<(String, String, usize, usize)> = Vec::new();
-    for t in trials
-        .iter()
-        .filter(|t| t.reason.as_deref() != Some("refused"))
-    {
-        let i = cells
-            .iter()
-            .position(|c| c.0 == t.medium && c.1 == t.key.mode)
-            .unwrap_or_else(|| {
-                cells.push((t.medium.clone(), t.key.mode.clone(), 0, 0));
-                cells.len() - 1
-            });
-        cells[i].2 += usize::from(t.success);
-        cells[i].3 += 1;
-    }
-    cells
-        .iter()
-        .map(|(m, mode, s, n)| format!("{m} {mode} {s}/{n}"))
-        .collect::<Vec<_>>()
-        .join(", ")
 }
 
 async fn show(

@@ -9,14 +9,10 @@ use clap::{Args, Subcommand};
 use softtouch_collector::progress::TrainProgress;
 use softtouch_lab::experiments::{self, Row, Sweep, fmt_opt};
 use softtouch_lab::finetune::{self, Start};
-use softtouch_lab::latent::{
-    column_means, strongest_dims, traversal_values, wrench_rows, write_traversal,
-};
 use softtouch_lab::models;
-use softtouch_trainer::similarity::cross_correlation;
-use softtouch_trainer::{AXES, InitFrom, ModelArtifact, ModelConfig, TrainConfig, latent_means};
+use softtouch_trainer::{AXES, InitFrom, ModelArtifact, ModelConfig, TrainConfig};
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// `softtouch sweep`.
 #[derive(Debug, Subcommand)]
@@ -155,7 +151,9 @@ pub async fn run_sweep(
             experiments::train_row(label, config, &train, &splits, &mut progress)?
         };
         if sweep == Sweep::Latent
-            && let Some(png) = latent_traversal(&common.out, &trained, &splits)?
+            && let Some(png) =
+                softtouch_lab::latent::sweep_traversal(&common.out, &trained, &splits)
+                    .map_err(|e| Failure::Runtime(e.into()))?
         {
             writeln!(out, "wrote {}", png.display()).map_err(io_failure)?;
         }
@@ -194,50 +192,6 @@ pub async fn run_sweep(
         )
         .await
         .map(drop)
-}
-
-/// Method S2 b–g: the traversal of one row of the latent sweep (the strongest
-/// dimension of each wrench axis on the test split, from −5 to +5, the others at
-/// their test mean), or `None` for a
-/// model without a decoder.
-fn latent_traversal(
-    dir: &Path,
-    trained: &softtouch_trainer::Trained,
-    splits: &softtouch_trainer::Splits,
-) -> Result<Option<PathBuf>, Failure> {
-    let artifact = &trained.artifact;
-    let h = &artifact.header;
-    if !h.config.kind.has_decoder() {
-        return Ok(None);
-    }
-    let device = softtouch_trainer::backend::device()?;
-    let latents = latent_means(&artifact.net, &h.config, &h.norm, &splits.test, &device);
-    let wrench = wrench_rows(&splits.test);
-    // Too few test samples or constant latents: traverse the first dimensions instead.
-    let strongest = cross_correlation(&latents, &wrench)
-        .map(|m| strongest_dims(&m))
-        .unwrap_or_default();
-    let dims: Vec<usize> = if strongest.iter().any(Option::is_some) {
-        Vec::new()
-    } else {
-        (0..h.config.latent.min(6)).collect()
-    };
-    let png = dir.join(format!("sweep-latent-traversal-{}.png", h.config.latent));
-    let title = format!(
-        "latent {}: decoder images, one latent from −5 to +5, others at their test mean (brightness stretched)",
-        h.config.latent
-    );
-    let drawn = write_traversal(
-        &png,
-        &title,
-        artifact,
-        &strongest,
-        &dims,
-        &column_means(&latents, h.config.latent),
-        &traversal_values(5.0, 11),
-    )
-    .map_err(|e| Failure::Runtime(e.into()))?;
-    Ok(drawn.map(|_| png))
 }
 
 async fn run_finetune(

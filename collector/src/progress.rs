@@ -99,3 +99,72 @@ impl Observer for TrainProgress<'_> {
         .ok();
     }
 }
+
+struct BarProgress {
+    bar: indicatif::ProgressBar,
+}
+
+impl crate::collect::Progress for BarProgress {
+    fn sample_done(&mut self, _index: u64, c: &crate::collect::Counters) {
+        self.bar.inc(1);
+        self.bar.set_message(format!(
+            "ok {} rejected {} retries {}",
+            c.ok, c.rejected, c.retries
+        ));
+    }
+    fn note(&mut self, message: &str) {
+        self.bar.println(message);
+    }
+}
+
+/// Log lines for a log file or CI: at most one every 10 s, and the last.
+struct LineProgress {
+    started: Instant,
+    last: Instant,
+    done: u64,
+    total: u64,
+}
+
+impl crate::collect::Progress for LineProgress {
+    fn sample_done(&mut self, index: u64, c: &crate::collect::Counters) {
+        self.done += 1;
+        let now = Instant::now();
+        if now.duration_since(self.last).as_secs() >= 10 || self.done == self.total {
+            self.last = now;
+            let secs = now.duration_since(self.started).as_secs_f64().max(1e-9);
+            let rate = self.done as f64 / secs;
+            let eta = (self.total - self.done) as f64 / rate.max(1e-9);
+            eprintln!(
+                "sample {index}: {}/{} done ({:.1}/s, ETA {:.0} s), ok {} rejected {} retries {}",
+                self.done, self.total, rate, eta, c.ok, c.rejected, c.retries
+            );
+        }
+    }
+    fn note(&mut self, message: &str) {
+        eprintln!("{message}");
+    }
+}
+
+/// A collection's progress: a bar on a terminal, log lines otherwise (at most one
+/// every 10 s, and the last, with the rate and ETA).
+#[must_use]
+pub fn collection_progress(total: u64) -> Box<dyn crate::collect::Progress> {
+    if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        let bar = indicatif::ProgressBar::new(total);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{elapsed_precise} [{bar:40}] {pos}/{len} samples {per_sec} ETA {eta} {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        Box::new(BarProgress { bar })
+    } else {
+        let now = Instant::now();
+        Box::new(LineProgress {
+            started: now,
+            last: now,
+            done: 0,
+            total,
+        })
+    }
+}

@@ -431,6 +431,53 @@ pub fn draw_pairs(
     Ok(())
 }
 
+/// Method S2 b–g: the traversal of one row of the latent sweep (the strongest
+/// dimension of each wrench axis on the test split, from −5 to +5, the others at
+/// their test mean), or `None` for a
+/// model without a decoder.
+///
+/// # Errors
+/// The backend, decoding or drawing failed.
+pub fn sweep_traversal(
+    dir: &Path,
+    trained: &softtouch_trainer::Trained,
+    splits: &softtouch_trainer::Splits,
+) -> Result<Option<std::path::PathBuf>, LatentError> {
+    let artifact = &trained.artifact;
+    let h = &artifact.header;
+    if !h.config.kind.has_decoder() {
+        return Ok(None);
+    }
+    let device = softtouch_trainer::backend::device()?;
+    let latents =
+        softtouch_trainer::latent_means(&artifact.net, &h.config, &h.norm, &splits.test, &device);
+    let wrench = wrench_rows(&splits.test);
+    // Too few test samples or constant latents: traverse the first dimensions instead.
+    let strongest = softtouch_trainer::similarity::cross_correlation(&latents, &wrench)
+        .map(|m| strongest_dims(&m))
+        .unwrap_or_default();
+    let dims: Vec<usize> = if strongest.iter().any(Option::is_some) {
+        Vec::new()
+    } else {
+        (0..h.config.latent.min(6)).collect()
+    };
+    let png = dir.join(format!("sweep-latent-traversal-{}.png", h.config.latent));
+    let title = format!(
+        "latent {}: decoder images, one latent from −5 to +5, others at their test mean (brightness stretched)",
+        h.config.latent
+    );
+    let drawn = write_traversal(
+        &png,
+        &title,
+        artifact,
+        &strongest,
+        &dims,
+        &column_means(&latents, h.config.latent),
+        &traversal_values(5.0, 11),
+    )?;
+    Ok(drawn.map(|_| png))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -22,9 +22,11 @@
 //! - [`report`]: `softtouch report`, one self-contained HTML page (inline SVG, maud
 //!   templates) of runs, datasets, models and sweeps, read from a read-only database.
 
+pub mod bench_train;
 pub mod experiments;
 pub mod finetune;
 pub mod grasp;
+pub mod host;
 pub mod latent;
 pub mod live;
 pub mod models;

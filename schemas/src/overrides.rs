@@ -256,6 +256,14 @@ pub fn applies_to<T: Serialize>(config: &T, path: &str) -> bool {
     matches!(walk(&mut root, parent), Ok(toml::Value::Table(_)))
 }
 
+/// The value at `path` in `config`, where there is one (the value a sweep starts from).
+#[must_use]
+pub fn value_at<T: Serialize>(config: &T, path: &str) -> Option<toml::Value> {
+    let mut root = toml::Value::try_from(config).ok()?;
+    let keys: Vec<&str> = path.split('.').collect();
+    walk(&mut root, &keys).ok().cloned()
+}
+
 /// Where `path`'s walk through `config` goes astray (`None`: its parent is there).
 #[must_use]
 pub fn astray<T: Serialize>(config: &T, path: &str) -> Option<String> {

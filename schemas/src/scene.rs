@@ -349,9 +349,10 @@ pub enum Effect {
         /// Typical period of the gusts, s.
         #[serde(default = "one")]
         period_s: f64,
-        /// The gusts as components (in place of `gust_m_s`/`period_s`).
-        #[serde(default, skip_serializing_if = "Vec::is_empty")]
-        spectrum: Vec<GustComponent>,
+        /// The gusts as components (in place of `gust_m_s`/`period_s`); absent, none.
+        /// An empty list is refused: no lab means it.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        spectrum: Option<Vec<GustComponent>>,
     },
     /// The object rests on a support (the floor, a tray): its weight less buoyancy
     /// presses it down and the support's friction holds it, so a finger that touches

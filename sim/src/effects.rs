@@ -129,6 +129,7 @@ impl Effects {
                         period_s,
                         spectrum: spectrum
                             .iter()
+                            .flatten()
                             .map(|g| (g.period_s, g.amplitude_m_s))
                             .collect(),
                     });

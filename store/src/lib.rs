@@ -43,10 +43,10 @@ pub use grasp_calibration::GraspCalibrationRow;
 pub use results::{NewResult, ResultRow, StoredResult};
 pub mod rows;
 mod runs;
-mod sync;
 pub mod target;
 pub mod testing;
 mod window;
+mod writer;
 pub use dialect::Dialect;
 pub use target::DbTarget;
 
@@ -54,7 +54,7 @@ pub use runs::{
     LEASE_STALE_S, LeaseHolder, LeaseRow, LeaseTaken, NewRun, RunRecord, RunStatus, RunSummary,
     host_name,
 };
-pub use sync::{LabelRow, OwnedNewRun, SyncStore, WriterStats, encode_for_store};
+pub use writer::{LabelRow, OwnedNewRun, SyncStore, WriterStats, encode_for_store};
 
 pub use models::{Members, ModelInfo, NewModel, PairKey};
 pub use window::{WINDOW_ENCODING, decode_window, encode_window};

@@ -261,6 +261,75 @@ pub fn write_disturb_png(path: &Path, run: &DisturbRun) -> Result<(), GraspRunEr
     .map_err(|e| GraspRunError::Failed(e.to_string()))
 }
 
+/// The terminal's table of a disturbance run: one row per phase, the estimate's
+/// numbers beside the truth's.
+///
+/// # Errors
+/// The writer's.
+pub fn print_disturb_table(
+    rows: &[DisturbRow],
+    out: &mut dyn std::io::Write,
+) -> std::io::Result<()> {
+    let opt = |v: Option<f64>| v.map_or_else(|| "never".to_owned(), |s| format!("{s:.3}"));
+    writeln!(
+        out,
+        "{:>5} {:>7} {:>6} {:>11} {:>10} {:>9} {:>12} {:>11} {:>10}",
+        "phase",
+        "turn °",
+        "yaw °",
+        "peak dev N",
+        "recover s",
+        "RMS N",
+        "true peak N",
+        "true rec s",
+        "true RMS N"
+    )?;
+    for (i, row) in rows.iter().enumerate() {
+        let (turn, yaw) = (row.phase.turn_deg, row.phase.yaw_deg);
+        let r = row.truth;
+        let Some(e) = row.estimate else {
+            writeln!(
+                out,
+                "{:>5} {turn:>7.1} {yaw:>6.1} (no usable estimate)",
+                i + 1
+            )?;
+            continue;
+        };
+        writeln!(
+            out,
+            "{:>5} {turn:>7.1} {yaw:>6.1} {:>11.3} {:>10} {:>9.3} {:>12} {:>11} {:>10}",
+            i + 1,
+            e.peak_deviation_n,
+            opt(e.recovery_s),
+            e.rms_error_n,
+            r.map_or_else(|| "-".into(), |r| format!("{:.3}", r.peak_deviation_n)),
+            r.map_or_else(|| "-".into(), |r| opt(r.recovery_s)),
+            r.map_or_else(|| "-".into(), |r| format!("{:.3}", r.rms_error_n)),
+        )?;
+    }
+    Ok(())
+}
+
+/// A disturbance run in one line, as the results table stores it: the force held, the
+/// turns and the largest deviation (the truth's where the simulator has it).
+#[must_use]
+pub fn disturb_summary(rows: &[DisturbRow], target_n: f64) -> String {
+    let worst = rows
+        .iter()
+        .filter_map(|r| r.truth.or(r.estimate))
+        .map(|m| m.peak_deviation_n)
+        .fold(f64::NAN, f64::max);
+    format!(
+        "{target_n} N held through {} turns; largest force deviation {} N",
+        rows.len(),
+        if worst.is_finite() {
+            format!("{worst:.3}")
+        } else {
+            "-".into()
+        }
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -319,3 +319,52 @@ pub fn write_twist_png(path: &Path, runs: &[TwistRun]) -> Result<(), GraspRunErr
     )
     .map_err(|e| GraspRunError::Failed(e.to_string()))
 }
+
+/// The terminal's table of a twist: one row per run (without, then with the wrist
+/// loop), counted from the first turn.
+///
+/// # Errors
+/// The writer's.
+pub fn print_twist_table(rows: &[TwistRow], out: &mut dyn std::io::Write) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "{:>14} {:>8} {:>14} {:>15} {:>16} {:>15} {:>14}",
+        "wrist loop",
+        "cycles",
+        "τz RMS N·mm",
+        "true τz RMS",
+        "true τz peak",
+        "true F RMS N",
+        "wrist max °"
+    )?;
+    for row in rows {
+        writeln!(
+            out,
+            "{:>14} {:>8} {:>14.3} {:>15.3} {:>16.3} {:>15.3} {:>14.2}",
+            if row.wrist_loop { "on" } else { "off" },
+            row.cycles_scored,
+            row.tz_rms_nmm,
+            row.true_tz_rms_nmm,
+            row.true_tz_peak_nmm,
+            row.true_force_rms_n,
+            row.wrist_max_deg
+        )?;
+    }
+    Ok(())
+}
+
+/// A twist in one line, as the results table stores it: the true τz RMS from the
+/// first turn, without and with the wrist loop.
+#[must_use]
+pub fn twist_summary(rows: &[TwistRow]) -> String {
+    rows.iter()
+        .map(|r| {
+            format!(
+                "wrist loop {}: true τz RMS {:.3} N·mm from the first turn",
+                if r.wrist_loop { "on" } else { "off" },
+                r.true_tz_rms_nmm
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}

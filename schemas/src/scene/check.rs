@@ -292,6 +292,13 @@ impl Effect {
                 c.within(&f("mean_m_s"), *mean_m_s, -10.0, 10.0, "m/s");
                 c.within(&f("gust_m_s"), *gust_m_s, 0.0, 10.0, "m/s");
                 c.within(&f("period_s"), *period_s, 0.01, 1000.0, "s");
+                if spectrum.as_ref().is_some_and(Vec::is_empty) {
+                    c.fail(
+                        f("spectrum"),
+                        "expected at least one component (leave `spectrum` out for a steady current or gusts from gust_m_s/period_s)",
+                    );
+                }
+                let spectrum = spectrum.as_deref().unwrap_or_default();
                 if !spectrum.is_empty() && *gust_m_s != 0.0 {
                     c.fail(
                         f("spectrum"),

@@ -162,6 +162,11 @@ fn support_added_mass_and_gust_spectra_are_checked_by_field() {
         ),
         (
             ball.clone(),
+            format!("{flow}\nspectrum = []"),
+            "expected at least one component",
+        ),
+        (
+            ball.clone(),
             format!("{flow}\nspectrum = [{{ period_s = 1.0, amplitude = 0.1 }}]"),
             "unknown field",
         ),

@@ -359,7 +359,7 @@ async fn a_load_or_a_current_that_is_not_a_number_is_an_error_not_an_outcome() {
         mean_m_s: f64::NAN,
         gust_m_s: 0.0,
         period_s: 1.0,
-        spectrum: Vec::new(),
+        spectrum: None,
     }]);
     let err = soft_grasp(&nan_flow, obj.clone(), 60.0, 1, TokioClock::new())
         .err()
@@ -372,7 +372,7 @@ async fn a_load_or_a_current_that_is_not_a_number_is_an_error_not_an_outcome() {
         mean_m_s: 0.05,
         gust_m_s: 0.02,
         period_s: 0.0,
-        spectrum: Vec::new(),
+        spectrum: None,
     }]);
     let err = soft_grasp(&zero_period, obj, 60.0, 1, TokioClock::new())
         .err()
@@ -652,7 +652,7 @@ async fn a_taller_object_is_pushed_harder_by_the_same_current() {
         mean_m_s: 0.3,
         gust_m_s: 0.0,
         period_s: 0.5,
-        spectrum: Vec::new(),
+        spectrum: None,
     }]);
     let spread_of = |height_m: f64| {
         let flow = flow.clone();
@@ -690,7 +690,7 @@ async fn a_declared_current_squeezes_one_finger_more_than_the_other() {
         mean_m_s: 0.3,
         gust_m_s: 0.2,
         period_s: 0.5,
-        spectrum: Vec::new(),
+        spectrum: None,
     }]);
     let obj = cylinder_standing();
     let (_, probe, _) = grip_at(&land(), obj.clone(), 0).await;
@@ -1379,7 +1379,7 @@ async fn a_current_sways_a_floating_object_by_what_its_drag_and_added_mass_predi
         mean_m_s: u,
         gust_m_s: 0.0,
         period_s: 1.0,
-        spectrum: Vec::new(),
+        spectrum: None,
     };
     let added = Effect::ObjectAddedMass {
         fluid_density_kg_m3: 1000.0,
@@ -1580,7 +1580,7 @@ proptest::proptest! {
                 mean_m_s: 0.0,
                 gust_m_s: 0.0,
                 period_s: 1.0,
-                spectrum: Vec::new(),
+                spectrum: None,
             },
         ];
         if mass_kg > 1000.0 * obj.volume_m3 {

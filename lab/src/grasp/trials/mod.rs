@@ -8,12 +8,15 @@
 //! of `(seed, object, i)` and σ, so it replays alone. [`start_session`] or
 //! [`resume_session`], then [`run_trials`]; [`table::summarise`] gives the stored rows
 //! per object, mode, medium and σ with Wilson 95 % intervals, and
-//! [`table::write_outputs`] the CSVs and charts. Nothing here parses arguments or
-//! prints.
+//! [`table::write_outputs`] the CSVs and charts; [`experiment::run`] carries out a
+//! whole `grasp trials` request, printing [`text`]'s tables. Nothing here parses
+//! arguments.
 
+pub mod experiment;
 pub mod rig;
 mod run;
 pub mod table;
+pub mod text;
 
 pub use run::{RunEnd, TrialDone, TrialTiming, pack_trace, run_trials};
 
@@ -48,6 +51,16 @@ pub fn paper_rate(medium: Medium, mode: Mode) -> f64 {
         (Medium::Air, Mode::Closed) => 1.0,
         (Medium::Water, Mode::Open) => 0.30,
         (Medium::Water, Mode::Closed) => 0.90,
+    }
+}
+
+/// A σ as the charts label it: the paper's is marked, `σ 5 mm (paper)`.
+#[must_use]
+pub fn sigma_label(sigma_mm: f64) -> String {
+    if (sigma_mm - PAPER_SIGMA_MM).abs() < 1e-9 {
+        format!("σ {sigma_mm} mm (paper)")
+    } else {
+        format!("σ {sigma_mm} mm")
     }
 }
 
@@ -186,9 +199,24 @@ pub struct SceneSweep {
     pub values: Vec<String>,
     /// Base scenes per value.
     pub per_value: u32,
+    /// The value the scenes ship with, where they all have one and agree (marked on
+    /// the charts; the paper gives no value for a scene's physics).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shipped: Option<String>,
 }
 
 impl SceneSweep {
+    /// Value `i` as the charts label it: `0.05 (shipped)` for the scenes' own value.
+    #[must_use]
+    pub fn value_label(&self, i: usize) -> String {
+        let v = self.values.get(i).map_or("?", String::as_str);
+        if self.shipped.as_deref() == Some(v) {
+            format!("{v} (shipped)")
+        } else {
+            v.to_owned()
+        }
+    }
+
     /// The swept value of scene `scene_index`.
     #[must_use]
     pub fn value_of(&self, scene_index: u32) -> Option<&str> {
@@ -441,12 +469,23 @@ pub fn swept_scenes(
     }
     let per_value =
         u32::try_from(base.len()).map_err(|_| invalid("--scene: too many scenes".into()))?;
+    // The value the scenes ship with, where those that have the path agree on one.
+    let mut shipped: Vec<String> = base
+        .iter()
+        .filter_map(|s| overrides::value_at(s, &sweep.path))
+        .map(|v| overrides::shown(&v))
+        .collect();
+    shipped.dedup();
     Ok((
         out,
         SceneSweep {
             path: sweep.path.clone(),
             values: sweep.values.iter().map(overrides::shown).collect(),
             per_value,
+            shipped: match shipped.as_slice() {
+                [one] => Some(one.clone()),
+                _ => None,
+            },
         },
     ))
 }
@@ -844,6 +883,38 @@ impl Session {
 #[allow(clippy::float_cmp)] // exact stored and published values
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_sweep_marks_the_value_the_scenes_ship_with_and_sigma_the_papers() {
+        let scenes = load_scenes(&[], &[]).unwrap_or_else(|e| panic!("{e}"));
+        let sweep: Sweep = "objects.bottle.wet_friction=0.05,0.2"
+            .parse()
+            .unwrap_or_else(|e| panic!("{e}"));
+        // Only the water scene has the value (land has no wet friction): it is the one.
+        let (_, stored) = swept_scenes(&scenes, &sweep).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(stored.shipped.as_deref(), Some("0.05"));
+        assert_eq!(stored.value_label(0), "0.05 (shipped)");
+        assert_eq!(stored.value_label(1), "0.2");
+        assert_eq!(stored.value_label(7), "?");
+        // Scenes that disagree have no one shipped value to mark.
+        let both: Sweep = "objects.bottle.friction=0.3,0.9"
+            .parse()
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut differing = scenes.clone();
+        differing[1]
+            .objects
+            .iter_mut()
+            .for_each(|o| o.friction += 0.01);
+        let (_, stored) = swept_scenes(&differing, &both).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(stored.shipped, None);
+        // A session stored before the mark existed reads back without one.
+        let old: SceneSweep =
+            serde_json::from_str(r#"{"path":"a.b","values":["1"],"per_value":1}"#)
+                .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(old.shipped, None);
+        assert_eq!(sigma_label(PAPER_SIGMA_MM), "σ 5 mm (paper)");
+        assert_eq!(sigma_label(2.0), "σ 2 mm");
+    }
 
     #[test]
     fn the_built_in_scenes_load_with_objects_inside_the_stroke() {

@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 use softtouch_grasp::{FailReason, Mode, Z_95, wilson_interval};
 use softtouch_schemas::Medium;
 
-use super::{PAPER_SIGMA_MM, SceneSweep, TrialPlan, TrialsError, medium_name, paper_rate};
+use super::{
+    PAPER_SIGMA_MM, SceneSweep, TrialPlan, TrialsError, medium_name, paper_rate, sigma_label,
+};
 use crate::store::GraspTrialRow;
 use softtouch_collector::plot::{BarChart, BarSeries, bar_chart};
 
@@ -306,7 +308,9 @@ pub fn write_value_sweep(
             keys.push((base, c.medium, c.mode));
         }
     }
-    let groups: Vec<String> = sweep.values.clone();
+    let groups: Vec<String> = (0..sweep.values.len())
+        .map(|i| sweep.value_label(i))
+        .collect();
     let series: Vec<BarSeries> = keys
         .iter()
         .map(|(base, medium, mode)| {
@@ -524,7 +528,7 @@ pub fn write_sweep(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), 
             keys.push((c.scene_index, c.medium, c.mode));
         }
     }
-    let groups: Vec<String> = plan.sigmas_mm.iter().map(|s| format!("σ {s} mm")).collect();
+    let groups: Vec<String> = plan.sigmas_mm.iter().map(|s| sigma_label(*s)).collect();
     // One bar per medium and mode at each σ, with its Wilson interval and n.
     let series: Vec<BarSeries> = keys
         .iter()
@@ -542,7 +546,14 @@ pub fn write_sweep(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), 
                 bars: (0..groups.len())
                     .map(|i| cell(i).and_then(|c| Some((c.rate()?, c.interval[0], c.interval[1]))))
                     .collect(),
-                reference: vec![None; groups.len()],
+                // The paper's rate beside the paper's σ (a black tick).
+                reference: plan
+                    .sigmas_mm
+                    .iter()
+                    .map(|s| {
+                        ((s - PAPER_SIGMA_MM).abs() < 1e-9).then(|| paper_rate(*medium, *mode))
+                    })
+                    .collect(),
                 notes: (0..groups.len())
                     .map(|i| cell(i).map(|c| format!("n={}", c.trials)))
                     .collect(),
@@ -567,6 +578,41 @@ pub fn write_sweep(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), 
         ),
     )
     .map_err(|e| TrialsError::Failed(e.to_string()))
+}
+
+/// Successes per medium and mode, `air open 23/50, …`, refused trials left out.
+#[must_use]
+pub fn session_summary(trials: &[crate::store::GraspTrialRow]) -> String {
+    let mut cells: Vec<(String, String, usize, usize)> = Vec::new();
+    for t in trials
+        .iter()
+        .filter(|t| t.reason.as_deref() != Some("refused"))
+    {
+        let i = cells
+            .iter()
+            .position(|c| c.0 == t.medium && c.1 == t.key.mode)
+            .unwrap_or_else(|| {
+                cells.push((t.medium.clone(), t.key.mode.clone(), 0, 0));
+                cells.len() - 1
+            });
+        cells[i].2 += usize::from(t.success);
+        cells[i].3 += 1;
+    }
+    cells
+        .iter()
+        .map(|(m, mode, s, n)| format!("{m} {mode} {s}/{n}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// A range of row ids as a list shows it: `7`, or `7–56`.
+#[must_use]
+pub fn id_span(first: i64, last: i64) -> String {
+    if first == last {
+        first.to_string()
+    } else {
+        format!("{first}–{last}")
+    }
 }
 
 #[cfg(test)]

@@ -175,7 +175,9 @@ fn sweep_figure(g: &GraspData) -> Result<Markup, ReportError> {
             g.session.session_id, sweep.path
         ),
         &sweep.path,
-        &sweep.values,
+        &(0..sweep.values.len())
+            .map(|i| sweep.value_label(i))
+            .collect::<Vec<_>>(),
         &series,
         (width, 340),
     )?)))
@@ -217,7 +219,7 @@ fn rates_figure(g: &GraspData, by_sigma: bool) -> Result<Markup, ReportError> {
             g.plan
                 .as_ref()
                 .and_then(|p| p.sigmas_mm.get(c.sigma_index as usize))
-                .map_or_else(|| "?".into(), |s| format!("σ {s} mm"))
+                .map_or_else(|| "?".into(), |s| crate::grasp::trials::sigma_label(*s))
         } else {
             c.object.clone().unwrap_or_else(|| "all".into())
         }

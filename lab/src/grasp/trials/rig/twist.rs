@@ -191,3 +191,97 @@ pub async fn twist_on_rig(
     )
     .await
 }
+
+/// What the twist without, then with the wrist loop gave on a rig: the cycles as CSV
+/// (`wrist_loop,t_s,estimate_n,torque_z_nmm,wrist_target_deg`) and a line per run.
+#[derive(Debug, Clone)]
+pub struct RigTwistPair {
+    /// Every cycle of both runs.
+    pub csv: String,
+    /// "wrist loop on: estimated τz RMS … N·mm", one per run that ran.
+    pub summary: Vec<String>,
+}
+
+/// The twist on the rig, without then with the wrist loop (`settings.wrist` is the
+/// loop of the second run), a table row printed after each; a stop request skips the
+/// runs after it.
+///
+/// # Errors
+/// As [`twist_on_rig`]; the writer's.
+#[allow(clippy::too_many_arguments)] // the rig's parts, as the trials take them
+pub async fn twist_without_then_with_wrist(
+    setup: &GraspSetup,
+    workspace: &WorkspaceBounds,
+    calibration: &ObjectSetup,
+    devices: &mut RigTrialDevices,
+    operator: &mut Operator,
+    model: &[u8],
+    settings: &RigTwistSettings,
+    stop: impl Fn() -> StopRequest,
+    out: &mut dyn std::io::Write,
+) -> Result<RigTwistPair, TrialsError> {
+    let written = |e: std::io::Error| TrialsError::Failed(format!("cannot write output: {e}"));
+    let mut csv = String::from("wrist_loop,t_s,estimate_n,torque_z_nmm,wrist_target_deg\n");
+    let mut summary = Vec::new();
+    writeln!(
+        out,
+        "{:>11} {:>8} {:>13} {:>13}",
+        "wrist loop", "cycles", "τz RMS N·mm", "wrist max °"
+    )
+    .map_err(written)?;
+    for with_wrist in [false, true] {
+        let settings = RigTwistSettings {
+            wrist: settings.wrist.filter(|_| with_wrist),
+            ..settings.clone()
+        };
+        let predictor = Predictor::from_bytes(model)?;
+        let run = twist_on_rig(
+            setup,
+            workspace,
+            calibration,
+            devices,
+            operator,
+            predictor,
+            &settings,
+            stop(),
+        )
+        .await?;
+        let on_off = if with_wrist { "on" } else { "off" };
+        let t0 = run.cycles.first().map_or(0, |cy| cy.t.0);
+        let tz: Vec<f64> = run.cycles.iter().filter_map(|cy| cy.torque_z_nm).collect();
+        let rms = if tz.is_empty() {
+            f64::NAN
+        } else {
+            (tz.iter().map(|t| (t * 1000.0).powi(2)).sum::<f64>() / tz.len() as f64).sqrt()
+        };
+        let wrist_max = run
+            .cycles
+            .iter()
+            .filter_map(|cy| cy.wrist_target_rad)
+            .fold(0.0_f64, |m, y| m.max(y.abs().to_degrees()));
+        for cy in &run.cycles {
+            let opt = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v}"));
+            csv.push_str(&format!(
+                "{on_off},{},{},{},{}\n",
+                cy.t.0.saturating_sub(t0) as f64 * 1e-9,
+                opt(cy.estimate_n),
+                opt(cy.torque_z_nm.map(|t| t * 1000.0)),
+                opt(cy.wrist_target_rad.map(f64::to_degrees))
+            ));
+        }
+        summary.push(format!(
+            "wrist loop {on_off}: estimated τz RMS {rms:.3} N·mm"
+        ));
+        writeln!(
+            out,
+            "{on_off:>11} {:>8} {rms:>13.3} {wrist_max:>13.2}",
+            run.cycles.len()
+        )
+        .map_err(written)?;
+        if let Some(name) = run.stopped {
+            writeln!(out, "stopped by {name}: the runs after it are skipped").map_err(written)?;
+            break;
+        }
+    }
+    Ok(RigTwistPair { csv, summary })
+}
