@@ -133,6 +133,32 @@ fn fenced_commands(text: &str) -> Vec<(usize, Vec<String>)> {
     found
 }
 
+/// The commands named in the prose of a Markdown text, outside fenced blocks: code
+/// spans that start with `softtouch ` and hold no synopsis (`[…]`, `|`, `…`, `<…>`).
+fn inline_commands(text: &str) -> Vec<(usize, Vec<String>)> {
+    let mut found = Vec::new();
+    let mut fenced = false;
+    for (i, line) in text.lines().enumerate() {
+        if line.trim_start().starts_with("```") {
+            fenced = !fenced;
+            continue;
+        }
+        if fenced {
+            continue;
+        }
+        let parts: Vec<&str> = line.split('`').collect();
+        for (k, span) in parts.iter().enumerate() {
+            // A span the line wraps (its closing backtick on the next line) is left out.
+            let closed = k + 1 < parts.len();
+            let synopsis = span.contains(['[', '|', '…', '<']);
+            if k % 2 == 1 && closed && span.starts_with("softtouch ") && !synopsis {
+                found.extend(invocations(span).into_iter().map(|args| (i + 1, args)));
+            }
+        }
+    }
+    found
+}
+
 /// Every example line (`  softtouch …`) of a command's help and its subcommands'.
 fn help_examples(command: &clap::Command, path: &str, found: &mut Vec<(String, Vec<String>)>) {
     for text in [command.get_after_help(), command.get_after_long_help()]
@@ -199,6 +225,71 @@ fn every_command_in_the_docs_parses() {
     assert!(seen >= 20, "only {seen} commands found in the docs");
 }
 
+/// A verb or flag the prose names must exist; what it leaves out (a required flag,
+/// the subcommand of a group) may be.
+#[test]
+fn every_command_named_in_the_docs_prose_exists() {
+    use clap::error::ErrorKind;
+    let mut seen = 0;
+    let mut wrong = Vec::new();
+    for file in doc_files() {
+        let text =
+            std::fs::read_to_string(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+        let name = file
+            .strip_prefix(root())
+            .unwrap_or(&file)
+            .display()
+            .to_string();
+        for (line, args) in inline_commands(&text) {
+            seen += 1;
+            let Err(e) = Cli::try_parse_from(&args) else {
+                continue;
+            };
+            let left_out = matches!(
+                e.kind(),
+                ErrorKind::MissingRequiredArgument
+                    | ErrorKind::MissingSubcommand
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+                    | ErrorKind::DisplayHelp
+            );
+            if !left_out {
+                wrong.push(format!("{name}:{line}: `{}`\n  {e}", args.join(" ")));
+            }
+        }
+    }
+    assert!(
+        wrong.is_empty(),
+        "commands named in the docs the program does not have:\n{}",
+        wrong.join("\n")
+    );
+    assert!(seen >= 40, "only {seen} commands named in the docs' prose");
+}
+
+#[test]
+fn every_relative_link_in_the_docs_leads_to_a_file() {
+    let mut wrong = Vec::new();
+    for file in doc_files() {
+        let text =
+            std::fs::read_to_string(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+        let dir = file.parent().unwrap_or_else(|| Path::new("."));
+        for (i, line) in text.lines().enumerate() {
+            for piece in line.split("](").skip(1) {
+                let Some(target) = piece.split(')').next() else {
+                    continue;
+                };
+                let path = target.split('#').next().unwrap_or_default();
+                if path.is_empty() || path.contains("://") {
+                    continue;
+                }
+                if !dir.join(path).exists() {
+                    wrong.push(format!("{}:{}: {target}", file.display(), i + 1));
+                }
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "links to nothing:\n{}", wrong.join("\n"));
+}
+
 #[test]
 fn every_example_in_the_help_parses() {
     let mut examples = Vec::new();
@@ -259,6 +350,20 @@ fn the_harness_reads_shell_lines_as_a_shell_would() {
             ]
         )]
     );
+    let prose = "run `softtouch grasp trials --model NAME`, see `softtouch results [list|show ID]`\n```sh\n`softtouch nope`\n```\nwrapped `softtouch train --dataset\nWATER`\n";
+    assert_eq!(
+        inline_commands(prose),
+        [(
+            1,
+            vec![
+                "softtouch".into(),
+                "grasp".into(),
+                "trials".into(),
+                "--model".into(),
+                "NAME".into()
+            ]
+        )]
+    );
     // A renamed flag is refused, so a doc that drifts fails.
     assert!(refused(&words("softtouch collect --sample 3")[0]).is_some());
     assert!(refused(&words("softtouch collect --samples 3")[0]).is_none());
@@ -289,18 +394,28 @@ fn the_readme_quick_looks_run() {
     }
 }
 
-/// The README's quick start end to end: collect 300 samples, then `status 1`
-/// (`#[ignore]`d: about a minute on 2 cores).
+/// The README's commands, top to bottom, in one folder: collect, status, render, the
+/// configs, a dataset, training, evaluation, the grasp trials and the report; each must
+/// exit 0 (`#[ignore]`d: about 1.5 minutes on 2 cores, 91 s here).
 #[test]
-#[ignore = "the README's 300-sample quick start, about a minute"]
-fn the_readme_quick_start_runs() {
+#[ignore = "the README's commands end to end, about 1.5 minutes"]
+fn the_readme_runs_top_to_bottom() {
+    let text = std::fs::read_to_string(root().join("README.md"))
+        .unwrap_or_else(|e| panic!("README.md: {e}"));
     let dir = tempdir();
     let d = dir.path();
-    let out = ok(&softtouch(
-        d,
-        &["collect", "--samples", "300", "--seed", "1"],
-    ));
-    assert!(out.contains("300"), "{out}");
-    let status = ok(&softtouch(d, &["status", "1"]));
-    assert!(status.contains("300"), "{status}");
+    let commands = fenced_commands(&text);
+    assert!(commands.len() >= 9, "{commands:?}");
+    for (line, args) in &commands {
+        let words: Vec<&str> = args[1..].iter().map(String::as_str).collect();
+        let out = softtouch(d, &words);
+        let printed = ok(&out);
+        eprintln!("README.md:{line}: softtouch {}: ok", words.join(" "));
+        if words.first() == Some(&"status") {
+            assert!(printed.contains("300"), "README.md:{line}: {printed}");
+        }
+    }
+    for file in ["softtouch.db", "frame.png", "report.html"] {
+        assert!(d.join(file).is_file(), "the README's commands leave {file}");
+    }
 }
