@@ -192,8 +192,8 @@ pub async fn run(
     let store = open_existing(db).await?;
     // The first Ctrl-C, SIGTERM or SIGHUP finishes the trial in hand (or the session's
     // start and calibrations, then none) and ends with the summary of what ran (exit
-    // 0); a second stops at once. Watched from the first instruction, so that no
-    // signal kills the verb with the database open.
+    // 0); a second stops at once. Watched from the moment the store is open, before
+    // anything is stored, so that no signal kills the verb with the database open.
     let (stop_tx, stop) = tokio::sync::watch::channel(0u32);
     let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx, "trial"));
     let mut terminal = Terminal {
