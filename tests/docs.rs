@@ -36,6 +36,27 @@ fn doc_files() -> Vec<PathBuf> {
     files
 }
 
+/// Each doc's name (from the repository's root), folder and text.
+fn doc_texts() -> Vec<(String, PathBuf, String)> {
+    doc_files()
+        .into_iter()
+        .map(|file| {
+            let text = std::fs::read_to_string(&file)
+                .unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+            let name = file
+                .strip_prefix(root())
+                .unwrap_or(&file)
+                .display()
+                .to_string();
+            let dir = file
+                .parent()
+                .unwrap_or_else(|| Path::new("."))
+                .to_path_buf();
+            (name, dir, text)
+        })
+        .collect()
+}
+
 /// Words of a shell command, with single and double quotes (no expansion).
 fn shell_words(line: &str) -> Vec<String> {
     let mut words = Vec::new();
@@ -201,14 +222,7 @@ fn refused(args: &[String]) -> Option<String> {
 fn every_command_in_the_docs_parses() {
     let mut seen = 0;
     let mut wrong = Vec::new();
-    for file in doc_files() {
-        let text =
-            std::fs::read_to_string(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
-        let name = file
-            .strip_prefix(root())
-            .unwrap_or(&file)
-            .display()
-            .to_string();
+    for (name, _, text) in doc_texts() {
         for (line, args) in fenced_commands(&text) {
             seen += 1;
             if let Some(why) = refused(&args) {
@@ -232,14 +246,7 @@ fn every_command_named_in_the_docs_prose_exists() {
     use clap::error::ErrorKind;
     let mut seen = 0;
     let mut wrong = Vec::new();
-    for file in doc_files() {
-        let text =
-            std::fs::read_to_string(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
-        let name = file
-            .strip_prefix(root())
-            .unwrap_or(&file)
-            .display()
-            .to_string();
+    for (name, _, text) in doc_texts() {
         for (line, args) in inline_commands(&text) {
             seen += 1;
             let Err(e) = Cli::try_parse_from(&args) else {
@@ -268,10 +275,7 @@ fn every_command_named_in_the_docs_prose_exists() {
 #[test]
 fn every_relative_link_in_the_docs_leads_to_a_file() {
     let mut wrong = Vec::new();
-    for file in doc_files() {
-        let text =
-            std::fs::read_to_string(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
-        let dir = file.parent().unwrap_or_else(|| Path::new("."));
+    for (name, dir, text) in doc_texts() {
         for (i, line) in text.lines().enumerate() {
             for piece in line.split("](").skip(1) {
                 let Some(target) = piece.split(')').next() else {
@@ -282,7 +286,7 @@ fn every_relative_link_in_the_docs_leads_to_a_file() {
                     continue;
                 }
                 if !dir.join(path).exists() {
-                    wrong.push(format!("{}:{}: {target}", file.display(), i + 1));
+                    wrong.push(format!("{name}:{}: {target}", i + 1));
                 }
             }
         }
