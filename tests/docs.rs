@@ -10,7 +10,7 @@ use softtouch_cli::Cli;
 use std::path::{Path, PathBuf};
 
 /// The repository's root (the CLI crate's parent).
-fn root() -> PathBuf {
+pub(crate) fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .parent()
         .unwrap_or_else(|| panic!("the CLI crate has a parent folder"))
@@ -37,7 +37,7 @@ fn doc_files() -> Vec<PathBuf> {
 }
 
 /// Each doc's name (from the repository's root), folder and text.
-fn doc_texts() -> Vec<(String, PathBuf, String)> {
+pub(crate) fn doc_texts() -> Vec<(String, PathBuf, String)> {
     doc_files()
         .into_iter()
         .map(|file| {
@@ -115,9 +115,17 @@ fn invocations(line: &str) -> Vec<Vec<String>> {
     found
 }
 
-/// Every command in the fenced shell blocks of a Markdown text, with its line; a line
+/// One step of a fenced shell block: a `softtouch` command, or an `export NAME=VALUE`
+/// that the commands after it see.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Step {
+    Run(Vec<String>),
+    Env(String, String),
+}
+
+/// Every step in the fenced shell blocks of a Markdown text, with its line; a line
 /// ending in `\` continues on the next.
-fn fenced_commands(text: &str) -> Vec<(usize, Vec<String>)> {
+pub(crate) fn fenced_steps(text: &str) -> Vec<(usize, Step)> {
     let mut found = Vec::new();
     let mut in_shell = None::<bool>;
     let mut pending = String::new();
@@ -144,14 +152,37 @@ fn fenced_commands(text: &str) -> Vec<(usize, Vec<String>)> {
             }
             None => {
                 pending.push_str(trimmed);
-                for args in invocations(&pending) {
-                    found.push((pending_line, args));
+                let export = pending
+                    .strip_prefix("export ")
+                    .and_then(|rest| shell_words(rest.split(" #").next()?).into_iter().next())
+                    .and_then(|word| {
+                        let (name, value) = word.split_once('=')?;
+                        Some(Step::Env(name.to_owned(), value.to_owned()))
+                    });
+                match export {
+                    Some(step) => found.push((pending_line, step)),
+                    None => found.extend(
+                        invocations(&pending)
+                            .into_iter()
+                            .map(|args| (pending_line, Step::Run(args))),
+                    ),
                 }
                 pending.clear();
             }
         }
     }
     found
+}
+
+/// Every `softtouch` command in the fenced shell blocks of a Markdown text, with its line.
+fn fenced_commands(text: &str) -> Vec<(usize, Vec<String>)> {
+    fenced_steps(text)
+        .into_iter()
+        .filter_map(|(line, step)| match step {
+            Step::Run(args) => Some((line, args)),
+            Step::Env(..) => None,
+        })
+        .collect()
 }
 
 /// The commands named in the prose of a Markdown text, outside fenced blocks: code
@@ -181,7 +212,11 @@ fn inline_commands(text: &str) -> Vec<(usize, Vec<String>)> {
 }
 
 /// Every example line (`  softtouch …`) of a command's help and its subcommands'.
-fn help_examples(command: &clap::Command, path: &str, found: &mut Vec<(String, Vec<String>)>) {
+pub(crate) fn help_examples(
+    command: &clap::Command,
+    path: &str,
+    found: &mut Vec<(String, Vec<String>)>,
+) {
     for text in [command.get_after_help(), command.get_after_long_help()]
         .into_iter()
         .flatten()
@@ -353,6 +388,18 @@ fn the_harness_reads_shell_lines_as_a_shell_would() {
                 "3".into()
             ]
         )]
+    );
+    assert_eq!(
+        fenced_steps(
+            "```sh\nexport SOFTTOUCH_DB=postgres://lab@db.lab/x   # each rig\nsofttouch runs\n```\n"
+        ),
+        [
+            (
+                2,
+                Step::Env("SOFTTOUCH_DB".into(), "postgres://lab@db.lab/x".into())
+            ),
+            (3, Step::Run(vec!["softtouch".into(), "runs".into()]))
+        ]
     );
     let prose = "run `softtouch grasp trials --model NAME`, see `softtouch results [list|show ID]`\n```sh\n`softtouch nope`\n```\nwrapped `softtouch train --dataset\nWATER`\n";
     assert_eq!(

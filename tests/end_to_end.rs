@@ -15,6 +15,7 @@ mod cli;
 mod collect;
 mod dataset;
 mod docs;
+mod docs_walk;
 mod faults;
 mod franka_sim;
 mod grasp;

@@ -127,7 +127,7 @@ pub enum Command {
     #[command(after_help = "Examples:
   softtouch train --dataset air
   softtouch train --dataset air --model convnet --epochs 20 --name air-cnn
-  softtouch train --dataset air --alpha 10 --beta 0.1 --latent 64 --out air-a10.stm
+  softtouch train --dataset air --alpha 10 --beta 0.1 --latent 64 --name air-a10 --out air-a10.stm
   softtouch train --dataset water --init land-svae     # fine-tune a land model on water data
 
 Interrupted? Run the same command again: it resumes from the last epoch's checkpoint.")]
@@ -184,7 +184,7 @@ MODEL-paired.png (with --water) and MODEL-latent.csv under --out (latent-out).")
   softtouch results                      # the same as `results list`
   softtouch results show 4
   softtouch results show 4 --table grasp-follow.csv > follow.csv
-  softtouch results trace 812 --out trial-812.csv")]
+  softtouch results trace 12 --out trial-12.csv")]
     Results {
         /// What to do (default: list).
         #[command(subcommand)]

@@ -32,7 +32,7 @@ pub enum ResultsCommand {
     /// requested position), by the trial's id (`softtouch results list` gives each
     /// session's range).
     #[command(
-        after_help = "Examples:\n  softtouch results trace 812\n  softtouch results trace 812 --out trial-812.csv"
+        after_help = "Examples:\n  softtouch results trace 12\n  softtouch results trace 12 --out trial-12.csv"
     )]
     Trace {
         /// The trial's id.

@@ -64,9 +64,10 @@ pub struct FinetuneArgs {
     /// The dataset to fine-tune on (its train split, subsampled; its test split whole).
     #[arg(long)]
     pub dataset: String,
-    /// Training sample counts (0: the starting model untouched).
-    #[arg(long, value_delimiter = ',', default_value = "0,100,300,1000,3000")]
-    pub samples: Vec<usize>,
+    /// Training sample counts (0: the starting model untouched) [default:
+    /// 0,100,300,1000,3000, those the train split holds]
+    #[arg(long, value_delimiter = ',')]
+    pub samples: Option<Vec<usize>>,
     /// Leave out the from-scratch rows (half the time).
     #[arg(long)]
     pub no_scratch: bool,
@@ -220,7 +221,10 @@ async fn run_finetune(
             problems.join("\n  ")
         )));
     }
-    let mut sizes = args.samples.clone();
+    let mut sizes = args
+        .samples
+        .clone()
+        .unwrap_or(finetune::DEFAULT_SIZES.to_vec());
     sizes.sort_unstable();
     sizes.dedup();
     finetune::check_requested(&sizes)?;
@@ -231,6 +235,18 @@ async fn run_finetune(
     let init = InitFrom::from_artifact(&args.init, &artifact)?;
     let splits = load(&store, &args.dataset, &init.config.preprocess, out).await?;
     store.close().await;
+    if args.samples.is_none() {
+        let (kept, cut) = finetune::default_sizes_within(splits.train.len());
+        if !cut.is_empty() {
+            let n = splits.train.len();
+            writeln!(
+                out,
+                "--samples: {cut:?} left out, the train split holds {n}"
+            )
+            .map_err(io_failure)?;
+        }
+        sizes = kept;
+    }
     finetune::check_sizes(&sizes, &splits)?;
     experiments::prepare_out(&args.out)?;
     writeln!(
@@ -338,7 +354,7 @@ async fn run_finetune(
     super::results::Recorder::new("sweep finetune")
         .model(&args.init)
         .dataset(&args.dataset)
-        .setting("samples", args.samples.clone())
+        .setting("samples", sizes.clone())
         .setting("no_scratch", args.no_scratch)
         .setting("target_r2", args.target_r2)
         .setting("epochs", args.epochs)

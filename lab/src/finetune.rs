@@ -95,6 +95,17 @@ pub fn check_requested(sizes: &[usize]) -> Result<(), ExperimentError> {
     Ok(())
 }
 
+/// `sweep finetune`'s sizes when `--samples` is not given.
+pub const DEFAULT_SIZES: [usize; 5] = [0, 100, 300, 1000, 3000];
+
+/// [`DEFAULT_SIZES`] as far as a train split of `train` samples reaches, and the
+/// sizes cut: a default that does not fit the dataset is narrowed, not refused (a
+/// size the user asked for is checked by [`check_sizes`]).
+#[must_use]
+pub fn default_sizes_within(train: usize) -> (Vec<usize>, Vec<usize>) {
+    DEFAULT_SIZES.iter().partition(|n| **n <= train)
+}
+
 /// Checks a list of subset sizes against the dataset (after [`check_requested`]).
 ///
 /// # Errors
@@ -275,6 +286,22 @@ pub fn plot(png: &Path, rows: &[FinetuneRow], floor: f64) -> Result<(), Experime
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_default_sizes_narrow_to_the_train_split() {
+        assert_eq!(
+            super::default_sizes_within(210),
+            (vec![0, 100], vec![300, 1000, 3000])
+        );
+        assert_eq!(
+            super::default_sizes_within(3000),
+            (super::DEFAULT_SIZES.to_vec(), vec![])
+        );
+        assert_eq!(
+            super::default_sizes_within(0),
+            (vec![0], vec![100, 300, 1000, 3000])
+        );
+    }
+
     use super::*;
     use softtouch_trainer::Example;
 
