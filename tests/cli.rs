@@ -440,7 +440,10 @@ fn collect_says_the_disk_it_needs_status_the_size_per_sample_and_the_db_file_alo
         "{out}"
     );
     // The `.db` file alone holds every commit once the binary has exited.
-    assert_eq!(softtouch_collector::store::file::db_size(&db).wal_bytes, 0);
+    assert_eq!(
+        softtouch_collector::store::sqlite_file::db_size(&db).wal_bytes,
+        0
+    );
     let backup = d.join("backup.db");
     std::fs::copy(&db, &backup).unwrap_or_else(|e| panic!("{e}"));
     let status = common::ok(&softtouch(d, &["--db", "backup.db", "status"]));

@@ -399,7 +399,9 @@ fn on_test_server(arg: &str, server: &str, group_db: &mut Option<String>, dir: &
 fn start_of(group: &str) -> PathBuf {
     use std::collections::HashMap;
     use std::sync::Mutex;
-    static BUILT: OnceLock<Mutex<HashMap<(bool, Vec<&'static str>), PathBuf>>> = OnceLock::new();
+    /// A start folder for each (from the lab's runs?, setup lines).
+    type Starts = HashMap<(bool, Vec<&'static str>), PathBuf>;
+    static BUILT: OnceLock<Mutex<Starts>> = OnceLock::new();
     let runs = !FROM_FILES_ONLY.contains(&group);
     let setup: Vec<&'static str> = ASSUMES
         .iter()
@@ -488,10 +490,10 @@ fn walk_group(group: &str, examples: &[Example]) -> Vec<String> {
             .iter()
             .position(|a| a == "--out")
             .and_then(|i| args.get(i + 1))
+            && !dir.join(out).exists()
         {
-            if !dir.join(out).exists() {
-                wrong.push(format!("{shown}: wrote nothing at {out}:\n{said}"));
-            }
+            wrong.push(format!("{shown}: wrote nothing at {out}:\n{said}"));
+            continue;
         }
         eprintln!("{shown}: ok, {:.1} s", t0.elapsed().as_secs_f64());
     }
@@ -526,10 +528,10 @@ fn stale_tables(groups: &BTreeMap<String, Vec<Example>>) -> Vec<String> {
     let mut used = vec![0; CHANGED.len()];
     let mut skipped = vec![0; NOT_RUN.len()];
     for example in groups.values().flatten() {
-        if let Step::Run(args) = &example.step {
-            if let Some(k) = not_run(&changed(&args[1..], &mut used)) {
-                skipped[k] += 1;
-            }
+        if let Step::Run(args) = &example.step
+            && let Some(k) = not_run(&changed(&args[1..], &mut used))
+        {
+            skipped[k] += 1;
         }
     }
     let mut stale: Vec<String> = ASSUMES

@@ -396,7 +396,7 @@ fn a_stop_signal_while_calibrating_ends_the_verb_cleanly(d: &std::path::Path) {
     assert!(stdout.contains("(made now)"), "{stdout}");
     assert!(stdout.contains("stopped by SIGTERM"), "{stdout}");
     assert_eq!(calibrations(), before + 1);
-    let wal = softtouch_collector::store::file::db_size(&db).wal_bytes;
+    let wal = softtouch_collector::store::sqlite_file::db_size(&db).wal_bytes;
     assert_eq!(wal, 0, "the write-ahead log holds {wal} bytes");
 }
 

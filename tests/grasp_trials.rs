@@ -162,7 +162,7 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
     assert!(out.contains("Wilson 95%"), "{out}");
     // Once the binary has exited, the `.db` file alone holds the session: a backup
     // that copies it alone misses nothing (the log was left holding it before).
-    let wal = softtouch_collector::store::file::db_size(&db).wal_bytes;
+    let wal = softtouch_collector::store::sqlite_file::db_size(&db).wal_bytes;
     assert_eq!(wal, 0, "the write-ahead log still holds {wal} bytes");
     let backup = d.join("backup.db");
     std::fs::copy(&db, &backup).unwrap_or_else(|e| panic!("copy: {e}"));

@@ -207,7 +207,8 @@ async fn footprint(
     scene: &softtouch_schemas::SceneSpec,
 ) -> Result<softtouch_collector::collect::disk::Footprint, Failure> {
     if let Some(path) = db.file()
-        && softtouch_store::file::inspect(path)? != softtouch_store::file::DbFile::Sqlite
+        && softtouch_store::sqlite_file::inspect(path)?
+            != softtouch_store::sqlite_file::DbFile::Sqlite
     {
         return Ok(softtouch_collector::collect::disk::Footprint::default());
     }
@@ -280,7 +281,7 @@ pub async fn run_status(
     let human = softtouch_collector::collect::disk::human_bytes;
     let (total, parts) = match db.file() {
         Some(path) => {
-            let size = softtouch_store::file::db_size(path);
+            let size = softtouch_store::sqlite_file::db_size(path);
             (
                 size.total(),
                 format!(

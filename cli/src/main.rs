@@ -188,7 +188,7 @@ fn fold_write_ahead_log(db: &softtouch_store::DbTarget) {
         return;
     };
     let wait = std::time::Duration::from_millis(200);
-    match rt.block_on(softtouch_store::file::checkpoint(path, wait)) {
+    match rt.block_on(softtouch_store::sqlite_file::checkpoint(path, wait)) {
         Ok(c) if !c.complete => tracing::info!(
             "{}: another process is writing the database; its write-ahead log stays until that one closes",
             db.display()

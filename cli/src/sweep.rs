@@ -221,13 +221,9 @@ async fn run_finetune(
             problems.join("\n  ")
         )));
     }
-    let mut sizes = args
-        .samples
-        .clone()
-        .unwrap_or(finetune::DEFAULT_SIZES.to_vec());
-    sizes.sort_unstable();
-    sizes.dedup();
-    finetune::check_requested(&sizes)?;
+    if let Some(asked) = &args.samples {
+        finetune::check_requested(asked)?;
+    }
     let store = open_existing(db).await?;
     let device = softtouch_trainer::backend::device()?;
     let bytes = models::artifact(&store, &args.init).await?;
@@ -235,19 +231,10 @@ async fn run_finetune(
     let init = InitFrom::from_artifact(&args.init, &artifact)?;
     let splits = load(&store, &args.dataset, &init.config.preprocess, out).await?;
     store.close().await;
-    if args.samples.is_none() {
-        let (kept, cut) = finetune::default_sizes_within(splits.train.len());
-        if !cut.is_empty() {
-            let n = splits.train.len();
-            writeln!(
-                out,
-                "--samples: {cut:?} left out, the train split holds {n}"
-            )
-            .map_err(io_failure)?;
-        }
-        sizes = kept;
+    let (sizes, left_out) = finetune::sizes_to_run(args.samples.as_deref(), &splits)?;
+    if let Some(line) = left_out {
+        writeln!(out, "{line}").map_err(io_failure)?;
     }
-    finetune::check_sizes(&sizes, &splits)?;
     experiments::prepare_out(&args.out)?;
     writeln!(
         out,

@@ -106,6 +106,37 @@ pub fn default_sizes_within(train: usize) -> (Vec<usize>, Vec<usize>) {
     DEFAULT_SIZES.iter().partition(|n| **n <= train)
 }
 
+/// The sizes a sweep runs, ascending, each once: those asked for (`--samples`), or
+/// the [`DEFAULT_SIZES`] the train split holds with a line that names those left out.
+///
+/// # Errors
+/// As [`check_requested`] and [`check_sizes`].
+pub fn sizes_to_run(
+    asked: Option<&[usize]>,
+    splits: &Splits,
+) -> Result<(Vec<usize>, Option<String>), ExperimentError> {
+    let (mut sizes, left_out) = match asked {
+        Some(asked) => {
+            check_requested(asked)?;
+            (asked.to_vec(), None)
+        }
+        None => {
+            let (kept, cut) = default_sizes_within(splits.train.len());
+            let line = (!cut.is_empty()).then(|| {
+                format!(
+                    "--samples: {cut:?} left out, the train split holds {}",
+                    splits.train.len()
+                )
+            });
+            (kept, line)
+        }
+    };
+    sizes.sort_unstable();
+    sizes.dedup();
+    check_sizes(&sizes, splits)?;
+    Ok((sizes, left_out))
+}
+
 /// Checks a list of subset sizes against the dataset (after [`check_requested`]).
 ///
 /// # Errors
@@ -286,22 +317,6 @@ pub fn plot(png: &Path, rows: &[FinetuneRow], floor: f64) -> Result<(), Experime
 
 #[cfg(test)]
 mod tests {
-    #[test]
-    fn the_default_sizes_narrow_to_the_train_split() {
-        assert_eq!(
-            super::default_sizes_within(210),
-            (vec![0, 100], vec![300, 1000, 3000])
-        );
-        assert_eq!(
-            super::default_sizes_within(3000),
-            (super::DEFAULT_SIZES.to_vec(), vec![])
-        );
-        assert_eq!(
-            super::default_sizes_within(0),
-            (vec![0], vec![100, 300, 1000, 3000])
-        );
-    }
-
     use super::*;
     use softtouch_trainer::Example;
 
@@ -318,6 +333,42 @@ mod tests {
             val: (0..val).map(ex).collect(),
             test: (0..3).map(ex).collect(),
         }
+    }
+
+    #[test]
+    fn the_default_sizes_narrow_to_the_train_split() {
+        assert_eq!(
+            super::default_sizes_within(210),
+            (vec![0, 100], vec![300, 1000, 3000])
+        );
+        assert_eq!(
+            super::default_sizes_within(3000),
+            (super::DEFAULT_SIZES.to_vec(), vec![])
+        );
+        assert_eq!(
+            super::default_sizes_within(0),
+            (vec![0], vec![100, 300, 1000, 3000])
+        );
+        // Without --samples: narrowed and said; asked for: sorted, once each, checked.
+        let small = splits(210, 30);
+        assert_eq!(
+            sizes_to_run(None, &small).ok(),
+            Some((
+                vec![0, 100],
+                Some("--samples: [300, 1000, 3000] left out, the train split holds 210".into())
+            ))
+        );
+        assert_eq!(
+            sizes_to_run(Some(&[100, 0, 100]), &small).ok(),
+            Some((vec![0, 100], None))
+        );
+        assert!(sizes_to_run(Some(&[0, 300]), &small).is_err());
+        assert!(sizes_to_run(Some(&[1]), &small).is_err());
+        assert!(sizes_to_run(Some(&[]), &small).is_err());
+        assert!(
+            sizes_to_run(None, &splits(210, 1)).is_err(),
+            "validation of 1"
+        );
     }
 
     #[test]

@@ -28,12 +28,12 @@ pub mod copy;
 pub mod datasets;
 pub mod dialect;
 mod event;
-pub mod file;
 mod grasp;
 mod grasp_calibration;
 mod models;
 pub mod report;
 mod results;
+pub mod sqlite_file;
 pub use event::EventKind;
 pub use grasp::{
     GraspSessionRow, GraspTrace, GraspTrialKey, GraspTrialRow, TRACE_ENCODING, TraceFrame,
@@ -378,15 +378,15 @@ impl Store {
         let DbTarget::File(path) = &target else {
             return Self::connect(target).await;
         };
-        match file::inspect(path)? {
-            file::DbFile::NotSqlite { starts_with } => {
-                return Err(file::not_a_database(path, starts_with));
+        match sqlite_file::inspect(path)? {
+            sqlite_file::DbFile::NotSqlite { starts_with } => {
+                return Err(sqlite_file::not_a_database(path, starts_with));
             }
-            file::DbFile::Empty => tracing::warn!(
+            sqlite_file::DbFile::Empty => tracing::warn!(
                 "{} is an empty file: setting it up as a new database",
                 path.display()
             ),
-            file::DbFile::Missing | file::DbFile::Sqlite => {}
+            sqlite_file::DbFile::Missing | sqlite_file::DbFile::Sqlite => {}
         }
         Self::connect(target).await
     }
@@ -403,11 +403,13 @@ impl Store {
         let DbTarget::File(path) = &target else {
             return Self::connect(target).await;
         };
-        match file::inspect(path)? {
-            file::DbFile::Sqlite => Self::connect(target).await,
-            file::DbFile::Missing => Err(StoreError::NoDatabase(path.clone())),
-            file::DbFile::Empty => Err(StoreError::EmptyFile { path: path.clone() }),
-            file::DbFile::NotSqlite { starts_with } => Err(file::not_a_database(path, starts_with)),
+        match sqlite_file::inspect(path)? {
+            sqlite_file::DbFile::Sqlite => Self::connect(target).await,
+            sqlite_file::DbFile::Missing => Err(StoreError::NoDatabase(path.clone())),
+            sqlite_file::DbFile::Empty => Err(StoreError::EmptyFile { path: path.clone() }),
+            sqlite_file::DbFile::NotSqlite { starts_with } => {
+                Err(sqlite_file::not_a_database(path, starts_with))
+            }
         }
     }
 
@@ -523,12 +525,12 @@ impl Store {
     }
 
     /// Close the pool. On SQLite, first copy the write-ahead log into the database
-    /// file ([`file::checkpoint`]), so that the `.db` file alone holds everything
+    /// file ([`sqlite_file::checkpoint`]), so that the `.db` file alone holds everything
     /// committed (what another process is still writing stays in the log until it
     /// closes); PostgreSQL's commits are the server's from the start.
     pub async fn close(self) {
         if self.dialect == Dialect::Sqlite
-            && let Err(e) = file::checkpoint_on(&self.pool).await
+            && let Err(e) = sqlite_file::checkpoint_on(&self.pool).await
         {
             tracing::debug!("checkpoint on close of {}: {e}", self.target.display());
         }
@@ -542,7 +544,7 @@ impl Store {
     /// The query fails.
     pub async fn database_bytes(&self) -> Result<u64, StoreError> {
         match &self.target {
-            DbTarget::File(path) => Ok(file::db_size(path).total()),
+            DbTarget::File(path) => Ok(sqlite_file::db_size(path).total()),
             DbTarget::Postgres(_) => {
                 let n: i64 = sqlx::query_scalar("SELECT pg_database_size(current_database())")
                     .fetch_one(&self.pool)

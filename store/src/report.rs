@@ -99,17 +99,17 @@ impl ReadOnly {
 
 /// What must be at a SQLite path before a reader opens it.
 fn check_file(path: &Path) -> Result<(), ReadError> {
-    match crate::file::inspect(path).map_err(|e| ReadError::NotADatabase(Box::new(e)))? {
-        crate::file::DbFile::Sqlite => Ok(()),
-        crate::file::DbFile::Missing => Err(ReadError::NoDatabase(path.to_owned())),
-        crate::file::DbFile::Empty => {
+    match crate::sqlite_file::inspect(path).map_err(|e| ReadError::NotADatabase(Box::new(e)))? {
+        crate::sqlite_file::DbFile::Sqlite => Ok(()),
+        crate::sqlite_file::DbFile::Missing => Err(ReadError::NoDatabase(path.to_owned())),
+        crate::sqlite_file::DbFile::Empty => {
             Err(ReadError::NotADatabase(Box::new(StoreError::EmptyFile {
                 path: path.to_owned(),
             })))
         }
-        crate::file::DbFile::NotSqlite { starts_with } => Err(ReadError::NotADatabase(Box::new(
-            crate::file::not_a_database(path, starts_with),
-        ))),
+        crate::sqlite_file::DbFile::NotSqlite { starts_with } => Err(ReadError::NotADatabase(
+            Box::new(crate::sqlite_file::not_a_database(path, starts_with)),
+        )),
     }
 }
 

@@ -83,11 +83,11 @@ impl DbTarget {
     }
 
     /// The URL sqlx's `Any` driver connects by, and the engine behind it; a SQLite file
-    /// is opened in `sqlite_mode` (`rwc`, `rw`, `ro`: see [`crate::file::sqlite_url`]).
+    /// is opened in `sqlite_mode` (`rwc`, `rw`, `ro`: see [`crate::sqlite_file::sqlite_url`]).
     pub(crate) fn url_and_dialect(&self, sqlite_mode: &str) -> (String, crate::Dialect) {
         match self {
             Self::File(path) => (
-                crate::file::sqlite_url(path, sqlite_mode),
+                crate::sqlite_file::sqlite_url(path, sqlite_mode),
                 crate::Dialect::Sqlite,
             ),
             Self::Postgres(url) => (url.expose().to_owned(), crate::Dialect::Postgres),

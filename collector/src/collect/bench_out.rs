@@ -271,7 +271,7 @@ pub fn time_rigs(
 /// (measure after the store is closed, when the log has been folded in).
 #[must_use]
 pub fn db_size_line(db: &Path) -> String {
-    let size = crate::store::file::db_size(db).total();
+    let size = crate::store::sqlite_file::db_size(db).total();
     format!(
         "database size: {:.1} MB ({})\n",
         size as f64 / 1e6,

@@ -7,7 +7,7 @@
 //!   database without samples.
 
 use crate::store::StoreError;
-use crate::store::file::free_bytes;
+use crate::store::sqlite_file::free_bytes;
 use softtouch_schemas::{ContactPose, FrameFormat, FrameMeta, SceneSpec, TimestampNs};
 use std::path::Path;
 

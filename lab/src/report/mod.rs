@@ -3,6 +3,8 @@
 //!
 //! - `data.rs`: the content, read through the store's read-only rows (`store::report`:
 //!   the report never writes).
+//! - `grasp_sessions.rs`: the stored grasp sessions the Grasping section shows, their
+//!   tables and the traces its viewer draws.
 //! - `predict.rs`: predicted against true on a downsampled test split (Figure 2b).
 //! - `results.rs`: the experiment verbs' stored results (Figure 5, land to water,
 //!   sweeps), their tables read by column.
@@ -19,7 +21,7 @@
 
 mod csv;
 mod data;
-mod grasp;
+mod grasp_sessions;
 mod page;
 mod predict;
 mod results;
@@ -181,7 +183,7 @@ pub(crate) struct Content {
     pub models: Vec<ModelData>,
     pub sweeps: Vec<csv::SweepFile>,
     pub collection: Option<csv::CollectionFile>,
-    pub grasp: Vec<grasp::GraspData>,
+    pub grasp: Vec<grasp_sessions::GraspData>,
     /// The experiment verbs' stored results.
     pub results: results::Results,
     /// Stored results that could not be read (each costs its part, not the page).
@@ -277,7 +279,7 @@ async fn gather(
         models,
         sweeps,
         collection,
-        grasp: grasp::gather(pool).await?,
+        grasp: grasp_sessions::gather(pool).await?,
         results,
         result_problems,
     })

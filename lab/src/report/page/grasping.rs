@@ -3,7 +3,7 @@
 //! reasons per cell), its wall time, and a viewer of chosen trials' traces.
 
 use super::*;
-use crate::report::grasp::{GraspData, medium};
+use crate::report::grasp_sessions::{GraspData, medium};
 use crate::store::GraspTrace;
 use base64::Engine as _;
 

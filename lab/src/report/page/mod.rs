@@ -235,7 +235,7 @@ fn summary_section(c: &Content) -> Markup {
                             (g.cells.iter().filter(|cell| cell.object.is_none()).map(|cell| format!(
                                 "σ {} mm {} {} {}/{} ({})",
                                 cell.sigma_mm,
-                                crate::report::grasp::medium(cell.medium),
+                                crate::report::grasp_sessions::medium(cell.medium),
                                 cell.mode.as_str(),
                                 cell.held,
                                 cell.trials,
