@@ -630,7 +630,14 @@ fn run_move(
                 }
             },
             franka::ControllerMode::CartesianImpedance,
-            true,
+            // No client-side rate limiter (libfranka 0.21's default: "it could distort
+            // your motion"). The plan above is within the limits already and a function
+            // of the robot's clock alone, so after a lost cycle the command is where the
+            // robot's extrapolation is. The limiter instead steps each command from the
+            // pose and derivatives the last state reported, and where those two disagree
+            // (franka-sim packing a state while it applies a command) it brakes a smooth
+            // plan into the jump it is there to prevent: 17 m/s² read, limit 9.
+            false,
             franka::MAX_CUTOFF_FREQUENCY,
         )
         .map_err(err)
