@@ -122,10 +122,11 @@ impl MotionLimits {
         let d = Self::default();
         Self {
             accel_m_s2: a * m,
-            jerk_m_s3: j * m,
+            // Jerk within what one lost cycle leaves room for (reach::JERK_MARGIN).
+            jerk_m_s3: j * m.min(reach::JERK_MARGIN),
             rot_speed_rad_s: rv * m,
             rot_accel_rad_s2: ra * m,
-            rot_jerk_rad_s3: rj * m,
+            rot_jerk_rad_s3: rj * m.min(reach::JERK_MARGIN),
             brake_accel_m_s2: d.brake_accel_m_s2,
             brake_jerk_m_s3: d.brake_jerk_m_s3,
             max_speed_m_s: (v * m).min(MAX_SPEED_M_S),

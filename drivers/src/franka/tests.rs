@@ -332,6 +332,10 @@ fn moves_use_the_margin_of_the_robots_own_cartesian_limits() {
     let fer = MotionLimits::for_robot(Robot::Fer, 1.0);
     assert!((fer.max_speed_m_s - 1.7).abs() < 1e-12);
     assert!((fer.rot_accel_rad_s2 - 25.0).abs() < 1e-12);
+    // Jerk never above the share one lost cycle leaves room for, whatever the margin.
+    assert!((fr3.jerk_m_s3 - 4500.0 * super::reach::JERK_MARGIN).abs() < 1e-9);
+    assert!((fer.jerk_m_s3 - 6500.0 * super::reach::JERK_MARGIN).abs() < 1e-9);
+    assert!((fer.rot_jerk_rad_s3 - 12500.0 * super::reach::JERK_MARGIN).abs() < 1e-9);
     // A margin out of (0, 1] is the default one.
     for bad in [0.0, -1.0, 2.0, f64::NAN] {
         assert_eq!(

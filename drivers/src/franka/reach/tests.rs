@@ -176,8 +176,7 @@ fn a_move_too_fast_for_a_joint_is_slowed_to_its_limits_and_one_out_of_reach_refu
     // speed (joint 7's limit is 5.26 rad/s) it must be slowed to 80 % of the FR3's
     // limit there, and 20 rad/s² (joint 7's limit is 10) to within 80 % of 10.
     let turn = from.compose(&ArmPose::from_translation_yaw([0.0; 3], 1.0));
-    let s =
-        path_scale(&kin, Robot::Fr3, &q0, &from, &turn, [6.0, 20.0, 1000.0]).expect("reachable");
+    let s = path_scale(&kin, Robot::Fr3, &q0, &from, &turn, [6.0, 20.0, 500.0]).expect("reachable");
     let (lower, upper) = Robot::Fr3.velocity_limits(&q0);
     let allowed = VELOCITY_MARGIN * upper[6].min(-lower[6]);
     assert!(
