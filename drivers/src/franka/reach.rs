@@ -87,10 +87,10 @@ pub const RATE_MARGIN: f64 = 0.5;
 
 /// The share of each jerk limit, joint and Cartesian, a planned move may use. A lost
 /// cycle is extrapolated at constant acceleration, and the resumed command is
-/// differenced against that guess: the jerk read there is 3.3-3.7 times the plan's
-/// (franka-sim, traced: a rotational jerk planned at 0.3 of 8 500 rad/s³ read 9 322;
-/// joint 2 at 1 700 rad/s³ read 5 583, limit 5 000). At 0.2 one lost cycle stays within
-/// the limit; the ramps it lengthens last milliseconds.
+/// differenced against that guess, which reads a few times the plan's jerk (franka-sim,
+/// traced: joint 2 planned at about 1 700 rad/s³, at 0.5 of its limit's share, read
+/// 5 583 after one lost cycle, limit 5 000). At 0.2 one lost cycle stays within the
+/// limit; the ramps it lengthens last milliseconds.
 pub const JERK_MARGIN: f64 = 0.2;
 
 /// The FR3's and Panda's "ready" joints (libfranka's examples): where `config check`
