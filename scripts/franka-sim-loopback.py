@@ -31,9 +31,12 @@ sys.setswitchinterval(0.0002)
 
 from franka_sim import FrankaSimServer  # noqa: E402 (after the thread settings above)
 
+log = logging.getLogger("franka-sim-loopback")
+
 
 class LoopbackServer(FrankaSimServer):
-    #: Whether a command that missed its cycle is dropped, as the FCI does.
+    #: Whether a command that missed its cycle is dropped, as the FCI does
+    #: (main sets it from --apply-late).
     drop_late = True
 
     def _absorb_within_motion_limits(self, command, *, fresh):
@@ -46,7 +49,7 @@ class LoopbackServer(FrankaSimServer):
         # read as 5500-9300 rad/s^3 of jerk and was aborted. A 1 kHz client is what the
         # FCI serves, so the harness drops it; the cycle still counts as lost.
         if self.drop_late and not fresh:
-            logging.getLogger("franka-sim-loopback").warning(
+            log.warning(
                 "dropped the command answering state %s: it came after the next state "
                 "went out (the FCI drops it; the extrapolation stands)",
                 command.get("message_id"),
@@ -67,7 +70,6 @@ def main():
     p.add_argument("--apply-late", action="store_true",
                    help="apply a command that missed its cycle, as franka-sim does, instead of dropping it as the FCI does")
     args = p.parse_args()
-    LoopbackServer.drop_late = not args.apply_late
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     enforce = not args.no_enforce
@@ -78,6 +80,7 @@ def main():
         enforce_comm_constraints=enforce,
         enforce_motion_limits=enforce,
     )
+    server.drop_late = not args.apply_late
     try:
         server.start()
     except KeyboardInterrupt:

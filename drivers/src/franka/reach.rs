@@ -76,7 +76,8 @@ impl Robot {
 /// inverse kinematics is not the one here, and its OTG overshoots the cruise speed.
 pub const VELOCITY_MARGIN: f64 = 0.8;
 
-/// The share of each joint acceleration and jerk limit a planned move may use. The
+/// The share of each joint acceleration limit a planned move may use (jerk has its
+/// own, [`JERK_MARGIN`]). The
 /// robot judges a Cartesian pose stream on the joint acceleration and jerk of its own
 /// inverse kinematics of each commanded pose, differenced at 1 kHz; its redundancy
 /// resolution is not the one here, and a cycle lost under load is differenced against
