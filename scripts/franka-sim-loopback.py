@@ -5,14 +5,14 @@
 starts the same server (franka_sim.FrankaSimServer, both enforcement options on
 unless told otherwise) on 127.0.0.1, lets the kernel pick the port (port 0), and
 prints one line `FRANKA_SIM_PORT=<port>` on stdout once it listens, for the test
-harness to read. The FR3 model comes from $FR3_MJCF (../shared/rigs/fr3_nomesh.xml),
+harness to read. The FR3 model comes from $FR3_MJCF (rigs/fr3/fr3_nomesh.xml),
 so nothing is downloaded.
 
 Where franka-sim differs from the FCI's documentation, this follows the documentation:
 a command that missed its cycle is dropped, not applied (`--apply-late` restores
 franka-sim's way). And it keeps the server's threads on time on a small host (below).
 
-    FR3_MJCF=../shared/rigs/fr3_nomesh.xml python3 scripts/franka-sim-loopback.py
+    FR3_MJCF=rigs/fr3/fr3_nomesh.xml python3 scripts/franka-sim-loopback.py
 """
 import argparse
 import logging

@@ -758,19 +758,16 @@ impl Arm for ThroughFci {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 async fn grasp_trials_on_the_rig_lift_and_set_down_through_fci() {
-    use softtouch_drivers::hande::{self, HandE, HandEConfig, HandEService};
-    use softtouch_drivers::{Clock, Gripper};
-    use softtouch_grasp::{CalibrationConfig, OperatorInput, calibrate_ends, calibrate_stiffness};
-    use softtouch_lab::grasp::calibration::{config_for, rig_setup_hash, to_row, top_for};
+    use common::hand_e_rig::{HandERig, calibrated_hand_e};
+    use softtouch_grasp::OperatorInput;
     use softtouch_lab::grasp::trials::rig::{
         Operator, RigTrialDevices, run_rig_trials, start_rig_session,
     };
     use softtouch_lab::grasp::trials::{RunEnd, TrialPlan, load_scenes};
     use softtouch_schemas::Medium;
     use softtouch_schemas::rig::{GraspObjectSetup, GraspSetup};
-    use softtouch_sim::{GraspObject, SoftGraspArm, soft_grasp};
+    use softtouch_sim::{GraspObject, SoftGraspArm};
     use softtouch_store::Store;
-    use softtouch_trainer::Predictor;
 
     const MODEL: &str = "air-svae";
     const OBJECT: &str = "cylinder";
@@ -834,45 +831,25 @@ async fn grasp_trials_on_the_rig_lift_and_set_down_through_fci() {
     });
 
     // The soft grasp behind the Hand-E server; the calibration over the pty.
-    let clock = TokioClock::new();
-    let (gripper, camera, handle) =
-        soft_grasp(&scene, object.clone(), 30.0, 7, clock).expect("builds");
-    let service = HandEService::new(gripper, 9).with_watchdog(Duration::from_secs(1));
-    tokio::spawn(hande::serve_serial(
-        service.clone(),
-        hande::open_port(&pair.b).expect("open pty b"),
-        std::future::pending(),
-    ));
-    let shared: Arc<dyn Clock> = Arc::new(clock);
-    let mut hand_e: Box<dyn Gripper> = Box::new(HandE::new(
-        hande::open_port(&pair.a).expect("open pty a"),
-        HandEConfig::default(),
-        shared.clone(),
-    ));
-    let mut camera: Box<dyn softtouch_drivers::Camera> = Box::new(camera);
-    handle.set_object(false).expect("clear");
-    let ends = calibrate_ends(hand_e.as_mut(), &clock, &CalibrationConfig::default())
-        .await
-        .expect("ends");
-    handle.set_object(true).expect("object back");
-    let mut predictor = Predictor::from_bytes(&bytes).expect("loads");
-    let projection = softtouch_lab::grasp::sim::projection().expect("projection");
-    let cal = calibrate_stiffness(
-        hand_e.as_mut(),
-        camera.as_mut(),
-        &mut predictor,
-        &projection,
-        &ends.stroke,
-        shared.as_ref(),
-        &config_for(&object, top_for(1.5)),
+    let HandERig {
+        hand_e,
+        camera,
+        handle,
+        service,
+        clock,
+        shared,
+        // Held to the end: the server stops when it is dropped.
+        server_stop: _server_stop,
+        ..
+    } = calibrated_hand_e(
+        &pair,
+        &scene,
+        (OBJECT, &object),
+        (MODEL, &bytes),
+        &rig,
+        &store,
     )
-    .await
-    .expect("the finger's estimate sees the cylinder");
-    let sha = softtouch_collector::dataset::export::sha256_hex(&bytes);
-    let setup = rig_setup_hash(&rig).expect("hash");
-    let mut row = to_row(&cal, ("rig", &setup), (MODEL, &sha), OBJECT, None).expect("row");
-    row.mm_per_count = ends.stroke.mm_per_count;
-    store.insert_grasp_calibration(&row).await.expect("stored");
+    .await;
 
     // The arm: the real driver on franka-sim, the grasp world told every move.
     let real = connect(&sim).await;

@@ -20,6 +20,7 @@ use crate::common;
 use crate::pty;
 use pty::pty_pair;
 
+use common::hand_e_rig::{HandERig, calibrated_hand_e};
 use common::{tempdir, tiny_model};
 
 use std::io::Write;
@@ -27,12 +28,8 @@ use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use softtouch_drivers::hande::{self, HandE, HandEConfig, HandEService};
-use softtouch_drivers::{Arm, Clock, Gripper, TokioClock};
-use softtouch_grasp::{
-    CalibrationConfig, OperatorInput, WristConfig, calibrate_ends, calibrate_stiffness,
-};
-use softtouch_lab::grasp::calibration::{config_for, rig_setup_hash, to_row, top_for};
+use softtouch_drivers::{Arm, Clock, Gripper};
+use softtouch_grasp::{OperatorInput, WristConfig};
 use softtouch_lab::grasp::trials::rig::twist::{RigTwistSettings, twist_on_rig};
 use softtouch_lab::grasp::trials::rig::{
     Operator, RigSession, RigTrialDevices, object_setup_on_rig, resume_rig_session, run_rig_trials,
@@ -41,7 +38,7 @@ use softtouch_lab::grasp::trials::rig::{
 use softtouch_lab::grasp::trials::{RunEnd, TrialPlan, TrialsError, load_scenes};
 use softtouch_schemas::rig::{GraspObjectSetup, GraspSetup};
 use softtouch_schemas::{ArmPose, Medium, RigConfig, TimestampNs};
-use softtouch_sim::{GraspObject, HoldState, SoftGraspArm, SoftGraspHandle, soft_grasp};
+use softtouch_sim::{GraspObject, HoldState, SoftGraspArm, SoftGraspHandle};
 use softtouch_store::Store;
 use softtouch_trainer::Predictor;
 
@@ -206,51 +203,26 @@ async fn a_rig_session_runs_judges_stops_and_ends_safe_on_the_simulated_rig() {
     let rig = rig(&pair.a, object.width_m * 1000.0 - 8.0);
 
     // The soft grasp behind the Hand-E server, with the object resting between the
-    // open fingers for the calibration.
-    let clock = TokioClock::new();
-    let (gripper, camera, handle) =
-        soft_grasp(&scene, object.clone(), 30.0, 7, clock).expect("builds");
-    let service = HandEService::new(gripper, 9).with_watchdog(Duration::from_secs(1));
-    let (server_stop, server_stopped) = tokio::sync::oneshot::channel::<()>();
-    let server = tokio::spawn(hande::serve_serial(
-        service.clone(),
-        hande::open_port(&pair.b).expect("open pty b"),
-        async move {
-            let _ = server_stopped.await;
-        },
-    ));
-    let shared: Arc<dyn Clock> = Arc::new(clock);
-    let mut hand_e: Box<dyn Gripper> = Box::new(HandE::new(
-        hande::open_port(&pair.a).expect("open pty a"),
-        HandEConfig::default(),
-        shared.clone(),
-    ));
-    let mut camera: Box<dyn softtouch_drivers::Camera> = Box::new(camera);
-
-    // `grasp calibrate --rig`'s closing, over the pty: the session's K comes from it.
-    handle.set_object(false).expect("clear");
-    let ends = calibrate_ends(hand_e.as_mut(), &clock, &CalibrationConfig::default())
-        .await
-        .expect("ends");
-    handle.set_object(true).expect("object back");
-    let mut predictor = Predictor::from_bytes(&bytes).expect("loads");
-    let projection = softtouch_lab::grasp::sim::projection().expect("projection");
-    let cal = calibrate_stiffness(
-        hand_e.as_mut(),
-        camera.as_mut(),
-        &mut predictor,
-        &projection,
-        &ends.stroke,
-        shared.as_ref(),
-        &config_for(&object, top_for(1.5)),
+    // open fingers for `grasp calibrate --rig`'s closing, over the pty: the session's
+    // K comes from it.
+    let HandERig {
+        hand_e,
+        camera,
+        handle,
+        service,
+        server,
+        server_stop,
+        clock,
+        shared,
+    } = calibrated_hand_e(
+        &pair,
+        &scene,
+        (OBJECT, &object),
+        (MODEL, &bytes),
+        &rig,
+        &store,
     )
-    .await
-    .expect("the finger's estimate sees the cylinder");
-    let sha = softtouch_collector::dataset::export::sha256_hex(&bytes);
-    let setup = rig_setup_hash(&rig).expect("hash");
-    let mut row = to_row(&cal, ("rig", &setup), (MODEL, &sha), OBJECT, None).expect("row");
-    row.mm_per_count = ends.stroke.mm_per_count;
-    store.insert_grasp_calibration(&row).await.expect("stored");
+    .await;
 
     lap("calibrated over the pty");
     // The arm starts at the safe pose, over the object's place (the object is taken

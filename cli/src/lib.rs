@@ -1,4 +1,5 @@
-//! The `softtouch` command line: one file per verb group, each parsing its arguments,
+//! The `softtouch` command line: one module per verb group (a file, or a folder with a
+//! file per verb: `grasp/`, `bench/`), each parsing its arguments,
 //! calling the collector and lab libraries and printing; exit codes. It holds no
 //! experiment, store or device logic of its own.
 //!
@@ -13,18 +14,12 @@
 //! (arguments, config or scene files, a missing database or run).
 
 pub mod bench;
-pub mod bench_grasp;
-pub mod bench_train;
 pub mod collect;
 pub mod config;
 pub mod dataset;
 pub mod db;
 pub mod eval;
 pub mod grasp;
-pub mod grasp_calibrate;
-pub mod grasp_loop;
-pub mod grasp_trials;
-pub mod grasp_turns;
 #[cfg(test)]
 pub(crate) mod house_rules;
 pub mod latent;

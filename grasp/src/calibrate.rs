@@ -1,5 +1,5 @@
 //! End calibration of a parallel gripper: the usable count range of a Hand-E is
-//! narrower than 0–255 and differs per gripper (PROTOCOLS.md §2.x), so before a force
+//! narrower than 0–255 and differs per gripper (docs/PROTOCOLS.md §2.x), so before a force
 //! loop the fingers close fully and open fully with a low force, the reached positions
 //! are read back, and the [`Stroke`] the stepper clamps to is derived from them.
 //!

@@ -7,7 +7,7 @@
 //! and, where a [`TrueForce`] knows it (simulation, a reference sensor), F_true.
 //! Nothing in the loop reads the truth; it is recorded beside the estimate only.
 //!
-//! Hand-E facts the loop respects (PROTOCOLS.md §2, §2.x):
+//! Hand-E facts the loop respects (docs/PROTOCOLS.md §2, §2.x):
 //! - **Keep-alive.** The gripper faults (0x09) after about 1 s without a command, so
 //!   the current request is re-sent when [`ControllerConfig::keep_alive`] has passed.
 //! - **Handshake.** After a request the loop waits for its echo in gPR before it steps

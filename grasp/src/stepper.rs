@@ -25,7 +25,7 @@ use crate::GraspError;
 /// The calibrated travel of a gripper in counts, and the opening per count.
 ///
 /// The usable count range of a Hand-E is narrower than 0–255 and is measured per
-/// gripper (PROTOCOLS.md §2.x); the loop never commands outside it.
+/// gripper (docs/PROTOCOLS.md §2.x); the loop never commands outside it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Stroke {
     /// Count of the fully open end.

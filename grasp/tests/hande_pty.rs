@@ -11,105 +11,18 @@
 mod pty;
 use pty::pty_pair;
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 use std::time::Duration;
 
-use rand::{RngExt, SeedableRng};
 use softtouch_drivers::hande::{self, HandE, HandEConfig, HandEService};
 use softtouch_drivers::{Clock, Gripper, TokioClock};
 use softtouch_grasp::{
-    CalibrationConfig, Controller, ControllerConfig, Projection, StepperConfig, TrueForce,
-    calibrate_ends, hold_metrics,
+    CalibrationConfig, Controller, ControllerConfig, StepperConfig, calibrate_ends, hold_metrics,
 };
-use softtouch_schemas::{ArmPose, ContactPose, TimestampNs};
-use softtouch_sim::{GraspObject, SoftGraspHandle, soft_grasp};
-use softtouch_trainer::labels::label_from_si;
-use softtouch_trainer::{
-    Example, ModelConfig, ModelKind, Predictor, Preprocess, Quiet, Splits, TrainConfig, train,
-};
+use softtouch_sim::{GraspObject, soft_grasp};
 
-const ROD: &str = "circle-20";
-const DIAMETER_M: f64 = 0.02;
-
-/// A tiny SVAE trained on 240 presses of the 20 mm rod (16×16, width 4; a few seconds).
-fn predictor() -> Predictor {
-    static BYTES: OnceLock<Vec<u8>> = OnceLock::new();
-    let bytes = BYTES.get_or_init(|| {
-        let mut scene = softtouch_schemas::defaults::scene();
-        scene.rods.push(softtouch_schemas::RodSpec {
-            name: ROD.into(),
-            shape: softtouch_schemas::RodShape::Circle,
-            size_m: DIAMETER_M,
-            aspect: 1.0,
-        });
-        let sim = softtouch_sim::SceneSim::new(&scene, 3).expect("scene");
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
-        let p = Preprocess {
-            size_px: 16,
-            ..Preprocess::default()
-        };
-        let mut all: Vec<Example> = (0..240)
-            .map(|i| {
-                let pose = ContactPose {
-                    x_m: rng.random_range(-0.004..=0.03),
-                    z_m: rng.random_range(-0.01..=0.01),
-                    theta_rad: rng.random_range(-0.3..=0.3),
-                };
-                let r = sim.render(ROD, &pose, i, 0.0).expect("renders");
-                let w = r.wrench_in_sensor;
-                Example {
-                    image: p.apply(640, 480, r.image.as_raw()).expect("preprocesses"),
-                    label: label_from_si(w.force_n, w.torque_nm),
-                }
-            })
-            .collect();
-        let test = all.split_off(200);
-        let val = all.split_off(180);
-        let splits = Splits {
-            train: all,
-            val,
-            test,
-        };
-        let config = ModelConfig {
-            kind: ModelKind::Svae,
-            width: 4,
-            latent: 8,
-            preprocess: p,
-            ..ModelConfig::default()
-        };
-        let t = TrainConfig {
-            epochs: 25,
-            batch_size: 16,
-            learning_rate: 3e-3,
-            lr_decay: 0.95,
-            patience: 0,
-            ..TrainConfig::default()
-        };
-        let trained = train(&config, &t, &splits, None, &mut Quiet).expect("trains");
-        trained.artifact.to_bytes().expect("serialises")
-    });
-    Predictor::from_bytes(bytes).expect("loads")
-}
-
-fn projection() -> Projection {
-    Projection::along_world_y(ArmPose::from_translation_yaw(
-        [0.0; 3],
-        -std::f64::consts::FRAC_PI_2,
-    ))
-    .expect("valid")
-}
-
-#[derive(Debug)]
-struct SimTruth(SoftGraspHandle, Projection);
-
-impl TrueForce for SimTruth {
-    fn true_force_n(&mut self, t: TimestampNs) -> Option<f64> {
-        self.0
-            .true_wrench(t)
-            .ok()
-            .and_then(|w| self.1.grip_force_n(&w))
-    }
-}
+mod common;
+use common::{DIAMETER_M, ROD, SimTruth, predictor, projection};
 
 #[tokio::test]
 async fn the_loop_drives_a_hand_e_over_a_pty_and_keeps_it_alive() {

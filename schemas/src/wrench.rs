@@ -173,7 +173,7 @@ impl fmt::Display for Wrench {
 /// The status word a Net F/T (or any sensor, mapped onto it) reports with a reading.
 ///
 /// 0 is OK. Bit 31 is the error summary; `0x8001_0000` ("monitor condition latched")
-/// is only a warning, any other non-zero value is a fault (PROTOCOLS.md §1.1).
+/// is only a warning, any other non-zero value is a fault (docs/PROTOCOLS.md §1.1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 #[serde(transparent)]
 pub struct FtStatus(pub u32);

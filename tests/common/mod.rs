@@ -2,6 +2,8 @@
 //! its own subset of these).
 #![allow(dead_code)]
 
+pub(crate) mod hand_e_rig;
+
 use softtouch_collector::store::DbTarget;
 use std::path::{Path, PathBuf};
 use std::process::Output;

@@ -54,7 +54,7 @@ impl FrankaSim {
     pub(crate) fn start(python: &Path, dir: &Path) -> Self {
         let log = dir.join("franka-sim.log");
         let err = std::fs::File::create(&log).unwrap_or_else(|e| panic!("{e}"));
-        let mjcf = root().join("../shared/rigs/fr3_nomesh.xml");
+        let mjcf = root().join("rigs/fr3/fr3_nomesh.xml");
         assert!(
             mjcf.exists(),
             "{} is missing: franka-sim needs the FR3 model offline",

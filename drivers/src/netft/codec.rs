@@ -2,7 +2,7 @@
 //! and the calibration request and reply (TCP 49151). Every decoder takes any bytes
 //! and returns an error for bytes that do not follow the protocol; none panics.
 //!
-//! All fields are big-endian (PROTOCOLS.md §1.1).
+//! All fields are big-endian (docs/PROTOCOLS.md §1.1).
 
 /// UDP port of the RDT stream.
 pub const RDT_PORT: u16 = 49152;

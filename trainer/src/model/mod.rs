@@ -420,7 +420,8 @@ mod tests {
 
     #[test]
     fn the_training_graph_s_work_is_counted_as_the_pytorch_peer_counts_it() {
-        // torch_light_bench.py's fwd_macs_train_graph_per_img and stem_macs_per_img.
+        // bench/torch_peer.py's forward_macs_per_image (its JSON's fwd_macs_train_graph_per_img
+        // and stem_macs_per_img).
         for (size_px, width, forward, stem) in [
             (32, 16, 3_084_480, 36_864),
             (32, 8, 821_440, 18_432),

@@ -1,7 +1,7 @@
 //! Training throughput (`softtouch bench train`): the very step [`super::train`] runs
 //! (batch assembly, latent noise, forward and loss read back, backward, Adam), timed
 //! per phase at a fixed batch size, with the process's CPU time to say how many cores
-//! it kept busy. The PyTorch peer (`shared/peers/torch_light_bench.py`) times the same
+//! it kept busy. The PyTorch peer (`bench/torch_peer.py`) times the same
 //! step the same way: images/s from the total time of the timed steps.
 
 use std::time::Instant;

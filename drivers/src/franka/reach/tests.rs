@@ -6,7 +6,7 @@ use super::*;
 use softtouch_schemas::rig::WorkspaceBounds;
 use softtouch_schemas::{ContactPose, Range};
 
-/// franka-sim's FR3 home keyframe (`../shared/rigs/fr3_nomesh.xml`), its digits as
+/// franka-sim's FR3 home keyframe (`rigs/fr3/fr3_nomesh.xml`), its digits as
 /// the file writes them.
 #[allow(clippy::approx_constant)]
 const SIM_HOME_Q: [f64; 7] = [0.0, 0.0, 0.0, -1.57079, 0.0, 1.57079, -0.7853];

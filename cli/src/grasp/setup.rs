@@ -6,9 +6,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::anyhow;
 use clap::Args;
+use softtouch_grasp::Cycle;
 use softtouch_grasp::{GainCheck, GraspError};
 
-use super::{Failure, io_failure, open_existing};
+use crate::{Failure, io_failure, open_existing};
 use softtouch_lab::grasp::settings;
 use softtouch_lab::grasp::soft::{GraspRunError, LoopSettings, Setup, grasp_scene};
 
@@ -47,8 +48,8 @@ pub struct LoopArgs {
 
 /// What a grasp experiment stores: the model and the shared flags (each verb adds
 /// its own settings, hashes and tables).
-pub(super) fn loop_recorder(verb: &'static str, c: &LoopArgs) -> super::results::Recorder {
-    super::results::Recorder::new(verb)
+pub(super) fn loop_recorder(verb: &'static str, c: &LoopArgs) -> crate::results::Recorder {
+    crate::results::Recorder::new(verb)
         .model(&c.model)
         .setting("gain_flag_n_per_mm", c.gain)
         .setting("tolerance_n", c.tolerance)
@@ -180,4 +181,25 @@ pub(super) fn print_setup(
 pub(super) fn create_out_dir(dir: &Path) -> Result<(), Failure> {
     std::fs::create_dir_all(dir)
         .map_err(|e| Failure::Runtime(anyhow!("cannot create {}: {e}", dir.display())))
+}
+
+/// A line when a stop request ended the loop early: what follows is what ran.
+pub(super) fn print_stopped(
+    stopped: Option<&'static str>,
+    cycles: &[Cycle],
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    if let Some(name) = stopped {
+        let ran_s = match (cycles.first(), cycles.last()) {
+            (Some(a), Some(b)) => b.t.0.saturating_sub(a.t.0) as f64 * 1e-9,
+            _ => 0.0,
+        };
+        writeln!(
+            out,
+            "stopped by {name} after {} cycles ({ran_s:.2} s); the fingers are open; below is what ran",
+            cycles.len()
+        )
+        .map_err(io_failure)?;
+    }
+    Ok(())
 }

@@ -1,7 +1,14 @@
-//! `softtouch bench collection|ingest|model|train` (`grasp`: `bench_grasp`).
+//! `softtouch bench collection|ingest|model|train|grasp`: `grasp` in `grasp.rs`, `train`
+//! in `train.rs`, the rest here.
 
-use super::train::{ModelArgs, load};
-use super::{Failure, io_failure};
+mod grasp;
+mod train;
+
+pub use grasp::BenchGraspArgs;
+pub use train::BenchTrainArgs;
+
+use crate::train::{ModelArgs, load};
+use crate::{Failure, io_failure};
 use anyhow::anyhow;
 use clap::Args;
 use clap::Subcommand;
@@ -25,7 +32,7 @@ pub enum BenchCommand {
     #[command(after_help = "Examples:
   softtouch bench grasp --model air-svae
   softtouch bench grasp --model air-svae,air-small --gains 0.3,0.75,1.5 --wall-clock")]
-    Grasp(super::bench_grasp::BenchGraspArgs),
+    Grasp(BenchGraspArgs),
     /// Accuracy costs time, for the model: over input size, encoder width and latent
     /// size, train on a dataset and report test R², training time per epoch and
     /// inference latency at batch 1 on one core; a table, CSV and a PNG of R² against
@@ -44,11 +51,11 @@ pub enum BenchCommand {
   softtouch bench train --torch .venv-torch/bin/python --repeats 5
   SOFTTOUCH_CONV=burn softtouch bench train --torch .venv-torch/bin/python
 
-The PyTorch peer is ../shared/peers/torch_light_bench.py (its README says how to
-install PyTorch); --torch-script points elsewhere. CI does not run PyTorch.
+The PyTorch peer is bench/torch_peer.py (bench/README.md says how to install
+PyTorch); --torch-script points elsewhere. CI does not run PyTorch.
 SOFTTOUCH_CONV=burn trains with burn's own convolutions and batch norm instead of
 softtouch's kernels, to compare the two.")]
-    Train(super::bench_train::BenchTrainArgs),
+    Train(BenchTrainArgs),
     /// Accuracy costs time: sweep settle time and force/torque window on the simulated
     /// scene (whose true wrench is known); print label error against samples per hour,
     /// and write a CSV and PNG plots. Also reports where a sample's time goes.
@@ -126,9 +133,9 @@ pub async fn run(
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
     match cmd {
-        BenchCommand::Grasp(args) => super::bench_grasp::run(args, db, out).await,
+        BenchCommand::Grasp(args) => grasp::run(args, db, out).await,
         BenchCommand::Model(args) => run_bench_model(args, db, out).await,
-        BenchCommand::Train(args) => super::bench_train::run(args, db, out).await,
+        BenchCommand::Train(args) => train::run(args, db, out).await,
         BenchCommand::Collection {
             samples,
             settle,
@@ -316,7 +323,7 @@ async fn run_bench_model(
 ) -> Result<(), Failure> {
     let (base, train) = args.model.configs()?;
     let wanted = experiments::model_grid(&base, &args.sizes, &args.widths, &args.latents)?;
-    let store = super::open_existing(db).await?;
+    let store = crate::open_existing(db).await?;
     experiments::prepare_out(&args.out)?;
     let (w, h, rgb) = softtouch_lab::models::first_test_frame(&store, &args.dataset).await?;
     let mut rows = Vec::new();

@@ -1,61 +1,24 @@
-//! `softtouch grasp disturb|twist`: Figure 5's experiments that turn the gripped
-//! object (about its axis, or about the fingers' axis with the wrist loop). Each checks
-//! its flags, calls [`softtouch_lab::grasp::disturb`] or [`softtouch_lab::grasp::twist`] and prints the
-//! table; the experiment writes the CSV and the chart.
+//! `softtouch grasp twist`: Figure 5's turn about the fingers' axis with the wrist loop,
+//! on the simulator or a rig's real wrist; checks its flags, calls
+//! [`softtouch_lab::grasp::twist`] and prints the table.
 
 use std::io::Write;
 use std::path::Path;
 
 use clap::Args;
 use softtouch_grasp::WristConfig;
-use softtouch_schemas::Medium;
 
-use super::Failure;
-use super::grasp_loop::{
+use super::setup::{
     LoopArgs, bad, check_duration, create_out_dir, load_model_calibrate_and_pause, loop_settings,
     print_setup, scene_for,
 };
-use super::io_failure;
-use softtouch_lab::grasp::disturb::{
-    DisturbSettings, disturb_rows, disturb_sim, disturb_summary, print_disturb_table,
-    write_disturb_csv, write_disturb_png,
-};
+use crate::Failure;
+use crate::io_failure;
 use softtouch_lab::grasp::soft::named_object;
 use softtouch_lab::grasp::twist::{
     TwistSettings, print_twist_table, twist_rows, twist_sim, twist_summary, write_twist_csv,
     write_twist_metrics_csv, write_twist_png,
 };
-
-/// Options of `grasp disturb`.
-#[derive(Debug, Args)]
-pub struct DisturbArgs {
-    /// Force held, N; default: 0.4 on land, 1.6 in water (the scene's medium).
-    #[arg(long)]
-    pub target: Option<f64>,
-    /// Object turned (a `[[objects]]` name).
-    #[arg(long, default_value = "oval-tube")]
-    pub object: String,
-    /// The turns, degrees, one after the other (each relative to the last).
-    #[arg(
-        long,
-        value_delimiter = ',',
-        allow_negative_numbers = true,
-        default_value = "45,60,-90"
-    )]
-    pub turns_deg: Vec<f64>,
-    /// How long the force is held before the first turn, s.
-    #[arg(long, default_value_t = 2.0)]
-    pub settle_s: f64,
-    /// How long each turn takes, s.
-    #[arg(long, default_value_t = 0.5)]
-    pub turn_s: f64,
-    /// Time from one turn's start to the next (each phase), s.
-    #[arg(long, default_value_t = 3.0)]
-    pub phase_s: f64,
-    /// Shared loop options.
-    #[command(flatten)]
-    pub common: LoopArgs,
-}
 
 /// Options of `grasp twist`.
 #[derive(Debug, Args)]
@@ -100,116 +63,7 @@ pub struct TwistArgs {
     pub common: LoopArgs,
 }
 
-pub(super) async fn disturb(
-    args: DisturbArgs,
-    db: &softtouch_store::DbTarget,
-    out: &mut dyn Write,
-) -> Result<(), Failure> {
-    let c = &args.common;
-    let loop_settings = loop_settings(c)?;
-    if args.turns_deg.is_empty() || args.turns_deg.len() > 20 {
-        return Err(bad(format!(
-            "--turns-deg: expected 1 to 20 turns in degrees, found {}",
-            args.turns_deg.len()
-        )));
-    }
-    if let Some(t) = args
-        .turns_deg
-        .iter()
-        .find(|t| !(t.is_finite() && t.abs() <= 360.0))
-    {
-        return Err(bad(format!("--turns-deg {t}: expected turns within ±360°")));
-    }
-    check_duration("--settle-s", args.settle_s, true)?;
-    check_duration("--turn-s", args.turn_s, true)?;
-    check_duration("--phase-s", args.phase_s, false)?;
-    if args.phase_s <= args.turn_s {
-        return Err(bad(format!(
-            "--phase-s {}: expected longer than --turn-s {} (a phase holds after its turn)",
-            args.phase_s, args.turn_s
-        )));
-    }
-    let scene = scene_for(c)?;
-    let target = args.target.unwrap_or(match scene.medium {
-        Medium::Air => 0.4,
-        Medium::Water => 1.6,
-    });
-    let object = named_object(&scene, &args.object)?;
-    softtouch_lab::grasp::settings::check_target_n("--target", target, loop_settings.tolerance_n)?;
-    // Ctrl-C, SIGTERM or SIGHUP ends the loop after its cycle, the fingers open; the
-    // table and files then show what ran. Watched before the calibration (see `grasp
-    // follow`).
-    let signals = super::signals::SignalWatch::start();
-    let (model, calibrated) =
-        load_model_calibrate_and_pause(c, db, &scene, &object, target).await?;
-    let settings = DisturbSettings {
-        loop_settings,
-        target_n: target,
-        turns_deg: args.turns_deg.clone(),
-        settle_s: args.settle_s,
-        turn_s: args.turn_s,
-        phase_s: args.phase_s,
-    };
-    let run = disturb_sim(
-        &settings,
-        &model,
-        &scene,
-        object,
-        &calibrated,
-        Some(signals.request()),
-    )
-    .await?;
-    print_setup(&args.object, &run.setup, &loop_settings, out)?;
-    super::grasp::print_stopped(run.stopped, &run.cycles, out)?;
-    let w = io_failure;
-    writeln!(
-        out,
-        "holding {target} N ({} medium) on `{}`",
-        scene.medium, args.object
-    )
-    .map_err(w)?;
-    print_disturb_table(&disturb_rows(&run, &settings), out).map_err(w)?;
-    let flagged = run
-        .cycles
-        .iter()
-        .filter(|c| c.single_finger.is_some())
-        .count();
-    if c.fingers == 2 && flagged > 0 {
-        writeln!(
-            out,
-            "{flagged} cycles ran on one finger's estimate (the other gave none)"
-        )
-        .map_err(w)?;
-    }
-    create_out_dir(&c.out_dir)?;
-    let csv = c.out_dir.join("grasp-disturb.csv");
-    write_disturb_csv(&csv, &run)?;
-    let png = c.out_dir.join("grasp-disturb.png");
-    let drawn = if run.cycles.is_empty() {
-        " (no cycle ran: no chart)".to_owned()
-    } else {
-        write_disturb_png(&png, &run)?;
-        format!(" and {}", png.display())
-    };
-    writeln!(out, "wrote {}{drawn}", csv.display()).map_err(w)?;
-    let summary = disturb_summary(&disturb_rows(&run, &settings), target);
-    super::grasp_loop::loop_recorder("grasp disturb", c)
-        .setting("object", args.object.as_str())
-        .setting("target_n", target)
-        .setting("turns_deg", args.turns_deg.clone())
-        .setting("settle_s", args.settle_s)
-        .setting("turn_s", args.turn_s)
-        .setting("phase_s", args.phase_s)
-        .setting("gain_n_per_mm", run.setup.gain)
-        .setting("stopped_by", run.stopped)
-        .scene_hash(super::grasp_loop::scene_hash(&scene, c))
-        .table(&csv)
-        .store(db, summary, out)
-        .await
-        .map(drop)
-}
-
-pub(super) async fn twist(
+pub(super) async fn run(
     args: TwistArgs,
     db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
@@ -247,7 +101,7 @@ pub(super) async fn twist(
     // Ctrl-C, SIGTERM or SIGHUP ends the run in hand after its cycle (fingers open)
     // and skips the next; the table and files show what ran. Watched before the
     // calibration (see `grasp follow`).
-    let signals = super::signals::SignalWatch::start();
+    let signals = crate::signals::SignalWatch::start();
     let (model, calibrated) =
         load_model_calibrate_and_pause(c, db, &scene, &object, args.target).await?;
     let settings = TwistSettings {
@@ -271,7 +125,7 @@ pub(super) async fn twist(
     // The same grasp twice: its setup and warnings are printed once.
     print_setup(&args.object, &setup, &loop_settings, out)?;
     if let Some(last) = runs.last() {
-        super::grasp::print_stopped(stopped, &last.cycles, out)?;
+        super::setup::print_stopped(stopped, &last.cycles, out)?;
     }
     let w = io_failure;
     writeln!(
@@ -309,7 +163,7 @@ pub(super) async fn twist(
         .setting("hold_s", args.hold_s)
         .setting("gain_n_per_mm", setup.gain)
         .setting("stopped_by", stopped)
-        .scene_hash(super::grasp_loop::scene_hash(&scene, c))
+        .scene_hash(super::setup::scene_hash(&scene, c))
         .table(&csv)
         .table(&metrics)
         .store(db, summary, out)
@@ -342,7 +196,7 @@ async fn twist_rig(
         .map_err(|e| bad(format!("--wrist-gain / --wrist-deadband-nmm: {e}")))?;
     check_duration("--duration-s", args.duration_s, false)?;
     let rig = softtouch_collector::configs::resolve(Some(rig_path), None)?.rig;
-    let store = super::open_existing(db).await?;
+    let store = crate::open_existing(db).await?;
     let bytes = softtouch_lab::models::force_artifact(&store, &c.model).await?;
     let setup =
         object_setup_on_rig(&store, &rig, &c.model, &bytes, &args.object, c.tolerance).await?;
@@ -351,8 +205,8 @@ async fn twist_rig(
         .clone()
         .ok_or_else(|| bad("--rig: no [grasp] section".into()))?;
     let mut devices = open_rig_devices(&rig, rig_path, "twist").await?;
-    let mut operator = super::grasp_trials::terminal_operator(false);
-    let signals = super::signals::SignalWatch::start();
+    let mut operator = super::trials::terminal_operator(false);
+    let signals = crate::signals::SignalWatch::start();
     let settings = RigTwistSettings {
         object: args.object.clone(),
         target_n: args.target,
@@ -391,8 +245,8 @@ async fn twist_rig(
 
 /// What `grasp twist` stores on the simulator and on a rig alike: the loop's flags,
 /// the object, the force held and the wrist loop's settings.
-fn twist_recorder(args: &TwistArgs) -> super::results::Recorder {
-    super::grasp_loop::loop_recorder("grasp twist", &args.common)
+fn twist_recorder(args: &TwistArgs) -> crate::results::Recorder {
+    super::setup::loop_recorder("grasp twist", &args.common)
         .setting("object", args.object.as_str())
         .setting("target_n", args.target)
         .setting("wrist_gain_rad_per_nm_s", args.wrist_gain)

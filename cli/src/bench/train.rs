@@ -2,8 +2,8 @@
 //! width, where the step's time goes and how many cores it kept busy; with
 //! `--torch PYTHON`, the PyTorch peer's same step, interleaved, and the ratio.
 
-use super::train::load;
-use super::{Failure, io_failure};
+use crate::train::load;
+use crate::{Failure, io_failure};
 use anyhow::anyhow;
 use clap::Args;
 use softtouch_lab::bench_train::{Row, TorchRun, csv_text, median, parse_torch, render};
@@ -44,7 +44,7 @@ pub struct BenchTrainArgs {
     #[arg(long)]
     pub torch: Option<PathBuf>,
     /// The PyTorch peer.
-    #[arg(long, default_value = "../shared/peers/torch_light_bench.py")]
+    #[arg(long, default_value = "bench/torch_peer.py")]
     pub torch_script: PathBuf,
     /// Threads PyTorch may use (this machine's cores).
     #[arg(long, default_value_t = 2)]
@@ -87,7 +87,7 @@ fn run_torch(
         .map_err(|e| Failure::Runtime(anyhow!("the PyTorch peer at {size}×{size}/{width}: {e}")))
 }
 
-pub async fn run(
+pub(super) async fn run(
     args: BenchTrainArgs,
     db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
@@ -100,7 +100,7 @@ pub async fn run(
     if let Some(python) = &args.torch {
         if !args.torch_script.is_file() {
             return Err(Failure::BadInput(anyhow!(
-                "--torch-script {}: not a file (the peer is shared/peers/torch_light_bench.py beside the checkout)",
+                "--torch-script {}: not a file (the peer is bench/torch_peer.py in the repository: run from its root, or give its path)",
                 args.torch_script.display()
             )));
         }
@@ -123,7 +123,7 @@ pub async fn run(
     )
     .map_err(io_failure)?;
     let store = match &args.dataset {
-        Some(_) => Some(super::open_existing(db).await?),
+        Some(_) => Some(crate::open_existing(db).await?),
         None => None,
     };
     std::fs::create_dir_all(&args.out)

@@ -10,7 +10,7 @@ use clap::Args;
 use softtouch_grasp::GraspError;
 use softtouch_sim::GraspObject;
 
-use super::{Failure, io_failure, open_existing};
+use crate::{Failure, io_failure, open_existing};
 use softtouch_collector::plot::{Series, SeriesStyle, XyChart, xy_chart};
 use softtouch_lab::grasp::bench::{CSV_HEADER, Outcome, Point, Setup, csv_row, grid, run_point};
 use softtouch_lab::grasp::settings;
@@ -83,7 +83,7 @@ fn check(args: &BenchGraspArgs) -> Result<(), Failure> {
 }
 
 /// Run `bench grasp`.
-pub async fn run(
+pub(super) async fn run(
     args: BenchGraspArgs,
     db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
@@ -263,7 +263,7 @@ pub async fn run(
     writeln!(out, "wrote {} and {}", csv_path.display(), png.display()).map_err(w)?;
     let scene_hash =
         softtouch_lab::grasp::calibration::scene_setup_hash(&setup.scene, 120.0, args.seed).ok();
-    super::results::Recorder::new("bench grasp")
+    crate::results::Recorder::new("bench grasp")
         .model(&args.model[0])
         .setting("models", args.model.clone())
         .setting("object", setup.object.name.as_str())

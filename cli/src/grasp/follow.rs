@@ -1,84 +1,26 @@
-//! `softtouch grasp follow|disturb|twist|trials`: the grasp experiments of Figures 4
-//! and 5 on the simulated Hand-E with soft fingers (and `follow` on a real one),
-//! closed by a stored model's estimate. Each verb checks its flags, calls its
-//! experiment in [`softtouch_lab::grasp`], and prints its table; the experiment writes the CSV
-//! and the chart.
+//! `softtouch grasp follow`: hold each target force in turn (Figure 5), on the
+//! simulated soft-finger Hand-E or on a rig's; prints the table per target and writes
+//! the CSVs and the chart.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::anyhow;
-use clap::{Args, Subcommand};
+use clap::Args;
 use softtouch_grasp::{ControllerConfig, Cycle};
 use softtouch_trainer::Predictor;
 
-use super::grasp_loop::{
+use super::setup::{
     LoopArgs, bad, check_duration, create_out_dir, grasp_failure, load_model_calibrate_and_pause,
-    loop_settings, print_setup, scene_for,
+    loop_settings, print_setup, print_stopped, scene_for,
 };
-use super::{Failure, io_failure, open_existing};
+use crate::{Failure, io_failure, open_existing};
 use softtouch_lab::grasp::follow::{
     FollowSettings, follow_rows, follow_sim, object_for, write_follow_csv,
     write_follow_metrics_csv, write_follow_png,
 };
 use softtouch_lab::grasp::soft::projections;
-
-/// The grasp experiments.
-#[derive(Debug, Subcommand)]
-pub enum GraspCommand {
-    /// Hold each target force in turn on the simulated soft-finger Hand-E, the model's
-    /// estimate closing the loop (Algorithm 1); prints rise time, settling time,
-    /// overshoot, steady-state and RMS error per target; writes a CSV and a PNG.
-    #[command(
-        after_help = "Example:\n  softtouch grasp follow --model land-v1-svae --targets 0.4,1.6,3\n  softtouch grasp follow --model land-v1-svae --scene scenes/grasp.toml --object ball --fingers 2\n  softtouch grasp follow --model land-v1-svae --rig lab.toml --object bottle --targets 0.4,1.6   # a real Hand-E, K from its calibration"
-    )]
-    Follow(FollowArgs),
-    /// Hold 0.4 N on land or 1.6 N in water (the scene's medium) on an oval tube while
-    /// the simulator turns it about its axis by 45°, then 60°, then −90°; prints per
-    /// turn the peak deviation, the recovery time to within δ and the RMS error;
-    /// writes `grasp-disturb.csv` and `grasp-disturb.png`.
-    #[command(
-        after_help = "Example:\n  softtouch grasp disturb --model land-v1-svae\n  softtouch grasp disturb --model water-v1-svae --scene scenes/grasp-water.toml --fingers 2"
-    )]
-    Disturb(super::grasp_turns::DisturbArgs),
-    /// Hold a grip force on a cylinder that the simulator turns about the fingers'
-    /// axis, and hold the torque τz ≈ 0 by turning the wrist on the model's τz
-    /// estimate; runs with and without the wrist loop and prints the τz RMS of both;
-    /// writes `grasp-twist.csv` and `grasp-twist.png`.
-    #[command(
-        after_help = "Example:\n  softtouch grasp twist --model land-v1-svae\n  softtouch grasp twist --model land-v1-svae --turn-deg 30 --wrist-gain 1000\n  softtouch grasp twist --model land-v1-svae --rig lab.toml --object bottle --duration-s 15   # the real wrist"
-    )]
-    Twist(super::grasp_turns::TwistArgs),
-    /// Grasp success-rate trials (Figure 4): per object, mode (open, closed) and medium
-    /// (one scene each; default land and water), `--trials` grasps with the grasp point
-    /// perturbed by N(0, σ²) per axis, lift and hold; the physics decides held, slip,
-    /// crush, miss or timeout. Each trial is stored as it ends; `--resume SESSION`
-    /// continues. Prints success rates with Wilson 95 % intervals beside the paper's;
-    /// writes `grasp-trials.csv`, `grasp-trials-rows.csv` and `grasp-trials.png`.
-    /// With `--rig FILE` the trials run on the rig's Franka, Hand-E and finger camera
-    /// at the grasp poses of its `[grasp]` section, K from each object's stored
-    /// `grasp calibrate --rig`; the rig judges (gOBJ, position, estimate) and the
-    /// operator confirms each verdict and each return of the object to its place.
-    #[command(after_help = "Example:
-  softtouch grasp trials --model land-v1-svae --trials 10 --sigma-mm 5 --modes open,closed
-  softtouch grasp trials --model land-v1-svae --rig lab.toml --objects bottle,ball --trials 10
-  softtouch grasp trials --rig lab.toml --resume 4
-  softtouch grasp trials --model land-v1-svae --objects cake,ball --scene scenes/grasp.toml
-  softtouch grasp trials --resume 3
-  softtouch grasp trials --model land-v1-svae --sweep-sigma 0,2,5,8,12 --trials 5")]
-    Trials(super::grasp_trials::TrialsArgs),
-    /// Calibrate an object's stiffness from the model's own estimate: close on it one
-    /// count at a time, fit Λ(P) = ΔF_est/ΔP (Theil–Sen over 7-count windows), report
-    /// the first touch and Λ_max with its spread, and store it. `follow`, `disturb`,
-    /// `twist`, `trials` and `bench grasp` take K = 0.75 Λ_max and the pre-grasp
-    /// opening from the latest matching calibration (making one when none matches);
-    /// on the simulator the true Λ_max is printed beside it as a check.
-    #[command(after_help = "Example:
-  softtouch grasp calibrate --model land-v1-svae --scene scenes/grasp.toml --object bottle
-  softtouch grasp calibrate --model land-v1-svae --rig lab.toml --object bottle   # a real Hand-E")]
-    Calibrate(super::grasp_calibrate::CalibrateArgs),
-}
 
 /// Options of `grasp follow`.
 #[derive(Debug, Args)]
@@ -106,22 +48,7 @@ pub struct FollowArgs {
     pub common: LoopArgs,
 }
 
-/// Run a grasp verb.
-pub async fn run(
-    cmd: GraspCommand,
-    db: &softtouch_store::DbTarget,
-    out: &mut dyn Write,
-) -> Result<(), Failure> {
-    match cmd {
-        GraspCommand::Follow(args) => follow(args, db, out).await,
-        GraspCommand::Disturb(args) => super::grasp_turns::disturb(args, db, out).await,
-        GraspCommand::Twist(args) => super::grasp_turns::twist(args, db, out).await,
-        GraspCommand::Trials(args) => super::grasp_trials::run(args, db, out).await,
-        GraspCommand::Calibrate(args) => super::grasp_calibrate::run(args, db, out).await,
-    }
-}
-
-async fn follow(
+pub(super) async fn run(
     args: FollowArgs,
     db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
@@ -145,7 +72,7 @@ async fn follow(
     // table and files then show what ran. Watched before the calibration, so that a
     // signal during it ends the verb the same way (after the calibration, which is
     // stored whole) instead of killing it with the database open.
-    let signals = super::signals::SignalWatch::start();
+    let signals = crate::signals::SignalWatch::start();
     let (model, calibrated) =
         load_model_calibrate_and_pause(c, db, &scene, &object, largest).await?;
     let settings = FollowSettings {
@@ -168,7 +95,7 @@ async fn follow(
     let (files, summary) = print_follow(&cycles, &args.targets, c.tolerance, &c.out_dir, out)?;
     follow_recorder(&args, &name, stopped, files)
         .setting("gain_n_per_mm", setup.gain)
-        .scene_hash(super::grasp_loop::scene_hash(&scene, c))
+        .scene_hash(super::setup::scene_hash(&scene, c))
         .store(db, summary, out)
         .await
         .map(drop)
@@ -180,8 +107,8 @@ fn follow_recorder(
     object: &str,
     stopped: Option<&'static str>,
     files: [PathBuf; 2],
-) -> super::results::Recorder {
-    super::grasp_loop::loop_recorder("grasp follow", &args.common)
+) -> crate::results::Recorder {
+    super::setup::loop_recorder("grasp follow", &args.common)
         .setting("targets_n", args.targets.clone())
         .setting("hold_s", args.hold_s)
         .setting("object", object)
@@ -255,7 +182,7 @@ async fn follow_on_rig(
     )
     .map_err(io_failure)?;
     let second = (c.fingers == 2).then_some(projections[1]);
-    let signals = super::signals::SignalWatch::start();
+    let signals = crate::signals::SignalWatch::start();
     let run = softtouch_lab::grasp::devices::follow_on_rig(
         rig,
         predictor,
@@ -295,27 +222,6 @@ async fn follow_on_rig(
     .store(db, summary, out)
     .await
     .map(drop)
-}
-
-/// A line when a stop request ended the loop early: what follows is what ran.
-pub(super) fn print_stopped(
-    stopped: Option<&'static str>,
-    cycles: &[Cycle],
-    out: &mut dyn Write,
-) -> Result<(), Failure> {
-    if let Some(name) = stopped {
-        let ran_s = match (cycles.first(), cycles.last()) {
-            (Some(a), Some(b)) => b.t.0.saturating_sub(a.t.0) as f64 * 1e-9,
-            _ => 0.0,
-        };
-        writeln!(
-            out,
-            "stopped by {name} after {} cycles ({ran_s:.2} s); the fingers are open; below is what ran",
-            cycles.len()
-        )
-        .map_err(io_failure)?;
-    }
-    Ok(())
 }
 
 /// `grasp follow`'s table per target, then its CSVs (cycles, metrics) and chart;

@@ -12,8 +12,8 @@ use softtouch_lab::grasp::calibration::{calibrate_sim_row, to_row, top_for};
 use softtouch_lab::grasp::follow::object_for;
 use softtouch_trainer::Predictor;
 
-use super::grasp_loop::{bad, grasp_failure};
-use super::{Failure, io_failure, open_existing};
+use super::setup::{bad, grasp_failure};
+use crate::{Failure, io_failure, open_existing};
 
 /// Options of `grasp calibrate`.
 #[derive(Debug, Args)]
@@ -46,7 +46,7 @@ pub struct CalibrateArgs {
 }
 
 /// Run `grasp calibrate`.
-pub async fn run(
+pub(super) async fn run(
     args: CalibrateArgs,
     db: &softtouch_store::DbTarget,
     out: &mut dyn Write,

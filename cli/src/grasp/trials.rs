@@ -8,8 +8,8 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::grasp_loop::bad;
-use super::{Failure, open_existing};
+use super::setup::bad;
+use crate::{Failure, open_existing};
 use softtouch_lab::grasp::trials::TrialPlan;
 use softtouch_lab::grasp::trials::experiment::{self, Terminal, TrialsRequest};
 use softtouch_lab::grasp::trials::rig::Operator;
@@ -182,7 +182,7 @@ pub(super) fn terminal_operator(confirm_verdicts: bool) -> Operator {
 }
 
 /// Run `grasp trials`.
-pub async fn run(
+pub(super) async fn run(
     args: TrialsArgs,
     db: &softtouch_store::DbTarget,
     out: &mut dyn Write,
@@ -195,7 +195,7 @@ pub async fn run(
     // 0); a second stops at once. Watched from the moment the store is open, before
     // anything is stored, so that no signal kills the verb with the database open.
     let (stop_tx, stop) = tokio::sync::watch::channel(0u32);
-    let signals = tokio::spawn(super::signals::count_stop_signals(stop_tx, "trial"));
+    let signals = tokio::spawn(crate::signals::count_stop_signals(stop_tx, "trial"));
     let mut terminal = Terminal {
         out,
         stop,

@@ -1,0 +1,360 @@
+//! The robot thread: franka-rs's synchronous 1 kHz loop, fed commands over a channel;
+//! one move's control loop, its cancellation by generation, the share of commands that
+//! arrived, and the measured pose's feed.
+
+use super::*;
+
+pub(super) type Reply<T> = oneshot::Sender<Result<T, DeviceError>>;
+
+pub(super) enum Cmd {
+    Move {
+        target: ArmPose,
+        speed: f64,
+        /// This move's number: cancelled once [`Cancel::through`] reaches it.
+        generation: u64,
+        reply: Reply<ArmState>,
+    },
+    State {
+        reply: Reply<ArmState>,
+    },
+    Recover {
+        reply: Reply<()>,
+    },
+    Stop {
+        reply: Reply<()>,
+    },
+}
+
+/// Which moves are cancelled: every move whose generation is at most `through`.
+/// Shared between the handle (which numbers moves and cancels them) and the robot
+/// thread (which skips a cancelled move it takes from the queue and brakes a running
+/// one). Generations only grow, so a cancel never reaches a later move.
+#[derive(Debug, Default)]
+pub struct Cancel {
+    through: AtomicU64,
+}
+
+impl Cancel {
+    /// Cancel every move up to and including `generation`.
+    pub fn cancel_through(&self, generation: u64) {
+        self.through.fetch_max(generation, Ordering::SeqCst);
+    }
+
+    /// Whether the move numbered `generation` is cancelled.
+    #[must_use]
+    pub fn is_cancelled(&self, generation: u64) -> bool {
+        self.through.load(Ordering::SeqCst) >= generation
+    }
+}
+
+impl std::fmt::Debug for Cmd {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Move { .. } => "Move",
+            Self::State { .. } => "State",
+            Self::Recover { .. } => "Recover",
+            Self::Stop { .. } => "Stop",
+        })
+    }
+}
+
+pub(super) fn err(e: franka::FrankaError) -> DeviceError {
+    use franka::FrankaError as F;
+    match e {
+        F::Control(c) => DeviceError::Fault {
+            device: DEVICE.into(),
+            code: None,
+            message: format!("{} (errors: {})", c.message, c.last_motion_errors),
+        },
+        F::Command(m) => DeviceError::Fault {
+            device: DEVICE.into(),
+            code: None,
+            message: m,
+        },
+        F::Network(m) => DeviceError::Link {
+            device: DEVICE.into(),
+            message: m,
+        },
+        F::Protocol(m) => DeviceError::Protocol {
+            device: DEVICE.into(),
+            message: m,
+        },
+        F::IncompatibleVersion {
+            server_version,
+            library_version,
+        } => DeviceError::Link {
+            device: DEVICE.into(),
+            message: format!(
+                "incompatible FCI version: server {server_version}, library {library_version}"
+            ),
+        },
+        F::Realtime(m) => DeviceError::Link {
+            device: DEVICE.into(),
+            message: format!("{m}: {}", crate::realtime::REFUSED_ADVICE),
+        },
+        F::InvalidArgument(m) | F::InvalidOperation(m) => DeviceError::InvalidCommand {
+            device: DEVICE.into(),
+            message: m,
+        },
+        other => DeviceError::Fault {
+            device: DEVICE.into(),
+            code: None,
+            message: other.to_string(),
+        },
+    }
+}
+
+pub(super) fn gone() -> DeviceError {
+    DeviceError::Link {
+        device: DEVICE.into(),
+        message: "the robot thread has stopped".into(),
+    }
+}
+
+pub(super) fn state_of(s: &franka::RobotState, clock: &dyn Clock) -> ArmState {
+    let f = s.O_F_ext_hat_K;
+    ArmState {
+        t: clock.now(),
+        base_from_finger: ArmPose::from_matrix(&s.O_T_EE),
+        external_wrench: Some(Wrench {
+            force_n: [f[0], f[1], f[2]],
+            torque_nm: [f[3], f[4], f[5]],
+        }),
+        faulted: s.robot_mode == franka::RobotMode::Reflex || s.current_errors.any(),
+        command_success_rate: Some(s.control_command_success_rate),
+    }
+}
+
+/// Cycles libfranka's `control_command_success_rate` is taken over: before that many
+/// cycles of a move it describes fewer commands than it says.
+pub(super) const SUCCESS_RATE_WINDOW: usize = 100;
+
+/// The share of commands that reached the robot over a move, from the rate the robot
+/// reports in each cycle of it: the lowest once a full window has passed (a dip in the
+/// middle of a move counts), else the last reported (a move shorter than the window).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SuccessRate {
+    /// Control cycles recorded.
+    pub cycles: usize,
+    last: Option<f64>,
+    lowest_full: Option<f64>,
+}
+
+impl SuccessRate {
+    /// One control cycle's reported rate (NaN is kept: it fails every check).
+    pub fn record(&mut self, rate: f64) {
+        self.cycles += 1;
+        self.last = Some(rate);
+        if self.cycles >= SUCCESS_RATE_WINDOW {
+            self.lowest_full = Some(lower(self.lowest_full, rate));
+        }
+    }
+
+    /// The move's rate, `None` before any cycle.
+    #[must_use]
+    pub fn rate(&self) -> Option<f64> {
+        self.lowest_full.or(self.last)
+    }
+}
+
+/// The lower of a kept value and a new one; NaN is lowest (it fails every check).
+#[must_use]
+pub fn lower(kept: Option<f64>, new: f64) -> f64 {
+    match kept {
+        Some(k) if k.is_nan() || k <= new => k,
+        _ => new,
+    }
+}
+
+/// One move's bookkeeping on the robot thread: whether it is cancelled, the share of
+/// commands that arrived, and where the measured pose is published.
+pub(super) struct MoveJob<'a> {
+    cancel: &'a Cancel,
+    generation: u64,
+    success: SuccessRate,
+    feed: &'a FeedTx,
+    clock: &'a dyn Clock,
+}
+
+pub(super) fn run_move(
+    robot: &franka::Robot,
+    target: &ArmPose,
+    speed: f64,
+    limits: &MotionLimits,
+    joints: &JointCheck,
+    job: &mut MoveJob<'_>,
+) -> Result<(), DeviceError> {
+    let start = robot.read_once().map_err(err)?;
+    let from = ArmPose::from_matrix(&start.O_T_EE_c);
+    let dist = from.distance_to(target);
+    let angle = from.angle_to(target);
+    let mut path = path_limits(dist, angle, speed, limits);
+    let mut brake_path = path_limits(dist, angle, speed, &limits.braking());
+    // Slowed (or refused) here where a joint would turn faster, or speed up or jerk
+    // harder, than its limits allow: the robot would abort the motion (FR3: velocity
+    // limits that depend on the joint's position).
+    if let Some((kin, robot_kind)) = joints {
+        let (scale, brake_scale) = reach::path_and_brake_scales(
+            kin,
+            *robot_kind,
+            &start.q,
+            &from,
+            target,
+            [path.max_velocity, path.max_acceleration, path.max_jerk],
+            [brake_path.max_acceleration, brake_path.max_jerk],
+        )
+        .map_err(|e| DeviceError::InvalidCommand {
+            device: DEVICE.into(),
+            message: format!("move refused before it was sent: {e}"),
+        })?;
+        if scale.velocity < 1.0 || scale.acceleration < 1.0 || scale.jerk < 1.0 {
+            tracing::debug!(
+                "franka: move {} slowed to {:.0} % of its speed, {:.0} % of its acceleration and {:.0} % of its jerk to keep every joint within {:.0} % of its limits",
+                job.generation,
+                scale.velocity * 100.0,
+                scale.acceleration * 100.0,
+                scale.jerk * 100.0,
+                reach::VELOCITY_MARGIN * 100.0
+            );
+            path.max_velocity *= scale.velocity;
+            path.max_acceleration *= scale.acceleration;
+            path.max_jerk *= scale.jerk;
+        }
+        // An abort brakes within the same joint limits as the move.
+        brake_path.max_acceleration *= brake_scale.acceleration;
+        brake_path.max_jerk *= brake_scale.jerk;
+    }
+    let mut otg = franka::Otg::new(0.0, path).map_err(err)?;
+    otg.set_target(1.0).map_err(err)?;
+    let mut seed: Option<ArmPose> = None;
+    let mut brake: Option<Brake> = None;
+    let mut aborted = false;
+    let target = *target;
+    robot
+        .control_cartesian_pose(
+            |state, dt| {
+                // Seed from the commanded pose of the first cycle.
+                let a = *seed.get_or_insert_with(|| ArmPose::from_matrix(&state.O_T_EE_c));
+                job.success.record(state.control_command_success_rate);
+                if job.success.cycles % FEED_EVERY == 1 {
+                    job.feed
+                        .send_replace(Some((job.clock.now(), ArmPose::from_matrix(&state.O_T_EE))));
+                }
+                // An abort ramps down within the limits; the motion ends at rest. A brake
+                // that would only stop past the target is not used: cut off there, it
+                // would ask for an instant stop (a reflex); the move's own plan, already
+                // slowing, stops at the target sooner and within the move's limits.
+                if !aborted && job.cancel.is_cancelled(job.generation) {
+                    aborted = true;
+                    let b = Brake::new(
+                        otg.position(),
+                        otg.velocity(),
+                        otg.acceleration(),
+                        brake_path.max_acceleration,
+                        brake_path.max_jerk,
+                    );
+                    if b.stops_before(1.0) {
+                        brake = Some(b);
+                    }
+                }
+                let (s, done) = match brake.as_mut() {
+                    Some(b) => (b.step(dt.as_secs_f64()).clamp(0.0, 1.0), b.finished()),
+                    None => {
+                        let s = otg.step(dt.as_secs_f64());
+                        (s, s >= 1.0 - 1e-9 && otg.velocity().abs() < 1e-9)
+                    }
+                };
+                let cmd = franka::CartesianPose::new(a.slerp(&target, s).to_matrix());
+                if done {
+                    franka::motion_finished(cmd)
+                } else {
+                    cmd
+                }
+            },
+            franka::ControllerMode::CartesianImpedance,
+            // No client-side rate limiter (libfranka 0.21's default: "it could distort
+            // your motion"). The plan above is within the limits already and a function
+            // of the robot's clock alone, so after a lost cycle the command is where the
+            // robot's extrapolation is. The limiter instead steps each command from the
+            // pose and derivatives the last state reported, and where those two disagree
+            // (franka-sim packing a state while it applies a command) it brakes a smooth
+            // plan into the jump it is there to prevent: 17 m/s² read, limit 9.
+            false,
+            franka::MAX_CUTOFF_FREQUENCY,
+        )
+        .map_err(err)
+}
+
+/// The kinematics each move is checked with against the joints' velocity limits
+/// (`None`: not checked, as in tests of the control loop alone).
+pub(super) type JointCheck = Option<(reach::Kinematics, reach::Robot)>;
+
+pub(super) fn worker(
+    robot: franka::Robot,
+    rx: mpsc::Receiver<Cmd>,
+    limits: MotionLimits,
+    joints: JointCheck,
+    cancel: Arc<Cancel>,
+    clock: Arc<dyn Clock>,
+    feed: FeedTx,
+) {
+    let state = |r: &franka::Robot| {
+        let s = r
+            .read_once()
+            .map_err(err)
+            .map(|s| state_of(&s, clock.as_ref()))?;
+        feed.send_replace(Some((s.t, s.base_from_finger)));
+        Ok(s)
+    };
+    while let Ok(cmd) = rx.recv() {
+        match cmd {
+            Cmd::Move {
+                target,
+                speed,
+                generation,
+                reply,
+            } => {
+                // Cancelled while it waited: it never reaches the robot.
+                if cancel.is_cancelled(generation) {
+                    tracing::debug!("franka: move {generation} cancelled before it started");
+                    let _ = reply.send(Err(DeviceError::InvalidCommand {
+                        device: DEVICE.into(),
+                        message: format!("move {generation} was cancelled before it started"),
+                    }));
+                    continue;
+                }
+                let mut job = MoveJob {
+                    cancel: &cancel,
+                    generation,
+                    success: SuccessRate::default(),
+                    feed: &feed,
+                    clock: clock.as_ref(),
+                };
+                let began = std::time::Instant::now();
+                let moved = run_move(&robot, &target, speed, &limits, &joints, &mut job);
+                // Where a sample's time goes on a robot: each move's speed and duration
+                // (`RUST_LOG=softtouch_drivers::franka=debug`).
+                tracing::debug!(
+                    "franka: move {generation} at {speed} m/s took {:.0} ms over {} control cycles{}",
+                    began.elapsed().as_secs_f64() * 1000.0,
+                    job.success.cycles,
+                    if moved.is_ok() { "" } else { " (failed)" }
+                );
+                let r = moved.and_then(|()| state(&robot)).map(|s| ArmState {
+                    command_success_rate: job.success.rate(),
+                    ..s
+                });
+                let _ = reply.send(r);
+            }
+            Cmd::State { reply } => {
+                let _ = reply.send(state(&robot));
+            }
+            Cmd::Recover { reply } => {
+                let _ = reply.send(robot.automatic_error_recovery().map_err(err));
+            }
+            Cmd::Stop { reply } => {
+                let _ = reply.send(robot.stop().map_err(err));
+            }
+        }
+    }
+}
