@@ -12,12 +12,25 @@ Where franka-sim differs from the FCI's documentation, this follows the document
 a command that missed its cycle is dropped, not applied (`--apply-late` restores
 franka-sim's way). And it keeps the server's threads on time on a small host (below).
 
-    FR3_MJCF=rigs/fr3/fr3_nomesh.xml python3 scripts/franka-sim-loopback.py
+With `--record PATH` (or $FRANKA_SIM_RECORD) it writes down, one line each, what the
+test harness judges the driver by (tests/fcisim/record.rs reads it):
+
+    c ID ON_TIME O_T_EE_c[16] q[7]   a command answering state ID (ON_TIME 1: in its cycle)
+    f ID O_T_EE_c[16] q[7]           the command that finished a motion
+    l ID                             state ID's cycle closed with no answer (a lost cycle)
+    a ID REASON...                   the motion aborted while state ID was the latest out
+    n                                a new connection (its state ids start again)
+
+`q` is the measured joints when the command arrived (the seed the harness solves the
+commanded pose's joints from).
+
+    FR3_MJCF=rigs/fr3/fr3_nomesh.xml python3 scripts/franka-sim-loopback.py --record cmds.txt
 """
 import argparse
 import logging
 import os
 import sys
+import threading
 
 # franka-sim stands in for a controller with a hard 1 kHz cycle, in one Python process
 # whose threads (physics, state publishing, command receipt) share the GIL. Two of
@@ -34,12 +47,80 @@ from franka_sim import FrankaSimServer  # noqa: E402 (after the thread settings 
 log = logging.getLogger("franka-sim-loopback")
 
 
+class Recorder:
+    """The record --record asks for; written from the UDP and publish threads, so one
+    lock. Flushed at every motion's end and abort (the harness reads it then), and
+    every 1 000 lines."""
+
+    def __init__(self, path):
+        self._file = open(path, "w", buffering=1 << 20)
+        self._lock = threading.Lock()
+        self._lines = 0
+
+    def line(self, text, flush=False):
+        with self._lock:
+            self._file.write(text + "\n")
+            self._lines += 1
+            if flush or self._lines % 1000 == 0:
+                self._file.flush()
+
+    @staticmethod
+    def numbers(values):
+        return " ".join(repr(float(v)) for v in values)
+
+
 class LoopbackServer(FrankaSimServer):
     #: Whether a command that missed its cycle is dropped, as the FCI does
     #: (main sets it from --apply-late).
     drop_late = True
+    #: The record (main sets it from --record), or None.
+    recorder = None
+
+    # The communication tracker is replaced at every connection; each one's cycle
+    # accounting is wrapped so that a lost cycle is recorded.
+    @property
+    def comm(self):
+        return self._comm
+
+    @comm.setter
+    def comm(self, tracker):
+        recorder = self.recorder
+        if recorder is not None:
+            tick = tracker.tick
+
+            def recording_tick(published_id):
+                outcome = tick(published_id)
+                if outcome.active and outcome.lost:
+                    recorder.line(f"l {outcome.closed_id}")
+                return outcome
+
+            tracker.tick = recording_tick
+            recorder.line("n")
+        self._comm = tracker
+
+    def _record_command(self, kind, command, fresh=None):
+        if self.recorder is None:
+            return
+        q = self.robot_state.state["q"]
+        on_time = "" if fresh is None else (" 1" if fresh else " 0")
+        self.recorder.line(
+            f"{kind} {command['message_id']}{on_time} "
+            f"{Recorder.numbers(command['O_T_EE_c'])} {Recorder.numbers(q)}",
+            flush=kind == "f",
+        )
+
+    def _finish_motion(self, command):
+        self._record_command("f", command)
+        return super()._finish_motion(command)
+
+    def _abort_with_error(self, error_index, reason, motion_id=0):
+        if self.recorder is not None:
+            published = self.robot_state.state["message_id"]
+            self.recorder.line(f"a {published} {' '.join(str(reason).split())}", flush=True)
+        return super()._abort_with_error(error_index, reason, motion_id)
 
     def _absorb_within_motion_limits(self, command, *, fresh):
+        self._record_command("c", command, fresh)
         # "The FCI drops a command that misses its 1 ms window; the cycle is lost, the
         # extrapolation stands, and the packet never existed" (franka-sim's own
         # MotionLimitChecker.rewind_extrapolation, after libfranka's docs/overview.rst).
@@ -69,10 +150,15 @@ def main():
     p.add_argument("--no-enforce", action="store_true", help="leave the motion-limit and communication checks off")
     p.add_argument("--apply-late", action="store_true",
                    help="apply a command that missed its cycle, as franka-sim does, instead of dropping it as the FCI does")
+    p.add_argument("--record", default=os.environ.get("FRANKA_SIM_RECORD"),
+                   help="write every command, lost cycle and abort to this file (default $FRANKA_SIM_RECORD)")
     args = p.parse_args()
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     enforce = not args.no_enforce
+    if args.record:
+        # Before the server exists: its constructor sets the tracker the property wraps.
+        LoopbackServer.recorder = Recorder(args.record)
     server = LoopbackServer(
         host="127.0.0.1",
         port=args.port,

@@ -11,7 +11,6 @@
 
 use crate::common;
 use crate::fcisim;
-use crate::pty;
 
 use common::{runtime, tempdir, text};
 use fcisim::{FrankaSim, LIMITS, SIM_DEVICES, home_in_base, python, rig_toml, wait_until};
@@ -45,8 +44,15 @@ fn ok(out: &Output, sim: &FrankaSim) -> String {
     text(&out.stdout)
 }
 
-/// The driver's connection to `sim`, as a rig file with `realtime = "ignore"` makes it.
+/// The driver's connection to `sim`, as a rig file with `realtime = "ignore"` makes it
+/// (at the rigs' default `motion_margin`, 0.3 of the FR3's limits).
 async fn connect(sim: &FrankaSim) -> FrankaArm {
+    connect_with(sim, MotionLimits::default(), Some(0.3)).await
+}
+
+/// The driver's connection to `sim` with `limits`, or with `margin` of the robot's
+/// limits where given.
+async fn connect_with(sim: &FrankaSim, limits: MotionLimits, margin: Option<f64>) -> FrankaArm {
     let config = FrankaConfig {
         address: sim.address(),
         reflex_force_n: 30.0,
@@ -55,8 +61,8 @@ async fn connect(sim: &FrankaSim) -> FrankaArm {
         ne_t_ee: None,
         payload: None,
         joint_torque_thresholds_nm: FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM,
-        limits: MotionLimits::default(),
-        motion_margin: None,
+        limits,
+        motion_margin: margin,
         route: Vec::new(),
     };
     FrankaArm::connect(config, Arc::new(TokioClock::new()))
@@ -84,13 +90,13 @@ fn still_arm(sim: &FrankaSim) -> ArmPose {
 }
 
 /// A franka-sim of its own and a folder holding the tier's rig (with `limits`) and
-/// scene; `None` (the test skips) without franka-sim.
-fn tier(limits: &str) -> Option<(tempfile::TempDir, FrankaSim)> {
-    let py = python()?;
+/// scene.
+fn tier(limits: &str) -> (tempfile::TempDir, FrankaSim) {
+    let py = python();
     let dir = tempdir();
     let sim = FrankaSim::start(&py, dir.path());
     fcisim::write_rig(dir.path(), &rig_toml(&sim.address(), SIM_DEVICES, limits));
-    Some((dir, sim))
+    (dir, sim)
 }
 
 /// The arm ended at the rigs' home, still; `context` is shown if not.
@@ -243,53 +249,132 @@ impl OutputOf for std::process::Child {
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn a_move_cancelled_while_queued_never_reaches_the_robot() {
-    let Some(py) = python() else { return };
+    let py = python();
     let dir = tempdir();
     let sim = FrankaSim::start(&py, dir.path());
-    runtime().block_on(async {
-        let mut arm = connect(&sim).await;
-        let start = arm.state().await.expect("state").base_from_finger;
-        eprintln!("franka-sim starts at {start:?}");
-        // A: 5 cm down at 2 cm/s, given up after 400 ms: the robot thread brakes it.
-        let mut a = start;
-        a.translation_m[2] -= 0.05;
-        let r = tokio::time::timeout(Duration::from_millis(400), arm.move_to(&a, 0.02)).await;
-        assert!(r.is_err(), "move A ended within 400 ms: {r:?}");
-        // B: 5 cm along x, sent while A still brakes and given up at once: it waits in
-        // the queue behind A when it is cancelled.
-        let mut b = start;
-        b.translation_m[0] += 0.05;
-        let r = tokio::time::timeout(Duration::from_millis(1), arm.move_to(&b, 0.05)).await;
-        assert!(r.is_err(), "move B ended within 1 ms: {r:?}");
-        // Long enough for B to have run in full (5 cm at 5 cm/s).
-        tokio::time::sleep(Duration::from_secs(3)).await;
-        let now = arm.state().await.expect("state").base_from_finger;
-        let along_x = now.translation_m[0] - start.translation_m[0];
-        assert!(
-            along_x.abs() < 0.002,
-            "the cancelled move B ran: the arm moved {:.1} mm along x",
-            along_x * 1000.0
-        );
-        let down = start.translation_m[2] - now.translation_m[2];
-        assert!(
-            down > 0.001 && down < 0.02,
-            "A moved {:.1} mm down before it was braked",
-            down * 1000.0
-        );
-        // The next move is not cancelled by the old ones.
-        let back = arm.move_to(&start, 0.05).await.expect("a new move runs");
-        assert!(back.base_from_finger.distance_to(&start) < 5e-4);
-        assert!(
-            back.command_success_rate.is_some_and(|r| r > 0.95),
-            "the success rate is sampled during the move: {:?}",
-            back.command_success_rate
-        );
-        // Between moves the robot reports 0 % (libfranka: no control loop runs).
-        let idle = arm.state().await.expect("state").command_success_rate;
-        assert!(idle.is_some_and(|r| r < 0.5), "{idle:?}");
-    });
-    sim.assert_no_abort();
+    // At franka-rs's conservative defaults, and at a rig's own limits (0.3 of the
+    // FR3's: 2.7 m/s², 900 m/s³), where the moves a night makes run.
+    for (limits, margin) in [
+        (MotionLimits::default(), None),
+        (MotionLimits::default(), Some(0.3)),
+    ] {
+        eprintln!("limits {limits:?}, margin {margin:?}");
+        runtime().block_on(cancelled_while_queued(&sim, limits, margin));
+    }
+    sim.judge();
 }
+
+async fn cancelled_while_queued(sim: &FrankaSim, limits: MotionLimits, margin: Option<f64>) {
+    let mut arm = connect_with(sim, limits, margin).await;
+    let start = arm.state().await.expect("state").base_from_finger;
+    eprintln!("franka-sim starts at {start:?}");
+    // A: 5 cm down at 2 cm/s, given up after 400 ms: the robot thread brakes it.
+    let mut a = start;
+    a.translation_m[2] -= 0.05;
+    let r = tokio::time::timeout(Duration::from_millis(400), arm.move_to(&a, 0.02)).await;
+    assert!(r.is_err(), "move A ended within 400 ms: {r:?}");
+    // B: 5 cm along x, sent while A still brakes and given up at once: it waits in
+    // the queue behind A when it is cancelled.
+    let mut b = start;
+    b.translation_m[0] += 0.05;
+    let r = tokio::time::timeout(Duration::from_millis(1), arm.move_to(&b, 0.05)).await;
+    assert!(r.is_err(), "move B ended within 1 ms: {r:?}");
+    // Long enough for B to have run in full (5 cm at 5 cm/s).
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let now = arm.state().await.expect("state").base_from_finger;
+    let along_x = now.translation_m[0] - start.translation_m[0];
+    assert!(
+        along_x.abs() < 0.002,
+        "the cancelled move B ran: the arm moved {:.1} mm along x",
+        along_x * 1000.0
+    );
+    let down = start.translation_m[2] - now.translation_m[2];
+    assert!(
+        down > 0.001 && down < 0.02,
+        "A moved {:.1} mm down before it was braked",
+        down * 1000.0
+    );
+    // The next move is not cancelled by the old ones.
+    let back = arm.move_to(&start, 0.05).await.expect("a new move runs");
+    assert!(back.base_from_finger.distance_to(&start) < 5e-4);
+    assert!(
+        back.command_success_rate.is_some_and(|r| r > 0.95),
+        "the success rate is sampled during the move: {:?}",
+        back.command_success_rate
+    );
+    // Between moves the robot reports 0 % (libfranka: no control loop runs).
+    let idle = arm.state().await.expect("state").command_success_rate;
+    assert!(idle.is_some_and(|r| r < 0.5), "{idle:?}");
+}
+
+/// A plan broken on purpose (its acceleration and jerk three times the FR3's own
+/// Cartesian limits, every check skipped, through the driver's test-only
+/// `test_rate_scale`) is caught twice. With the limits enforced, franka-sim aborts it
+/// with no cycle lost before: the driver's abort. With them off, the whole signal is
+/// recorded and the check of the commanded signal finds it over the limits on its own,
+/// whatever the server did and on any host.
+#[test]
+#[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
+fn a_plan_with_rates_past_the_robots_limits_is_caught_by_the_signal_check() {
+    use softtouch_drivers::franka::reach::Robot;
+    let py = python();
+    let broken = MotionLimits {
+        test_rate_scale: BROKEN_RATE_SCALE,
+        ..MotionLimits::for_robot(Robot::Fr3, 1.0)
+    };
+    let broken_move = |sim: &FrankaSim| {
+        runtime().block_on(async {
+            let mut arm = connect_with(sim, broken, None).await;
+            let start = arm.state().await.expect("state").base_from_finger;
+            let mut to = start;
+            to.translation_m[2] -= 0.08;
+            arm.move_to(&to, 0.5).await
+        })
+    };
+    let record = |sim: &FrankaSim| {
+        let text = std::fs::read_to_string(&sim.record).expect("record");
+        fcisim::record::Record::parse(&text).expect("record parses")
+    };
+
+    let dir = tempdir();
+    let enforced = FrankaSim::start(&py, dir.path());
+    let moved = broken_move(&enforced);
+    assert!(
+        moved.is_err(),
+        "franka-sim let the broken plan run: {moved:?}"
+    );
+    let rec = record(&enforced);
+    assert!(!rec.aborts.is_empty(), "no abort recorded");
+    assert!(
+        rec.aborts.iter().all(|a| !rec.is_the_hosts(a)),
+        "the broken plan's abort was put down to the host: {:?} (lost {:?})",
+        rec.aborts,
+        rec.lost
+    );
+    eprintln!("enforced: {:?}", rec.aborts);
+
+    let dir = tempdir();
+    let open = FrankaSim::start_with(&py, dir.path(), &["--no-enforce"]);
+    let moved = broken_move(&open);
+    eprintln!("not enforced, the broken move: {moved:?}");
+    let rec = record(&open);
+    assert!(rec.aborts.is_empty(), "{:?}", rec.aborts);
+    let verdict = rec.judge();
+    eprintln!("{}", verdict.table());
+    assert!(
+        !verdict.holds(),
+        "the broken plan passed:\n{}",
+        verdict.table()
+    );
+    let over: Vec<&str> = verdict.over().iter().map(|p| p.what.as_str()).collect();
+    assert!(
+        over.iter().any(|w| w.contains("translational jerk")),
+        "{over:?}"
+    );
+}
+
+/// How many times the robot's limits the broken plan's acceleration and jerk are.
+const BROKEN_RATE_SCALE: f64 = 3.0;
 
 // -------------------------------------------------------------------- rig check
 
@@ -302,8 +387,8 @@ fn a_move_cancelled_while_queued_never_reaches_the_robot() {
 fn rig_check_passes_every_row_with_the_arm_on_franka_sim() {
     use softtouch_drivers::hande::{self, HandEService};
     use softtouch_drivers::netft::{NetFtServer, ServerConfig};
-    let Some(py) = python() else { return };
-    let Some(pair) = pty::pty_pair() else { return };
+    let py = python();
+    let pair = fcisim::pty();
     let dir = tempdir();
     let sim = FrankaSim::start(&py, dir.path());
     let rt = tokio::runtime::Builder::new_multi_thread()
@@ -370,6 +455,7 @@ slave_id = 9
     assert!(arm_row.contains("% of real-time commands"), "{arm_row}");
     eprintln!("{table}");
     drop(rt);
+    sim.judge();
 }
 
 // ---------------------------------------------------------------------- collect
@@ -380,9 +466,7 @@ slave_id = 9
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
-    let Some((dir, sim)) = tier(LIMITS) else {
-        return;
-    };
+    let (dir, sim) = tier(LIMITS);
     let samples = "24";
     let args = collect_args(samples, "11");
     let t0 = std::time::Instant::now();
@@ -409,7 +493,7 @@ fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
     let sim_dir = tempdir();
     fcisim::write_rig(sim_dir.path(), &rig_toml(&sim.address(), SIM_DEVICES, LIMITS).replace(
             &format!(
-                "driver = \"franka\"\naddress = \"{}\"\nreflex_force_n = 30.0\nrealtime = \"ignore\"",
+                "driver = \"franka\"\naddress = \"{}\"\nreflex_force_n = 30.0\nrealtime = \"ignore\"\n# A rig's own share of the FR3's limits (the default, said): 2.7 m/s², 900 m/s³.\nmotion_margin = 0.3",
                 sim.address()
             ),
             "driver = \"sim\"\nreflex_force_n = 30.0",
@@ -455,7 +539,7 @@ fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
         "no sample pressed the rod: {:?}",
         franka.samples.first()
     );
-    sim.assert_no_abort();
+    sim.judge();
     ends_home_and_still(&sim, "");
 }
 
@@ -512,9 +596,7 @@ fn timed_collect(sim: &FrankaSim, rig: &str, scene: &str, samples: u64) -> (f64,
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn a_planned_run_on_franka_sim_turns_the_wrist_little_and_breaks_no_limit() {
-    let Some((_dir, sim)) = tier(LIMITS) else {
-        return;
-    };
+    let (_dir, sim) = tier(LIMITS);
     let n = pace_samples();
     let base = rig_toml(&sim.address(), SIM_DEVICES, LIMITS);
     let (rig, scene) = wide(&base, "planned");
@@ -535,7 +617,7 @@ fn a_planned_run_on_franka_sim_turns_the_wrist_little_and_breaks_no_limit() {
         planned.events
     );
     assert_eq!(planned.kinds("visit_plan").len(), 1, "{:?}", planned.events);
-    sim.assert_no_abort();
+    sim.judge();
     // Home in the widened rig's rod frame (turned 180° about x).
     let home = ArmPose::from_contact(
         &ArmPose {
@@ -556,7 +638,7 @@ fn a_planned_run_on_franka_sim_turns_the_wrist_little_and_breaks_no_limit() {
     let (index_wall_s, stdout, index) = timed_collect(&sim, &rig, &scene, few);
     eprintln!("franka-sim, index order, {few} samples in {index_wall_s:.1} s wall:\n{stdout}");
     assert_eq!(index.status, "completed");
-    sim.assert_no_abort();
+    sim.judge();
     let (planned_per_s, index_per_s) = (wall_s / n as f64, index_wall_s / few as f64);
     assert!(
         index_per_s > 2.0 * planned_per_s,
@@ -567,32 +649,52 @@ fn a_planned_run_on_franka_sim_turns_the_wrist_little_and_breaks_no_limit() {
 // ------------------------------------------------------------------- safe exits
 
 /// The force guard trips on the approach (a limit below the first contact's force):
-/// the arm is stopped, retreats home, the sample is rejected with its reason.
+/// every attempt is stopped within [`GUARD_STOP_BOUND_M`] of where the arm was at the
+/// trip, the arm retreats home, every sample is rejected for the force limit and the
+/// run completes.
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn a_force_guard_trip_on_franka_sim_stops_the_arm_and_rejects_the_sample() {
-    let Some((dir, sim)) = tier("max_force_n = 0.05\nmax_torque_nm = 0.8") else {
-        return;
-    };
+    // 0.3 N: 24 σ of the Nano17's noise (never tripped by it, where 0.05 N was, on
+    // fast travel legs), well below the first contact's force.
+    let (dir, sim) = tier("max_force_n = 0.3\nmax_torque_nm = 0.8");
     let out = run(dir.path(), &collect_args("2", "3"));
     let said = format!("{}{}", text(&out.stdout), text(&out.stderr));
     let s = stored(&dir.path().join("softtouch.db"), 1);
-    assert!(
-        !s.kinds("force_limit").is_empty(),
-        "no guard trip: {:?}\n{said}",
-        s.events
-    );
+    assert_eq!(s.status, "completed", "{:?}\n{said}", s.events);
+    assert_eq!(s.samples.len(), 2, "{:?}", s.samples);
     assert!(
         s.samples
             .iter()
-            .any(|x| x.reason.as_deref() == Some("force_limit"))
-            || s.status == "failed",
-        "{:?} {}",
-        s.samples,
-        s.status
+            .all(|x| x.status != "ok" && x.reason.as_deref() == Some("force_limit")),
+        "{:?}",
+        s.samples
     );
-    sim.assert_no_abort();
+    let trips = s.kinds("force_limit");
+    eprintln!("guard trips: {trips:#?}");
+    assert!(!trips.is_empty(), "no guard trip: {:?}\n{said}", s.events);
+    for trip in &trips {
+        let mm = stopped_after_mm(trip)
+            .unwrap_or_else(|| panic!("a trip without where the arm came to rest: {trip}"));
+        assert!(
+            mm <= GUARD_STOP_BOUND_M * 1000.0,
+            "the arm came to rest {mm} mm past the trip (bound {} mm): {trip}",
+            GUARD_STOP_BOUND_M * 1000.0
+        );
+    }
+    sim.judge();
     ends_home_and_still(&sim, &said);
+}
+
+/// How far past the trip an approach may carry the arm: at the rig's 0.05 m/s, the
+/// brake's 1.5 m/s² and 200 m/s³ stop it in about 1 mm; the rest is the guard's
+/// reaction (a window of readings, the pose feed's age).
+const GUARD_STOP_BOUND_M: f64 = 0.005;
+
+/// The distance a `force_limit` event says the arm came to rest from the trip, mm.
+fn stopped_after_mm(message: &str) -> Option<f64> {
+    let rest = message.split("came to rest ").nth(1)?;
+    rest.split(" mm").next()?.trim().parse().ok()
 }
 
 /// SIGTERM mid-run: the sample in hand finishes, the arm goes home, the run is
@@ -600,9 +702,7 @@ fn a_force_guard_trip_on_franka_sim_stops_the_arm_and_rejects_the_sample() {
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn sigterm_on_franka_sim_finishes_the_sample_and_leaves_the_arm_home() {
-    let Some((dir, sim)) = tier(LIMITS) else {
-        return;
-    };
+    let (dir, sim) = tier(LIMITS);
     let child = collect_until(dir.path(), &collect_args("200", "4"), 2, &sim);
     common::signal(&child, "TERM");
     let out = child.wait_with_output().expect("wait");
@@ -622,6 +722,14 @@ fn sigterm_on_franka_sim_finishes_the_sample_and_leaves_the_arm_home() {
         first,
         "no gap: the plan's first {n} samples"
     );
+    assert!(
+        s.kinds("stopped")
+            .iter()
+            .any(|m| m.contains("stopped by the operator")),
+        "{:?}",
+        s.events
+    );
+    sim.judge();
     ends_home_and_still(&sim, "");
 }
 
@@ -654,9 +762,7 @@ fn plan_order(seed: u64, samples: u64) -> Vec<i64> {
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn a_store_failure_on_franka_sim_ends_in_a_safe_stop_at_home() {
-    let Some((dir, sim)) = tier(LIMITS) else {
-        return;
-    };
+    let (dir, sim) = tier(LIMITS);
     let db = dir.path().join("softtouch.db");
     ok(&run(dir.path(), &["db", "init"]), &sim);
     runtime().block_on(async {
@@ -688,6 +794,7 @@ fn a_store_failure_on_franka_sim_ends_in_a_safe_stop_at_home() {
         "{:?}",
         s.events
     );
+    sim.judge();
     ends_home_and_still(&sim, "");
 }
 
@@ -696,9 +803,7 @@ fn a_store_failure_on_franka_sim_ends_in_a_safe_stop_at_home() {
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn a_lost_robot_connection_ends_the_run_in_a_safe_stop() {
-    let Some((dir, mut sim)) = tier(LIMITS) else {
-        return;
-    };
+    let (dir, mut sim) = tier(LIMITS);
     let child = collect_until(dir.path(), &collect_args("200", "6"), 1, &sim);
     // Mid-move: samples are mostly moves.
     std::thread::sleep(Duration::from_millis(700));
@@ -709,7 +814,17 @@ fn a_lost_robot_connection_ends_the_run_in_a_safe_stop() {
     assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
     let s = stored(&dir.path().join("softtouch.db"), 1);
     assert_eq!(s.status, "failed", "{:?}", s.events);
-    assert!(!s.kinds("safe_stop").is_empty(), "{:?}", s.events);
+    let stops = s.kinds("safe_stop");
+    assert!(
+        stops.iter().any(|m| m.contains("franka")
+            && (m.contains("link failed") || m.contains("no answer"))),
+        "the safe stop does not name the robot's link: {:?}",
+        s.events
+    );
+    eprintln!("safe stop: {stops:?}");
+    // What the driver sent up to the kill (franka-sim cannot show where a robot that
+    // lost its client stops: it goes idle; TESTING.md).
+    sim.judge();
 }
 
 // ------------------------------------------------------------- grasp trials --rig
@@ -771,11 +886,11 @@ async fn grasp_trials_on_the_rig_lift_and_set_down_through_fci() {
 
     const MODEL: &str = "air-svae";
     const OBJECT: &str = "cylinder";
-    let Some(py) = python() else { return };
+    let py = python();
     let dir = tempdir();
     let d = dir.path();
     tokio::task::block_in_place(|| common::tiny_model(d));
-    let Some(pair) = pty::pty_pair() else { return };
+    let pair = fcisim::pty();
     let sim = FrankaSim::start(&py, d);
 
     let db = d.join("softtouch.db");
@@ -940,7 +1055,7 @@ async fn grasp_trials_on_the_rig_lift_and_set_down_through_fci() {
     let status = devices.gripper.status().await.expect("status");
     assert!(status.position <= 5, "fingers at count {}", status.position);
     drop(devices);
-    sim.assert_no_abort();
+    sim.judge();
     store.close().await;
 }
 
@@ -949,7 +1064,7 @@ async fn grasp_trials_on_the_rig_lift_and_set_down_through_fci() {
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn a_workspace_beyond_the_fr3s_limits_is_refused_at_connect_before_any_motion() {
-    let Some(py) = python() else { return };
+    let py = python();
     let dir = tempdir();
     let sim = FrankaSim::start(&py, dir.path());
     let full = "theta_rad = [-3.141592653589793, 3.141592653589793]";

@@ -3,9 +3,15 @@
 //! communication constraints abort a motion as a robot does).
 //!
 //! Needs `SOFTTOUCH_FRANKA_SIM_PYTHON`: a Python with franka-sim installed (`.ci/run`
-//! makes one; TESTING.md says how by hand). Without it the tier is skipped with a
-//! message, except under CI, where it fails.
+//! makes one; TESTING.md says how by hand). The tier's tests are `#[ignore]`d; asked
+//! to run without it (or without socat, or the FR3 model), they fail saying what is
+//! missing: a run that ran nothing never passes.
+//!
+//! Every server records what the driver sent ([`record`]); [`FrankaSim::judge`] is
+//! the tier's verdict on it.
 #![allow(dead_code)]
+
+pub(crate) mod record;
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -20,23 +26,24 @@ pub(crate) fn root() -> PathBuf {
         .to_owned()
 }
 
-/// The Python that runs franka-sim, or `None` (skip) outside CI.
-pub(crate) fn python() -> Option<PathBuf> {
+/// The Python that runs franka-sim. The tier's tests are `#[ignore]`d: one asked to
+/// run without it fails, naming what to set, rather than passing having run nothing.
+pub(crate) fn python() -> PathBuf {
     match std::env::var_os("SOFTTOUCH_FRANKA_SIM_PYTHON") {
-        Some(p) if !p.is_empty() => Some(PathBuf::from(p)),
-        _ => {
-            let ci = std::env::var("CI")
-                .is_ok_and(|v| !v.is_empty() && v != "0" && !v.eq_ignore_ascii_case("false"));
-            assert!(
-                !ci,
-                "SOFTTOUCH_FRANKA_SIM_PYTHON is not set: under CI the franka-sim tier must run (.ci/run installs it)"
-            );
-            eprintln!(
-                "skipped: set SOFTTOUCH_FRANKA_SIM_PYTHON to a Python with franka-sim (TESTING.md, the franka-sim tier)"
-            );
-            None
-        }
+        Some(p) if !p.is_empty() => PathBuf::from(p),
+        _ => panic!(
+            "the franka-sim tier was asked to run, but SOFTTOUCH_FRANKA_SIM_PYTHON is not set: \
+             set it to a Python with franka-sim (TESTING.md, the franka-sim tier; .ci/run makes \
+             target/franka-sim-venv)"
+        ),
     }
+}
+
+/// A pty pair from socat, which the tier's Hand-E needs: missing, the test fails.
+pub(crate) fn pty() -> crate::pty::PtyPair {
+    crate::pty::pty_pair().unwrap_or_else(|| {
+        panic!("the franka-sim tier was asked to run, but socat is missing (apt-get install socat)")
+    })
 }
 
 /// A running franka-sim; killed when dropped.
@@ -47,13 +54,33 @@ pub(crate) struct FrankaSim {
     pub(crate) port: u16,
     /// Its log (stderr).
     pub(crate) log: PathBuf,
+    /// What it recorded of the driver's commands ([`record`]).
+    pub(crate) record: PathBuf,
+}
+
+/// The tier's verdict on one server's record ([`FrankaSim::judge`]).
+#[derive(Debug)]
+pub(crate) struct Judged {
+    /// The driver's commanded signal against the robot's limits.
+    pub(crate) verdict: softtouch_drivers::franka::signal::Verdict,
+    /// Aborts with cycles lost just before them: the host's, recovered from.
+    pub(crate) host_aborts: usize,
+    /// Cycles the server closed with no answer in time.
+    pub(crate) lost_cycles: usize,
 }
 
 impl FrankaSim {
     /// Start one in `dir` (its log there) and wait until it listens.
     pub(crate) fn start(python: &Path, dir: &Path) -> Self {
+        Self::start_with(python, dir, &[])
+    }
+
+    /// [`FrankaSim::start`] with more arguments for the loopback script (`--no-enforce`:
+    /// nothing aborted, so a whole signal is recorded).
+    pub(crate) fn start_with(python: &Path, dir: &Path, args: &[&str]) -> Self {
         let log = dir.join("franka-sim.log");
         let err = std::fs::File::create(&log).unwrap_or_else(|e| panic!("{e}"));
+        let record = dir.join("franka-sim-record.txt");
         let mjcf = root().join("rigs/fr3/fr3_nomesh.xml");
         assert!(
             mjcf.exists(),
@@ -62,6 +89,9 @@ impl FrankaSim {
         );
         let mut child = Command::new(python)
             .arg(root().join("scripts/franka-sim-loopback.py"))
+            .arg("--record")
+            .arg(&record)
+            .args(args)
             .env("FR3_MJCF", &mjcf)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
@@ -92,6 +122,7 @@ impl FrankaSim {
             child: Some(child),
             port,
             log,
+            record,
         }
     }
 
@@ -117,38 +148,80 @@ impl FrankaSim {
         lines[lines.len().saturating_sub(30)..].join("\n")
     }
 
-    /// Asserts its log records no motion the simulator aborted (a limit the robot would
-    /// have enforced).
-    pub(crate) fn assert_no_abort(&self) {
-        if let Some(line) = self.aborted_a_motion() {
+    /// The tier's verdict, from what the server recorded: every command the driver
+    /// sent, differenced on the robot's 1 ms clock with no lost cycle in any
+    /// difference, holds within the FR3's Cartesian and joint limits; and every motion
+    /// the server aborted had cycles lost just before it (the host's: the run under
+    /// test must have recovered from it, which its own checks see). An abort with no
+    /// lost cycle before it, or a commanded signal over a limit, fails, whatever the
+    /// host. Prints the verdict.
+    pub(crate) fn judge(&self) -> Judged {
+        let text = std::fs::read_to_string(&self.record).unwrap_or_else(|e| {
             panic!(
-                "franka-sim aborted a motion: {line}\nits log up to there:\n{}",
-                self.log_before(&line, 40)
+                "cannot read franka-sim's record {}: {e}",
+                self.record.display()
+            )
+        });
+        let rec = record::Record::parse(&text)
+            .unwrap_or_else(|e| panic!("{}: {e}", self.record.display()));
+        let verdict = rec.judge();
+        let (hosts, drivers): (Vec<_>, Vec<_>) =
+            rec.aborts.iter().partition(|a| rec.is_the_hosts(a));
+        eprintln!(
+            "franka-sim verdict: {} commands ({} late), {} cycles lost, {} aborts ({} the host's)\n{}",
+            rec.commands.len(),
+            rec.late,
+            rec.lost.len(),
+            rec.aborts.len(),
+            hosts.len(),
+            verdict.table()
+        );
+        for a in &hosts {
+            eprintln!(
+                "franka-sim: the host's abort (cycles lost before it), recovered: {}",
+                a.reason
             );
         }
+        if !drivers.is_empty() || !verdict.holds() {
+            let kept = self.keep();
+            assert!(
+                drivers.is_empty(),
+                "franka-sim aborted a motion with no cycle lost in the {} before it (the driver's): {:?}\nits log:\n{}\nthe record and log are kept in {kept}",
+                record::LOST_BEFORE_ABORT,
+                drivers,
+                self.log_tail()
+            );
+            panic!(
+                "the driver's commanded signal breaks the FR3's limits:\n{}\nthe record and log are kept in {kept}",
+                verdict.table()
+            );
+        }
+        assert!(verdict.commands > 0, "franka-sim recorded no command");
+        Judged {
+            verdict,
+            host_aborts: hosts.len(),
+            lost_cycles: rec.lost.len(),
+        }
     }
+}
 
-    /// Up to `n` lines of its log that come before `line`, and `line`.
-    #[must_use]
-    pub(crate) fn log_before(&self, line: &str, n: usize) -> String {
-        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
-        let lines: Vec<&str> = text.lines().collect();
-        let at = lines.iter().position(|l| *l == line).unwrap_or(lines.len());
-        lines[at.saturating_sub(n)..(at + 1).min(lines.len())].join("\n")
-    }
-
-    /// The first line of its log that records an aborted motion: every reflex
-    /// franka-sim emulates logs "-- aborting the motion" (a motion limit, a
-    /// discontinuity of the joints' inverse kinematics, lost commands).
-    #[must_use]
-    pub(crate) fn aborted_a_motion(&self) -> Option<String> {
-        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
-        text.lines()
-            .find(|l| {
-                l.contains("aborting the motion")
-                    || (l.contains("violation") && !l.contains("enforce"))
-            })
-            .map(str::to_owned)
+impl FrankaSim {
+    /// Copies the record and the log of a failed test to
+    /// `target/franka-sim-failed/TEST/` (the test's folder is removed when it ends),
+    /// and says where.
+    fn keep(&self) -> String {
+        let test = std::thread::current()
+            .name()
+            .unwrap_or("unnamed")
+            .replace("::", "-");
+        let dir = root().join("target/franka-sim-failed").join(test);
+        let kept = std::fs::create_dir_all(&dir)
+            .and_then(|()| std::fs::copy(&self.record, dir.join("franka-sim-record.txt")))
+            .and_then(|_| std::fs::copy(&self.log, dir.join("franka-sim.log")));
+        match kept {
+            Ok(_) => dir.display().to_string(),
+            Err(e) => format!("nowhere ({}: {e})", dir.display()),
+        }
     }
 }
 
@@ -181,6 +254,8 @@ driver = "franka"
 address = "{address}"
 reflex_force_n = 30.0
 realtime = "ignore"
+# A rig's own share of the FR3's limits (the default, said): 2.7 m/s², 900 m/s³.
+motion_margin = 0.3
 
 {devices}
 

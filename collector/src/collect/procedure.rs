@@ -35,6 +35,9 @@ enum AttemptError {
     ForceLimit {
         reading: FtReading,
         stop_failed: Option<DeviceError>,
+        /// How far the arm went from where it was measured at the trip to where it came
+        /// to rest, m (`None`: an arm with no pose feed, or its state unread).
+        stopped_after_m: Option<f64>,
     },
     /// The guard stopped the approach for the stream's sake (stale, failing or
     /// non-finite); the arm was told to stop, which may have failed too.
@@ -219,14 +222,19 @@ impl Job<'_> {
                 Err(AttemptError::ForceLimit {
                     reading,
                     stop_failed,
+                    stopped_after_m,
                 }) => {
                     self.events.log(
                         EventKind::ForceLimit,
                         EventLevel::Warn,
                         Some(index),
                         &format!(
-                            "attempt {attempt}: approach aborted at {}",
-                            reading.wrench_in_sensor
+                            "attempt {attempt}: approach aborted at {}{}",
+                            reading.wrench_in_sensor,
+                            stopped_after_m.map_or(String::new(), |m| format!(
+                                "; the arm came to rest {:.2} mm from where it was at the trip",
+                                m * 1000.0
+                            ))
                         ),
                     )?;
                     if let Some(e) = stop_failed {
@@ -400,6 +408,7 @@ impl Job<'_> {
         let arm = &mut self.arm;
         let mut took = Vec::with_capacity(legs.len());
         let guard = self.ft.guard(limits);
+        let feed = arm.pose_feed();
         let moves = async {
             for (pose, speed_m_s) in legs {
                 let t0 = clock.now();
@@ -411,11 +420,24 @@ impl Job<'_> {
         let moved = tokio::select! {
             moved = moves => moved,
             trip = guard => {
+                // Where the arm was at the trip (its latest measured pose), and where
+                // it came to rest: the guard's stopping distance, said with the trip.
+                let at_trip = feed.as_ref().and_then(|f| f.borrow().map(|(_, p)| p));
                 let stop_failed = self.arm.stop().await.err();
+                let stopped_after_m = match (at_trip, stop_failed.is_none()) {
+                    (Some(at), true) => self
+                        .arm
+                        .state()
+                        .await
+                        .ok()
+                        .map(|s| s.base_from_finger.distance_to(&at)),
+                    _ => None,
+                };
                 return Err(match trip {
                     GuardTrip::OverLimit(reading) => AttemptError::ForceLimit {
                         reading,
                         stop_failed,
+                        stopped_after_m,
                     },
                     trip => AttemptError::Guard { trip, stop_failed },
                 });

@@ -23,6 +23,11 @@ pub struct MotionLimits {
     pub brake_jerk_m_s3: f64,
     /// Translational speed a move is held to, m/s (a faster request is slowed).
     pub max_speed_m_s: f64,
+    /// Test only, 1 on every rig: any other value plans every move's acceleration and
+    /// jerk at this many times the robot's own Cartesian limits, skipping every limit
+    /// and joint check. The franka-sim tier sets it to prove that its check of the
+    /// commanded signal catches a broken plan.
+    pub test_rate_scale: f64,
 }
 
 impl Default for MotionLimits {
@@ -40,6 +45,7 @@ impl Default for MotionLimits {
             brake_accel_m_s2: 1.5,
             brake_jerk_m_s3: 200.0,
             max_speed_m_s: MAX_SPEED_M_S,
+            test_rate_scale: 1.0,
         }
     }
 }
@@ -78,6 +84,7 @@ impl MotionLimits {
             brake_accel_m_s2: d.brake_accel_m_s2,
             brake_jerk_m_s3: d.brake_jerk_m_s3,
             max_speed_m_s: (v * m).min(MAX_SPEED_M_S),
+            test_rate_scale: 1.0,
         }
     }
 

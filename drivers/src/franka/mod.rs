@@ -70,6 +70,7 @@ pub use worker::{Cancel, SuccessRate, lower};
 use worker::{Cmd, Reply, err, gone, worker};
 
 pub mod reach;
+pub mod signal;
 use reach::IDENTITY;
 
 #[cfg(test)]

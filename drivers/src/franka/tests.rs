@@ -4,7 +4,8 @@
 use super::*;
 
 /// The Panda at `SOFTTOUCH_FRANKA_ADDRESS`, connected with real time enforced, 30 N
-/// reflexes and Desk's end effector (hardware tier; a missing variable fails the test).
+/// reflexes, Desk's end effector and a rig's own share of the robot's limits (the
+/// default `motion_margin`) (hardware tier; a missing variable fails the test).
 async fn hardware_arm() -> FrankaArm {
     let address = std::env::var("SOFTTOUCH_FRANKA_ADDRESS").unwrap_or_else(|_| {
         panic!("SOFTTOUCH_FRANKA_ADDRESS is not set (see TESTING.md, hardware tier)")
@@ -18,7 +19,7 @@ async fn hardware_arm() -> FrankaArm {
         payload: None,
         joint_torque_thresholds_nm: softtouch_schemas::FRANKA_DEFAULT_JOINT_TORQUE_THRESHOLDS_NM,
         limits: MotionLimits::default(),
-        motion_margin: None,
+        motion_margin: Some(softtouch_schemas::FRANKA_DEFAULT_MOTION_MARGIN),
         route: Vec::new(),
     };
     FrankaArm::connect(config, Arc::new(crate::TokioClock::new()))

@@ -224,6 +224,23 @@ pub(super) fn run_move(
         brake_path.max_acceleration *= brake_scale.acceleration;
         brake_path.max_jerk *= brake_scale.jerk;
     }
+    let k = limits.test_rate_scale;
+    if k.is_finite() && k > 0.0 && (k - 1.0).abs() > f64::EPSILON {
+        // Test only (1 on every rig): a broken plan, its acceleration and jerk `k`
+        // times the robot's own Cartesian limits, every check above skipped.
+        let robot_kind = joints.as_ref().map_or(reach::Robot::Fr3, |(_, r)| *r);
+        let [_, a, j, _, ra, rj] = cartesian_limits(robot_kind);
+        let broken = MotionLimits {
+            accel_m_s2: a * k,
+            jerk_m_s3: j * k,
+            rot_accel_rad_s2: ra * k,
+            rot_jerk_rad_s3: rj * k,
+            ..*limits
+        };
+        let p = path_limits(dist, angle, speed, &broken);
+        path.max_acceleration = p.max_acceleration;
+        path.max_jerk = p.max_jerk;
+    }
     let mut otg = franka::Otg::new(0.0, path).map_err(err)?;
     otg.set_target(1.0).map_err(err)?;
     let mut seed: Option<ArmPose> = None;

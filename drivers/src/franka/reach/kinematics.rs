@@ -158,11 +158,40 @@ impl Kinematics {
         let at = self.pose(&q);
         (at.distance_to(&want) < 1e-4 && at.angle_to(&want) < 1e-3).then_some(q)
     }
+
+    /// `q` (near a solution for `target`) refined by Gauss-Newton steps, with no
+    /// damping and the least joint motion, until the pose error is below `tol` (m and
+    /// rad) or 20 steps pass: joints differenced at 1 kHz need them exact, where
+    /// [`Kinematics::solve`] stops at 1e-5.
+    #[must_use]
+    pub fn refine(&self, target: &ArmPose, q: &[f64; 7], tol: f64) -> [f64; 7] {
+        let want = target.normalised();
+        let mut q = *q;
+        for _ in 0..20 {
+            let at = self.pose(&q);
+            let dp = Vector3::from(want.translation_m) - Vector3::from(at.translation_m);
+            let dr = rotation_error(&want, &at);
+            if dp.norm() < tol && dr.norm() < tol {
+                break;
+            }
+            let e = Vector6::new(dp[0], dp[1], dp[2], dr[0], dr[1], dr[2]);
+            let j = self.jacobian(&q);
+            let jjt: Matrix6<f64> = j * j.transpose();
+            let Some(y) = jjt.lu().solve(&e) else { break };
+            let dq = j.transpose() * y;
+            let next: [f64; 7] = std::array::from_fn(|i| q[i] + dq[i]);
+            if next.iter().any(|v| !v.is_finite()) {
+                break;
+            }
+            q = next;
+        }
+        q
+    }
 }
 
 /// The rotation vector (axis × angle, base frame) that turns `at` into `want`: from
 /// the quaternion `want · at⁻¹`, finite at zero angle (where a matrix's `acos` is not).
-pub(super) fn rotation_error(want: &ArmPose, at: &ArmPose) -> Vector3<f64> {
+pub fn rotation_error(want: &ArmPose, at: &ArmPose) -> Vector3<f64> {
     let [w1, x1, y1, z1] = want.rotation_wxyz;
     let [w2, x2, y2, z2] = at.normalised().rotation_wxyz;
     // want · conj(at)
