@@ -590,9 +590,11 @@ fn timed_collect(sim: &FrankaSim, rig: &str, scene: &str, samples: u64) -> (f64,
 
 /// Where a sample's time goes on the Franka path, and the pace of a planned run over
 /// the widest wrist turn the FR3 allows: the planned order at the robot's speeds
-/// takes every sample with no motion aborted by franka-sim's enforced limits, and at
-/// least twice the pace of index order (every sample from home, wrist turns of up to
-/// 5.2 rad). Prints both phase tables (`--nocapture`).
+/// takes every sample with no motion aborted by franka-sim's enforced limits, and
+/// spends less than half the robot's motion time a sample that index order does (every
+/// sample from home, wrist turns of up to 5.2 rad). Motion time is the commands the
+/// driver sent, one per 1 ms cycle, so a busy host does not move the verdict (wall
+/// time did: 1.92 times beside a busy loop). Prints both phase tables (`--nocapture`).
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn a_planned_run_on_franka_sim_turns_the_wrist_little_and_breaks_no_limit() {
@@ -617,7 +619,7 @@ fn a_planned_run_on_franka_sim_turns_the_wrist_little_and_breaks_no_limit() {
         planned.events
     );
     assert_eq!(planned.kinds("visit_plan").len(), 1, "{:?}", planned.events);
-    sim.judge();
+    let planned_cycles = sim.judge().verdict.commands;
     // Home in the widened rig's rod frame (turned 180° about x).
     let home = ArmPose::from_contact(
         &ArmPose {
@@ -638,11 +640,19 @@ fn a_planned_run_on_franka_sim_turns_the_wrist_little_and_breaks_no_limit() {
     let (index_wall_s, stdout, index) = timed_collect(&sim, &rig, &scene, few);
     eprintln!("franka-sim, index order, {few} samples in {index_wall_s:.1} s wall:\n{stdout}");
     assert_eq!(index.status, "completed");
-    sim.judge();
-    let (planned_per_s, index_per_s) = (wall_s / n as f64, index_wall_s / few as f64);
+    let index_cycles = sim.judge().verdict.commands - planned_cycles;
+    let (planned_s, index_s) = (
+        planned_cycles as f64 / 1000.0 / n as f64,
+        index_cycles as f64 / 1000.0 / few as f64,
+    );
+    eprintln!(
+        "motion a sample: planned {planned_s:.2} s, index order {index_s:.2} s; wall a sample: planned {:.2} s, index order {:.2} s",
+        wall_s / n as f64,
+        index_wall_s / few as f64
+    );
     assert!(
-        index_per_s > 2.0 * planned_per_s,
-        "planned {planned_per_s:.2} s a sample, index order {index_per_s:.2} s"
+        index_s > 2.0 * planned_s,
+        "motion a sample: planned {planned_s:.2} s, index order {index_s:.2} s"
     );
 }
 
