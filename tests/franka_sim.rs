@@ -331,10 +331,6 @@ fn a_plan_with_rates_past_the_robots_limits_is_caught_by_the_signal_check() {
             arm.move_to(&to, 0.5).await
         })
     };
-    let record = |sim: &FrankaSim| {
-        let text = std::fs::read_to_string(&sim.record).expect("record");
-        fcisim::record::Record::parse(&text).expect("record parses")
-    };
 
     let dir = tempdir();
     let enforced = FrankaSim::start(&py, dir.path());
@@ -343,7 +339,7 @@ fn a_plan_with_rates_past_the_robots_limits_is_caught_by_the_signal_check() {
         moved.is_err(),
         "franka-sim let the broken plan run: {moved:?}"
     );
-    let rec = record(&enforced);
+    let rec = enforced.recorded();
     assert!(!rec.aborts.is_empty(), "no abort recorded");
     assert!(
         rec.aborts.iter().all(|a| !rec.is_the_hosts(a)),
@@ -357,7 +353,7 @@ fn a_plan_with_rates_past_the_robots_limits_is_caught_by_the_signal_check() {
     let open = FrankaSim::start_with(&py, dir.path(), &["--no-enforce"]);
     let moved = broken_move(&open);
     eprintln!("not enforced, the broken move: {moved:?}");
-    let rec = record(&open);
+    let rec = open.recorded();
     assert!(rec.aborts.is_empty(), "{:?}", rec.aborts);
     let verdict = rec.judge();
     eprintln!("{}", verdict.table());

@@ -148,6 +148,17 @@ impl FrankaSim {
         lines[lines.len().saturating_sub(30)..].join("\n")
     }
 
+    /// What the server has recorded so far ([`record`]).
+    pub(crate) fn recorded(&self) -> record::Record {
+        let text = std::fs::read_to_string(&self.record).unwrap_or_else(|e| {
+            panic!(
+                "cannot read franka-sim's record {}: {e}",
+                self.record.display()
+            )
+        });
+        record::Record::parse(&text).unwrap_or_else(|e| panic!("{}: {e}", self.record.display()))
+    }
+
     /// The tier's verdict, from what the server recorded: every command the driver
     /// sent, differenced on the robot's 1 ms clock with no lost cycle in any
     /// difference, holds within the FR3's Cartesian and joint limits; and every motion
@@ -156,14 +167,7 @@ impl FrankaSim {
     /// lost cycle before it, or a commanded signal over a limit, fails, whatever the
     /// host. Prints the verdict.
     pub(crate) fn judge(&self) -> Judged {
-        let text = std::fs::read_to_string(&self.record).unwrap_or_else(|e| {
-            panic!(
-                "cannot read franka-sim's record {}: {e}",
-                self.record.display()
-            )
-        });
-        let rec = record::Record::parse(&text)
-            .unwrap_or_else(|e| panic!("{}: {e}", self.record.display()));
+        let rec = self.recorded();
         let verdict = rec.judge();
         let (hosts, drivers): (Vec<_>, Vec<_>) =
             rec.aborts.iter().partition(|a| rec.is_the_hosts(a));

@@ -129,14 +129,11 @@ impl Kinematics {
         let want = target.normalised();
         let mut q = *seed;
         for _ in 0..200 {
-            let at = self.pose(&q);
-            let dp = Vector3::from(want.translation_m) - Vector3::from(at.translation_m);
-            let dr = rotation_error(&want, &at);
-            if dp.norm() < 1e-5 && dr.norm() < 1e-5 {
+            let (e, dp, dr) = self.pose_error(&want, &q);
+            if dp < 1e-5 && dr < 1e-5 {
                 return Some(q);
             }
 
-            let e = Vector6::new(dp[0], dp[1], dp[2], dr[0], dr[1], dr[2]);
             let j = self.jacobian(&q);
             // Damped least squares: steady near singularities, exact away from them.
             let damping = 1e-4;
@@ -159,6 +156,16 @@ impl Kinematics {
         (at.distance_to(&want) < 1e-4 && at.angle_to(&want) < 1e-3).then_some(q)
     }
 
+    /// The error from the end effector at `q` to `want` (normalised): the stacked
+    /// translation (m) and rotation vector (rad), and the norm of each.
+    fn pose_error(&self, want: &ArmPose, q: &[f64; 7]) -> (Vector6<f64>, f64, f64) {
+        let at = self.pose(q);
+        let dp = Vector3::from(want.translation_m) - Vector3::from(at.translation_m);
+        let dr = rotation_error(want, &at);
+        let e = Vector6::new(dp[0], dp[1], dp[2], dr[0], dr[1], dr[2]);
+        (e, dp.norm(), dr.norm())
+    }
+
     /// `q` (near a solution for `target`) refined by Gauss-Newton steps, with no
     /// damping and the least joint motion, until the pose error is below `tol` (m and
     /// rad) or 20 steps pass: joints differenced at 1 kHz need them exact, where
@@ -168,13 +175,10 @@ impl Kinematics {
         let want = target.normalised();
         let mut q = *q;
         for _ in 0..20 {
-            let at = self.pose(&q);
-            let dp = Vector3::from(want.translation_m) - Vector3::from(at.translation_m);
-            let dr = rotation_error(&want, &at);
-            if dp.norm() < tol && dr.norm() < tol {
+            let (e, dp, dr) = self.pose_error(&want, &q);
+            if dp < tol && dr < tol {
                 break;
             }
-            let e = Vector6::new(dp[0], dp[1], dp[2], dr[0], dr[1], dr[2]);
             let j = self.jacobian(&q);
             let jjt: Matrix6<f64> = j * j.transpose();
             let Some(y) = jjt.lu().solve(&e) else { break };
