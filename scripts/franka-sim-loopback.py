@@ -17,12 +17,20 @@ test harness judges the driver by (tests/fcisim/record.rs reads it):
 
     c ID ON_TIME O_T_EE_c[16] q[7]   a command answering state ID (ON_TIME 1: in its cycle)
     f ID O_T_EE_c[16] q[7]           the command that finished a motion
+    j ID ON_TIME q_c[7] q[7]         the same two of a joint-position motion
+    k ID q_c[7] q[7]
     l ID                             state ID's cycle closed with no answer (a lost cycle)
     a ID REASON...                   the motion aborted while state ID was the latest out
     n                                a new connection (its state ids start again)
 
 `q` is the measured joints when the command arrived (the seed the harness solves the
 commanded pose's joints from).
+
+As a robot does (and franka-sim does not), a robot in reflex refuses every setter
+(collision behaviour, impedances, end effector, load) with CommandNotPossibleRejected
+until AutomaticErrorRecovery. `--reflex-on-connect N` puts the Nth connection's robot in
+the reflex a client that died mid-motion leaves (communication_constraints_violation):
+franka-sim starts every connection fresh and idle, a robot does not.
 
     FR3_MJCF=rigs/fr3/fr3_nomesh.xml python3 scripts/franka-sim-loopback.py --record cmds.txt
 """
@@ -42,7 +50,27 @@ import threading
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.setswitchinterval(0.0002)
 
+import struct  # noqa: E402
+
 from franka_sim import FrankaSimServer  # noqa: E402 (after the thread settings above)
+from franka_sim.comm_constraints import COMMUNICATION_CONSTRAINTS_VIOLATION_INDEX  # noqa: E402
+from franka_sim.franka_protocol import LibfrankaMotionGeneratorMode  # noqa: E402
+from franka_sim.franka_protocol import MessageHeader  # noqa: E402
+from franka_sim.server.constants import RobotMode  # noqa: E402
+
+#: The setters a robot in reflex refuses (franka-sim's handler names).
+SETTERS = [
+    "handle_set_collision_behavior_command",
+    "handle_set_joint_impedance_command",
+    "handle_set_cartesian_impedance_command",
+    "handle_set_guiding_mode_command",
+    "handle_set_ee_to_k_command",
+    "handle_set_ne_to_ee_command",
+    "handle_set_load_command",
+]
+
+#: GetterSetterStatus::kCommandNotPossibleRejected (libfranka's service types).
+COMMAND_NOT_POSSIBLE_REJECTED = 1
 
 log = logging.getLogger("franka-sim-loopback")
 
@@ -75,6 +103,32 @@ class LoopbackServer(FrankaSimServer):
     drop_late = True
     #: The record (main sets it from --record), or None.
     recorder = None
+    #: The connection (1-based) that finds the robot in reflex (main sets it from
+    #: --reflex-on-connect), or 0.
+    reflex_on_connect = 0
+
+    _connections = 0
+    _new_connection = False
+
+    def handle_client(self, client_socket):
+        # franka-sim's handle_client resets the session's state first: that reset is
+        # the new connection's.
+        LoopbackServer._connections += 1
+        self._new_connection = True
+        return super().handle_client(client_socket)
+
+    def reset_state(self):
+        super().reset_state()
+        if not self._new_connection:
+            return
+        self._new_connection = False
+        if self._connections == self.reflex_on_connect:
+            state = self.robot_state.state
+            state["errors"][COMMUNICATION_CONSTRAINTS_VIOLATION_INDEX] = True
+            state["reflex_reason"][COMMUNICATION_CONSTRAINTS_VIOLATION_INDEX] = True
+            state["robot_mode"] = RobotMode.kReflex
+            log.warning("connection %s: the robot is in reflex (communication_constraints_violation), "
+                        "as a client that died mid-motion leaves it", self._connections)
 
     # The communication tracker is replaced at every connection; each one's cycle
     # accounting is wrapped so that a lost cycle is recorded.
@@ -103,10 +157,16 @@ class LoopbackServer(FrankaSimServer):
             return
         q = self.robot_state.state["q"]
         on_time = "" if fresh is None else (" 1" if fresh else " 0")
+        # A joint-position motion commands q_c; its O_T_EE_c means nothing.
+        if self.robot_state.state["motion_generator_mode"] == LibfrankaMotionGeneratorMode.kJointPosition:
+            kind = {"c": "j", "f": "k"}[kind]
+            commanded = command["q_c"]
+        else:
+            commanded = command["O_T_EE_c"]
         self.recorder.line(
             f"{kind} {command['message_id']}{on_time} "
-            f"{Recorder.numbers(command['O_T_EE_c'])} {Recorder.numbers(q)}",
-            flush=kind == "f",
+            f"{Recorder.numbers(commanded)} {Recorder.numbers(q)}",
+            flush=kind in ("f", "k"),
         )
 
     def _finish_motion(self, command):
@@ -144,6 +204,24 @@ class LoopbackServer(FrankaSimServer):
         print(f"FRANKA_SIM_PORT={self.port}", flush=True)
 
 
+def _refused_in_reflex(name):
+    original = getattr(FrankaSimServer, name)
+
+    def handler(self, client_socket, header, payload):
+        if self.robot_state.state["robot_mode"] == RobotMode.kReflex:
+            log.warning("%s refused: the robot is in reflex (recover it first)", name)
+            response = MessageHeader(header.command, header.command_id, 12 + 4).to_bytes()
+            self._send_tcp(client_socket, response + struct.pack("<B3x", COMMAND_NOT_POSSIBLE_REJECTED))
+            return
+        return original(self, client_socket, header, payload)
+
+    return handler
+
+
+for _name in SETTERS:
+    setattr(LoopbackServer, _name, _refused_in_reflex(_name))
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--port", type=int, default=0, help="TCP command port (default 0: a free one)")
@@ -152,7 +230,10 @@ def main():
                    help="apply a command that missed its cycle, as franka-sim does, instead of dropping it as the FCI does")
     p.add_argument("--record", default=os.environ.get("FRANKA_SIM_RECORD"),
                    help="write every command, lost cycle and abort to this file (default $FRANKA_SIM_RECORD)")
+    p.add_argument("--reflex-on-connect", type=int, default=0, metavar="N",
+                   help="the Nth connection finds the robot in reflex, as a client that died mid-motion leaves it")
     args = p.parse_args()
+    LoopbackServer.reflex_on_connect = args.reflex_on_connect
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     enforce = not args.no_enforce

@@ -48,6 +48,11 @@ struct ProbeState {
     moves_before_last_stop: usize,
     /// Readings the sensor wrapper spiked or spoilt, with their place in the packet.
     spoilt: Vec<(usize, usize)>,
+    /// Joints the arm reports, where it plays an arm with joints: each Cartesian move
+    /// drifts joint 3 (the elbow) by 2 mrad, as a robot's redundancy does over a night.
+    joints: Option<[f64; 7]>,
+    /// Joint-space moves, their targets.
+    joint_moves: Vec<[f64; 7]>,
 }
 
 type Probe = Arc<Mutex<ProbeState>>;
@@ -69,6 +74,7 @@ struct ProbeArm {
     inner: Arc<tokio::sync::Mutex<Box<dyn Arm>>>,
     probe: Probe,
     home: ArmPose,
+    base_from_rod: ArmPose,
     stop_on_approach: Option<(u32, watch::Sender<u32>)>,
 }
 
@@ -81,18 +87,33 @@ impl Drop for Approaching {
     }
 }
 
+/// Whether `target` lies nearer the rod than the retreat plane (home's x): a move
+/// there is an approach.
+fn toward_rod(base_from_rod: &ArmPose, home: &ArmPose, target: &ArmPose) -> bool {
+    let x = |p: &ArmPose| softtouch_schemas::ContactPose::from_arm(base_from_rod, p).x_m;
+    x(target) > x(home) + 1e-6
+}
+
 #[async_trait]
 impl Arm for ProbeArm {
     async fn move_to(&mut self, target: &ArmPose, speed_m_s: f64) -> Result<ArmState, DeviceError> {
-        let approach = !same_pose(target, &self.home);
+        let approach = toward_rod(&self.base_from_rod, &self.home, target);
         let (n, starts) = {
             let mut p = probe(&self.probe);
-            // An approach is one or two moves (its slow end); it starts from home.
-            let starts = approach && p.moves.last().is_none_or(|m| same_pose(m, &self.home));
+            // An approach is one or two moves (its slow end); it starts from its
+            // retreat point.
+            let starts = approach
+                && p.moves
+                    .last()
+                    .is_none_or(|m| !toward_rod(&self.base_from_rod, &self.home, m));
             p.moves.push(*target);
+            if let Some(q) = p.joints.as_mut() {
+                q[2] += 0.002;
+            }
+            // Any move ends the recording.
+            p.recording = false;
             if approach {
                 p.approaching = true;
-                p.recording = false;
             }
             if starts {
                 p.approaches += 1;
@@ -119,6 +140,20 @@ impl Arm for ProbeArm {
     }
     async fn recover(&mut self) -> Result<(), DeviceError> {
         self.inner.lock().await.recover().await
+    }
+    async fn joints_rad(&mut self) -> Result<Option<[f64; 7]>, DeviceError> {
+        Ok(probe(&self.probe).joints)
+    }
+    async fn move_joints(&mut self, q_rad: &[f64; 7]) -> Result<Option<ArmState>, DeviceError> {
+        {
+            let mut p = probe(&self.probe);
+            if p.joints.is_none() {
+                return Ok(None);
+            }
+            p.joints = Some(*q_rad);
+            p.joint_moves.push(*q_rad);
+        }
+        self.inner.lock().await.state().await.map(Some)
     }
     async fn stop(&mut self) -> Result<(), DeviceError> {
         {
@@ -305,6 +340,10 @@ struct Faults {
     stop_on_approach: Option<u32>,
     /// An absent operator at the first rod change (with two rods of `block` samples).
     absent_operator: bool,
+    /// Two rods of two samples each, changed by the simulated operator.
+    two_rods: bool,
+    /// The arm reports joints (and its elbow drifts): see [`ProbeState::joints`].
+    joints: bool,
     /// Before collecting: change the plan (e.g. poses outside the workspace).
     edit_plan: fn(&mut CollectPlan),
     /// Before collecting: SQL run on the database from another connection.
@@ -318,6 +357,8 @@ impl Default for Faults {
             camera_timeout: |_| false,
             stop_on_approach: None,
             absent_operator: false,
+            two_rods: false,
+            joints: false,
             edit_plan: |_| {},
             sql: String::new(),
         }
@@ -345,6 +386,48 @@ impl Ended {
     fn still(&self) -> bool {
         same_pose(&self.final_pose, &self.later_pose)
     }
+
+    /// Every approach starts at its retreat point, and every move after an approach
+    /// (whatever ended it: the sample, a guard trip, a fault, a stop) goes straight
+    /// back along the approach axis: to the retreat plane (home's x) with the
+    /// approach's z and θ, nothing turned. How many departures there were.
+    fn departures_along_the_approach_axis(&self, base_from_rod: &ArmPose) -> usize {
+        use softtouch_schemas::ContactPose;
+        let c = |p: &ArmPose| ContactPose::from_arm(base_from_rod, p);
+        let plane_x = c(&self.home).x_m;
+        let moves = &self.probe.moves;
+        let mut departures = 0;
+        for (k, pair) in moves.windows(2).enumerate() {
+            let (a, b) = (c(&pair[0]), c(&pair[1]));
+            let into = toward_rod(base_from_rod, &self.home, &pair[1]);
+            let from = toward_rod(base_from_rod, &self.home, &pair[0]);
+            let same_line =
+                (a.z_m - b.z_m).abs() < 1e-9 && (a.theta_rad - b.theta_rad).abs() < 1e-9;
+            if into && !from {
+                assert!(
+                    same_line && (a.x_m - plane_x).abs() < 1e-9,
+                    "move {} approaches from {a:?}, not from its retreat point, to {b:?}",
+                    k + 1
+                );
+            }
+            if into && from {
+                assert!(
+                    same_line,
+                    "move {} turns on the approach line: {a:?} to {b:?}",
+                    k + 1
+                );
+            }
+            if from && !into {
+                departures += 1;
+                assert!(
+                    same_line && (b.x_m - plane_x).abs() < 1e-9,
+                    "move {} leaves {a:?} for {b:?}: not straight back along the approach axis",
+                    k + 1
+                );
+            }
+        }
+        departures
+    }
 }
 
 fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
@@ -362,12 +445,12 @@ fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
     let request = NewRunRequest {
         samples,
         seed: Some(3),
-        rods: if faults.absent_operator {
+        rods: if faults.absent_operator || faults.two_rods {
             vec!["circle-10".into(), "square-10".into()]
         } else {
             Vec::new()
         },
-        block: Some(if faults.absent_operator {
+        block: Some(if faults.absent_operator || faults.two_rods {
             2
         } else {
             samples.max(1)
@@ -386,6 +469,9 @@ fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
         let w = &plan.rig.workspace;
         let home = ArmPose::from_contact(&w.base_from_rod, &w.home);
         let shared: Probe = Probe::default();
+        if faults.joints {
+            probe(&shared).joints = Some([0.0, -0.3, 0.0, -2.2, 0.0, 1.9, 0.6]);
+        }
         let arm = Arc::new(tokio::sync::Mutex::new(devices.arm));
         let (stop_tx, stop_rx) = watch::channel(0u32);
         let wrapped = CollectDevices {
@@ -393,6 +479,7 @@ fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
                 inner: Arc::clone(&arm),
                 probe: Arc::clone(&shared),
                 home,
+                base_from_rod: w.base_from_rod,
                 stop_on_approach: faults.stop_on_approach.map(|n| (n, stop_tx.clone())),
             }),
             force_sensor: Box::new(FaultySensor {
@@ -565,7 +652,113 @@ fn a_force_spike_in_the_middle_of_a_packet_trips_the_guard() {
     assert!(s.samples[1..].iter().all(|x| x.1 == "ok"));
     assert!(e.probe.stops >= 1, "the arm was told to stop at the trip");
     assert!(e.at_home() && e.still(), "the arm ends at home, still");
+    let w = softtouch_schemas::defaults::rig().workspace;
+    assert!(e.departures_along_the_approach_axis(&w.base_from_rod) >= 4);
     nothing_lost(&e, &s);
+}
+
+/// The finger leaves the rod the way it came, from every pose where it may touch it:
+/// a guard trip on every sample (0.3 N: below the first contact's force, 24 σ of the
+/// Nano17's noise, which 0.05 N is not), across a
+/// block's end (two rods), in the planned and the index order, and normal samples.
+/// Nothing turns or travels before the arm is back at the retreat plane.
+#[test]
+fn every_departure_from_the_rod_runs_back_along_the_approach_axis() {
+    for order in [
+        softtouch_schemas::rig::VisitOrder::Planned,
+        softtouch_schemas::rig::VisitOrder::Index,
+    ] {
+        for trip in [true, false] {
+            let dir = tempdir();
+            let db = dir.path().join("t.db");
+            let edit: fn(&mut CollectPlan) = match (order, trip) {
+                (softtouch_schemas::rig::VisitOrder::Planned, true) => |p| {
+                    p.rig.procedure.visit_order = softtouch_schemas::rig::VisitOrder::Planned;
+                    p.rig.limits.max_force_n = 0.3;
+                },
+                (softtouch_schemas::rig::VisitOrder::Planned, false) => |p| {
+                    p.rig.procedure.visit_order = softtouch_schemas::rig::VisitOrder::Planned;
+                },
+                (_, true) => |p| p.rig.limits.max_force_n = 0.3,
+                (_, false) => |_| {},
+            };
+            let e = faulty_run(
+                &db,
+                4,
+                Faults {
+                    two_rods: true,
+                    edit_plan: edit,
+                    ..Faults::default()
+                },
+            );
+            let s = stored(&db, e.run_id);
+            let context = format!("{order:?}, trip {trip}: {:?}", s.events);
+            assert_eq!(e.outcome, Outcome::Completed, "{context}");
+            assert_eq!(s.samples.len(), 4, "{context}");
+            assert_eq!(s.kinds("rod_change").len(), 2, "{context}");
+            if trip {
+                assert!(
+                    s.samples
+                        .iter()
+                        .all(|x| x.2.as_deref() == Some("force_limit")),
+                    "{context}"
+                );
+            } else {
+                assert!(s.samples.iter().all(|x| x.1 == "ok"), "{context}");
+            }
+            let w = softtouch_schemas::defaults::rig().workspace;
+            let departures = e.departures_along_the_approach_axis(&w.base_from_rod);
+            assert!(departures >= 4, "{departures} departures: {context}");
+            assert!(e.at_home() && e.still(), "{context}");
+        }
+    }
+}
+
+/// On an arm with joints, the elbow goes back in joint space to where the run first
+/// found it at home, at each block's end, with its drift logged; an arm without
+/// joints (the simulator) logs nothing and moves nothing.
+#[test]
+fn the_elbow_goes_back_to_homes_joints_at_each_blocks_end() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        4,
+        Faults {
+            two_rods: true,
+            joints: true,
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    assert_eq!(e.outcome, Outcome::Completed, "{:?}", s.events);
+    let elbow = s.kinds("elbow");
+    assert_eq!(elbow.len(), 2, "one per block's end: {:?}", s.events);
+    for m in &elbow {
+        assert!(
+            m.starts_with("block's end: the joints drifted at most") && m.contains("(joint 3)"),
+            "{m}"
+        );
+        assert!(m.contains("moved back in joint space"), "{m}");
+    }
+    assert_eq!(e.probe.joint_moves.len(), 2, "{:?}", e.probe.joint_moves);
+    for q in &e.probe.joint_moves {
+        // Where the run first reached home: one move in (2 mrad of drift).
+        assert!((q[2] - 0.002).abs() < 1e-12, "{q:?}");
+    }
+    // No joints: nothing logged, nothing moved.
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        4,
+        Faults {
+            two_rods: true,
+            ..Faults::default()
+        },
+    );
+    assert!(stored(&db, e.run_id).kinds("elbow").is_empty());
+    assert!(e.probe.joint_moves.is_empty());
 }
 
 #[test]
@@ -856,6 +1049,8 @@ fn a_store_that_fails_mid_run_ends_in_a_safe_stop_and_resume_fills_the_gap() {
         e.at_home() && e.still(),
         "the arm went home despite the store"
     );
+    let w = softtouch_schemas::defaults::rig().workspace;
+    assert!(e.departures_along_the_approach_axis(&w.base_from_rod) >= 2);
     assert!(!s.lease_held);
     // Whether the job saw sample 2 as done depends on when the writer failed (the
     // commit runs beside the job); either way it is not stored, and resume takes it.

@@ -92,9 +92,14 @@ fn still_arm(sim: &FrankaSim) -> ArmPose {
 /// A franka-sim of its own and a folder holding the tier's rig (with `limits`) and
 /// scene.
 fn tier(limits: &str) -> (tempfile::TempDir, FrankaSim) {
+    tier_with(limits, &[])
+}
+
+/// [`tier`], with more arguments for the loopback script.
+fn tier_with(limits: &str, args: &[&str]) -> (tempfile::TempDir, FrankaSim) {
     let py = python();
     let dir = tempdir();
-    let sim = FrankaSim::start(&py, dir.path());
+    let sim = FrankaSim::start_with(&py, dir.path(), args);
     fcisim::write_rig(dir.path(), &rig_toml(&sim.address(), SIM_DEVICES, limits));
     (dir, sim)
 }
@@ -449,6 +454,7 @@ slave_id = 9
         .find(|l| l.trim_start().starts_with("arm"))
         .unwrap_or_default();
     assert!(arm_row.contains("% of real-time commands"), "{arm_row}");
+    assert!(arm_row.contains("mode at connect: Idle"), "{arm_row}");
     eprintln!("{table}");
     drop(rt);
     sim.judge();
@@ -456,13 +462,16 @@ slave_id = 9
 
 // ---------------------------------------------------------------------- collect
 
-/// A few dozen samples on one rod through FCI, killed (-9) mid-run and resumed: every
-/// index once, the commanded poses those the simulated arm is sent for the seed, the
-/// arm measured where it was sent, and the labels those the simulated arm gives.
+/// A few dozen samples on one rod through FCI, killed (-9) mid-run and resumed with
+/// the robot left in reflex (the loopback's second connection finds it so, as a client
+/// that died mid-motion leaves a robot; in reflex it refuses every setting): connect
+/// recovers it first, the resume completes, every index once, the commanded poses
+/// those the simulated arm is sent for the seed, the arm measured where it was sent,
+/// and the labels those the simulated arm gives.
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
-    let (dir, sim) = tier(LIMITS);
+    let (dir, sim) = tier_with(LIMITS, &["--reflex-on-connect", "2"]);
     let samples = "24";
     let args = collect_args(samples, "11");
     let t0 = std::time::Instant::now();
@@ -480,6 +489,14 @@ fn collect_killed_and_resumed_on_franka_sim_poses_as_the_simulated_arm() {
     assert_eq!(
         franka.samples.iter().map(|s| s.index).collect::<Vec<_>>(),
         (0..24).collect::<Vec<_>>()
+    );
+    let recovered = franka.kinds("arm_recovered");
+    assert!(
+        recovered
+            .iter()
+            .any(|m| m.contains("at connect: Reflex with errors; automatic error recovery run")),
+        "the resume found the robot in reflex and recovered it: {:?}",
+        franka.events
     );
     eprintln!(
         "franka-sim: 24 samples (killed at {before}, resumed) in {wall_s:.0} s wall: {:.0} samples/h",
@@ -615,6 +632,15 @@ fn a_planned_run_on_franka_sim_turns_the_wrist_little_and_breaks_no_limit() {
         planned.events
     );
     assert_eq!(planned.kinds("visit_plan").len(), 1, "{:?}", planned.events);
+    let elbow = planned.kinds("elbow");
+    eprintln!("the elbow at the block's end: {elbow:?}");
+    assert_eq!(elbow.len(), 1, "{:?}", planned.events);
+    // The widened rig's rod frame (turned 180° about x).
+    let wide_rod = ArmPose {
+        translation_m: [0.58, 0.0, 0.6],
+        rotation_wxyz: [0.0, 1.0, 0.0, 0.0],
+    };
+    assert!(departures_hold(&sim, &wide_rod) >= n as usize);
     let planned_cycles = sim.judge().verdict.commands;
     // Home in the widened rig's rod frame (turned 180° about x).
     let home = ArmPose::from_contact(
@@ -654,48 +680,118 @@ fn a_planned_run_on_franka_sim_turns_the_wrist_little_and_breaks_no_limit() {
 
 // ------------------------------------------------------------------- safe exits
 
-/// The force guard trips on the approach (a limit below the first contact's force):
-/// every attempt is stopped within [`GUARD_STOP_BOUND_M`] of where the arm was at the
-/// trip, the arm retreats home, every sample is rejected for the force limit and the
-/// run completes.
+/// The force guard trips on the approach (a limit below the first contact's force),
+/// on every sample, across a block's end (two blocks of two), at the tier's approach
+/// speed (0.05 m/s) and at 0.2 m/s: every attempt is stopped within
+/// [`GUARD_STOP_BOUND_M`] of where the arm was at the trip, every sample is rejected
+/// for the force limit, the run completes at home; and every departure from the rod
+/// in the commands the driver sent runs straight back along the approach axis, with
+/// no turn, to the retreat plane (the table is printed: `--nocapture`).
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn a_force_guard_trip_on_franka_sim_stops_the_arm_and_rejects_the_sample() {
     // 0.3 N: 24 σ of the Nano17's noise (never tripped by it, where 0.05 N was, on
     // fast travel legs), well below the first contact's force.
     let (dir, sim) = tier("max_force_n = 0.3\nmax_torque_nm = 0.8");
-    let out = run(dir.path(), &collect_args("2", "3"));
-    let said = format!("{}{}", text(&out.stdout), text(&out.stderr));
-    let s = stored(&dir.path().join("softtouch.db"), 1);
-    assert_eq!(s.status, "completed", "{:?}\n{said}", s.events);
-    assert_eq!(s.samples.len(), 2, "{:?}", s.samples);
-    assert!(
-        s.samples
-            .iter()
-            .all(|x| x.status != "ok" && x.reason.as_deref() == Some("force_limit")),
-        "{:?}",
-        s.samples
-    );
-    let trips = s.kinds("force_limit");
-    eprintln!("guard trips: {trips:#?}");
-    assert!(!trips.is_empty(), "no guard trip: {:?}\n{said}", s.events);
-    for trip in &trips {
-        let mm = stopped_after_mm(trip)
-            .unwrap_or_else(|| panic!("a trip without where the arm came to rest: {trip}"));
+    let mut stops = Vec::new();
+    for (run_id, speed) in [(1, "0.05"), (2, "0.2")] {
+        let rig = std::fs::read_to_string(dir.path().join("rig.toml")).expect("rig");
+        let rig = rig.replace(
+            "approach_speed_m_s = 0.05",
+            &format!("approach_speed_m_s = {speed}"),
+        );
+        std::fs::write(dir.path().join("rig.toml"), rig).expect("rig");
+        let mut args = collect_args("4", "3").to_vec();
+        args.extend(["--block", "2"]);
+        let out = run(dir.path(), &args);
+        let said = format!("{}{}", text(&out.stdout), text(&out.stderr));
+        let s = stored(&dir.path().join("softtouch.db"), run_id);
+        assert_eq!(s.status, "completed", "{:?}\n{said}", s.events);
+        assert_eq!(s.samples.len(), 4, "{:?}", s.samples);
         assert!(
-            mm <= GUARD_STOP_BOUND_M * 1000.0,
-            "the arm came to rest {mm} mm past the trip (bound {} mm): {trip}",
-            GUARD_STOP_BOUND_M * 1000.0
+            s.samples
+                .iter()
+                .all(|x| x.status != "ok" && x.reason.as_deref() == Some("force_limit")),
+            "{:?}",
+            s.samples
+        );
+        let trips = s.kinds("force_limit");
+        eprintln!("guard trips at {speed} m/s: {trips:#?}");
+        let elbow = s.kinds("elbow");
+        eprintln!("the elbow at each block's end: {elbow:#?}");
+        assert_eq!(elbow.len(), 2, "one per block's end: {:?}", s.events);
+        assert!(
+            trips.len() >= 4,
+            "a trip per sample: {:?}\n{said}",
+            s.events
+        );
+        let bound_mm = guard_stop_bound_m(speed.parse().expect("a speed")) * 1000.0;
+        for trip in &trips {
+            let mm = stopped_after_mm(trip)
+                .unwrap_or_else(|| panic!("a trip without where the arm came to rest: {trip}"));
+            assert!(
+                mm <= bound_mm,
+                "the arm came to rest {mm} mm past the trip (bound {bound_mm:.2} mm): {trip}"
+            );
+            stops.push((speed, mm));
+        }
+        ends_home_and_still(&sim, &said);
+    }
+    for speed in ["0.05", "0.2"] {
+        let mm: Vec<f64> = stops.iter().filter(|s| s.0 == speed).map(|s| s.1).collect();
+        eprintln!(
+            "guard stopping distance at {speed} m/s: {} trips, {:.2}-{:.2} mm",
+            mm.len(),
+            mm.iter().copied().fold(f64::INFINITY, f64::min),
+            mm.iter().copied().fold(0.0, f64::max)
         );
     }
+    let ds = departures_hold(&sim, &fcisim::base_from_rod());
+    assert!(ds >= 8, "a departure per trip: {ds}");
     sim.judge();
-    ends_home_and_still(&sim, &said);
 }
 
-/// How far past the trip an approach may carry the arm: at the rig's 0.05 m/s, the
-/// brake's 1.5 m/s² and 200 m/s³ stop it in about 1 mm; the rest is the guard's
-/// reaction (a window of readings, the pose feed's age).
-const GUARD_STOP_BOUND_M: f64 = 0.005;
+/// Every departure from the rod in the commands the driver sent runs straight back
+/// along the approach axis to the retreat plane: at most 0.02 rad of turn and 10° off
+/// the axis (the table is printed: `--nocapture`). How many departures.
+fn departures_hold(sim: &FrankaSim, base_from_rod: &ArmPose) -> usize {
+    // Cartesian commands (a joint-space move of the elbow, at home, starts and ends
+    // there).
+    let poses: Vec<ArmPose> = sim
+        .recorded()
+        .commands
+        .iter()
+        .filter(|c| c.q_commanded.is_none())
+        .map(|c| c.pose)
+        .collect();
+    let ds = fcisim::departures::departures(&poses, base_from_rod, -0.03);
+    eprintln!(
+        "departures from the rod (commanded):\n{}",
+        fcisim::departures::table(&ds)
+    );
+    for d in &ds {
+        assert!(d.reached_plane, "{d:?}");
+        assert!(
+            d.turn_to_plane_rad <= 0.02 && d.side_to_plane_deg <= 10.0,
+            "a departure that turns or drags: {d:?}"
+        );
+    }
+    ds.len()
+}
+
+/// How far past the trip an approach at `speed_m_s` may carry the arm: the brake's
+/// own stopping distance at the tier's limits (an FR3 at margin 0.3: the move's 2.7
+/// m/s² and 900 m/s³; 0.5 mm from 0.05 m/s, 7.7 mm from 0.2 m/s), and
+/// [`GUARD_REACTION_M`] for the guard's reaction (a window of readings, the pose
+/// feed's age).
+fn guard_stop_bound_m(speed_m_s: f64) -> f64 {
+    MotionLimits::for_robot(softtouch_drivers::franka::reach::Robot::Fr3, 0.3)
+        .stopping_distance_m(speed_m_s)
+        + GUARD_REACTION_M
+}
+
+/// What the guard's reaction may add to the brake's stopping distance, m.
+const GUARD_REACTION_M: f64 = 0.003;
 
 /// The distance a `force_limit` event says the arm came to rest from the trip, mm.
 fn stopped_after_mm(message: &str) -> Option<f64> {
@@ -734,6 +830,10 @@ fn sigterm_on_franka_sim_finishes_the_sample_and_leaves_the_arm_home() {
             .any(|m| m.contains("stopped by the operator")),
         "{:?}",
         s.events
+    );
+    assert!(
+        departures_hold(&sim, &fcisim::base_from_rod()) >= n,
+        "a departure per sample"
     );
     sim.judge();
     ends_home_and_still(&sim, "");
@@ -800,6 +900,7 @@ fn a_store_failure_on_franka_sim_ends_in_a_safe_stop_at_home() {
         "{:?}",
         s.events
     );
+    assert!(departures_hold(&sim, &fcisim::base_from_rod()) >= s.samples.len());
     sim.judge();
     ends_home_and_still(&sim, "");
 }

@@ -44,12 +44,33 @@ pub trait Arm: Send {
     /// Clear a reflex or error so the arm can move again (automatic error recovery).
     async fn recover(&mut self) -> Result<(), DeviceError>;
 
+    /// The arm's joint positions, rad, where it has joints to report (a robot arm);
+    /// `None` for an arm that moves the finger in Cartesian space alone (the simulator).
+    async fn joints_rad(&mut self) -> Result<Option<[f64; 7]>, DeviceError> {
+        Ok(None)
+    }
+
+    /// Move in joint space to `q_rad`, where the arm has joints ([`Arm::joints_rad`]):
+    /// a redundant arm's elbow back where it was. `None`: an arm with no joints to
+    /// move, nothing moved.
+    async fn move_joints(&mut self, q_rad: &[f64; 7]) -> Result<Option<ArmState>, DeviceError> {
+        let _ = q_rad;
+        Ok(None)
+    }
+
     /// Stop any motion now.
     async fn stop(&mut self) -> Result<(), DeviceError>;
 
     /// The measured pose while the arm moves, for an arm that streams it (a real arm's
     /// control loop). Lets a simulated sensor and camera follow a real arm.
     fn pose_feed(&self) -> Option<PoseFeed> {
+        None
+    }
+
+    /// What a real arm found at connect: its mode, and the error recovery run where it
+    /// was in reflex (a client that died mid-motion leaves it so). `None`: nothing to
+    /// say (a simulated arm).
+    fn found_at_connect(&self) -> Option<String> {
         None
     }
 }
@@ -65,10 +86,19 @@ impl<T: Arm + ?Sized> Arm for Box<T> {
     async fn recover(&mut self) -> Result<(), DeviceError> {
         (**self).recover().await
     }
+    async fn joints_rad(&mut self) -> Result<Option<[f64; 7]>, DeviceError> {
+        (**self).joints_rad().await
+    }
+    async fn move_joints(&mut self, q_rad: &[f64; 7]) -> Result<Option<ArmState>, DeviceError> {
+        (**self).move_joints(q_rad).await
+    }
     async fn stop(&mut self) -> Result<(), DeviceError> {
         (**self).stop().await
     }
     fn pose_feed(&self) -> Option<PoseFeed> {
         (**self).pose_feed()
+    }
+    fn found_at_connect(&self) -> Option<String> {
+        (**self).found_at_connect()
     }
 }

@@ -52,6 +52,9 @@ pub enum EventKind {
     VisitPlan,
     /// Where the samples' time went: per phase, over the samples of a job.
     PhaseTimes,
+    /// The elbow's drift over a block (a robot arm's joints against home's), and its
+    /// move back in joint space.
+    Elbow,
 }
 
 impl EventKind {
@@ -81,6 +84,7 @@ impl EventKind {
             Self::StartFailed => "start_failed",
             Self::VisitPlan => "visit_plan",
             Self::PhaseTimes => "phase_times",
+            Self::Elbow => "elbow",
         }
     }
 }

@@ -11,6 +11,7 @@
 //! the tier's verdict on it.
 #![allow(dead_code)]
 
+pub(crate) mod departures;
 pub(crate) mod record;
 
 use std::io::{BufRead, BufReader};

@@ -99,6 +99,34 @@ impl Record {
                         message_id,
                         pose: ArmPose::from_matrix(&m),
                         q_measured: Some(q),
+                        q_commanded: None,
+                    });
+                }
+                "j" | "k" => {
+                    let message_id = id(words.next())?;
+                    let on_time = if kind == "j" {
+                        match words.next() {
+                            Some("1") => true,
+                            Some("0") => false,
+                            other => {
+                                return Err(format!(
+                                    "line {line}: on-time flag {other:?}, expected 0 or 1"
+                                ));
+                            }
+                        }
+                    } else {
+                        true
+                    };
+                    let q_c: [f64; 7] = numbers(&mut words, line, "q_c")?;
+                    let q: [f64; 7] = numbers(&mut words, line, "q")?;
+                    if !on_time {
+                        r.late += 1;
+                    }
+                    r.commands.push(Commanded {
+                        message_id,
+                        pose: ArmPose::from_matrix(&IDENTITY),
+                        q_measured: Some(q),
+                        q_commanded: Some(q_c),
                     });
                 }
                 "l" => r.lost.push(id(words.next())?),
@@ -142,7 +170,10 @@ impl Record {
     /// the documented flange, the same poses solve to another elbow (joint 4 at −1.06
     /// rad where the robot is at −1.57) and read as joint rates the robot never ran.
     pub(crate) fn end_effector(&self, kin: &Kinematics) -> Option<[f64; 16]> {
-        let first = self.commands.iter().find(|c| c.q_measured.is_some())?;
+        let first = self
+            .commands
+            .iter()
+            .find(|c| c.q_measured.is_some() && c.q_commanded.is_none())?;
         let flange = kin.pose(&first.q_measured?);
         Some(flange.inverse().compose(&first.pose).to_matrix())
     }
@@ -177,6 +208,19 @@ mod tests {
         assert!(r.is_the_hosts(&r.aborts[2]));
         let v = r.judge();
         assert_eq!(v.commands, 4);
+        // A joint-space motion's commands are its joints, judged as they are: a still
+        // one holds; one that jumps a joint by 0.01 rad in a cycle is over its limits.
+        let still = Record::parse(&format!(
+            "j 1 1 {Q} {Q}\nj 2 1 {Q} {Q}\nj 3 1 {Q} {Q}\nk 4 {Q} {Q}\n"
+        ))
+        .expect("joints");
+        assert_eq!(still.commands.len(), 4);
+        assert!(still.commands.iter().all(|c| c.q_commanded.is_some()));
+        assert!(still.judge().holds(), "{}", still.judge().table());
+        let jump = "0 -0.78 0 -2.34 0 1.57 0.78";
+        let jumped = Record::parse(&format!("j 1 1 {Q} {Q}\nj 2 1 {Q} {Q}\nj 3 1 {jump} {Q}\n"))
+            .expect("joints");
+        assert!(!jumped.judge().holds(), "{}", jumped.judge().table());
     }
 
     #[test]
@@ -193,6 +237,8 @@ mod tests {
                 "q value 3 is \"zero\"",
             ),
             ("l\n".into(), "\"l\" without a message id"),
+            (format!("j 1 1 0 0 x {Q}\n"), "q_c value 3 is \"x\""),
+            (format!("j 1 3 {Q} {Q}\n"), "on-time flag"),
             ("z 4\n".into(), "unknown kind \"z\""),
             (format!("l 1\nl 2\nc 3 1 {POSE}\n"), "line 3"),
         ] {
@@ -219,6 +265,7 @@ mod tests {
                 message_id: 1,
                 pose: reported,
                 q_measured: Some(q),
+                q_commanded: None,
             }],
             ..Record::default()
         };

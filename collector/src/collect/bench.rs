@@ -81,6 +81,20 @@ impl Arm for Timed<Box<dyn Arm>> {
         let timer = self.timer.clone();
         timer.time(self.inner.stop()).await
     }
+    async fn joints_rad(&mut self) -> Result<Option<[f64; 7]>, DeviceError> {
+        let timer = self.timer.clone();
+        timer.time(self.inner.joints_rad()).await
+    }
+    async fn move_joints(&mut self, q_rad: &[f64; 7]) -> Result<Option<ArmState>, DeviceError> {
+        let timer = self.timer.clone();
+        timer.time(self.inner.move_joints(q_rad)).await
+    }
+    fn pose_feed(&self) -> Option<softtouch_drivers::PoseFeed> {
+        self.inner.pose_feed()
+    }
+    fn found_at_connect(&self) -> Option<String> {
+        self.inner.found_at_connect()
+    }
 }
 
 #[async_trait]

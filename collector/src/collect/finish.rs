@@ -1,8 +1,12 @@
 //! The end of every collection, however it ended: the safe stop (stop, retreat, stop
-//! the stream, check completeness, record the end, release the lease, flush) and the
-//! retreat home.
+//! the stream, check completeness, record the end, release the lease, flush); and
+//! every move that is not an approach: leaving the rod along the approach axis, travel
+//! and homing, each guarded against a force that rises, and the elbow back to home's
+//! joints.
 
+use super::procedure::AttemptError;
 use super::*;
+use softtouch_drivers::ForceGuard;
 
 impl Job<'_> {
     /// Whatever happened: stop the arm, retreat (unless a forced stop said stop where
@@ -194,12 +198,123 @@ impl Job<'_> {
         (outcome, counters)
     }
 
-    /// Move home at the retreat speed, recovering from reflexes on the way (with
-    /// backoff, logged). Store errors do not stop a retreat: they are kept for the
-    /// sample loop.
-    pub(super) async fn go_home(&mut self, index: Option<u64>) -> Result<(), DeviceError> {
+    /// Leave the rod: straight back along the approach axis (the rod frame's x) to the
+    /// retreat plane (home's x), keeping z and θ, at the retreat speed, guarded
+    /// ([`Job::leaving_guard`]). From the contact pose whose approach began
+    /// (`near_rod`: the arm is on its approach line, wherever a trip, a fault or a stop
+    /// left it); with none, from the measured pose, and only where it is nearer the rod
+    /// than the retreat plane (a start after a crash). Nothing turns or travels before
+    /// this has ended.
+    pub(super) async fn leave_rod(&mut self, index: Option<u64>) -> Result<(), MoveFailed> {
+        let w = &self.plan.rig.workspace;
+        let from = match self.near_rod {
+            Some(p) => p,
+            None => {
+                let s = self.arm.state().await.map_err(MoveFailed::Arm)?;
+                let here = ContactPose::from_arm(&w.base_from_rod, &s.base_from_finger);
+                // Near the rod: nearer than the retreat plane, within the workspace's
+                // z and θ, with its retreat point in reach. Anywhere else (an arm left
+                // elsewhere) it goes home as it is.
+                let near = here.x_m > w.home.x_m + LEAVE_FROM_M
+                    && w.z_m.contains(here.z_m)
+                    && w.theta_rad.contains(here.theta_rad)
+                    && w.contains_arm(&self.retreat_pose(&here));
+                if !near {
+                    return Ok(());
+                }
+                here
+            }
+        };
+        let clear = self.retreat_pose(&from);
+        let speed = self.plan.rig.procedure.retreat_speed_m_s;
+        self.guarded_move(&clear, speed, index, "leaving the rod")
+            .await?;
+        self.near_rod = None;
+        Ok(())
+    }
+
+    /// Leave the rod ([`Job::leave_rod`]), then move home at the retreat speed,
+    /// guarded, recovering from reflexes on the way (with backoff, logged). Store
+    /// errors do not stop a retreat: they are kept for the sample loop.
+    pub(super) async fn go_home(&mut self, index: Option<u64>) -> Result<(), MoveFailed> {
+        self.leave_rod(index).await?;
         let home = self.home;
         self.go_to(&home, false, index).await
+    }
+
+    /// At home, the elbow back where the run first found it: every move is Cartesian and
+    /// leaves the arm's redundancy to the robot, so over a night the elbow drifts
+    /// toward a joint's limit. Where the arm has joints ([`Arm::joints_rad`]), log how
+    /// far they drifted from home's (the largest, and which joint) and move back to
+    /// them in joint space. Called at each block's end and after a recovery; a no-op on
+    /// an arm without joints, or before home's joints are known.
+    pub(super) async fn reset_elbow(
+        &mut self,
+        index: Option<u64>,
+        at: &str,
+    ) -> Result<(), MoveFailed> {
+        let Some(home_q) = self.home_joints else {
+            return Ok(());
+        };
+        let Some(q) = self.arm.joints_rad().await.map_err(MoveFailed::Arm)? else {
+            return Ok(());
+        };
+        let (joint, drift_rad) = (0..7)
+            .map(|j| (j + 1, (q[j] - home_q[j]).abs()))
+            .fold((0, 0.0f64), |m, d| if d.1 > m.1 { d } else { m });
+        let moved = drift_rad > ELBOW_RESET_FROM_RAD;
+        self.log_or_keep(
+            EventKind::Elbow,
+            EventLevel::Info,
+            index,
+            &format!(
+                "{at}: the joints drifted at most {drift_rad:.4} rad (joint {joint}) from home's{}",
+                if moved {
+                    "; moved back in joint space"
+                } else {
+                    ""
+                }
+            ),
+        );
+        if moved {
+            // Guarded as every move near the rod is; a guard that cannot watch (the
+            // stream down) leaves the move to run unguarded, as a retreat does.
+            let guard = self.leaving_guard();
+            let arm = &mut self.arm;
+            let trip = tokio::select! {
+                m = arm.move_joints(&home_q) => {
+                    m.map_err(MoveFailed::Arm)?;
+                    None
+                }
+                trip = self.ft.guard(&guard) => Some(trip),
+            };
+            match trip {
+                None => {}
+                Some(GuardTrip::OverLimit(reading)) => {
+                    let stopped = self.arm.stop().await;
+                    return Err(MoveFailed::Caught(format!(
+                        "the force rose while moving the elbow back: {}; the arm was stopped{}",
+                        reading.wrench_in_sensor,
+                        stopped
+                            .err()
+                            .map_or(String::new(), |e| format!(" (its stop failed: {e})"))
+                    )));
+                }
+                Some(trip) => {
+                    self.log_or_keep(
+                        EventKind::GuardStop,
+                        EventLevel::Warn,
+                        index,
+                        &format!("moving the elbow back: the force guard cannot watch ({trip}); moving unguarded"),
+                    );
+                    self.arm
+                        .move_joints(&home_q)
+                        .await
+                        .map_err(MoveFailed::Arm)?;
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The arm's pose at the retreat point of contact pose `pose`: its z and θ, home's
@@ -215,45 +330,168 @@ impl Job<'_> {
         )
     }
 
-    /// Move to `target` clear of the rod (at the travel speed if `travel`, else the
-    /// retreat speed), recovering from reflexes on the way as [`Job::go_home`] does.
+    /// Move to `target` in the retreat plane (at the travel speed if `travel`, else the
+    /// retreat speed), guarded as [`Job::guarded_move`] is. Only after the rod was left.
     pub(super) async fn go_to(
         &mut self,
         target: &ArmPose,
         travel: bool,
         index: Option<u64>,
-    ) -> Result<(), DeviceError> {
+    ) -> Result<(), MoveFailed> {
         let p = &self.plan.rig.procedure;
         let speed = if travel {
             p.travel_speed_m_s
         } else {
             p.retreat_speed_m_s
         };
-        let tries = p.max_attempts.max(1);
+        self.guarded_move(target, speed, index, "retreating").await
+    }
+
+    /// The force guard of a move that is not an approach (leaving the rod, travel in
+    /// the retreat plane, homing): it trips on a force that rises, by a quarter of the
+    /// rig's limit above the larger of the limit and the force when the move began.
+    /// A finger that leaves a press over the limit (a guard trip) is not stopped by the
+    /// force it left with; one that is caught, or hits something, is. Before the
+    /// first tare (a start after a crash) the sensor's offset is what it began with.
+    pub(super) fn leaving_guard(&self) -> ForceGuard {
+        let l = &self.plan.rig.limits;
+        let (force_n, torque_nm) = self.ft.latest().map_or((0.0, 0.0), |r| {
+            let w = &r.wrench_in_sensor;
+            let f = w.force_n.iter().map(|x| x * x).sum::<f64>().sqrt();
+            let t = w.torque_nm.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            (f, t)
+        });
+        let finite = |x: f64| if x.is_finite() { x } else { 0.0 };
+        ForceGuard {
+            max_force_n: l.max_force_n.max(finite(force_n)) + LEAVE_RISE * l.max_force_n,
+            max_torque_nm: l.max_torque_nm.max(finite(torque_nm)) + LEAVE_RISE * l.max_torque_nm,
+            stale: Duration::from_secs_f64(self.plan.rig.procedure.ft_stale_s),
+        }
+    }
+
+    /// One move that is not an approach, raced against [`Job::leaving_guard`],
+    /// recovering from reflexes on the way (with backoff, logged). A force that rises
+    /// stops the arm: [`MoveFailed::Caught`]. A guard that cannot watch (the stream
+    /// stalled, failed or sent non-finite readings) is logged and the move made
+    /// unguarded: a run ending on a failed sensor still gets the arm clear.
+    async fn guarded_move(
+        &mut self,
+        target: &ArmPose,
+        speed_m_s: f64,
+        index: Option<u64>,
+        what: &str,
+    ) -> Result<(), MoveFailed> {
+        let tries = self.plan.rig.procedure.max_attempts.max(1);
+        let mut watched = true;
         let mut n = 0;
         loop {
             n += 1;
-            match self.arm.move_to(target, speed).await {
-                Ok(_) => return Ok(()),
-                Err(e) if e.is_fault() && n < tries => {
-                    self.counters.arm_faults += 1;
+            let moved = if watched {
+                let guard = self.leaving_guard();
+                self.guarded(&[(*target, speed_m_s)], &guard)
+                    .await
+                    .map(drop)
+            } else {
+                self.arm
+                    .move_to(target, speed_m_s)
+                    .await
+                    .map(drop)
+                    .map_err(AttemptError::of_arm)
+            };
+            let e = match moved {
+                Ok(()) => return Ok(()),
+                Err(AttemptError::ForceLimit {
+                    reading,
+                    stop_failed,
+                    ..
+                }) => {
+                    return Err(MoveFailed::Caught(format!(
+                        "the force rose while {what}: {} over the guard's {:.2} N / {:.3} N·m; the arm was stopped{}",
+                        reading.wrench_in_sensor,
+                        self.leaving_guard().max_force_n,
+                        self.leaving_guard().max_torque_nm,
+                        stop_failed.map_or(String::new(), |e| format!(" (its stop failed: {e})"))
+                    )));
+                }
+                Err(AttemptError::Guard { trip, .. }) => {
                     self.log_or_keep(
-                        EventKind::ArmFault,
+                        EventKind::GuardStop,
                         EventLevel::Warn,
                         index,
-                        &format!("retreating: {e}"),
+                        &format!("{what}: the force guard cannot watch ({trip}); moving unguarded"),
                     );
-                    tokio::time::sleep(recovery_backoff(n)).await;
-                    self.arm.recover().await?;
-                    self.log_or_keep(
-                        EventKind::ArmRecovered,
-                        EventLevel::Info,
-                        index,
-                        "automatic error recovery succeeded",
-                    );
+                    watched = false;
+                    continue;
                 }
-                Err(e) => return Err(e),
+                Err(AttemptError::ArmFault(e)) => e,
+                Err(
+                    AttemptError::ArmLink(e)
+                    | AttemptError::FrameTimeout(e)
+                    | AttemptError::Sensor(e),
+                ) => {
+                    return Err(MoveFailed::Arm(e));
+                }
+                Err(AttemptError::Unsafe(message)) => {
+                    return Err(MoveFailed::Arm(DeviceError::InvalidCommand {
+                        device: "arm".into(),
+                        message,
+                    }));
+                }
+                // Not met here: a forced stop races the whole retreat (`finish`).
+                Err(AttemptError::Interrupted) => {
+                    return Err(MoveFailed::Arm(DeviceError::InvalidCommand {
+                        device: "arm".into(),
+                        message: format!("{what}: interrupted"),
+                    }));
+                }
+            };
+            if n >= tries {
+                return Err(MoveFailed::Arm(e));
             }
+            self.counters.arm_faults += 1;
+            self.log_or_keep(
+                EventKind::ArmFault,
+                EventLevel::Warn,
+                index,
+                &format!("{what}: {e}"),
+            );
+            tokio::time::sleep(recovery_backoff(n)).await;
+            self.arm.recover().await.map_err(MoveFailed::Arm)?;
+            self.log_or_keep(
+                EventKind::ArmRecovered,
+                EventLevel::Info,
+                index,
+                "automatic error recovery succeeded",
+            );
+        }
+    }
+}
+
+/// Below this drift of every joint from home's the elbow is left where it is, rad.
+const ELBOW_RESET_FROM_RAD: f64 = 1e-3;
+
+/// How far nearer the rod than the retreat plane a measured pose must be for a start
+/// or an end of a run to leave the rod first, m (the rest is a tracking error).
+const LEAVE_FROM_M: f64 = 0.001;
+
+/// How far a force must rise above the larger of the limit and its value at the start
+/// of a move that is not an approach before the guard trips, as a share of the limit.
+const LEAVE_RISE: f64 = 0.25;
+
+/// Why a move clear of the rod (leaving it, travelling, homing) failed.
+#[derive(Debug)]
+pub(super) enum MoveFailed {
+    /// The arm refused, faulted past its recoveries, or its link failed.
+    Arm(DeviceError),
+    /// The force guard stopped it: the finger was caught or hit something.
+    Caught(String),
+}
+
+impl std::fmt::Display for MoveFailed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Arm(e) => write!(f, "{e}"),
+            Self::Caught(m) => f.write_str(m),
         }
     }
 }

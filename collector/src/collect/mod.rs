@@ -8,9 +8,14 @@
 //! - **settle**: wait the configured time;
 //! - **record**: ask the camera for the first frame after settling, and take the
 //!   force/torque readings in a window around that frame's time;
-//! - **retreat**: out to the sample's retreat point (its z and θ, home's x), where the
-//!   next sample of the [`route`] begins; home between rods and after an error (with
-//!   `visit_order = "index"`, home after every sample).
+//! - **retreat**: straight back along the approach axis (the rod frame's x, z and θ
+//!   kept) to the sample's retreat point (home's x), guarded; only then does anything
+//!   turn or travel: on to the next sample of the [`route`], or home between rods and
+//!   after an error (with `visit_order = "index"`, home after every sample). Every
+//!   approach starts from its retreat point, so it runs along the approach axis alone.
+//!   From wherever the finger may touch the rod (a guard trip, a fault, a stop, the end
+//!   of a run, a start after a crash) the arm leaves the same way; a force that rises
+//!   while it leaves (the finger caught) stops it and ends the run safely.
 //!
 //! Faults: an arm reflex is recovered automatically with backoff and the sample tried
 //! again; a sensor fault, a bad window or a frame timeout retries the sample; when the
@@ -29,7 +34,9 @@
 //! # Layout
 //! - this module: the job loop (rods, samples in order, failures in a row);
 //! - `finish`: the safe stop at its end, whatever ended it (stop, retreat, stream
-//!   counts, completeness, the run's final status, the lease) and the retreat home;
+//!   counts, completeness, the run's final status, the lease), and every move that is
+//!   not an approach: leaving the rod along the approach axis, travel and homing
+//!   (guarded against a force that rises), the elbow back to home's joints;
 //! - `procedure`: one sample's state machine, its retries, and storing it;
 //! - [`plan`]: what to collect, for a new run or the rest of a stored one;
 //! - [`devices`]: the devices of a collection, built from the rig config;
@@ -172,6 +179,13 @@ struct Job<'a> {
     /// A store error met where the job could not stop for it (a retreat goes on
     /// whatever the store does); the sample loop stops on it.
     store_failed: Option<StoreError>,
+    /// The contact pose whose approach began and whose leave has not ended: where the
+    /// finger may touch the rod. A retreat from anywhere leaves along its approach
+    /// axis first.
+    near_rod: Option<ContactPose>,
+    /// The arm's joints where the run first reached home (an arm with joints): the
+    /// elbow goes back to them at each block's end (`reset_elbow`).
+    home_joints: Option<[f64; 7]>,
 }
 
 /// How long before a resumed run's time base its job's clock starts, ns: room for the
@@ -279,6 +293,8 @@ pub async fn collect(
         stop: stop.clone(),
         next_index: plan.indices().next().unwrap_or(plan.end_index),
         store_failed: None,
+        near_rod: None,
+        home_joints: None,
     };
     let ended = tokio::select! {
         ended = job.run_samples(devices.rods, progress) => ended,
@@ -378,9 +394,30 @@ impl<'a> Job<'a> {
             .and_then(|v| v.todo.first().copied())
             .unwrap_or(plan.end_index);
         self.next_index = index;
+        // A robot a crash left in reflex was recovered at connect: said in the run's log.
+        if let Some(found) = self.arm.found_at_connect()
+            && found.contains("recovery")
+        {
+            self.events.log(
+                EventKind::ArmRecovered,
+                EventLevel::Warn,
+                None,
+                &format!("the arm at connect: {found}"),
+            )?;
+        }
+        // A start after a crash may find the finger on the rod: it leaves along the
+        // approach axis before anything turns (`go_home` leaves first).
         if let Err(e) = self.go_home(None).await {
             let reason = format!("cannot move the arm home before starting: {e}");
             return Ok((Outcome::SafeStop { reason }, index));
+        }
+        // Home's joints, as the run first reaches it: where the elbow returns to.
+        match self.arm.joints_rad().await {
+            Ok(q) => self.home_joints = q,
+            Err(e) => {
+                let reason = format!("cannot read the arm's joints at home: {e}");
+                return Ok((Outcome::SafeStop { reason }, index));
+            }
         }
         if plan.rig.procedure.tare_for(plan.scene.medium) == Tare::PerRun
             && let Err(e) = self.ft.bias().await

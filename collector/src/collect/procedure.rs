@@ -25,7 +25,7 @@ pub(super) enum SampleEnd {
 
 /// Why one attempt at a sample failed.
 #[derive(Debug)]
-enum AttemptError {
+pub(super) enum AttemptError {
     /// Reflex or other arm fault: recover and retry.
     ArmFault(DeviceError),
     /// The arm's link failed: stop safely.
@@ -58,7 +58,7 @@ enum AttemptError {
 impl AttemptError {
     /// What a failed move means for the attempt: a fault is recovered, a refused
     /// command is a bug or a bad config, anything else a lost link.
-    fn of_arm(e: DeviceError) -> Self {
+    pub(super) fn of_arm(e: DeviceError) -> Self {
         match e {
             e if e.is_fault() => Self::ArmFault(e),
             e @ DeviceError::InvalidCommand { .. } => Self::Unsafe(e.to_string()),
@@ -126,10 +126,11 @@ impl Job<'_> {
                 self.counters.retries += 1;
             }
             let result = self.attempt(pose).await;
-            // End every attempt clear of the rod: at its retreat point where the plan
-            // goes on from there, else at home (a reflex is recovered below first). A
-            // block ends at home, so a run resumed at the next block starts where the
-            // uninterrupted run was.
+            // End every attempt clear of the rod: first straight back along the
+            // approach axis to the retreat plane (nothing turns or travels before),
+            // then at its retreat point where the plan goes on from there, else at
+            // home (a reflex is recovered below first). A block ends at home, so a
+            // run resumed at the next block starts where the uninterrupted run was.
             if !matches!(
                 result,
                 Err(AttemptError::ArmLink(_)
@@ -138,14 +139,19 @@ impl Job<'_> {
             ) {
                 let t0 = self.clock.now();
                 let planned = self.plan.rig.procedure.visit_order == VisitOrder::Planned;
-                let (back, to) = if planned && result.is_ok() && !home_after {
-                    let clear = self.retreat_pose(&pose);
-                    (
-                        self.go_to(&clear, true, Some(index)).await,
-                        "its retreat point",
-                    )
+                // From the pose whose approach began; an attempt that never began
+                // one (refused, or stopped on its way to the retreat point) is clear.
+                let mut back = self.leave_rod(Some(index)).await;
+                let to = if planned && result.is_ok() && !home_after {
+                    "its retreat point"
                 } else {
-                    (self.go_home(Some(index)).await, "home")
+                    if back.is_ok() {
+                        back = self.go_home(Some(index)).await;
+                    }
+                    if back.is_ok() && home_after {
+                        back = self.reset_elbow(Some(index), "block's end").await;
+                    }
+                    "home"
                 };
                 self.counters.phases.retreat_ns += self.since(t0);
                 if let Err(e) = back {
@@ -213,7 +219,12 @@ impl Job<'_> {
                         )?,
                         Err(e) => return Ok(SampleEnd::Fatal(format!("arm recovery failed: {e}"))),
                     }
-                    if let Err(e) = self.go_home(Some(index)).await {
+                    // Out along the approach axis, then home, the elbow as at the start.
+                    let back = match self.go_home(Some(index)).await {
+                        Ok(()) => self.reset_elbow(Some(index), "after a recovery").await,
+                        Err(e) => Err(e),
+                    };
+                    if let Err(e) = back {
                         return Ok(SampleEnd::Fatal(format!(
                             "cannot retreat home after a reflex: {e}"
                         )));
@@ -399,7 +410,7 @@ impl Job<'_> {
 
     /// The moves `legs` in turn, raced against the force guard `limits`; how long each
     /// took on the rig's clock. A trip stops the arm (the caller logs what happened).
-    async fn guarded(
+    pub(super) async fn guarded(
         &mut self,
         legs: &[(ArmPose, f64)],
         limits: &ForceGuard,
@@ -458,13 +469,12 @@ impl Job<'_> {
         let p = &plan.rig.procedure;
         let l = &plan.rig.limits;
         let target = ArmPose::from_contact(&w.base_from_rod, &pose);
-        let planned = p.visit_order == VisitOrder::Planned;
         let clear = self.retreat_pose(&pose);
         // Every command is checked before it reaches the arm.
         if !pose.is_finite()
             || !w.contains_contact(&pose)
             || !w.contains_arm(&target)
-            || (planned && !w.contains_arm(&clear))
+            || !w.contains_arm(&clear)
         {
             return Err(AttemptError::Unsafe(format!(
                 "pose {pose:?} (flange at {:?} m, its retreat point at {:?} m) lies outside the workspace; not sent",
@@ -480,15 +490,14 @@ impl Job<'_> {
             max_torque_nm: l.max_torque_nm,
             stale: Duration::from_secs_f64(p.ft_stale_s),
         };
-        // Travel clear of the rod to this pose's retreat point (a few millimetres and
-        // a small turn from the last one, in a planned order), guarded as the approach
-        // is: a retreat point that is not clear of the rod stops the arm.
-        if planned {
-            let took = self
-                .guarded(&[(clear, p.travel_speed_m_s)], &limits)
-                .await?;
-            self.counters.phases.travel_ns += took.iter().sum::<u64>();
-        }
+        // Travel clear of the rod to this pose's retreat point (from the last one, a few
+        // millimetres and a small turn away in a planned order; from home otherwise),
+        // guarded as the approach is: a retreat point that is not clear of the rod
+        // stops the arm. Every approach then runs along the approach axis alone.
+        let took = self
+            .guarded(&[(clear, p.travel_speed_m_s)], &limits)
+            .await?;
+        self.counters.phases.travel_ns += took.iter().sum::<u64>();
 
         // Zero the sensor clear of the rod (home, or the retreat point): the label then
         // carries neither the sensor's offset nor the drift from before this attempt.
@@ -500,15 +509,10 @@ impl Job<'_> {
 
         // approach, guarded; the last stretch slowly: a contact there trips the guard
         // at low speed.
-        let from = if planned {
-            clear
-        } else {
-            match self.arm.state().await {
-                Ok(s) => s.base_from_finger,
-                Err(e) if e.is_fault() => return Err(AttemptError::ArmFault(e)),
-                Err(e) => return Err(AttemptError::ArmLink(e)),
-            }
-        };
+        // From here the finger may touch the rod: whatever ends the attempt, the arm
+        // leaves along the approach axis first (`leave_rod`).
+        self.near_rod = Some(pose);
+        let from = clear;
         let legs = approach_legs(&from, &target, p);
         let took = self.guarded(&legs, &limits).await?;
         // The last leg is the slow one unless the slow end is off.

@@ -12,6 +12,8 @@ pub struct FrankaArm {
     generation: u64,
     clock: Arc<dyn Clock>,
     feed: PoseFeed,
+    /// The robot's mode at connect, and the recovery run if it needed one.
+    found_at_connect: String,
 }
 
 impl FrankaArm {
@@ -26,7 +28,7 @@ impl FrankaArm {
             });
         }
         let (tx, rx) = mpsc::channel::<Cmd>();
-        let (ready_tx, ready_rx) = oneshot::channel::<Result<(), DeviceError>>();
+        let (ready_tx, ready_rx) = oneshot::channel::<Result<String, DeviceError>>();
         let cancel = Arc::new(Cancel::default());
         let (cancel2, clock2) = (cancel.clone(), clock.clone());
         let (feed_tx, feed) = watch::channel(None);
@@ -59,6 +61,15 @@ impl FrankaArm {
                         return;
                     }
                 };
+                // A robot left in reflex or with errors (a client that died mid-motion)
+                // refuses every setting: recover it first, and say what was found.
+                let found = match recover_first(&robot) {
+                    Ok(found) => found,
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e));
+                        return;
+                    }
+                };
                 // The robot's own Cartesian limits, by the FCI version it answered with.
                 let kind = reach::Robot::of(robot.fci_version());
                 let limits = config
@@ -72,7 +83,7 @@ impl FrankaArm {
                     });
                 let kin = match set {
                     Ok(kin) => {
-                        let _ = ready_tx.send(Ok(()));
+                        let _ = ready_tx.send(Ok(found));
                         kin
                     }
                     Err(e) => {
@@ -102,13 +113,14 @@ impl FrankaArm {
                 device: DEVICE.into(),
                 message: format!("cannot start the robot thread: {e}"),
             })?;
-        ready_rx.await.map_err(|_| gone())??;
+        let found_at_connect = ready_rx.await.map_err(|_| gone())??;
         Ok(Self {
             tx,
             cancel,
             generation: 0,
             clock,
             feed,
+            found_at_connect,
         })
     }
 
@@ -166,6 +178,37 @@ impl Arm for FrankaArm {
         self.ask(|reply| Cmd::State { reply }).await
     }
 
+    async fn joints_rad(&mut self) -> Result<Option<[f64; 7]>, DeviceError> {
+        self.ask(|reply| Cmd::Joints { reply }).await.map(Some)
+    }
+
+    async fn move_joints(&mut self, q_rad: &[f64; 7]) -> Result<Option<ArmState>, DeviceError> {
+        if !q_rad.iter().all(|q| q.is_finite()) {
+            return Err(DeviceError::InvalidCommand {
+                device: DEVICE.into(),
+                message: format!("invalid joint target {q_rad:?}"),
+            });
+        }
+        self.generation += 1;
+        let generation = self.generation;
+        let (reply, rx) = oneshot::channel();
+        self.tx
+            .send(Cmd::MoveJoints {
+                q: *q_rad,
+                generation,
+                reply,
+            })
+            .map_err(|_| gone())?;
+        let mut guard = CancelOnDrop {
+            cancel: &self.cancel,
+            generation,
+            armed: true,
+        };
+        let r = rx.await.map_err(|_| gone())?;
+        guard.armed = false;
+        r.map(Some)
+    }
+
     async fn recover(&mut self) -> Result<(), DeviceError> {
         self.ask(|reply| Cmd::Recover { reply }).await
     }
@@ -179,6 +222,42 @@ impl Arm for FrankaArm {
     fn pose_feed(&self) -> Option<PoseFeed> {
         Some(self.feed.clone())
     }
+
+    fn found_at_connect(&self) -> Option<String> {
+        Some(self.found_at_connect.clone())
+    }
+}
+
+/// Read the robot's mode before any setting; one in reflex or with errors (its client
+/// died mid-motion, or an aborted motion was never recovered) refuses every setting,
+/// so the automatic error recovery runs first (logged). What was found, for `rig
+/// check` and the collection's log.
+fn recover_first(robot: &franka::Robot) -> Result<String, DeviceError> {
+    let s = robot.read_once().map_err(err)?;
+    let mode = s.robot_mode;
+    let errors = s.current_errors.any();
+    if !(mode == franka::RobotMode::Reflex || errors) {
+        return Ok(format!("{mode:?}"));
+    }
+    let what = format!("{mode:?}{}", if errors { " with errors" } else { "" });
+    tracing::warn!(
+        "franka: the robot was in {what} at connect: running the automatic error recovery before any setting"
+    );
+    robot.automatic_error_recovery().map_err(|e| match err(e) {
+        DeviceError::Fault { device, code, message } => DeviceError::Fault {
+            device,
+            code,
+            message: format!(
+                "the robot was in {what} at connect and its automatic error recovery failed: {message}; recover it in Desk"
+            ),
+        },
+        other => other,
+    })?;
+    let after = robot.read_once().map_err(err)?;
+    Ok(format!(
+        "{what}; automatic error recovery run, now {:?}",
+        after.robot_mode
+    ))
 }
 
 /// Cancels its move if the move's future is dropped before it completes.

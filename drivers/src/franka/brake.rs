@@ -47,10 +47,45 @@ impl Brake {
         }
     }
 
-    /// Whether it comes to rest at or before path position `end` (the move's target).
+    /// Whether it stays at or before path position `end` (the move's target) all the
+    /// way to rest. A brake that would pass the target and come back is not one: cut
+    /// off at the target it would ask for a jump in velocity (a jerk spike on the
+    /// wire); the move's own plan stops there within its limits instead.
     #[must_use]
     pub fn stops_before(&self, end: f64) -> bool {
-        self.state_at(self.duration()).0 <= end + 1e-12
+        let end = end + 1e-12;
+        // The furthest point is where the velocity crosses zero, inside a piece or at
+        // its end: each piece's velocity is a quadratic, so its roots are checked with
+        // the ends.
+        let (mut s, mut v, mut a) = self.start;
+        if s.is_nan() || s > end {
+            return false;
+        }
+        for &(jerk, duration) in &self.pieces {
+            let at = |t: f64| s + v * t + a * t * t / 2.0 + jerk * t * t * t / 6.0;
+            let mut times = vec![duration];
+            // v + a t + jerk t²/2 = 0
+            if jerk.abs() > 0.0 {
+                let disc = a * a - 2.0 * jerk * v;
+                if disc >= 0.0 {
+                    let r = disc.sqrt();
+                    times.extend([(-a + r) / jerk, (-a - r) / jerk]);
+                }
+            } else if a.abs() > 0.0 {
+                times.push(-v / a);
+            }
+            if times.iter().any(|&t| {
+                t.is_finite() && (0.0..=duration).contains(&t) && (at(t).is_nan() || at(t) > end)
+            }) {
+                return false;
+            }
+            (s, v, a) = (
+                at(duration),
+                v + a * duration + jerk * duration * duration / 2.0,
+                a + jerk * duration,
+            );
+        }
+        true
     }
 
     /// How long braking takes, s.

@@ -17,7 +17,8 @@ pub struct MotionLimits {
     /// Rotational jerk, rad/s³ (FCI allows 12500).
     pub rot_jerk_rad_s3: f64,
     /// Translational deceleration when a move is aborted (the force guard's stop),
-    /// m/s²: harder than a move's own, so the arm stops short of the reflex.
+    /// m/s²: at least a move's own ([`MotionLimits::for_robot`]), so a brake always
+    /// stops sooner than the move would.
     pub brake_accel_m_s2: f64,
     /// Translational jerk when a move is aborted, m/s³.
     pub brake_jerk_m_s3: f64,
@@ -63,8 +64,11 @@ pub const fn cartesian_limits(robot: reach::Robot) -> [f64; 6] {
 
 impl MotionLimits {
     /// `margin` (in (0, 1]; anything else is taken as the default) of `robot`'s
-    /// Cartesian limits. An abort brakes as the default does (1.5 m/s², 200 m/s³: what
-    /// one FER accepted), or softer where the joints need it (`run_move`).
+    /// Cartesian limits. An abort brakes at least as hard as the move it stops: the
+    /// harder of the move's own acceleration and jerk and the default brake's (1.5
+    /// m/s², 200 m/s³: what one FER accepted), softened only where the joints need it
+    /// (`run_move`). Its stopping distance at a rig's approach speeds is
+    /// [`MotionLimits::stopping_distance_m`] (RIG.md gives the table).
     #[must_use]
     pub fn for_robot(robot: reach::Robot, margin: f64) -> Self {
         let m = if margin.is_finite() && margin > 0.0 && margin <= 1.0 {
@@ -81,11 +85,25 @@ impl MotionLimits {
             rot_speed_rad_s: rv * m,
             rot_accel_rad_s2: ra * m,
             rot_jerk_rad_s3: rj * m.min(reach::JERK_MARGIN),
-            brake_accel_m_s2: d.brake_accel_m_s2,
-            brake_jerk_m_s3: d.brake_jerk_m_s3,
+            brake_accel_m_s2: d.brake_accel_m_s2.max(a * m),
+            brake_jerk_m_s3: d.brake_jerk_m_s3.max(j * m.min(reach::JERK_MARGIN)),
             max_speed_m_s: (v * m).min(MAX_SPEED_M_S),
             test_rate_scale: 1.0,
         }
+    }
+
+    /// How far a straight move at `speed_m_s` (at its cruise: no acceleration) runs
+    /// after an abort before it is at rest, m, braking at these limits.
+    #[must_use]
+    pub fn stopping_distance_m(&self, speed_m_s: f64) -> f64 {
+        let b = Brake::new(
+            0.0,
+            speed_m_s,
+            0.0,
+            self.brake_accel_m_s2,
+            self.brake_jerk_m_s3,
+        );
+        b.state_at(b.duration()).0
     }
 
     /// The limits an aborted move brakes with: the brake's translation, the move's

@@ -58,6 +58,7 @@ const DEVICE: &str = "franka";
 mod arm;
 mod brake;
 mod connect;
+pub mod joints;
 mod limits;
 mod worker;
 

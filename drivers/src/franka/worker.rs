@@ -14,8 +14,17 @@ pub(super) enum Cmd {
         generation: u64,
         reply: Reply<ArmState>,
     },
+    /// A joint-space move ([`super::joints`]).
+    MoveJoints {
+        q: [f64; 7],
+        generation: u64,
+        reply: Reply<ArmState>,
+    },
     State {
         reply: Reply<ArmState>,
+    },
+    Joints {
+        reply: Reply<[f64; 7]>,
     },
     Recover {
         reply: Reply<()>,
@@ -51,7 +60,9 @@ impl std::fmt::Debug for Cmd {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
             Self::Move { .. } => "Move",
+            Self::MoveJoints { .. } => "MoveJoints",
             Self::State { .. } => "State",
+            Self::Joints { .. } => "Joints",
             Self::Recover { .. } => "Recover",
             Self::Stop { .. } => "Stop",
         })
@@ -176,6 +187,25 @@ pub(super) struct MoveJob<'a> {
     clock: &'a dyn Clock,
 }
 
+impl MoveJob<'_> {
+    /// One control cycle's bookkeeping: the share of commands that arrived, and the
+    /// measured pose published every [`FEED_EVERY`] cycles.
+    pub(super) fn tick(&mut self, state: &franka::RobotState) {
+        self.success.record(state.control_command_success_rate);
+        if self.success.cycles % FEED_EVERY == 1 {
+            self.feed.send_replace(Some((
+                self.clock.now(),
+                ArmPose::from_matrix(&state.O_T_EE),
+            )));
+        }
+    }
+
+    /// Whether this move was cancelled (dropped, or [`Arm::stop`]).
+    pub(super) fn cancelled(&self) -> bool {
+        self.cancel.is_cancelled(self.generation)
+    }
+}
+
 pub(super) fn run_move(
     robot: &franka::Robot,
     target: &ArmPose,
@@ -252,16 +282,12 @@ pub(super) fn run_move(
             |state, dt| {
                 // Seed from the commanded pose of the first cycle.
                 let a = *seed.get_or_insert_with(|| ArmPose::from_matrix(&state.O_T_EE_c));
-                job.success.record(state.control_command_success_rate);
-                if job.success.cycles % FEED_EVERY == 1 {
-                    job.feed
-                        .send_replace(Some((job.clock.now(), ArmPose::from_matrix(&state.O_T_EE))));
-                }
+                job.tick(state);
                 // An abort ramps down within the limits; the motion ends at rest. A brake
                 // that would only stop past the target is not used: cut off there, it
                 // would ask for an instant stop (a reflex); the move's own plan, already
                 // slowing, stops at the target sooner and within the move's limits.
-                if !aborted && job.cancel.is_cancelled(job.generation) {
+                if !aborted && job.cancelled() {
                     aborted = true;
                     let b = Brake::new(
                         otg.position(),
@@ -275,7 +301,8 @@ pub(super) fn run_move(
                     }
                 }
                 let (s, done) = match brake.as_mut() {
-                    Some(b) => (b.step(dt.as_secs_f64()).clamp(0.0, 1.0), b.finished()),
+                    // `stops_before` holds it within [s, 1] all the way to rest.
+                    Some(b) => (b.step(dt.as_secs_f64()), b.finished()),
                     None => {
                         let s = otg.step(dt.as_secs_f64());
                         (s, s >= 1.0 - 1e-9 && otg.velocity().abs() < 1e-9)
@@ -363,8 +390,40 @@ pub(super) fn worker(
                 });
                 let _ = reply.send(r);
             }
+            Cmd::MoveJoints {
+                q,
+                generation,
+                reply,
+            } => {
+                if cancel.is_cancelled(generation) {
+                    let _ = reply.send(Err(DeviceError::InvalidCommand {
+                        device: DEVICE.into(),
+                        message: format!("move {generation} was cancelled before it started"),
+                    }));
+                    continue;
+                }
+                let mut job = MoveJob {
+                    cancel: &cancel,
+                    generation,
+                    success: SuccessRate::default(),
+                    feed: &feed,
+                    clock: clock.as_ref(),
+                };
+                let kind = joints
+                    .as_ref()
+                    .map_or_else(|| reach::Robot::of(robot.fci_version()), |(_, k)| *k);
+                let moved = super::joints::run_joint_move(&robot, &q, kind, &mut job);
+                let r = moved.and_then(|()| state(&robot)).map(|s| ArmState {
+                    command_success_rate: job.success.rate(),
+                    ..s
+                });
+                let _ = reply.send(r);
+            }
             Cmd::State { reply } => {
                 let _ = reply.send(state(&robot));
+            }
+            Cmd::Joints { reply } => {
+                let _ = reply.send(robot.read_once().map(|s| s.q).map_err(err));
             }
             Cmd::Recover { reply } => {
                 let _ = reply.send(robot.automatic_error_recovery().map_err(err));

@@ -90,7 +90,7 @@ impl From<HostCheck> for Measured {
 }
 
 /// The arm's state: a valid pose and no fault.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ArmCheck {
     /// The finger's position in the base frame, m.
     pub translation_m: [f64; 3],
@@ -100,6 +100,9 @@ pub struct ArmCheck {
     pub worst_arrival_mm: f64,
     /// Share of the real-time commands that reached the robot (a Franka's).
     pub command_success_rate: Option<f64>,
+    /// The robot's mode at connect, and the recovery run if it was in reflex (a
+    /// Franka's).
+    pub found_at_connect: Option<String>,
 }
 
 /// The force/torque stream over the window.
@@ -211,6 +214,9 @@ impl fmt::Display for Measured {
                 if let Some(rate) = a.command_success_rate {
                     write!(f, "; {:.1} % of real-time commands arrived", rate * 100.0)?;
                 }
+                if let Some(found) = &a.found_at_connect {
+                    write!(f, "; mode at connect: {found}")?;
+                }
                 Ok(())
             }
             Self::Host(h) => {
@@ -266,10 +272,10 @@ impl fmt::Display for Measured {
     }
 }
 
-/// How far the force/torque stream's measured rate may be from the configured one, as
-/// a fraction of it, either way (the host's clock over the window, lost readings
-/// counted as sent).
-const RATE_TOLERANCE: f64 = 0.1;
+/// How far the force/torque stream's period may be from the configured one, as a
+/// fraction of it, either way (the host's clock over the window, lost readings counted
+/// as sent): the driver's own ([`softtouch_drivers::netft::client::RATE_REFUSED`]).
+use softtouch_drivers::netft::client::RATE_REFUSED;
 /// Counts of the gripper's test move.
 const GRIPPER_TEST_COUNTS: u8 = 20;
 /// Exchanges timed to measure the gripper link's rate.

@@ -26,6 +26,10 @@ pub const RATE_MARGIN: f64 = 0.5;
 /// limit; the ramps it lengthens last milliseconds.
 pub const JERK_MARGIN: f64 = 0.2;
 
+/// The share of a joint's acceleration and jerk room the path's curvature may take at
+/// a move's speed (the rest is left to the path's own acceleration and jerk).
+pub const CURVATURE_SHARE: f64 = 0.5;
+
 /// How much of a move's planned path limits its joints allow ([`path_scale`]): each
 /// in (0, 1], 1 where the move is within the joints' limits.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -128,15 +132,32 @@ pub fn path_and_brake_scales(
         last_d1 = Some(dq);
         Ok(())
     })?;
-    let velocity = if worst_v > 1.0 { 1.0 / worst_v } else { 1.0 };
-    let v = s_dot * velocity;
-    // The share of `want` that joint j allows, given what the curvature takes.
+    let mut v = s_dot * if worst_v > 1.0 { 1.0 / worst_v } else { 1.0 };
+    // Where the path's curvature alone would take more than half a joint's share of
+    // acceleration (q''·ṡ²) or jerk (3·q''·ṡ·s̈, at the largest s̈ asked for), the
+    // speed is lowered until it takes half: the move is slowed, never run with its
+    // acceleration and jerk cut while its speed breaks the bound.
+    for j in 0..7 {
+        if d2[j] > 0.0 {
+            v = v.min((CURVATURE_SHARE * acc_max[j] * RATE_MARGIN / d2[j]).sqrt());
+            let a_most = s_ddot.max(b_ddot);
+            if a_most > 0.0 {
+                v = v.min(CURVATURE_SHARE * jerk_max[j] * JERK_MARGIN / (3.0 * d2[j] * a_most));
+            }
+        }
+    }
+    let velocity = if s_dot > 0.0 {
+        (v / s_dot).min(1.0)
+    } else {
+        1.0
+    };
+    // The share of `want` that joint j allows, given what the curvature takes (at most
+    // half the room, above).
     let share = |want: f64, room: f64, g1: f64| -> f64 {
         if want <= 0.0 || g1 * want <= room {
             1.0
         } else {
-            // The curvature alone may take the whole limit: crawl rather than stop.
-            (room / (g1 * want)).clamp(0.05, 1.0)
+            (room / (g1 * want)).clamp(1e-6, 1.0)
         }
     };
     // The shares of an acceleration and a jerk at the (scaled) speed v.

@@ -212,3 +212,44 @@ fn a_move_too_fast_for_a_joint_is_slowed_to_its_limits_and_one_out_of_reach_refu
     assert!(path_scale(&kin, Robot::Fr3, &q0, &from, &nan, [0.1, 1.0, 10.0]).is_err());
     assert!(path_scale(&kin, Robot::Fr3, &q0, &from, &turn, [f64::NAN, 1.0, 10.0]).is_err());
 }
+
+/// A long move asked for at a speed its path's curvature cannot carry: the speed is
+/// lowered (not only the acceleration and jerk) until the curvature alone takes at
+/// most [`CURVATURE_SHARE`] of every joint's acceleration share, checked by
+/// differencing the joints along the path at the scaled cruise speed.
+#[test]
+fn a_move_whose_curvature_breaks_a_share_is_slowed() {
+    let kin = flange();
+    let q0 = SIM_HOME_Q;
+    let from = kin.pose(&q0);
+    // Half a metre sideways and down, turning: the elbow bends along it.
+    let mut to = from.compose(&ArmPose::from_translation_yaw([0.0; 3], 0.8));
+    to.translation_m[1] += 0.35;
+    to.translation_m[2] -= 0.2;
+    let path = [40.0, 400.0, 40_000.0];
+    let s = path_scale(&kin, Robot::Fr3, &q0, &from, &to, path).expect("reachable");
+    assert!(s.velocity < 1.0, "{s:?}");
+    let v = path[0] * s.velocity;
+    let steps = 400;
+    let mut qs = vec![kin.solve(&from, &q0).expect("start")];
+    walk_leg(&kin, Robot::Fr3, qs[0], &from, &to, steps, |_, next| {
+        qs.push(*next);
+        Ok(())
+    })
+    .expect("walk");
+    let ds = 1.0 / steps as f64;
+    let (acc_max, _) = joint_rate_limits(Robot::Fr3);
+    let mut worst = 0.0f64;
+    for w in qs.windows(3) {
+        for j in 0..7 {
+            let q2 = (w[2][j] - 2.0 * w[1][j] + w[0][j]) / (ds * ds);
+            worst = worst.max(q2.abs() * v * v / (acc_max[j] * RATE_MARGIN));
+        }
+    }
+    assert!(
+        worst > 0.0 && worst <= CURVATURE_SHARE + 0.05,
+        "{worst} of the share, {s:?}"
+    );
+    // The shares left for acceleration and jerk are real ones, not a floor.
+    assert!(s.acceleration > 0.0 && s.jerk > 0.0, "{s:?}");
+}

@@ -28,6 +28,9 @@ pub struct Commanded {
     /// The measured joints when it arrived: the seed of the first joint solve of a run
     /// of consecutive cycles (`None`: the ready pose).
     pub q_measured: Option<[f64; 7]>,
+    /// A joint-space motion's command: its joints (`q_c`), judged as they are; `pose`
+    /// is then ignored and taken as their forward kinematics.
+    pub q_commanded: Option<[f64; 7]>,
 }
 
 /// The largest value of one quantity over the signal, against its limit.
@@ -203,7 +206,15 @@ fn solve_exact(kin: &Kinematics, pose: &ArmPose, seed: &[f64; 7]) -> Option<[f64
 /// `robot`'s Cartesian limits and, through `kin`, its joint limits.
 #[must_use]
 pub fn judge(commands: &[Commanded], robot: Robot, kin: &Kinematics) -> Verdict {
-    let mut sorted: Vec<&Commanded> = commands.iter().collect();
+    // A joint command's pose is where its joints put the end effector.
+    let owned: Vec<Commanded> = commands
+        .iter()
+        .map(|c| Commanded {
+            pose: c.q_commanded.map_or(c.pose, |q| kin.pose(&q)),
+            ..*c
+        })
+        .collect();
+    let mut sorted: Vec<&Commanded> = owned.iter().collect();
     sorted.sort_by_key(|c| c.message_id);
     sorted.dedup_by_key(|c| c.message_id);
     let [v, a, j, rv, ra, rj] = cartesian_limits(robot);
@@ -270,7 +281,8 @@ pub fn judge(commands: &[Commanded], robot: Robot, kin: &Kinematics) -> Verdict 
         let mut seed = run[0].q_measured.unwrap_or(reach::READY_Q);
         let mut solved = true;
         for c in run {
-            match solve_exact(kin, &c.pose, &seed) {
+            let solved_q = c.q_commanded.or_else(|| solve_exact(kin, &c.pose, &seed));
+            match solved_q {
                 Some(x) => {
                     q.push(x);
                     seed = x;

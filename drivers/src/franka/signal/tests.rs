@@ -31,6 +31,7 @@ fn planned(limits: &MotionLimits, speed_m_s: f64, first: u64) -> Vec<Commanded> 
             message_id: id,
             pose: from.slerp(&to, s),
             q_measured: (id == first).then_some(READY_Q),
+            q_commanded: None,
         });
         id += 1;
         if s >= 1.0 - 1e-12 && otg.velocity().abs() < 1e-12 {
@@ -122,6 +123,7 @@ fn empty_single_and_constant_signals_hold() {
             message_id: 100 + i,
             pose: from,
             q_measured: Some(READY_Q),
+            q_commanded: None,
         })
         .collect();
     for cmds in [&still[..1], &still[..]] {
@@ -151,6 +153,7 @@ fn a_nan_command_and_an_unreachable_pose_are_reported() {
             message_id: i,
             pose: if i == 3 { nan } else { from },
             q_measured: Some(READY_Q),
+            q_commanded: None,
         })
         .collect();
     let v = judge(&cmds, Robot::Fr3, &kin());
@@ -164,6 +167,7 @@ fn a_nan_command_and_an_unreachable_pose_are_reported() {
             message_id: 1,
             pose: far,
             q_measured: None,
+            q_commanded: None,
         }],
         Robot::Fr3,
         &kin(),
