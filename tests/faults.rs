@@ -75,7 +75,9 @@ struct ProbeArm {
     probe: Probe,
     home: ArmPose,
     base_from_rod: ArmPose,
-    stop_on_approach: Option<(u32, watch::Sender<u32>)>,
+    /// At the start of approach `n`: the stop requests `level` stands for (1: SIGTERM,
+    /// finish the sample and stop; 2: a second Ctrl-C, stop where it is).
+    stop_on_approach: Option<(u32, u32, watch::Sender<u32>)>,
 }
 
 /// Clears `approaching` however the move ends (done, failed, or dropped mid-way).
@@ -122,15 +124,16 @@ impl Arm for ProbeArm {
         };
         let _clear = Approaching(Arc::clone(&self.probe));
         if starts
-            && let Some((at, tx)) = &self.stop_on_approach
+            && let Some((at, level, tx)) = &self.stop_on_approach
             && *at == n
         {
             // Well into the move (an approach takes about a second).
-            let tx = tx.clone();
+            let (tx, level) = (tx.clone(), *level);
             tokio::spawn(async move {
                 tokio::time::sleep(Duration::from_millis(200)).await;
-                tx.send_replace(1);
-                tx.send_replace(2);
+                for l in 1..=level {
+                    tx.send_replace(l);
+                }
             });
         }
         self.inner.lock().await.move_to(target, speed_m_s).await
@@ -338,6 +341,8 @@ struct Faults {
     camera_timeout: fn(u32) -> bool,
     /// A double stop request at the start of this approach.
     stop_on_approach: Option<u32>,
+    /// One stop request (as SIGTERM sends) at the start of this approach.
+    term_on_approach: Option<u32>,
     /// An absent operator at the first rod change (with two rods of `block` samples).
     absent_operator: bool,
     /// Two rods of two samples each, changed by the simulated operator.
@@ -356,6 +361,7 @@ impl Default for Faults {
             sensor: SensorFault::None,
             camera_timeout: |_| false,
             stop_on_approach: None,
+            term_on_approach: None,
             absent_operator: false,
             two_rods: false,
             joints: false,
@@ -480,7 +486,10 @@ fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
                 probe: Arc::clone(&shared),
                 home,
                 base_from_rod: w.base_from_rod,
-                stop_on_approach: faults.stop_on_approach.map(|n| (n, stop_tx.clone())),
+                stop_on_approach: faults
+                    .stop_on_approach
+                    .map(|n| (n, 2, stop_tx.clone()))
+                    .or_else(|| faults.term_on_approach.map(|n| (n, 1, stop_tx.clone()))),
             }),
             force_sensor: Box::new(FaultySensor {
                 inner: devices.force_sensor,
@@ -759,6 +768,30 @@ fn the_elbow_goes_back_to_homes_joints_at_each_blocks_end() {
     );
     assert!(stored(&db, e.run_id).kinds("elbow").is_empty());
     assert!(e.probe.joint_moves.is_empty());
+}
+
+/// A stop request (as SIGTERM sends) during an approach: the sample finishes, the arm
+/// leaves the rod along the approach axis and goes home, the run is `stopped`.
+#[test]
+fn a_stop_request_mid_approach_finishes_the_sample_and_leaves_along_the_axis() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        6,
+        Faults {
+            term_on_approach: Some(2),
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    assert_eq!(e.outcome, Outcome::Stopped, "{:?}", s.events);
+    assert_eq!(s.status, "stopped");
+    assert_eq!(s.indices(), [0, 1], "the sample under way finished");
+    let w = softtouch_schemas::defaults::rig().workspace;
+    assert!(e.departures_along_the_approach_axis(&w.base_from_rod) >= 2);
+    assert!(e.at_home() && e.still());
+    nothing_lost(&e, &s);
 }
 
 #[test]

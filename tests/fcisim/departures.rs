@@ -10,9 +10,6 @@ use softtouch_schemas::{ArmPose, ContactPose};
 /// The first stretch of a departure the issue asks about, m.
 pub(crate) const WATCHED_M: f64 = 0.004;
 
-/// Nearer the rod than the retreat plane by this, the finger may touch it, m.
-const NEAR_M: f64 = 0.001;
-
 /// The side angle is measured once the finger has moved this far from where the
 /// departure began (below it a direction is rounding), m.
 const SIDE_FROM_M: f64 = 0.0002;
@@ -36,12 +33,17 @@ pub(crate) struct Departure {
 }
 
 /// Every departure in `poses` (commanded finger poses in the base frame, in order):
-/// each starts where the finger, nearer the rod than `plane_x_m` (home's x) by more
-/// than [`NEAR_M`], first moves away from it.
+/// each starts where the finger, beyond `near_x_m` along the approach axis (within
+/// reach of the rod: the scene's poses begin at x = 0) and along the rod within `z_m`
+/// (the scene's poses, with a margin), first moves away from it, and runs until the
+/// retreat plane `plane_x_m` (home's x). The arm's first move home from wherever the
+/// robot stood is not one (franka-sim's ready pose is 25 mm out and 60-130 mm down).
 pub(crate) fn departures(
     poses: &[ArmPose],
     base_from_rod: &ArmPose,
     plane_x_m: f64,
+    near_x_m: f64,
+    z_m: (f64, f64),
 ) -> Vec<Departure> {
     let rod_from_base = base_from_rod.inverse();
     let in_rod: Vec<ArmPose> = poses.iter().map(|p| rod_from_base.compose(p)).collect();
@@ -49,7 +51,8 @@ pub(crate) fn departures(
     let mut out = Vec::new();
     let mut k = 0;
     while k + 1 < in_rod.len() {
-        if !(x(k) > plane_x_m + NEAR_M && x(k + 1) < x(k) - 1e-12) {
+        let z = in_rod[k].translation_m[2];
+        if !(x(k) > near_x_m && x(k + 1) < x(k) - 1e-12 && z_m.0 <= z && z <= z_m.1) {
             k += 1;
             continue;
         }
@@ -136,6 +139,9 @@ pub(crate) fn table(ds: &[Departure]) -> String {
 mod tests {
     use super::*;
 
+    const Z: (f64, f64) = (-0.06, 0.06);
+    const NEAR: f64 = -0.005;
+
     fn rod() -> ArmPose {
         crate::fcisim::base_from_rod()
     }
@@ -170,14 +176,14 @@ mod tests {
         // In along x, out along x: nothing.
         let mut poses = line((-0.03, 0.01, 0.2), (0.002, 0.01, 0.2), 64);
         poses.extend(line((0.002, 0.01, 0.2), (-0.03, 0.01, 0.2), 64));
-        let ds = departures(&poses, &rod(), -0.03);
+        let ds = departures(&poses, &rod(), -0.03, NEAR, Z);
         assert_eq!(ds.len(), 1, "{ds:?}");
         assert!(ds[0].reached_plane);
         assert!(ds[0].turn_rad < 1e-9 && ds[0].side_deg < 1e-4, "{ds:?}");
         // Home in one move from the pressed pose: x, z and θ together.
         let mut poses = line((-0.03, 0.01, 0.2), (0.002, 0.01, 0.2), 64);
         poses.extend(line((0.002, 0.01, 0.2), (-0.03, 0.0, 0.0), 64));
-        let ds = departures(&poses, &rod(), -0.03);
+        let ds = departures(&poses, &rod(), -0.03, NEAR, Z);
         assert_eq!(ds.len(), 1, "{ds:?}");
         // 10 mm of z over 32 mm of x: 17° off the axis; 0.2 rad turned over the whole
         // way, 4/33.5 of it in the first 4 mm.
@@ -192,18 +198,22 @@ mod tests {
 
     #[test]
     fn nothing_near_the_rod_an_empty_stream_and_a_turn_back_are_no_departures() {
-        assert!(departures(&[], &rod(), -0.03).is_empty());
+        assert!(departures(&[], &rod(), -0.03, NEAR, Z).is_empty());
         // Travel in the retreat plane is not a departure.
         let poses = line((-0.03, 0.0, 0.0), (-0.03, 0.02, 0.3), 20);
-        assert!(departures(&poses, &rod(), -0.03).is_empty());
+        assert!(departures(&poses, &rod(), -0.03, NEAR, Z).is_empty());
         // Out 2 mm and back in: one departure that never reached the plane.
         let mut poses = line((-0.03, 0.0, 0.0), (0.002, 0.0, 0.0), 32);
         poses.extend(line((0.002, 0.0, 0.0), (0.0, 0.0, 0.0), 2));
         poses.extend(line((0.0, 0.0, 0.0), (0.003, 0.0, 0.0), 3));
-        let ds = departures(&poses, &rod(), -0.03);
+        let ds = departures(&poses, &rod(), -0.03, NEAR, Z);
         assert_eq!(ds.len(), 1, "{ds:?}");
         assert!(!ds[0].reached_plane);
+        // Far down the rod (the robot's ready pose) is not near it.
+        let mut poses = line((-0.018, -0.13, 0.0), (-0.03, 0.0, 0.0), 20);
+        poses.insert(0, at(-0.018, -0.13, 0.0));
+        assert!(departures(&poses, &rod(), -0.03, NEAR, Z).is_empty());
         // A constant stream: nothing.
-        assert!(departures(&vec![at(0.0, 0.0, 0.0); 10], &rod(), -0.03).is_empty());
+        assert!(departures(&vec![at(0.0, 0.0, 0.0); 10], &rod(), -0.03, NEAR, Z).is_empty());
     }
 }
