@@ -551,3 +551,50 @@ fn bench_train_times_a_tiny_net_beside_a_peer_and_names_what_it_cannot_run() {
         text(&out.stderr)
     );
 }
+
+/// A refused `collect` names the flag at fault and leaves nothing behind: no new
+/// database, no log file (`--samples 0` used to store an empty completed run; `-1` was
+/// an unknown argument; a bad rod or rig made an empty database and a log first).
+#[test]
+fn a_refused_collect_names_its_flag_and_leaves_no_database_nor_log() {
+    let dir = tempdir();
+    let d = dir.path();
+    for (args, says) in [
+        (
+            &["collect", "--samples", "0"][..],
+            "invalid value '0' for '--samples",
+        ),
+        (
+            &["collect", "--samples", "-1"],
+            "invalid value '-1' for '--samples",
+        ),
+        (
+            &["collect", "--samples", "3", "--rods", "nosuch"],
+            "--rods: no rod `nosuch`",
+        ),
+        (
+            &["collect", "--samples", "3", "--rig", "missing.toml"],
+            "missing.toml",
+        ),
+        (
+            &["collect", "--samples", "3", "--block", "0"],
+            "--block: expected at least 1",
+        ),
+        (
+            &["collect", "--poses-from", "1"],
+            "--poses-from 1: no database",
+        ),
+    ] {
+        let out = softtouch(d, args);
+        common::fails_with(&out, 2, says);
+        let left: Vec<_> = std::fs::read_dir(d)
+            .map(|r| r.filter_map(Result::ok).map(|e| e.file_name()).collect())
+            .unwrap_or_default();
+        assert!(left.is_empty(), "{args:?} left {left:?}");
+        assert!(
+            text(&out.stdout).is_empty(),
+            "{args:?}: {}",
+            text(&out.stdout)
+        );
+    }
+}

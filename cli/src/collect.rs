@@ -34,11 +34,14 @@ pub struct CollectArgs {
     /// Scene (default: the embedded on-land scene).
     #[arg(long, conflicts_with = "resume")]
     pub scene: Option<PathBuf>,
-    /// Samples to take.
+    /// Samples to take (at least 1).
     #[arg(
         long,
         required_unless_present_any = ["resume", "poses_from"],
-        conflicts_with_all = ["resume", "poses_from"]
+        conflicts_with_all = ["resume", "poses_from"],
+        // `-1` is a value to refuse by this flag's name, not an unknown flag.
+        allow_negative_numbers = true,
+        value_parser = clap::value_parser!(u64).range(1..)
     )]
     pub samples: Option<u64>,
     /// Seed of the pose sampler and the simulation (default: from the clock; printed
@@ -63,6 +66,19 @@ pub struct CollectArgs {
     pub resume: Option<i64>,
 }
 
+/// The new run `args` ask for.
+fn new_run_request(args: &CollectArgs) -> NewRunRequest {
+    NewRunRequest {
+        rig: args.rig.clone(),
+        scene: args.scene.clone(),
+        samples: args.samples.unwrap_or(0),
+        seed: args.seed,
+        rods: args.rods.clone(),
+        block: args.block,
+        poses_from: args.poses_from,
+    }
+}
+
 /// A planning error as a CLI failure: the exit code says whose fault it is.
 fn plan_failure(e: PlanError) -> Failure {
     match e {
@@ -85,6 +101,19 @@ pub async fn run_collect(
             "--resume: no database at {} (check --db; only a new run creates one)",
             db.display()
         )));
+    }
+    // A new run's request is checked before anything is said or the database opened:
+    // a refused one leaves no new, empty database (nor its log) behind.
+    if args.resume.is_none() {
+        if let Some(source) = args.poses_from
+            && db.file().is_some_and(|path| !path.exists())
+        {
+            return Err(Failure::BadInput(anyhow!(
+                "--poses-from {source}: no database at {} (check --db)",
+                db.display()
+            )));
+        }
+        CollectPlan::check_new_run(&new_run_request(&args)).map_err(plan_failure)?;
     }
     // The disk a run takes is said, and checked, before anything is written. A request
     // the plan below refuses (a bad scene, a missing --poses-from run) is left to it.
@@ -112,16 +141,7 @@ pub async fn run_collect(
             Resumed::Plan(plan) => *plan,
         }
     } else {
-        let request = NewRunRequest {
-            rig: args.rig,
-            scene: args.scene,
-            samples: args.samples.unwrap_or(0),
-            seed: args.seed,
-            rods: args.rods,
-            block: args.block,
-            poses_from: args.poses_from,
-        };
-        CollectPlan::new_run(&store, &request).map_err(plan_failure)?
+        CollectPlan::new_run(&store, &new_run_request(&args)).map_err(plan_failure)?
     };
 
     let run_id = plan.run_id;

@@ -118,7 +118,10 @@ fn init_logging(cli: &Cli) -> Option<tracing_appender::non_blocking::WorkerGuard
 
 fn main() -> ExitCode {
     let cli = Cli::parse(); // exits 2 on bad arguments, 0 on --help
-    let _log_guard = init_logging(&cli);
+    // A verb refused before it made its database leaves no log file of its own.
+    let log_file = log_path(&cli.db);
+    let stray_log = wants_log_file(&cli) && !log_file.exists();
+    let log_guard = init_logging(&cli);
     // The command line as logged: a URL's password as ***.
     let args: Vec<String> = std::env::args_os()
         .skip(1)
@@ -157,6 +160,10 @@ fn main() -> ExitCode {
             eprintln!("error: {message}");
             // Not `error!`: stderr already has it; the file gets it at info.
             tracing::info!(exit_code = failure.exit_code(), "failed: {message}");
+            if stray_log && db.file().is_some_and(|p| !p.exists()) {
+                drop(log_guard);
+                let _ = std::fs::remove_file(&log_file);
+            }
             ExitCode::from(failure.exit_code())
         }
     }

@@ -315,20 +315,68 @@ where
             }
         }
     }
+    let set: Vec<String> = overrides.iter().map(|o| echo(&o.to_string())).collect();
+    let set = set.join(", --set ");
+    let named = root.clone();
     let value: T = serde_path_to_error::deserialize(root).map_err(|e| {
         let field = e.path().to_string();
-        let set: Vec<String> = overrides.iter().map(|o| echo(&o.to_string())).collect();
         fail(
-            if field == "." { String::new() } else { field },
-            format!(
-                "{} (with --set {})",
-                echo_long(&e.inner().to_string()),
-                set.join(", --set ")
-            ),
+            if field == "." {
+                String::new()
+            } else {
+                by_name(&named, &field)
+            },
+            format!("{} (with --set {set})", echo_long(&e.inner().to_string())),
         )
     })?;
     let mut check = Check::default();
     value.validate(&mut check);
-    check.finish(source)?;
+    // A value the checks refuse is said as the --set that made it, and by the names
+    // the --set path used (`objects.bottle`, not `objects[3]`).
+    check.finish(source).map_err(|mut e| {
+        for p in &mut e.problems {
+            p.field = by_name(&named, &p.field);
+            p.message = format!("{} (with --set {set})", p.message);
+        }
+        e
+    })?;
     Ok(value)
+}
+
+/// `field` (`objects[3].mass_kg`) with each list entry that has a `name` (or a `kind`)
+/// in `root` said by it, as a `--set` path says it: `objects.bottle.mass_kg`. Entries
+/// without either, and anything that does not resolve, stay as they are.
+fn by_name(root: &toml::Value, field: &str) -> String {
+    let mut at = Some(root);
+    let mut out: Vec<String> = Vec::new();
+    for part in field.split('.') {
+        let (key, index) = match part.split_once('[') {
+            Some((k, rest)) => (
+                k,
+                rest.strip_suffix(']').and_then(|i| i.parse::<usize>().ok()),
+            ),
+            None => (part, None),
+        };
+        let list = at.and_then(|v| v.get(key));
+        match index {
+            Some(i) => {
+                let entry = list.and_then(|l| l.get(i));
+                let name = entry.and_then(|e| {
+                    e.get("name")
+                        .or_else(|| e.get("kind"))
+                        .and_then(toml::Value::as_str)
+                });
+                match name {
+                    Some(n) if !n.contains('.') => out.push(format!("{key}.{n}")),
+                    _ => out.push(part.to_owned()),
+                }
+                at = entry;
+            }
+            None => {
+                out.push(part.to_owned());
+                at = list;
+            }
+        }
+    }
+    out.join(".")
 }

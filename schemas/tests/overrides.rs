@@ -101,12 +101,18 @@ fn a_value_is_checked_as_the_files_is() {
     };
     let e = err("objects.bottle.wet_friction=abc");
     assert!(
-        e.contains("objects[3].wet_friction")
+        e.contains("field `objects.bottle.wet_friction`")
             && e.contains("--set objects.bottle.wet_friction=abc"),
         "{e}"
     );
+    // A value the checks refuse names the object and the --set, not `objects[3]`.
     let e = err("objects.bottle.wet_friction=-1");
-    assert!(e.contains("wet_friction"), "{e}");
+    assert!(
+        e.contains("field `objects.bottle.wet_friction`")
+            && e.contains("(with --set objects.bottle.wet_friction=-1)")
+            && !e.contains("objects[3]"),
+        "{e}"
+    );
     let e = err("effects.object_flow.period_s=0");
     assert!(e.contains("period_s"), "{e}");
     let e = err("effects.object_flow.mean_m_s=nan");

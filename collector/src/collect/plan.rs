@@ -91,6 +91,9 @@ pub enum PlanError {
     /// A block of 0 samples per rod.
     #[error("--block: expected at least 1 sample per rod")]
     ZeroBlock,
+    /// A new run of 0 samples (it would be stored as complete, holding nothing).
+    #[error("--samples: expected at least 1 sample")]
+    ZeroSamples,
     /// Neither the request nor the scene names a rod.
     #[error("no rods to use")]
     NoRods,
@@ -117,6 +120,7 @@ impl PlanError {
             Self::Config(_)
             | Self::UnknownRod { .. }
             | Self::ZeroBlock
+            | Self::ZeroSamples
             | Self::NoRods
             | Self::Unpairable { .. } => true,
             Self::NoRodSchedule(_) => false,
@@ -148,7 +152,40 @@ impl CollectPlan {
         if let Some(source) = request.poses_from {
             return Self::paired_run(store, request, resolved, source);
         }
+        let (rods, block) = Self::schedule_of(request, &resolved)?;
+        let schedule = RodSchedule::new(rods, block).ok_or(PlanError::NoRods)?;
+        let seed = request.seed.unwrap_or_else(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_nanos() as u64)
+        });
+        Self::create(store, resolved, seed, request.samples, schedule, None)
+    }
+
+    /// What [`CollectPlan::new_run`] checks before it needs the store (the configs, the
+    /// rods, the block), so that a refused request creates no database. A request
+    /// repeating another run's poses needs that run: it is checked by `new_run`.
+    ///
+    /// # Errors
+    /// As `new_run`'s own checks.
+    pub fn check_new_run(request: &NewRunRequest) -> Result<(), PlanError> {
+        let resolved = configs::resolve(request.rig.as_deref(), request.scene.as_deref())?;
+        if request.poses_from.is_none() {
+            let (rods, block) = Self::schedule_of(request, &resolved)?;
+            RodSchedule::new(rods, block).ok_or(PlanError::NoRods)?;
+        }
+        Ok(())
+    }
+
+    /// The rods (the request's, each in the scene, or all of the scene's) and the block.
+    fn schedule_of(
+        request: &NewRunRequest,
+        resolved: &configs::Resolved,
+    ) -> Result<(Vec<String>, u64), PlanError> {
         let samples = request.samples;
+        if samples == 0 {
+            return Err(PlanError::ZeroSamples);
+        }
         let scene_rods = || resolved.scene.rods.iter().map(|r| r.name.as_str());
         let rods: Vec<String> = if request.rods.is_empty() {
             scene_rods().map(str::to_owned).collect()
@@ -169,15 +206,9 @@ impl CollectPlan {
         let block = match request.block {
             Some(0) => return Err(PlanError::ZeroBlock),
             Some(b) => b,
-            None => samples.div_ceil(rods.len() as u64).max(1),
+            None => samples.div_ceil(rods.len().max(1) as u64).max(1),
         };
-        let schedule = RodSchedule::new(rods, block).ok_or(PlanError::NoRods)?;
-        let seed = request.seed.unwrap_or_else(|| {
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(0, |d| d.as_nanos() as u64)
-        });
-        Self::create(store, resolved, seed, samples, schedule, None)
+        Ok((rods, block))
     }
 
     /// A new run repeating run `source`'s poses and rods in the request's scene. Pose
