@@ -169,10 +169,11 @@ fn live_presses_on_the_simulated_rig_and_bench_grasp_writes_its_table() {
         "--rig",
         "real.toml",
     ];
-    fails_with(&softtouch(d, &follow), 2, "--gain or --object");
+    fails_with(&softtouch(d, &follow), 2, "--object: on a real gripper");
+    // --gain sets K only: the squeeze bound still needs the object's calibration.
     let mut with_gain = follow.to_vec();
     with_gain.extend(["--gain", "4"]);
-    fails_with(&softtouch(d, &with_gain), 1, "camera");
+    fails_with(&softtouch(d, &with_gain), 2, "--object: on a real gripper");
     // K from the rig's calibration of the object: none yet, then one stored (as
     // `grasp calibrate --rig` stores it), which takes the verb as far as the devices.
     let mut with_object = follow.to_vec();

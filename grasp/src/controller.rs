@@ -30,6 +30,7 @@ use softtouch_schemas::TimestampNs;
 use crate::GraspError;
 use crate::estimator::ForceEstimator;
 use crate::projection::Projection;
+use crate::squeeze::SqueezeBound;
 use crate::stepper::{StepOutcome, Stepper, StepperConfig};
 use crate::wrist::{Wrist, WristLoop};
 
@@ -65,7 +66,7 @@ pub enum ExitAction {
 }
 
 /// Settings of the loop.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ControllerConfig {
     /// Algorithm 1.
     pub stepper: StepperConfig,
@@ -73,7 +74,10 @@ pub struct ControllerConfig {
     pub projection: Projection,
     /// rSP for every request.
     pub speed: u8,
-    /// rFR for every request: high enough that a few newtons never trip a contact stop.
+    /// rFR for every request. 0, the register's lowest: the grip force the Hand-E
+    /// applies at a contact stop is then its least (about 20 N by the figures quoted,
+    /// docs/PROTOCOLS.md §2.x), the hardware's own backstop under the squeeze bound;
+    /// still far above the few newtons the loop regulates, so none trips a stop.
     pub force: u8,
     /// How long to wait for a frame before the run fails, ms. A cycle may wait this
     /// long on each of two cameras, so `keep_alive + 2 × frame_timeout_ms` stays under
@@ -83,21 +87,33 @@ pub struct ControllerConfig {
     pub keep_alive: Duration,
     /// What the gripper does at the end of a run.
     pub on_exit: ExitAction,
+    /// The closing limit from the stiffness calibration ([`SqueezeBound`]); `None`
+    /// only where no calibration exists (the end calibration, a bare test rig).
+    pub squeeze: Option<SqueezeBound>,
 }
 
 impl ControllerConfig {
     /// Defaults for a projection: K = 4 N/mm, δ = 0.1 N, whole Hand-E scale, half speed,
-    /// full force, 200 ms keep-alive, open on exit.
+    /// the lowest force register (0), 200 ms keep-alive, open on exit, no squeeze bound
+    /// (set one from the calibration with [`Self::with_squeeze`]).
     pub fn new(projection: Projection) -> Self {
         Self {
             stepper: StepperConfig::default(),
             projection,
             speed: 128,
-            force: 255,
+            force: 0,
             frame_timeout_ms: 300,
             keep_alive: Duration::from_millis(200),
             on_exit: ExitAction::Open,
+            squeeze: None,
         }
+    }
+
+    /// The same settings with the closing limit `bound`.
+    #[must_use]
+    pub fn with_squeeze(mut self, bound: SqueezeBound) -> Self {
+        self.squeeze = Some(bound);
+        self
     }
 
     /// Checks the settings and every target before anything moves.
@@ -114,6 +130,9 @@ impl ControllerConfig {
 
     fn validate(&self) -> Result<(), GraspError> {
         self.stepper.validate()?;
+        if let Some(bound) = &self.squeeze {
+            bound.validate()?;
+        }
         if self.keep_alive.is_zero() || self.keep_alive >= Duration::from_secs(1) {
             return Err(GraspError::Config(format!(
                 "keep_alive {:?}: expected more than 0 and less than 1 s (the Hand-E faults after 1 s without a command)",
@@ -540,7 +559,15 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
             .is_none_or(|(p, _)| status.requested_position == p);
         let (position_request, outcome) = if echoed {
             let step = self.stepper.step(status.position, target_n, estimate_n);
-            (step.position_request, Some(step.outcome))
+            match self.squeezed(&step, &status, target_n, estimate_n) {
+                Err(stalled) => {
+                    // Hold where the fingers stand: the bound is the furthest they go.
+                    let hold = status.position.min(step.position_request);
+                    self.send(hold, now).await?;
+                    return Err(stalled);
+                }
+                Ok(step) => (step.position_request, Some(step.outcome)),
+            }
         } else {
             let pending = self.sent.map_or(status.position, |(p, _)| p);
             (pending, None)
@@ -579,6 +606,48 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
             torque_z_nm,
             wrist_target_rad,
         })
+    }
+
+    /// The step held to the squeeze bound: a request past it stops at it, and fingers
+    /// that stand at it (within the arrival slack) while the estimate is still below
+    /// the target by more than δ end the loop with [`GraspError::EstimateStalled`].
+    fn squeezed(
+        &self,
+        step: &crate::stepper::Step,
+        status: &GripperStatus,
+        target_n: f64,
+        estimate_n: Option<f64>,
+    ) -> Result<crate::stepper::Step, GraspError> {
+        let Some(bound) = &self.config.squeeze else {
+            return Ok(*step);
+        };
+        if step.outcome.is_flagged() {
+            return Ok(*step);
+        }
+        let limit = bound.limit_count(target_n);
+        let below = estimate_n.is_none_or(|f| f < target_n - self.config.stepper.tolerance_n);
+        // At the bound: asked for it, and there (or stopped within the arrival slack).
+        let asked = self.sent.is_some_and(|(p, _)| p >= limit);
+        let there = status.position >= limit
+            || (status.object != ObjectStatus::Moving
+                && status.position.saturating_add(ARRIVAL_SLACK_COUNTS) >= limit);
+        if below && asked && there {
+            return Err(GraspError::EstimateStalled {
+                target_n,
+                estimate_n,
+                limit_count: limit,
+                touch_count: bound.touch_count,
+                limit_mm: bound.limit_mm(target_n),
+                factor: bound.factor,
+            });
+        }
+        if step.position_request > limit {
+            return Ok(crate::stepper::Step {
+                position_request: limit,
+                outcome: StepOutcome::ClampedSqueeze,
+            });
+        }
+        Ok(*step)
     }
 
     async fn send(&mut self, position: u8, now: TimestampNs) -> Result<(), GraspError> {

@@ -11,6 +11,8 @@
 //! - [`stepper`]: Algorithm 1 as a pure stepper on gripper counts (gain K, tolerance
 //!   δ, clamped to the calibrated stroke; NaN or saturated estimates hold), and the
 //!   Method S4 checks on K and δ for a measured stiffness Λ.
+//! - [`squeeze`]: the closing limit of every force loop, from the stiffness
+//!   calibration and the target; an estimate that does not rise stops the loop there.
 //! - [`estimator`]: camera frame → wrench, implemented for the trained
 //!   [`softtouch_trainer::Predictor`].
 //! - [`controller`]: one cycle per camera frame (frame → preprocess → inference →
@@ -38,6 +40,7 @@ pub mod controller;
 pub mod estimator;
 pub mod metrics;
 pub mod projection;
+pub mod squeeze;
 pub mod stepper;
 pub mod stiffness;
 pub mod trials;
@@ -51,12 +54,14 @@ pub use controller::{
 pub use estimator::ForceEstimator;
 pub use metrics::{HoldMetrics, hold_metrics};
 pub use projection::Projection;
+pub use squeeze::{SQUEEZE_FACTOR, SQUEEZE_FLOOR_COUNTS, SqueezeBound};
 pub use stepper::{
     GainCheck, Step, StepOutcome, Stepper, StepperConfig, Stroke, check_gain, check_tolerance,
     one_count_force_n,
 };
 pub use stiffness::{
     CalibrationEnd, CalibrationPoint, StiffnessCalibration, StiffnessConfig, calibrate_stiffness,
+    theil_sen_slope,
 };
 pub use trials::{
     ArmLift, FailReason, Judge, KEEP_ALIVE, Lift, LiftPlan, Mode, Moment, ObjectState, Observation,
@@ -95,6 +100,27 @@ pub enum GraspError {
     /// The model could not read a frame.
     #[error("force estimate: {0}")]
     Estimate(String),
+    /// The fingers reached the closing limit of [`SqueezeBound`] with the estimate
+    /// still below the target: the estimate does not follow the force (a weak model,
+    /// a bad frame) and closing further could crush. The loop stops there.
+    #[error(
+        "estimate stalled: the fingers stand at count {limit_count} ({limit_mm:.2} mm past the calibrated touch at {touch_count}, {factor} × the squeeze the calibration needed for {target_n} N) and the estimate reads {estimate}; the loop stopped instead of closing further (check the model and the lighting, or recalibrate)",
+        estimate = estimate_n.map_or_else(|| "nothing".to_owned(), |f| format!("{f:.3} N"))
+    )]
+    EstimateStalled {
+        /// The target, N.
+        target_n: f64,
+        /// The last estimate, N.
+        estimate_n: Option<f64>,
+        /// The limit reached, counts.
+        limit_count: u8,
+        /// The calibrated first touch, counts.
+        touch_count: u8,
+        /// The limit's squeeze past the touch, mm.
+        limit_mm: f64,
+        /// The bound's factor.
+        factor: f64,
+    },
     /// A stop request (a signal, named) ended the loop; the gripper was left as the
     /// controller's exit action says.
     #[error("stopped by {0}")]

@@ -161,6 +161,9 @@ pub enum StepOutcome {
     /// The step wanted to go past the closed end (e.g. no object between the fingers);
     /// the request stops there.
     ClampedClosed,
+    /// The step wanted to close past the squeeze bound ([`crate::SqueezeBound`]); the
+    /// request stops at the bound.
+    ClampedSqueeze,
 }
 
 impl StepOutcome {
@@ -173,6 +176,7 @@ impl StepOutcome {
             Self::HeldSaturated => "held_saturated",
             Self::ClampedOpen => "clamped_open",
             Self::ClampedClosed => "clamped_closed",
+            Self::ClampedSqueeze => "clamped_squeeze",
         }
     }
 

@@ -198,6 +198,19 @@ fn pairwise_slopes(points: &[(f64, f64)], mm_per_count: f64) -> Vec<f64> {
     slopes
 }
 
+/// The Theil–Sen slope of `points` (the median of the pairwise slopes Δy/Δx), with the
+/// number of pairs it took; `None` with no pair of distinct, finite x.
+#[must_use]
+pub fn theil_sen_slope(points: &[(f64, f64)]) -> Option<(f64, usize)> {
+    let finite: Vec<(f64, f64)> = points
+        .iter()
+        .copied()
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .collect();
+    let slopes = pairwise_slopes(&finite, 1.0);
+    (!slopes.is_empty()).then(|| (quantile(&slopes, 0.5), slopes.len()))
+}
+
 /// Fits a closing: the touch, Λ(P), Λ_max and its spread. Pure, so a stored curve can
 /// be refitted and the fit tested on its hard cases.
 ///
@@ -459,6 +472,24 @@ mod tests {
     /// A contact from count 100 at 0.5 N per count: Λ = 0.5 / 0.196 mm ≈ 2.55 N/mm.
     fn linear(c: u8) -> Option<f64> {
         Some(0.02 + 0.5 * f64::from(c.saturating_sub(100)))
+    }
+
+    #[test]
+    fn theil_sen_takes_the_median_slope_and_survives_hard_cases() {
+        // y = 2x with one wild outlier: the median slope stays 2.
+        let mut pts: Vec<(f64, f64)> = (0..9).map(|i| (f64::from(i), 2.0 * f64::from(i))).collect();
+        pts.push((4.5, 1e6));
+        let (m, n) = theil_sen_slope(&pts).expect("slope");
+        assert!((m - 2.0).abs() < 1e-9, "{m}");
+        assert_eq!(n, 45);
+        // Empty, one point, all at one x, NaN: no slope.
+        assert!(theil_sen_slope(&[]).is_none());
+        assert!(theil_sen_slope(&[(1.0, 1.0)]).is_none());
+        assert!(theil_sen_slope(&[(1.0, 1.0), (1.0, 5.0)]).is_none());
+        assert!(theil_sen_slope(&[(f64::NAN, 1.0), (2.0, f64::INFINITY)]).is_none());
+        // A constant y: slope 0.
+        let flat = [(0.0, 3.0), (1.0, 3.0), (2.0, 3.0)];
+        assert_eq!(theil_sen_slope(&flat).map(|s| s.0), Some(0.0));
     }
 
     #[test]

@@ -10,7 +10,7 @@ use softtouch_drivers::{
 };
 use softtouch_grasp::{
     Controller, ControllerConfig, Cycle, ExitAction, ForceEstimator, GainCheck, GraspError,
-    Projection, StepOutcome, StepperConfig, Stroke, check_gain, hold_metrics,
+    Projection, SqueezeBound, StepOutcome, StepperConfig, Stroke, check_gain, hold_metrics,
 };
 use softtouch_schemas::{ArmPose, TimestampNs, Wrench};
 use softtouch_sim::{GraspObject, SoftGraspHandle, soft_grasp};
@@ -81,8 +81,15 @@ fn rig<E: ForceEstimator>(
         commands: Vec::new(),
     };
     let truth = SimTruth(handle.clone(), projection());
-    let c = Controller::new(gripper, camera, estimator, truth, Arc::new(clock), cfg)
-        .expect("valid settings");
+    let c = Controller::new(
+        gripper,
+        camera,
+        estimator,
+        truth,
+        Arc::new(clock),
+        cfg.clone(),
+    )
+    .expect("valid settings");
     (c, handle, clock)
 }
 
@@ -137,7 +144,7 @@ async fn the_learned_touch_holds_each_target_on_the_soft_grasp() {
         "K = {} vs Λ_max = {lambda_max}",
         cfg.stepper.gain_n_per_mm
     );
-    let (mut c, handle, _) = rig(predictor(), cfg, 60.0);
+    let (mut c, handle, _) = rig(predictor(), cfg.clone(), 60.0);
     pre_grasp(&mut c, &handle).await;
     let targets = [(1.0, Duration::from_secs(2)), (2.5, Duration::from_secs(2))];
     let cycles = c.follow(&targets).await.expect("follows");
@@ -190,10 +197,82 @@ impl ForceEstimator for Fixed {
     }
 }
 
+/// An estimate that never rises (a weak model that reads nothing) closes no further
+/// than the squeeze bound of a calibration that read the force as the simulator has
+/// it: the loop stops there with `estimate_stalled`, never requests past it, and every
+/// request carries the lowest force register. There the true force is within 3× the
+/// target.
+#[tokio::test(start_paused = true)]
+async fn an_estimate_that_does_not_rise_stops_at_the_squeeze_bound() {
+    let (_, _, h) = soft_grasp(
+        &softtouch_schemas::defaults::scene(),
+        GraspObject::cylinder(ROD, DIAMETER_M),
+        60.0,
+        7,
+        TokioClock::new(),
+    )
+    .expect("builds");
+    let touch = h.contact_count(0.02).expect("curve").expect("touches");
+    let counts: Vec<u8> = (touch..=255).collect();
+    let curve = h.grip_force_curve(&counts).expect("curve");
+    // A perfect calibration: the estimate's rise is the true squeeze, up to 4.5 N.
+    let points: Vec<(u8, Option<f64>)> = curve
+        .iter()
+        .take_while(|(_, f)| *f <= 4.5)
+        .map(|(p, f)| (*p, Some(*f)))
+        .collect();
+    let mm = softtouch_drivers::gripper::STROKE_MM / 255.0;
+    let bound = SqueezeBound::from_points(touch, 0.0, &points, measured_stiffness(4.5), mm);
+    let target_n = 1.0;
+    let limit = bound.limit_count(target_n);
+    let true_at_limit = curve
+        .iter()
+        .find(|(p, _)| *p == limit)
+        .map(|(_, f)| *f)
+        .expect("the limit lies on the curve");
+    assert!(
+        true_at_limit <= 3.0 * target_n,
+        "the bound at count {limit} squeezes {true_at_limit} N"
+    );
+    let cfg = config(4.0, 0.1).with_squeeze(bound);
+    let (mut c, handle, _) = rig(Fixed(Wrench::ZERO), cfg, 60.0);
+    pre_grasp(&mut c, &handle).await;
+    let err = c
+        .follow(&[(target_n, Duration::from_secs(3))])
+        .await
+        .expect_err("stalls");
+    match &err {
+        GraspError::EstimateStalled {
+            limit_count,
+            touch_count,
+            ..
+        } => {
+            assert_eq!((*limit_count, *touch_count), (limit, touch));
+        }
+        e => panic!("expected a stall, got {e}"),
+    }
+    assert!(err.to_string().contains("estimate stalled"), "{err}");
+    let (g, ..) = c.into_parts();
+    assert!(
+        g.commands.iter().all(|(_, cmd)| cmd.position <= limit),
+        "a request past the bound {limit}"
+    );
+    assert!(g.commands.iter().any(|(_, cmd)| cmd.position == limit));
+    assert!(g.commands.iter().all(|(_, cmd)| cmd.force == 0), "rFR 0");
+    // The same loop without a bound closes on past it (what the bound prevents).
+    let (mut c, handle, _) = rig(Fixed(Wrench::ZERO), config(4.0, 0.1), 60.0);
+    pre_grasp(&mut c, &handle).await;
+    let cycles = c
+        .follow(&[(target_n, Duration::from_secs(3))])
+        .await
+        .expect("runs");
+    assert!(cycles.iter().any(|c| c.measured_position > limit + 10));
+}
+
 #[tokio::test(start_paused = true)]
 async fn with_no_object_the_fingers_stop_at_the_stroke_end() {
     let cfg = config(4.0, 0.1);
-    let (mut c, handle, _) = rig(predictor(), cfg, 60.0);
+    let (mut c, handle, _) = rig(predictor(), cfg.clone(), 60.0);
     handle.set_object(false).expect("removes");
     pre_grasp(&mut c, &handle).await;
     let cycles = c
@@ -211,7 +290,7 @@ async fn with_no_object_the_fingers_stop_at_the_stroke_end() {
 #[tokio::test(start_paused = true)]
 async fn an_object_lost_mid_hold_closes_to_the_stroke_end_and_no_further() {
     let cfg = config(4.0, 0.15);
-    let (mut c, handle, clock) = rig(predictor(), cfg, 60.0);
+    let (mut c, handle, clock) = rig(predictor(), cfg.clone(), 60.0);
     pre_grasp(&mut c, &handle).await;
     let held = c
         .follow(&[(1.5, Duration::from_secs(2))])
@@ -274,7 +353,7 @@ async fn a_nan_or_saturated_estimate_never_moves_the_gripper() {
 #[tokio::test(start_paused = true)]
 async fn an_unreachable_target_is_a_clear_error_and_nothing_moves() {
     let cfg = config(4.0, 0.1);
-    let (mut c, _, clock) = rig(Fixed(Wrench::ZERO), cfg, 30.0);
+    let (mut c, _, clock) = rig(Fixed(Wrench::ZERO), cfg.clone(), 30.0);
     for target in [12.0, -0.5, 0.0] {
         let err = c
             .follow(&[
@@ -442,7 +521,7 @@ async fn two_fingers_hold_on_their_mean_and_a_blind_finger_is_flagged() {
     let lambda_max = measured_stiffness(4.0);
     let cfg = config(0.75 * lambda_max, 0.15);
     // Both fingers see: F_est is the mean of two estimates of the same squeeze.
-    let (c, handle, _) = rig(predictor(), cfg, 60.0);
+    let (c, handle, _) = rig(predictor(), cfg.clone(), 60.0);
     let mut c = c.with_second_finger(
         Box::new(handle.second_camera().expect("camera")),
         second_projection(),
@@ -558,12 +637,19 @@ async fn turning_an_oval_tube_disturbs_the_hold_and_the_loop_recovers() {
     let lambda_max = handle.max_stiffness_n_per_mm(touch, end).expect("Λ");
     let cfg = config(0.75 * lambda_max, 0.15);
     let truth = SimTruth(handle.clone(), projection());
-    let mut c = Controller::new(gripper, camera, predictor(), truth, Arc::new(clock), cfg)
-        .expect("valid")
-        .with_second_finger(
-            Box::new(handle.second_camera().expect("camera")),
-            second_projection(),
-        );
+    let mut c = Controller::new(
+        gripper,
+        camera,
+        predictor(),
+        truth,
+        Arc::new(clock),
+        cfg.clone(),
+    )
+    .expect("valid")
+    .with_second_finger(
+        Box::new(handle.second_camera().expect("camera")),
+        second_projection(),
+    );
     c.approach(touch.saturating_sub(4), Duration::from_secs(3))
         .await
         .expect("approaches");
@@ -645,7 +731,7 @@ async fn the_simulated_soft_gripper_calibrates_to_its_whole_scale() {
 #[tokio::test(start_paused = true)]
 async fn a_stop_request_ends_the_follow_with_the_cycles_run_and_the_fingers_open() {
     let cfg = config(4.0, 0.15);
-    let (c, handle, _) = rig(predictor(), cfg, 60.0);
+    let (c, handle, _) = rig(predictor(), cfg.clone(), 60.0);
     let (tx, rx) = tokio::sync::watch::channel(None);
     let mut c = c.with_stop(rx);
     pre_grasp(&mut c, &handle).await;

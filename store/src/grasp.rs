@@ -628,6 +628,79 @@ mod tests {
         conn.close().await.expect("closes");
     }
 
+    /// The migration that lets a stalled estimate be stored rebuilds the trials, their
+    /// traces and their frames: every row survives, the children still cascade, and a
+    /// trial failed with `estimate_stalled` can then be written.
+    #[tokio::test]
+    async fn the_estimate_stalled_migration_keeps_every_trial_trace_and_frame() {
+        use sqlx::{ConnectOptions, Connection};
+        let dir = tempfile::tempdir().expect("temp dir");
+        let mut conn = sqlx::sqlite::SqliteConnectOptions::new()
+            .filename(dir.path().join("old.db"))
+            .create_if_missing(true)
+            .foreign_keys(true)
+            .connect()
+            .await
+            .expect("connects");
+        let all: Vec<&sqlx::migrate::Migration> = crate::MIGRATOR.iter().collect();
+        let at = all
+            .iter()
+            .position(|m| m.description.contains("grasp trial estimate stalled"))
+            .expect("the migration is embedded");
+        for m in &all[..at] {
+            sqlx::raw_sql(sqlx::AssertSqlSafe(m.sql.as_str().to_owned()))
+                .execute(&mut conn)
+                .await
+                .unwrap_or_else(|e| panic!("{}: {e}", m.description));
+        }
+        sqlx::raw_sql(
+            "INSERT INTO grasp_sessions (session_id, created_at, model, seed, scenes_json, config_json, software_version) VALUES (1, 'then', 'm', 0, '[]', '{}', 'v');
+             INSERT INTO grasp_trials VALUES (7, 1, 0, 0, 'cake', 'closed', 0, 'land', 0.005, 0.001, 0.0, 0.0, 0.02, 0.02, 1.2, NULL, 0, 'crush', NULL, NULL, 0.4, 'then');
+             INSERT INTO grasp_traces VALUES (7, 2, 'f32le-v1', x'0000000000000040', x'0000000000000040', x'0000c07f0000c07f', x'0102', x'0304');
+             INSERT INTO grasp_trial_frames VALUES (7, 'contact', 0.1, x'89504e470d0a1a0a00');",
+        )
+        .execute(&mut conn)
+        .await
+        .expect("an old session");
+        let stalled = "INSERT INTO grasp_trials VALUES (8, 1, 0, 0, 'cake', 'closed', 1, 'land', 0.005, 0.0, 0.0, 0.0, 0.02, 0.01, 0.2, 30.0, 0, 'estimate_stalled', 'bound', NULL, 0.5, 'now')";
+        assert!(
+            sqlx::raw_sql(stalled).execute(&mut conn).await.is_err(),
+            "estimate_stalled is new"
+        );
+        for m in &all[at..] {
+            sqlx::raw_sql(sqlx::AssertSqlSafe(m.sql.as_str().to_owned()))
+                .execute(&mut conn)
+                .await
+                .unwrap_or_else(|e| panic!("{}: {e}", m.description));
+        }
+        sqlx::raw_sql(stalled)
+            .execute(&mut conn)
+            .await
+            .expect("a stalled trial is stored");
+        let kept: (i64, String, Vec<u8>, Vec<u8>) = sqlx::query_as(
+            "SELECT t.trial_id, t.reason, c.measured_count, f.png FROM grasp_trials t JOIN grasp_traces c USING (trial_id) JOIN grasp_trial_frames f USING (trial_id)",
+        )
+        .fetch_one(&mut conn)
+        .await
+        .expect("the old trial, its trace and its frame");
+        assert_eq!(kept.0, 7);
+        assert_eq!(kept.1, "crush");
+        assert_eq!(kept.2, vec![1, 2]);
+        assert_eq!(kept.3.len(), 9);
+        sqlx::raw_sql("DELETE FROM grasp_trials WHERE trial_id = 7")
+            .execute(&mut conn)
+            .await
+            .expect("deletes");
+        let left: (i64, i64) = sqlx::query_as(
+            "SELECT (SELECT COUNT(*) FROM grasp_traces), (SELECT COUNT(*) FROM grasp_trial_frames)",
+        )
+        .fetch_one(&mut conn)
+        .await
+        .expect("counts");
+        assert_eq!(left, (0, 0));
+        conn.close().await.expect("closes");
+    }
+
     #[tokio::test]
     async fn a_trial_and_its_trace_store_once_and_read_back() {
         let dir = tempfile::tempdir().expect("temp dir");

@@ -205,6 +205,40 @@ impl Store {
         )
     }
 
+    /// The press of the collection runs model `name` was trained on: each accepted
+    /// training sample's commanded x (m, rod frame: how far the finger was pressed
+    /// in) and its label's force magnitude (N), in the dataset's order, at most
+    /// `limit`. Empty when the model or its dataset is gone.
+    ///
+    /// # Errors
+    /// A query failure.
+    pub async fn training_press(
+        &self,
+        name: &str,
+        limit: i64,
+    ) -> Result<Vec<(f64, f64)>, StoreError> {
+        let rows: Vec<(f64, f64, f64, f64)> = sqlx::query_as(self.dialect.sql(
+            "SELECT s.cmd_x_m, s.fx_n, s.fy_n, s.fz_n
+             FROM models mo
+             JOIN dataset_members m ON m.dataset_id = mo.dataset_id
+             JOIN samples s ON s.run_id = m.run_id AND s.sample_index = m.sample_index
+             WHERE mo.name = ?1 AND m.split = 'train' AND s.status = 'ok'
+             ORDER BY m.position
+             LIMIT ?2",
+        ))
+        .bind(name)
+        .bind(limit)
+        .fetch_all(self.pool())
+        .await
+        .map_err(query_err(
+            "reading the press of the model's training samples",
+        ))?;
+        Ok(rows
+            .into_iter()
+            .map(|(x, fx, fy, fz)| (x, (fx * fx + fy * fy + fz * fz).sqrt()))
+            .collect())
+    }
+
     /// The test samples of water dataset `water_id` whose run repeats the poses of a
     /// run in land dataset `land_id` (`collect --poses-from`), with that run, in the
     /// water dataset's order.

@@ -55,9 +55,10 @@ pub struct BenchGraspArgs {
 fn grasp_failure(e: GraspError) -> Failure {
     match e {
         GraspError::Config(_) | GraspError::UnreachableTarget { .. } => Failure::BadInput(e.into()),
-        GraspError::Device(_) | GraspError::Estimate(_) | GraspError::Interrupted(_) => {
-            Failure::Runtime(e.into())
-        }
+        GraspError::Device(_)
+        | GraspError::Estimate(_)
+        | GraspError::EstimateStalled { .. }
+        | GraspError::Interrupted(_) => Failure::Runtime(e.into()),
     }
 }
 
@@ -122,13 +123,7 @@ pub(super) async fn run(
             softtouch_lab::grasp::calibration::top_for(args.target),
         )
         .await?;
-        models.push((
-            name.clone(),
-            bytes,
-            predictor.header().config,
-            (cal.touch(), cal.lambda_max()),
-            cal,
-        ));
+        models.push((name.clone(), bytes, predictor.header().config, cal));
     }
     store.close().await;
     std::fs::create_dir_all(&args.out)
@@ -151,7 +146,7 @@ pub(super) async fn run(
         points.len()
     )
     .map_err(w)?;
-    for (name, _, _, _, cal) in &models {
+    for (name, _, _, cal) in &models {
         writeln!(
             out,
             "model `{name}`: calibration #{} ({}): first touch at count {}, Λ_max = {:.3} N/mm from its estimate{}",
@@ -186,11 +181,11 @@ pub(super) async fn run(
     let mut csv = format!("{CSV_HEADER}\n");
     let mut gain_traces: Vec<Series> = Vec::new();
     tokio::time::pause(); // virtual time for the simulated grasp
-    for (i, (name, bytes, config, calibrated, _)) in models.iter().enumerate() {
+    for (i, (name, bytes, config, calibrated)) in models.iter().enumerate() {
         let shape = (config.preprocess.size_px, config.width, config.latent);
         for point in &points {
             let predictor = softtouch_trainer::Predictor::from_bytes(bytes)?;
-            let o = run_point(&setup, predictor, *point, *calibrated)
+            let o = run_point(&setup, predictor, *point, calibrated)
                 .await
                 .map_err(grasp_failure)?;
             print_row(out, name, shape, &o)?;
@@ -207,7 +202,7 @@ pub(super) async fn run(
     }
     if args.wall_clock {
         tokio::time::resume();
-        let (name, bytes, config, calibrated, _) = &models[0];
+        let (name, bytes, config, calibrated) = &models[0];
         let shape = (config.preprocess.size_px, config.width, config.latent);
         let point = Point {
             varied: "wall-clock",
@@ -216,7 +211,7 @@ pub(super) async fn run(
             fps: 120.0,
         };
         let predictor = softtouch_trainer::Predictor::from_bytes(bytes)?;
-        let o = run_point(&setup, predictor, point, *calibrated)
+        let o = run_point(&setup, predictor, point, calibrated)
             .await
             .map_err(grasp_failure)?;
         print_row(out, name, shape, &o)?;

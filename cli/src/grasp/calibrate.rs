@@ -109,6 +109,20 @@ pub(super) async fn run(
             None,
         )?;
         row.mm_per_count = ends.stroke.mm_per_count;
+        // What the rig knows: the object's declared opening where the rig's grasp
+        // trials declare it (no crush force there: taken as rigid), and the finger's
+        // press in the model's training samples.
+        let evidence = softtouch_lab::grasp::calibration::Evidence {
+            object: object.clone(),
+            open_width_mm: rig
+                .grasp
+                .as_ref()
+                .and_then(|g| g.objects.iter().find(|o| o.name == object))
+                .map(|o| o.open_width_mm),
+            crush_force_n: None,
+            press: softtouch_lab::grasp::calibration::training_press(&store, &args.model).await?,
+        };
+        softtouch_lab::grasp::calibration::check_calibration(&row, top_n, &evidence)?;
         (row, Some(ends))
     } else {
         // The grasp scene unless told otherwise, as every grasp verb: its objects are
@@ -128,6 +142,9 @@ pub(super) async fn run(
             top_n,
         )
         .await?;
+        let evidence =
+            softtouch_lab::grasp::calibration::sim_evidence(&store, &args.model, &object).await?;
+        softtouch_lab::grasp::calibration::check_calibration(&row, top_n, &evidence)?;
         (row, None)
     };
     let id = store

@@ -37,10 +37,10 @@ pub struct FollowArgs {
     pub hold_s: f64,
     /// Rig file: when it names a real gripper (`driver = "hand-e"`), the loop runs on
     /// the real Hand-E and finger cameras (`camera`, and `second_camera` for a second
-    /// finger), after an end calibration with nothing between the fingers; K is then
-    /// `--gain`, or 0.75 Λ_max of the latest `grasp calibrate --rig` of `--object`
-    /// with this model and rig file. A rig with a simulated gripper runs the simulated
-    /// soft grasp.
+    /// finger), after an end calibration with nothing between the fingers; the squeeze
+    /// bound, and K unless `--gain`, then come from the latest `grasp calibrate --rig`
+    /// of `--object` (required) with this model and rig file. A rig with a simulated
+    /// gripper runs the simulated soft grasp.
     #[arg(long)]
     pub rig: Option<PathBuf>,
     /// Shared loop options.
@@ -92,7 +92,14 @@ pub(super) async fn run(
     .await?;
     print_setup(&name, &setup, &loop_settings, out)?;
     print_stopped(stopped, &cycles, out)?;
-    let (files, summary) = print_follow(&cycles, &args.targets, c.tolerance, &c.out_dir, out)?;
+    let (files, summary) = print_follow(
+        &cycles,
+        &args.targets,
+        c.tolerance,
+        (setup.touch, softtouch_drivers::gripper::STROKE_MM / 255.0),
+        &c.out_dir,
+        out,
+    )?;
     follow_recorder(&args, &name, stopped, files)
         .setting("gain_n_per_mm", setup.gain)
         .scene_hash(super::setup::scene_hash(&scene, c))
@@ -118,10 +125,10 @@ fn follow_recorder(
         .table(&files[1])
 }
 
-/// `grasp follow --rig FILE` on a real Hand-E: K from `--gain`, else 0.75 × Λ_max of
-/// the latest `grasp calibrate --rig FILE` of `--object` with this model (the rig
-/// file's bytes and the model's artifact must be the same); no truth column; the
-/// stroke comes from the end calibration.
+/// `grasp follow --rig FILE` on a real Hand-E: the squeeze bound, and K unless
+/// `--gain`, from the latest `grasp calibrate --rig FILE` of `--object` with this
+/// model (the rig's gripper and cameras and the model's artifact must be the same);
+/// no truth column; the stroke comes from the end calibration.
 async fn follow_on_rig(
     args: &FollowArgs,
     rig: &softtouch_schemas::RigConfig,
@@ -136,41 +143,50 @@ async fn follow_on_rig(
     }
     let store = open_existing(db).await?;
     let bytes = softtouch_lab::models::force_artifact(&store, &c.model).await?;
-    let gain = match c.gain {
-        Some(g) => g,
-        None => {
-            let object = args.object.as_deref().ok_or_else(|| {
-                bad("--gain or --object: on a real gripper K is --gain, or 0.75 Λ_max of the latest `grasp calibrate --rig` of --object with this model".into())
-            })?;
-            let rig_path = args.rig.as_deref().unwrap_or_else(|| Path::new(""));
-            let sha = softtouch_collector::dataset::export::sha256_hex;
-            let setup = softtouch_lab::grasp::calibration::rig_setup_hash(rig)
-                .map_err(|e| Failure::Runtime(anyhow!("{e}")))?;
-            let cal = store
-                .latest_grasp_calibration(&setup, &sha(&bytes), object)
-                .await
-                .map_err(|e| Failure::Runtime(anyhow!("{e}")))?
-                .ok_or_else(|| {
-                    bad(format!(
-                        "no calibration of `{object}` with model `{}` on this rig's gripper and cameras: run `softtouch grasp calibrate --rig {} --model {} --object {object}` first, or give --gain",
-                        c.model,
-                        rig_path.display(),
-                        c.model
-                    ))
-                })?;
-            writeln!(
-                out,
-                "calibration #{} (stored, {}): first touch at count {}, Λ_max = {:.3} N/mm from the model's estimate; K = 0.75 Λ_max",
-                cal.calibration_id, cal.created_at, cal.touch_count, cal.lambda_max_n_per_mm
-            )
-            .map_err(io_failure)?;
-            0.75 * cal.lambda_max_n_per_mm
-        }
-    };
+    // The calibration always: every force loop takes its squeeze bound from it, and K
+    // too unless --gain is given.
+    let object = args.object.as_deref().ok_or_else(|| {
+        bad("--object: on a real gripper the loop's squeeze bound (and K = 0.75 Λ_max, unless --gain) comes from the latest `grasp calibrate --rig` of --object with this model".into())
+    })?;
+    let rig_path = args.rig.as_deref().unwrap_or_else(|| Path::new(""));
+    let sha = softtouch_collector::dataset::export::sha256_hex;
+    let setup = softtouch_lab::grasp::calibration::rig_setup_hash(rig)
+        .map_err(|e| Failure::Runtime(anyhow!("{e}")))?;
+    let cal = store
+        .latest_grasp_calibration(&setup, &sha(&bytes), object)
+        .await
+        .map_err(|e| Failure::Runtime(anyhow!("{e}")))?
+        .ok_or_else(|| {
+            bad(format!(
+                "no calibration of `{object}` with model `{}` on this rig's gripper and cameras: run `softtouch grasp calibrate --rig {} --model {} --object {object}` first",
+                c.model,
+                rig_path.display(),
+                c.model
+            ))
+        })?;
+    let squeeze = softtouch_lab::grasp::calibration::squeeze_of_row(&cal)
+        .map_err(|e| Failure::Runtime(anyhow!("{e}")))?;
+    let gain = c.gain.unwrap_or(0.75 * cal.lambda_max_n_per_mm);
+    let touch_count = cal.touch_count;
+    let largest = args.targets.iter().copied().fold(0.0, f64::max);
+    writeln!(
+        out,
+        "calibration #{} (stored, {}): first touch at count {}, Λ_max = {:.3} N/mm from the model's estimate; K = {}; squeeze bound for {largest} N: count {} ({:.2} mm past the touch, {} × the calibrated squeeze + {} counts)",
+        cal.calibration_id,
+        cal.created_at,
+        cal.touch_count,
+        cal.lambda_max_n_per_mm,
+        if c.gain.is_some() { "--gain" } else { "0.75 Λ_max" },
+        squeeze.limit_count(largest),
+        squeeze.limit_mm(largest),
+        squeeze.factor,
+        squeeze.floor_counts
+    )
+    .map_err(io_failure)?;
     store.close().await;
     let predictor = Predictor::from_bytes(&bytes)?;
     let projections = projections().map_err(grasp_failure)?;
-    let mut config = ControllerConfig::new(projections[0]);
+    let mut config = ControllerConfig::new(projections[0]).with_squeeze(squeeze);
     config.stepper.gain_n_per_mm = gain;
     config.stepper.tolerance_n = c.tolerance;
     let hold = Duration::from_secs_f64(args.hold_s);
@@ -209,7 +225,14 @@ async fn follow_on_rig(
     )
     .map_err(io_failure)?;
     print_stopped(run.stopped, &run.cycles, out)?;
-    let (files, summary) = print_follow(&run.cycles, &args.targets, c.tolerance, &c.out_dir, out)?;
+    let (files, summary) = print_follow(
+        &run.cycles,
+        &args.targets,
+        c.tolerance,
+        (touch_count, cal.stroke.mm_per_count),
+        &c.out_dir,
+        out,
+    )?;
     let rig_hash = softtouch_lab::grasp::calibration::rig_setup_hash(rig).ok();
     follow_recorder(
         args,
@@ -225,11 +248,14 @@ async fn follow_on_rig(
 }
 
 /// `grasp follow`'s table per target, then its CSVs (cycles, metrics) and chart;
-/// returns the CSVs and a one-line summary.
+/// returns the CSVs and a one-line summary: per target the estimate's steady-state
+/// error beside the peak true force where the simulator knows it, else the closing
+/// past the calibrated touch (`touch`: its count and mm per count).
 fn print_follow(
     cycles: &[Cycle],
     targets: &[f64],
     tolerance_n: f64,
+    touch: (u8, f64),
     out_dir: &Path,
     out: &mut dyn Write,
 ) -> Result<([PathBuf; 2], String), Failure> {
@@ -254,11 +280,16 @@ fn print_follow(
     let summary = rows
         .iter()
         .map(|r| {
+            let grip = match (r.peak_true_n, r.past_touch_mm(touch.0, touch.1)) {
+                (Some(p), _) => format!(", peak true {p:.2} N"),
+                (None, Some(mm)) => format!(", closed {mm:.2} mm past the touch"),
+                (None, None) => String::new(),
+            };
             r.estimate.map_or_else(
-                || format!("{:.2} N: no estimate", r.target_n),
+                || format!("{:.2} N: no estimate{grip}", r.target_n),
                 |m| {
                     format!(
-                        "{:.2} N: ss error {:.3} N",
+                        "{:.2} N: ss error {:.3} N{grip}",
                         r.target_n, m.steady_state_error_n
                     )
                 },

@@ -156,6 +156,9 @@ pub enum FailReason {
     Timeout,
     /// A device faulted or its link failed.
     DeviceFault,
+    /// The closed loop reached its squeeze bound with the estimate below the target
+    /// ([`crate::GraspError::EstimateStalled`]): it stopped there instead of closing on.
+    EstimateStalled,
     /// The perturbed grasp pose lay outside the workspace: nothing moved. Stored and
     /// shown, never counted as a trial of the success rate.
     Refused,
@@ -163,16 +166,18 @@ pub enum FailReason {
 
 impl FailReason {
     /// Every reason, in the order tables list them.
-    pub const ALL: [Self; 6] = [
+    pub const ALL: [Self; 7] = [
         Self::Slip,
         Self::Crush,
         Self::Miss,
         Self::Timeout,
         Self::DeviceFault,
+        Self::EstimateStalled,
         Self::Refused,
     ];
 
-    /// As stored: `slip`, `crush`, `miss`, `timeout`, `device_fault`.
+    /// As stored: `slip`, `crush`, `miss`, `timeout`, `device_fault`,
+    /// `estimate_stalled`, `refused`.
     #[must_use]
     pub const fn as_str(self) -> &'static str {
         match self {
@@ -181,6 +186,7 @@ impl FailReason {
             Self::Miss => "miss",
             Self::Timeout => "timeout",
             Self::DeviceFault => "device_fault",
+            Self::EstimateStalled => "estimate_stalled",
             Self::Refused => "refused",
         }
     }
@@ -194,7 +200,7 @@ impl FailReason {
             .into_iter()
             .find(|r| r.as_str() == s)
             .ok_or_else(|| {
-                format!("unknown failure reason `{s}`: expected slip, crush, miss, timeout, device_fault or refused")
+                format!("unknown failure reason `{s}`: expected slip, crush, miss, timeout, device_fault, estimate_stalled or refused")
             })
     }
 }

@@ -86,7 +86,7 @@ where
         Lent(estimator),
         truth,
         Arc::clone(&clock),
-        controller,
+        controller.clone(),
     )?;
     let mut run = Run {
         clock: Arc::clone(&clock),
@@ -138,6 +138,10 @@ where
         ),
         Err(GraspError::Device(e)) => (
             Verdict::Failed(FailReason::DeviceFault),
+            Some(e.to_string()),
+        ),
+        Err(e @ GraspError::EstimateStalled { .. }) => (
+            Verdict::Failed(FailReason::EstimateStalled),
             Some(e.to_string()),
         ),
         Err(e) => return Err(e),

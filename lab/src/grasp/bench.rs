@@ -99,14 +99,14 @@ pub struct Setup {
 }
 
 /// One run of the loop at `point` with `predictor`, on tokio's clock as it is (paused:
-/// virtual time; running: the wall clock). `calibrated` is the model's first touch
-/// (counts) and Λ_max (N/mm) on the object, from its stiffness calibration
-/// ([`crate::grasp::calibration`]): K is `point.gain_over_lambda` × that Λ_max.
+/// virtual time; running: the wall clock). `calibration` is the model's stiffness
+/// calibration on the object ([`crate::grasp::calibration`]): the pre-grasp from its
+/// first touch, K = `point.gain_over_lambda` × its Λ_max, and the squeeze bound.
 pub async fn run_point(
     setup: &Setup,
     predictor: Predictor,
     point: Point,
-    calibrated: (u8, f64),
+    calibration: &crate::grasp::calibration::Calibrated,
 ) -> Result<Outcome, GraspError> {
     let clock = TokioClock::new();
     let (gripper, camera, handle) = soft_grasp(
@@ -117,9 +117,12 @@ pub async fn run_point(
         clock,
     )
     .map_err(sim_err)?;
-    let (touch, lambda) = calibrated;
+    let (touch, lambda) = (calibration.touch(), calibration.lambda_max());
     let gain_n_per_mm = point.gain_over_lambda * lambda;
-    let mut config = ControllerConfig::new(projection()?);
+    let squeeze = calibration
+        .squeeze()
+        .map_err(|e| GraspError::Config(e.to_string()))?;
+    let mut config = ControllerConfig::new(projection()?).with_squeeze(squeeze);
     config.stepper.gain_n_per_mm = gain_n_per_mm;
     config.stepper.tolerance_n = point.tolerance_n;
     let shared: Arc<dyn Clock> = Arc::new(clock);

@@ -86,6 +86,20 @@ pub struct FollowRow {
     pub estimate: Option<HoldMetrics>,
     /// From the simulator's truth (`None` on a rig).
     pub truth: Option<HoldMetrics>,
+    /// The largest true force of the hold, N (`None` on a rig): what a crush would show.
+    pub peak_true_n: Option<f64>,
+    /// The furthest the fingers closed during the hold, counts (P_m): on a rig, with
+    /// the calibrated touch, how deep past contact the grip went.
+    pub deepest_count: Option<u8>,
+}
+
+impl FollowRow {
+    /// How far past the calibrated first touch `touch_count` the fingers closed, mm.
+    #[must_use]
+    pub fn past_touch_mm(&self, touch_count: u8, mm_per_count: f64) -> Option<f64> {
+        self.deepest_count
+            .map(|c| f64::from(c.saturating_sub(touch_count)) * mm_per_count)
+    }
 }
 
 /// The numbers per target of a run's cycles.
@@ -105,6 +119,12 @@ pub fn follow_rows(cycles: &[Cycle], targets_n: &[f64], tolerance_n: f64) -> Vec
                 target_n: *target,
                 estimate: hold_metrics(&series(|c| c.estimate_n), *target, tolerance_n),
                 truth: hold_metrics(&series(|c| c.true_n), *target, tolerance_n),
+                peak_true_n: hold
+                    .iter()
+                    .filter_map(|c| c.true_n)
+                    .filter(|f| f.is_finite())
+                    .reduce(f64::max),
+                deepest_count: hold.iter().map(|c| c.measured_position).max(),
             }
         })
         .collect()

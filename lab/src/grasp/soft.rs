@@ -218,7 +218,7 @@ pub async fn prepare(
         )));
     }
     let projections = projections()?;
-    let mut config = ControllerConfig::new(projections[0]);
+    let mut config = ControllerConfig::new(projections[0]).with_squeeze(calibration.squeeze()?);
     config.stepper.gain_n_per_mm = gain;
     config.stepper.tolerance_n = settings.tolerance_n;
     config.on_exit = on_exit;

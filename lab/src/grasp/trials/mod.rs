@@ -136,6 +136,18 @@ pub(crate) fn invalid(m: String) -> TrialsError {
     TrialsError::Invalid(m)
 }
 
+impl From<crate::grasp::soft::GraspRunError> for TrialsError {
+    fn from(e: crate::grasp::soft::GraspRunError) -> Self {
+        use crate::grasp::soft::GraspRunError as E;
+        match e {
+            E::Invalid(m) => Self::Invalid(m),
+            E::Grasp(e) => Self::Grasp(e),
+            E::Model(e) => Self::Model(e),
+            e => Self::Failed(e.to_string()),
+        }
+    }
+}
+
 impl From<softtouch_trainer::TrainError> for TrialsError {
     fn from(e: softtouch_trainer::TrainError) -> Self {
         Self::Model(e.into())

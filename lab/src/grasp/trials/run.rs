@@ -117,7 +117,8 @@ pub async fn run_trials(
         let gain = plan.gain_over_lambda * setup.calibration.lambda_max().max(0.05);
         let dither_n = setup.count_n;
         let tolerance_n = setup.tolerance_n;
-        let mut controller = ControllerConfig::new(projection()?);
+        let mut controller =
+            ControllerConfig::new(projection()?).with_squeeze(setup.calibration.squeeze()?);
         controller.stepper.gain_n_per_mm = gain;
         controller.stepper.tolerance_n = tolerance_n;
         let grasp_mm = plan

@@ -251,7 +251,7 @@ pub fn write_value_sweep_csv(
     sweep: &SceneSweep,
 ) -> Result<(), TrialsError> {
     let mut text = String::from(
-        "path,value,sigma_mm,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,slip,crush,miss,timeout,device_fault,refused\n",
+        "path,value,sigma_mm,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,slip,crush,miss,timeout,device_fault,estimate_stalled,refused\n",
     );
     let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
     for c in cells {
@@ -260,7 +260,7 @@ pub fn write_value_sweep_csv(
         };
         let r = |k: &str| c.reasons.get(k).copied().unwrap_or(0);
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             csv_field(&sweep.path),
             csv_field(value),
             plan.sigmas_mm
@@ -279,6 +279,7 @@ pub fn write_value_sweep_csv(
             r("miss"),
             r("timeout"),
             r("device_fault"),
+            r("estimate_stalled"),
             r("refused"),
         ));
     }
@@ -381,13 +382,13 @@ pub fn csv_field(s: &str) -> String {
 /// The file cannot be written.
 pub fn write_summary_csv(path: &Path, cells: &[Cell]) -> Result<(), TrialsError> {
     let mut text = String::from(
-        "sigma_index,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,paper_rate,slip,crush,miss,timeout,device_fault,refused\n",
+        "sigma_index,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,paper_rate,slip,crush,miss,timeout,device_fault,estimate_stalled,refused\n",
     );
     let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
     for c in cells {
         let r = |k: &str| c.reasons.get(k).copied().unwrap_or(0);
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             c.sigma_index,
             medium_name(c.medium),
             csv_field(c.object.as_deref().unwrap_or("all")),
@@ -403,6 +404,7 @@ pub fn write_summary_csv(path: &Path, cells: &[Cell]) -> Result<(), TrialsError>
             r("miss"),
             r("timeout"),
             r("device_fault"),
+            r("estimate_stalled"),
             r("refused"),
         ));
     }

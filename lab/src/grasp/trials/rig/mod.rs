@@ -565,7 +565,8 @@ async fn run_inner(
         or_stop(stop, arm_to(devices, moves, &pose, moves.slow())).await??;
 
         let gain = plan.gain_over_lambda * setup.calibration.lambda_max().max(0.05);
-        let mut controller = ControllerConfig::new(projection);
+        let mut controller =
+            ControllerConfig::new(projection).with_squeeze(setup.calibration.squeeze()?);
         controller.stepper.gain_n_per_mm = gain;
         controller.stepper.tolerance_n = setup.tolerance_n;
         controller.stepper.stroke = stroke;

@@ -135,7 +135,8 @@ pub async fn twist_on_rig(
         holding = Holding::AtObject;
         arm_to(devices, &moves, &pose, moves.slow()).await?;
 
-        let mut config = ControllerConfig::new(crate::grasp::sim::projection()?);
+        let mut config = ControllerConfig::new(crate::grasp::sim::projection()?)
+            .with_squeeze(calibration.calibration.squeeze()?);
         config.stepper.gain_n_per_mm =
             settings.gain_over_lambda * calibration.calibration.lambda_max().max(0.05);
         config.stepper.tolerance_n = calibration.tolerance_n;
