@@ -203,7 +203,11 @@ fn built_in_scenes_are_reachable_by_name_from_any_folder() {
     }
     let out = softtouch(dir.path(), &["config", "show", "rig", "water"]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(text(&out.stderr).contains("only a scene is built in by name"));
+    assert!(
+        text(&out.stderr).contains("no built-in rig `water`: expected one of sim, fr3"),
+        "{}",
+        text(&out.stderr)
+    );
 }
 
 #[test]

@@ -268,3 +268,92 @@ fn rig_check_holds_a_real_arm_to_a_real_time_host() {
     }
     assert_eq!(out.status.code(), Some(1), "{stdout}");
 }
+
+/// A Franka FR3 rig in one edit: `config show rig fr3` with the robot's address passes
+/// `config check` alone, and with a scene narrowed to its θ (one more edit, in the
+/// scene); the default rig switched to a Franka is refused naming the fields to change
+/// and values that pass. With the gripper and finger camera made real, `grasp calibrate
+/// --rig` (beside `--scene`) gets past every file check to opening the devices: the
+/// camera is opened first and is not there, a runtime failure (exit 1).
+#[test]
+fn an_fr3_rig_from_config_show_passes_its_check_and_grasp_calibrate_reaches_the_devices() {
+    let dir = tempdir();
+    let d = dir.path();
+    let shown = ok(&softtouch(d, &["config", "show", "rig", "fr3"]));
+    let rig = shown.replace("address = \"172.16.0.2\"", "address = \"127.0.0.1\"");
+    assert_ne!(rig, shown, "the FR3 rig's address line changed");
+    std::fs::write(d.join("fr3.toml"), &rig).expect("write");
+    let out = ok(&softtouch(d, &["config", "check", "--rig", "fr3.toml"]));
+    assert!(
+        out.contains("corners within the FR3's joint ranges") && out.contains("ok: rig"),
+        "{out}"
+    );
+    let full = "theta_rad = [-3.141592653589793, 3.141592653589793]";
+    let scene = softtouch_schemas::defaults::SCENE_TOML.replace(full, "theta_rad = [-0.4, 0.4]");
+    assert!(!scene.contains(full), "the default scene's θ line changed");
+    std::fs::write(d.join("scene.toml"), scene).expect("write");
+    ok(&softtouch(
+        d,
+        &[
+            "config",
+            "check",
+            "--rig",
+            "fr3.toml",
+            "--scene",
+            "scene.toml",
+        ],
+    ));
+    // The default rig with a Franka: refused, naming what to change.
+    let franka = softtouch_schemas::defaults::RIG_TOML.replace(
+        "driver = \"sim\"            # or \"franka\" with address = \"172.16.0.2\"",
+        "driver = \"franka\"\naddress = \"127.0.0.1\"",
+    );
+    assert!(
+        franka.contains("\"franka\""),
+        "the default rig's arm line changed"
+    );
+    std::fs::write(d.join("franka.toml"), franka).expect("write");
+    let out = softtouch(d, &["config", "check", "--rig", "franka.toml"]);
+    fails_with(&out, 2, "workspace.base_from_rod = {");
+    let e = text(&out.stderr);
+    assert!(
+        e.contains("workspace.theta_rad = [-0.4, 0.4]") && e.contains("config show rig fr3"),
+        "{e}"
+    );
+
+    tiny_model(d);
+    let real = rig
+        .replace(
+            "[gripper]\ndriver = \"sim\"",
+            "[gripper]\ndriver = \"hand-e\"\nport = \"/dev/softtouch-no-such-port\"\nslave_id = 9\n",
+        )
+        .replace(
+            "[camera]\ndriver = \"sim\"",
+            "[camera]\ndriver = \"v4l\"\ndevice = \"/dev/softtouch-no-such-camera\"\n",
+        )
+        .replace("fps = 120.0\n", "");
+    assert!(
+        real.contains("hand-e") && real.contains("v4l"),
+        "the FR3 rig's layout changed"
+    );
+    std::fs::write(d.join("real.toml"), real).expect("write");
+    let calibrate = [
+        "grasp",
+        "calibrate",
+        "--rig",
+        "real.toml",
+        "--model",
+        "air-svae",
+        "--object",
+        "bottle",
+        "--scene",
+        "grasp",
+    ];
+    let out = softtouch(d, &calibrate);
+    fails_with(&out, 1, "camera");
+    assert!(
+        !text(&out.stderr).contains("outside the rig's workspace"),
+        "{}",
+        text(&out.stderr)
+    );
+}

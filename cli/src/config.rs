@@ -23,13 +23,14 @@ pub enum ConfigCommand {
     /// Without files, prints the embedded defaults (an all-simulated rig and the
     /// paper's on-land scene) with their comments.
     #[command(
-        after_help = "Examples:\n  softtouch config show rig > rig.toml\n  softtouch config show scene > scene.toml\n  softtouch config show scene grasp-water > my-tank.toml   # a built-in scene to edit\n  softtouch config show --rig rig.toml --scene water.toml\n\nBuilt-in scenes (also usable as --scene NAME from any folder): land, water, grasp, grasp-water."
+        after_help = "Examples:\n  softtouch config show rig > rig.toml\n  softtouch config show rig fr3 > rig.toml   # a Franka FR3 rig: set arm.address\n  softtouch config show scene > scene.toml\n  softtouch config show scene grasp-water > my-tank.toml   # a built-in scene to edit\n  softtouch config show --rig rig.toml --scene water.toml\n\nBuilt-in scenes (also usable as --scene NAME from any folder): land, water, grasp, grasp-water."
     )]
     Show {
         /// Show only this one.
         which: Option<Which>,
         /// With `scene`: the built-in scene of this name (land, water, grasp,
-        /// grasp-water), as shipped, comments included.
+        /// grasp-water); with `rig`: the built-in rig (sim, the default; fr3, a
+        /// Franka FR3 with a workspace it reaches); as shipped, comments included.
         name: Option<String>,
         /// Rig config file (default: embedded all-simulated rig).
         #[arg(long)]
@@ -39,9 +40,10 @@ pub enum ConfigCommand {
         scene: Option<PathBuf>,
     },
     /// Check a rig and a scene: every field, every range, and that the scene's poses
-    /// lie inside the rig's workspace.
+    /// lie inside the rig's workspace. `--rig` alone checks the rig alone (a grasp
+    /// uses no scene; a collection checks its scene when it starts).
     #[command(
-        after_help = "Example:\n  softtouch config check --rig rig.toml --scene scenes/water.toml"
+        after_help = "Examples:\n  softtouch config check --rig rig.toml --scene scenes/water.toml\n  softtouch config check --rig rig.toml      # the rig alone"
     )]
     Check {
         /// Rig config file (default: embedded all-simulated rig).
@@ -60,9 +62,22 @@ pub fn run(cmd: ConfigCommand, out: &mut dyn Write) -> Result<(), Failure> {
             name: Some(name),
             ..
         } => {
+            if which == Some(Which::Rig) {
+                let (_, text) = defaults::builtin_rig(&name).ok_or_else(|| {
+                    Failure::BadInput(anyhow::anyhow!(
+                        "no built-in rig `{name}`: expected one of {}",
+                        defaults::BUILTIN_RIGS
+                            .iter()
+                            .map(|(n, _)| *n)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ))
+                })?;
+                return out.write_all(text.as_bytes()).map_err(io_failure);
+            }
             if which != Some(Which::Scene) {
                 return Err(Failure::BadInput(anyhow::anyhow!(
-                    "`{name}`: only a scene is built in by name (softtouch config show scene {name})"
+                    "`{name}`: say which: softtouch config show scene {name}, or config show rig {name}"
                 )));
             }
             let (_, text) = defaults::builtin_scene(&name).ok_or_else(|| {
@@ -98,6 +113,22 @@ pub fn run(cmd: ConfigCommand, out: &mut dyn Write) -> Result<(), Failure> {
             };
             out.write_all(text.as_bytes()).map_err(io_failure)
         }
+        ConfigCommand::Check {
+            rig: Some(rig),
+            scene: None,
+        } => {
+            let (rig_config, source) = configs::rig(Some(&rig))?;
+            if let Some(reach) = franka_reach(&rig_config)
+                .map_err(|e| Failure::BadInput(anyhow::anyhow!("{source}: arm: {e}")))?
+            {
+                writeln!(out, "{reach}").map_err(io_failure)?;
+            }
+            writeln!(
+                out,
+                "ok: rig {source} (alone: give --scene to check a collection's poses against its workspace)"
+            )
+            .map_err(io_failure)
+        }
         ConfigCommand::Check { rig, scene } => {
             let resolved = configs::resolve(rig.as_deref(), scene.as_deref())?;
             // The objects as the simulated grasp takes them (a floating one refused).
@@ -123,6 +154,10 @@ pub fn run(cmd: ConfigCommand, out: &mut dyn Write) -> Result<(), Failure> {
     }
 }
 
+/// What to change when the FR3 cannot reach the workspace: the fields and values of
+/// the built-in FR3 rig, which pass.
+const FR3_HINT: &str = "To reach it, set workspace.base_from_rod = { translation_m = [0.58, 0.0, 0.6], rotation_wxyz = [0.0, 0.9238795325112867, -0.3826834323650898, 0.0] } (the rod's axis along the base's -z: the finger points down as at the FR3's home keyframe) and workspace.theta_rad = [-0.4, 0.4] (and the scene's poses.theta_rad within it); `softtouch config show rig fr3` prints a rig with both";
+
 /// For a Franka arm: whether home and the workspace's corners lie within the FR3's
 /// joint ranges and velocity limits, followed from its ready joints at the procedure's
 /// speeds (`None` for a simulated arm). Offline, so Desk's end effector is taken as
@@ -139,7 +174,7 @@ fn franka_reach(rig: &softtouch_schemas::RigConfig) -> Result<Option<String>, St
     };
     let start = kin.solve(&home.pose, &reach::READY_Q).ok_or_else(|| {
         format!(
-            "{}: the FR3 cannot reach it from its ready joints (flange at {:?} m in the base frame)",
+            "{}: the FR3 cannot reach it from its ready joints (flange at {:?} m in the base frame). {FR3_HINT}",
             home.name, home.pose.translation_m
         )
     })?;
@@ -150,7 +185,7 @@ fn franka_reach(rig: &softtouch_schemas::RigConfig) -> Result<Option<String>, St
         &config.route,
         config.motion_margin.map_or(config.limits, |m| MotionLimits::for_robot(reach::Robot::Fr3, m)).rot_speed_rad_s,
     )
-    .map_err(|e| format!("{e} (checked against the FR3 from its ready joints; connect checks again from the arm's own)"))?;
+    .map_err(|e| format!("{e} (checked against the FR3 from its ready joints; connect checks again from the arm's own). {FR3_HINT}"))?;
     Ok(Some(format!(
         "ok: arm: home and the workspace's {} corners within the FR3's joint ranges and velocity limits (from its ready joints; checked again at connect)",
         config.route.len() / 2

@@ -36,6 +36,9 @@ pub const SQUEEZE_FLOOR_COUNTS: u8 = 3;
 pub struct SqueezeBound {
     /// The calibration's first touch, counts (P_m).
     pub touch_count: u8,
+    /// The estimate with no contact, N: a target is reached when the estimate rises
+    /// `target − baseline` (the loop compares the estimate itself with the target).
+    pub baseline_n: f64,
     /// The calibration's closing from the touch: counts past the touch and the
     /// estimate's rise above the no-contact level, N, in closing order.
     pub rise_n: Vec<(u8, f64)>,
@@ -47,6 +50,10 @@ pub struct SqueezeBound {
     pub factor: f64,
     /// [`SQUEEZE_FLOOR_COUNTS`] unless a caller states another.
     pub floor_counts: u8,
+    /// Counts the contact may move while the loop runs, added to the limit (0 unless
+    /// the run turns the object: then from its width to its narrowest across the
+    /// fingers, [`Self::with_allowance_mm`]).
+    pub allowance_counts: u8,
 }
 
 impl SqueezeBound {
@@ -78,6 +85,11 @@ impl SqueezeBound {
         lambda_max_n_per_mm: f64,
         mm_per_count: f64,
     ) -> Self {
+        let baseline_n = if baseline_n.is_finite() {
+            baseline_n
+        } else {
+            0.0
+        };
         let rise_n = points
             .iter()
             .filter(|(p, _)| *p >= touch_count)
@@ -88,12 +100,27 @@ impl SqueezeBound {
             .collect();
         Self {
             touch_count,
+            baseline_n,
             rise_n,
             lambda_max_n_per_mm,
             mm_per_count,
             factor: SQUEEZE_FACTOR,
             floor_counts: SQUEEZE_FLOOR_COUNTS,
+            allowance_counts: 0,
         }
+    }
+
+    /// The same bound with `mm` of opening allowed for a contact that moves (an
+    /// object turned between the fingers to a narrower side), in whole counts.
+    #[must_use]
+    pub fn with_allowance_mm(mut self, mm: f64) -> Self {
+        let counts = (mm.max(0.0) / self.mm_per_count).ceil();
+        self.allowance_counts = if counts.is_finite() {
+            counts.min(255.0) as u8
+        } else {
+            0
+        };
+        self
     }
 
     /// Rejects a bound that cannot work, naming the field.
@@ -116,12 +143,13 @@ impl SqueezeBound {
         Ok(())
     }
 
-    /// Counts past the touch at which the calibrated estimate first rose `target_n`
-    /// (interpolated between counts; past the closing's end, extended at Λ_max). A
-    /// closing that never rose that far with no usable Λ_max gives its last count:
-    /// the bound then allows only what was seen.
+    /// Counts past the touch at which the calibrated estimate first read `target_n`
+    /// (rose `target_n − baseline_n`; interpolated between counts; past the
+    /// closing's end, extended at Λ_max). A closing that never rose that far with no
+    /// usable Λ_max gives its last count: the bound then allows only what was seen.
     #[must_use]
     pub fn needed_counts(&self, target_n: f64) -> f64 {
+        let target_n = target_n - self.baseline_n;
         let mut prev: Option<(f64, f64)> = None;
         // The running peak, so a noisy dip after a rise does not push the bound out.
         let mut peak = f64::NEG_INFINITY;
@@ -155,7 +183,10 @@ impl SqueezeBound {
     pub fn limit_count(&self, target_n: f64) -> u8 {
         // A hair under a whole count is that count (float noise in the rise).
         let extra = (self.factor * self.needed_counts(target_n) - 1e-9).ceil();
-        let limit = f64::from(self.touch_count) + extra + f64::from(self.floor_counts);
+        let limit = f64::from(self.touch_count)
+            + f64::from(self.allowance_counts)
+            + extra
+            + f64::from(self.floor_counts);
         if limit.is_finite() {
             limit.clamp(0.0, 255.0) as u8
         } else {
@@ -236,6 +267,35 @@ mod tests {
         // A huge target on a tiny stiffness stays inside the scale.
         let tiny = SqueezeBound::from_points(250, 0.0, &pts, 1e-12, MM);
         assert_eq!(tiny.limit_count(5.0), 255);
+    }
+
+    #[test]
+    fn a_target_is_read_from_the_no_contact_level() {
+        // The estimate reads −0.15 N with no contact: 1 N is a rise of 1.15 N.
+        let points: Vec<(u8, Option<f64>)> = (100..=145)
+            .map(|c: u8| (c, Some(-0.15 + 0.1 * f64::from(c - 100))))
+            .collect();
+        let b = SqueezeBound::from_points(100, -0.15, &points, 0.1 / MM, MM);
+        assert!(
+            (b.needed_counts(1.0) - 11.5).abs() < 1e-9,
+            "{}",
+            b.needed_counts(1.0)
+        );
+        // A NaN level is taken as 0.
+        let b = SqueezeBound::from_points(100, f64::NAN, &points, 0.1 / MM, MM);
+        assert_eq!(b.baseline_n, 0.0);
+        assert!(b.rise_n.iter().all(|r| r.1.is_finite()));
+    }
+
+    #[test]
+    fn an_allowance_moves_the_limit_by_whole_counts() {
+        let b = linear().with_allowance_mm(12.0);
+        // 12 mm at 50/255 mm a count: 61.2, so 62 counts.
+        assert_eq!(b.allowance_counts, 62);
+        assert_eq!(b.limit_count(1.0), 118 + 62);
+        assert_eq!(linear().with_allowance_mm(-1.0).allowance_counts, 0);
+        assert_eq!(linear().with_allowance_mm(f64::NAN).allowance_counts, 0);
+        assert_eq!(linear().with_allowance_mm(1e9).limit_count(1.0), 255);
     }
 
     #[test]

@@ -9,6 +9,18 @@ use crate::scene::SceneSpec;
 pub const RIG_TOML: &str = include_str!("../defaults/rig.toml");
 /// The default scene, as TOML with comments.
 pub const SCENE_TOML: &str = include_str!("../defaults/scene.toml");
+/// A Franka FR3 rig (`softtouch config show rig fr3`): the default with its arm real
+/// and the franka-sim tier's workspace, which an FR3 reaches.
+pub const RIG_FR3_TOML: &str = include_str!("../defaults/rig-fr3.toml");
+
+/// The rigs built in, by name, as TOML with comments (`softtouch config show rig NAME`).
+pub const BUILTIN_RIGS: [(&str, &str); 2] = [("sim", RIG_TOML), ("fr3", RIG_FR3_TOML)];
+
+/// The built-in rig called `name`, as its name and TOML.
+#[must_use]
+pub fn builtin_rig(name: &str) -> Option<(&'static str, &'static str)> {
+    BUILTIN_RIGS.iter().copied().find(|(n, _)| *n == name)
+}
 
 /// The scenes built in, by name, as TOML with comments: what `--scene NAME` reads
 /// from any folder and `softtouch config show scene NAME` prints (`land` is the

@@ -30,6 +30,8 @@ pub mod dialect;
 mod event;
 mod grasp;
 mod grasp_calibration;
+#[cfg(test)]
+mod grasp_migrations;
 mod models;
 pub mod report;
 mod results;

@@ -50,6 +50,10 @@ pub struct BenchGraspArgs {
     /// Seed of the simulated scene's effects.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Use stiffness calibrations their check refuses (as `grasp follow
+    /// --accept-calibration`), saying each.
+    #[arg(long)]
+    pub accept_calibration: bool,
 }
 
 fn grasp_failure(e: GraspError) -> Failure {
@@ -121,8 +125,16 @@ pub(super) async fn run(
             120.0,
             args.seed,
             softtouch_lab::grasp::calibration::top_for(args.target),
+            args.accept_calibration,
         )
         .await?;
+        if let Some(refusal) = &cal.accepted_against {
+            writeln!(
+                out,
+                "warning: --accept-calibration: model `{name}` runs on a calibration its check refuses: {refusal}"
+            )
+            .map_err(io_failure)?;
+        }
         models.push((name.clone(), bytes, predictor.header().config, cal));
     }
     store.close().await;

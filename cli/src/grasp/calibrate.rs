@@ -26,13 +26,19 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub object: Option<String>,
     /// Scene file (simulated grasp); default: the built-in grasp scene
-    /// (`scenes/grasp.toml`), its first object unless --object names another.
-    #[arg(long, conflicts_with = "rig")]
+    /// (`scenes/grasp.toml`), its first object unless --object names another. Beside
+    /// --rig: the scene's object of --object's name declares the width and crush
+    /// force the calibration is checked against (else the rig's `[grasp]` object).
+    #[arg(long)]
     pub scene: Option<PathBuf>,
     /// Rig file with a real Hand-E and finger camera: the ends are calibrated first
     /// (nothing between the fingers), then you place the object and press Enter.
     #[arg(long)]
     pub rig: Option<PathBuf>,
+    /// Store the calibration even when its check refuses it, printing the refusal
+    /// (the verbs that use it then need `--accept-calibration` too).
+    #[arg(long)]
+    pub accept_calibration: bool,
     /// The largest target the loop will hold, N: the closing goes up to 1.5 × it (at
     /// least 4.5 N).
     #[arg(long, default_value_t = 3.0)]
@@ -65,7 +71,8 @@ pub(super) async fn run(
             .object
             .clone()
             .ok_or_else(|| bad("--object: expected the reference object's name on a rig".into()))?;
-        let rig = softtouch_collector::configs::resolve(Some(rig_path), None)?.rig;
+        // The rig alone: a grasp uses none of a collection scene's poses.
+        let rig = softtouch_collector::configs::rig(Some(rig_path))?.0;
         let setup_hash = softtouch_lab::grasp::calibration::rig_setup_hash(&rig)?;
         let predictor = Predictor::from_bytes(&bytes)?;
         let projection = softtouch_lab::grasp::soft::projections().map_err(grasp_failure)?[0];
@@ -112,17 +119,31 @@ pub(super) async fn run(
         // What the rig knows: the object's declared opening where the rig's grasp
         // trials declare it (no crush force there: taken as rigid), and the finger's
         // press in the model's training samples.
-        let evidence = softtouch_lab::grasp::calibration::Evidence {
-            object: object.clone(),
-            open_width_mm: rig
-                .grasp
-                .as_ref()
-                .and_then(|g| g.objects.iter().find(|o| o.name == object))
-                .map(|o| o.open_width_mm),
-            crush_force_n: None,
-            press: softtouch_lab::grasp::calibration::training_press(&store, &args.model).await?,
+        let press = softtouch_lab::grasp::calibration::training_press(&store, &args.model).await?;
+        let evidence = match args.scene.as_deref() {
+            Some(path) => {
+                let scene = softtouch_collector::configs::scene(Some(path))?.0;
+                let declared = object_for(&scene, Some(&object))?;
+                softtouch_lab::grasp::calibration::Evidence {
+                    press,
+                    ..softtouch_lab::grasp::calibration::Evidence::of_object(&declared)
+                }
+            }
+            None => softtouch_lab::grasp::calibration::Evidence {
+                object: object.clone(),
+                open_width_mm: rig
+                    .grasp
+                    .as_ref()
+                    .and_then(|g| g.objects.iter().find(|o| o.name == object))
+                    .map(|o| o.open_width_mm),
+                crush_force_n: None,
+                press,
+            },
         };
-        softtouch_lab::grasp::calibration::check_calibration(&row, top_n, &evidence)?;
+        accept_or_refuse(
+            softtouch_lab::grasp::calibration::check_calibration(&row, top_n, &evidence),
+            args.accept_calibration,
+        )?;
         (row, Some(ends))
     } else {
         // The grasp scene unless told otherwise, as every grasp verb: its objects are
@@ -144,7 +165,10 @@ pub(super) async fn run(
         .await?;
         let evidence =
             softtouch_lab::grasp::calibration::sim_evidence(&store, &args.model, &object).await?;
-        softtouch_lab::grasp::calibration::check_calibration(&row, top_n, &evidence)?;
+        accept_or_refuse(
+            softtouch_lab::grasp::calibration::check_calibration(&row, top_n, &evidence),
+            args.accept_calibration,
+        )?;
         (row, None)
     };
     let id = store
@@ -199,4 +223,18 @@ pub(super) async fn run(
         .collect();
     writeln!(out, "Λ(P) N/mm by count: {}", shown.join(", ")).map_err(w)?;
     Ok(())
+}
+
+/// A check's refusal: an error, or with `--accept-calibration` a warning on stderr.
+fn accept_or_refuse(
+    checked: Result<(), softtouch_lab::grasp::soft::GraspRunError>,
+    accept: bool,
+) -> Result<(), softtouch_lab::grasp::soft::GraspRunError> {
+    match checked {
+        Err(e) if accept => {
+            eprintln!("warning: --accept-calibration: stored against its check: {e}");
+            Ok(())
+        }
+        other => other,
+    }
 }

@@ -60,10 +60,17 @@ pub(super) async fn run(
     check_duration("--hold-s", args.hold_s, false)?;
     let loop_settings = loop_settings(c)?;
     if let Some(rig_path) = &args.rig {
-        let rig = softtouch_collector::configs::resolve(Some(rig_path), None)?.rig;
+        // The rig alone: a grasp uses none of a collection scene's poses.
+        let rig = softtouch_collector::configs::rig(Some(rig_path))?.0;
         if softtouch_lab::grasp::devices::has_real_gripper(&rig) {
             return follow_on_rig(&args, &rig, db, out).await;
         }
+    }
+    // The targets before anything else: a calibration for an unreachable one is
+    // neither made nor refused in its place.
+    for t in &args.targets {
+        softtouch_lab::grasp::settings::check_target_n("--targets", *t, c.tolerance)
+            .map_err(|e| bad(e.to_string()))?;
     }
     let scene = scene_for(c)?;
     let object = object_for(&scene, args.object.as_deref())?;

@@ -44,6 +44,13 @@ pub struct LoopArgs {
     /// Seed of the simulated scene's effects.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Use a stiffness calibration its check refuses (`softtouch grasp calibrate`:
+    /// the touch far from the object's width, an estimate that did not follow the
+    /// closing): the refusal is printed and stored with the result, and the squeeze
+    /// bound still limits the loop. For a model known to under-read (a land model in
+    /// water) or an object the check does not know.
+    #[arg(long)]
+    pub accept_calibration: bool,
 }
 
 /// What a grasp experiment stores: the model and the shared flags (each verb adds
@@ -57,6 +64,7 @@ pub(super) fn loop_recorder(verb: &'static str, c: &LoopArgs) -> crate::results:
         .setting("fingers", c.fingers)
         .setting("seed", c.seed)
         .setting("scene", c.scene.as_ref().map(|p| p.display().to_string()))
+        .setting("accept_calibration", c.accept_calibration)
 }
 
 /// The simulated scene's fingerprint as a result records it.
@@ -122,9 +130,13 @@ pub(super) async fn load_model_calibrate_and_pause(
         c.fps,
         c.seed,
         softtouch_lab::grasp::calibration::top_for(largest_target_n),
+        c.accept_calibration,
     )
     .await?;
     store.close().await;
+    if let Some(refusal) = &calibrated.accepted_against {
+        eprintln!("warning: --accept-calibration: using it against its check: {refusal}");
+    }
     tokio::time::pause();
     Ok((bytes, calibrated))
 }

@@ -107,6 +107,12 @@ pub struct TrialsArgs {
     /// operator still confirms each return of the object to its place).
     #[arg(long, requires = "rig")]
     pub no_confirm: bool,
+    /// Use stiffness calibrations their check refuses (`softtouch grasp calibrate`),
+    /// each refusal said in the session's header: for a model known to under-read (a
+    /// land model in water before its image tare). The squeeze bound still limits
+    /// every closed loop.
+    #[arg(long, conflicts_with = "resume")]
+    pub accept_calibration: bool,
     /// Folder for `grasp-trials.csv`, `grasp-trials-rows.csv`, `grasp-trials.png`,
     /// with --sweep-sigma `grasp-trials-sigma.png`, and with --sweep
     /// `grasp-trials-sweep.csv` and `grasp-trials-sweep.png`.
@@ -152,6 +158,7 @@ impl TrialsArgs {
             lift_mm: self.lift_mm,
             hold_s: self.hold_s,
             open_width_mm: self.open_width_mm,
+            accept_calibration: self.accept_calibration,
             ..TrialPlan::default()
         };
         Ok(TrialsRequest {

@@ -195,7 +195,8 @@ async fn twist_rig(
         .validate()
         .map_err(|e| bad(format!("--wrist-gain / --wrist-deadband-nmm: {e}")))?;
     check_duration("--duration-s", args.duration_s, false)?;
-    let rig = softtouch_collector::configs::resolve(Some(rig_path), None)?.rig;
+    // The rig alone: a grasp uses none of a collection scene's poses.
+    let rig = softtouch_collector::configs::rig(Some(rig_path))?.0;
     let store = crate::open_existing(db).await?;
     let bytes = softtouch_lab::models::force_artifact(&store, &c.model).await?;
     let setup =

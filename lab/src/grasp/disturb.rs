@@ -78,6 +78,7 @@ pub async fn disturb_sim(
         &[settings.target_n],
         ExitAction::Open,
         calibration,
+        true,
     )
     .await?;
     let start = p.clock.now();

@@ -65,6 +65,7 @@ pub async fn follow_sim(
         &settings.targets_n,
         ExitAction::Open,
         calibration,
+        false,
     )
     .await?;
     let hold = Duration::from_secs_f64(settings.hold_s);

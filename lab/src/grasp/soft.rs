@@ -180,9 +180,11 @@ pub struct Prepared {
     pub setup: Setup,
 }
 
-/// Builds the soft grasp of `object`, takes Λ_max and the first touch from
-/// `calibration`, configures Algorithm 1 and approaches to four counts before the
-/// touch. Run on a paused tokio clock.
+/// Builds the soft grasp of `object`, takes Λ_max, the first touch and the squeeze
+/// bound from `calibration`, configures Algorithm 1 and approaches to four counts
+/// before the touch. `turns_object`: the run turns the object between the fingers
+/// (disturb, twist), so the bound allows its width down to its narrowest side. Run on
+/// a paused tokio clock.
 ///
 /// # Errors
 /// A target the loop cannot hold (checked before K is derived from the targets), a
@@ -195,6 +197,7 @@ pub async fn prepare(
     targets_n: &[f64],
     on_exit: ExitAction,
     calibration: &Calibrated,
+    turns_object: bool,
 ) -> Result<Prepared, GraspRunError> {
     // The targets first: K is derived from them, so a bad target must not read as a
     // bad K (a flag the user never gave).
@@ -218,7 +221,14 @@ pub async fn prepare(
         )));
     }
     let projections = projections()?;
-    let mut config = ControllerConfig::new(projections[0]).with_squeeze(calibration.squeeze()?);
+    // An oval turned a quarter presents its depth (aspect × width) to the fingers.
+    let allowance_mm = if turns_object {
+        object.width_m * 1000.0 * (1.0 - object.aspect.min(1.0))
+    } else {
+        0.0
+    };
+    let mut config = ControllerConfig::new(projections[0])
+        .with_squeeze(calibration.squeeze()?.with_allowance_mm(allowance_mm));
     config.stepper.gain_n_per_mm = gain;
     config.stepper.tolerance_n = settings.tolerance_n;
     config.on_exit = on_exit;

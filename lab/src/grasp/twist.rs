@@ -77,6 +77,7 @@ pub async fn twist_sim(
             &[settings.target_n],
             ExitAction::Open,
             calibration,
+            true,
         )
         .await?;
         setup.get_or_insert(p.setup);

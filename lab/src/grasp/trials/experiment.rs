@@ -316,7 +316,8 @@ async fn run_on_rig(
     store: &Store,
     terminal: &mut Terminal<'_>,
 ) -> Result<(), TrialsError> {
-    let rig = softtouch_collector::configs::resolve(Some(rig_path), None)?.rig;
+    // The rig alone: a grasp uses none of a collection scene's poses.
+    let rig = softtouch_collector::configs::rig(Some(rig_path))?.0;
     let session = match request.resume {
         Some(id) => resume_rig_session(store, id, request.model.as_deref(), &rig).await?,
         None => {

@@ -45,6 +45,10 @@ pub struct TrialPlan {
     /// session began.
     #[serde(default)]
     pub pregrasp_from_touch: bool,
+    /// Use stiffness calibrations their check refuses (`--accept-calibration`); each
+    /// refusal is said in the session's header. Absent in sessions stored before.
+    #[serde(default)]
+    pub accept_calibration: bool,
     /// A rig's session: what its rig file chose (absent: a simulated session).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rig: Option<RigPlan>,
@@ -89,6 +93,7 @@ impl Default for TrialPlan {
             open_width_mm: None,
             pregrasp_margin_mm: 6.0,
             pregrasp_from_touch: true,
+            accept_calibration: false,
             rig: None,
             sweep: None,
         }

@@ -270,6 +270,7 @@ pub(super) async fn calibrate_all(
             plan.fps,
             seed,
             top_for(plan.target_n),
+            plan.accept_calibration,
         )
         .await
         .map_err(|e| match e {

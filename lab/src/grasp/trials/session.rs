@@ -98,7 +98,9 @@ impl Session {
                     } else {
                         String::new()
                     }
-                ))
+                ) + &c.accepted_against.as_ref().map_or_else(String::new, |r| {
+                    format!("; ACCEPTED against its check (--accept-calibration): {r}")
+                }))
             })
             .collect()
     }

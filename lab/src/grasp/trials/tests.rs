@@ -83,6 +83,7 @@ fn objects_that_close_alike_are_said_to() {
                 true_lambda_max_n_per_mm: None,
             },
             fresh: true,
+            accepted_against: None,
         },
         count_n: 0.2,
         tolerance_n: 0.1,

@@ -218,7 +218,11 @@ async fn rig_calibrations(
             ObjectSetup {
                 tolerance_n: tolerance_for(plan.tolerance_n, count_n),
                 count_n,
-                calibration: Calibrated { row, fresh: false },
+                calibration: Calibrated {
+                    row,
+                    fresh: false,
+                    accepted_against: None,
+                },
             },
         );
     }
