@@ -232,6 +232,9 @@ pub struct Controller<G, C, E, T = NoTruth> {
     wrist: Option<(Box<dyn Wrist>, WristLoop)>,
     last_frame_t: Option<TimestampNs>,
     stop: Option<StopRequest>,
+    /// This run's touch: the first measured count at which the estimate rose
+    /// [`crate::squeeze::RUN_TOUCH_N`] over the calibrated no-contact level.
+    run_touch: Option<u8>,
 }
 
 /// A stop request published by name (a signal's), checked once per cycle.
@@ -310,6 +313,7 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
             wrist: None,
             last_frame_t: None,
             stop: None,
+            run_touch: None,
         })
     }
 
@@ -612,7 +616,7 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
     /// that stand at it (within the arrival slack) while the estimate is still below
     /// the target by more than δ end the loop with [`GraspError::EstimateStalled`].
     fn squeezed(
-        &self,
+        &mut self,
         step: &crate::stepper::Step,
         status: &GripperStatus,
         target_n: f64,
@@ -624,7 +628,12 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
         if step.outcome.is_flagged() {
             return Ok(*step);
         }
-        let limit = bound.limit_count(target_n);
+        if self.run_touch.is_none()
+            && estimate_n.is_some_and(|f| f - bound.baseline_n >= crate::squeeze::RUN_TOUCH_N)
+        {
+            self.run_touch = Some(status.position);
+        }
+        let limit = bound.limit_from(target_n, self.run_touch);
         let below = estimate_n.is_none_or(|f| f < target_n - self.config.stepper.tolerance_n);
         // At the bound: asked for it, and there (or stopped within the arrival slack).
         let asked = self.sent.is_some_and(|(p, _)| p >= limit);
@@ -636,8 +645,9 @@ impl<G: Gripper, C: Camera, E: ForceEstimator, T: TrueForce> Controller<G, C, E,
                 target_n,
                 estimate_n,
                 limit_count: limit,
-                touch_count: bound.touch_count,
-                limit_mm: bound.limit_mm(target_n),
+                touch_count: bound.anchor_count(self.run_touch),
+                limit_mm: f64::from(limit.saturating_sub(bound.anchor_count(self.run_touch)))
+                    * bound.mm_per_count,
                 factor: bound.factor,
             });
         }

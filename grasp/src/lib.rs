@@ -54,7 +54,9 @@ pub use controller::{
 pub use estimator::ForceEstimator;
 pub use metrics::{HoldMetrics, hold_metrics};
 pub use projection::Projection;
-pub use squeeze::{SQUEEZE_FACTOR, SQUEEZE_FLOOR_COUNTS, SqueezeBound};
+pub use squeeze::{
+    RUN_TOUCH_N, SQUEEZE_FACTOR, SQUEEZE_FLOOR_COUNTS, SqueezeBound, TOUCH_SEARCH_MM,
+};
 pub use stepper::{
     GainCheck, Step, StepOutcome, Stepper, StepperConfig, Stroke, check_gain, check_tolerance,
     one_count_force_n,
@@ -104,7 +106,7 @@ pub enum GraspError {
     /// still below the target: the estimate does not follow the force (a weak model,
     /// a bad frame) and closing further could crush. The loop stops there.
     #[error(
-        "estimate stalled: the fingers stand at count {limit_count} ({limit_mm:.2} mm past the calibrated touch at {touch_count}, {factor} × the squeeze the calibration needed for {target_n} N) and the estimate reads {estimate}; the loop stopped instead of closing further (check the model and the lighting, or recalibrate)",
+        "estimate stalled: the fingers stand at count {limit_count} ({limit_mm:.2} mm past the touch at {touch_count}, {factor} × the squeeze the calibration needed for {target_n} N) and the estimate reads {estimate}; the loop stopped instead of closing further (check the model and the lighting, or recalibrate)",
         estimate = estimate_n.map_or_else(|| "nothing".to_owned(), |f| format!("{f:.3} N"))
     )]
     EstimateStalled {
@@ -114,7 +116,8 @@ pub enum GraspError {
         estimate_n: Option<f64>,
         /// The limit reached, counts.
         limit_count: u8,
-        /// The calibrated first touch, counts.
+        /// The touch the limit was measured from (this run's, else the calibrated),
+        /// counts.
         touch_count: u8,
         /// The limit's squeeze past the touch, mm.
         limit_mm: f64,

@@ -200,8 +200,9 @@ impl ForceEstimator for Fixed {
 /// An estimate that never rises (a weak model that reads nothing) closes no further
 /// than the squeeze bound of a calibration that read the force as the simulator has
 /// it: the loop stops there with `estimate_stalled`, never requests past it, and every
-/// request carries the lowest force register. There the true force is within 3× the
-/// target.
+/// request carries the lowest force register. There the true force is within 9× the
+/// target (3× the squeeze on this rod, which stiffens as d²), where the same loop
+/// unbounded closes on.
 #[tokio::test(start_paused = true)]
 async fn an_estimate_that_does_not_rise_stops_at_the_squeeze_bound() {
     let (_, _, h) = soft_grasp(
@@ -231,7 +232,7 @@ async fn an_estimate_that_does_not_rise_stops_at_the_squeeze_bound() {
         .map(|(_, f)| *f)
         .expect("the limit lies on the curve");
     assert!(
-        true_at_limit <= 3.0 * target_n,
+        true_at_limit <= 9.0 * target_n,
         "the bound at count {limit} squeezes {true_at_limit} N"
     );
     let cfg = config(4.0, 0.1).with_squeeze(bound);

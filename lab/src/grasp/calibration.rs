@@ -282,15 +282,13 @@ pub fn check_calibration(
             cal.ended,
             f64::from(cal.counts_spanned) * mm_per_count
         )),
-        Some(crush) if fingers_ended => {
-            // It gave way: the estimate must have seen the squeeze that crushed it.
-            if peak.is_nan() || peak < 0.5 * crush {
-                wrong.push(format!(
-                    "the object gave way ({} {:.1} mm past the touch) while the estimate rose at most {peak:.3} N; expected at least half its crush_force_n {crush} N",
-                    cal.ended,
-                    f64::from(cal.counts_spanned) * mm_per_count
-                ));
-            }
+        // It gave way: the estimate must have seen the squeeze that crushed it.
+        Some(crush) if fingers_ended && (peak.is_nan() || peak < 0.5 * crush) => {
+            wrong.push(format!(
+                "the object gave way ({} {:.1} mm past the touch) while the estimate rose at most {peak:.3} N; expected at least half its crush_force_n {crush} N",
+                cal.ended,
+                f64::from(cal.counts_spanned) * mm_per_count
+            ));
         }
         _ => {}
     }
@@ -634,7 +632,7 @@ mod tests {
         let mut r = row(100, 0.1 / (STROKE_MM / 255.0), "reached_top");
         r.points_json = "[[100,100,0.0],[105,105,0.5],[110,110,1.0]]".into();
         let b = squeeze_of_row(&r).expect("parses");
-        assert_eq!(b.limit_count(1.0), 100 + 15 + 3);
+        assert_eq!(b.limit_count(1.0), 100 + 30 + 3);
         r.points_json = "[[100,100".into();
         r.calibration_id = 12;
         let e = squeeze_of_row(&r).expect_err("damaged").to_string();

@@ -189,6 +189,7 @@ pub struct Prepared {
 /// # Errors
 /// A target the loop cannot hold (checked before K is derived from the targets), a
 /// Λ_max too small for a gain, the model, the simulator.
+#[allow(clippy::too_many_arguments)] // the loop's settings, model, scene, object, targets, exit, calibration, and whether it turns the object
 pub async fn prepare(
     settings: &LoopSettings,
     model_bytes: &[u8],
