@@ -237,10 +237,12 @@ pub fn lambda_floor(press_n_per_mm: f64, rigid: bool) -> f64 {
     }
 }
 
-/// Checks a calibration against what the rig knows before it is stored: the touch
-/// near the object's declared width, the closing ended by the estimate (not by the
-/// fingers' end or a contact stop) on a rigid object, and Λ_max above the floor from
-/// the finger's press in the collection runs.
+/// Checks a calibration against what the rig knows before it is stored or reused: the
+/// touch within [`TOUCH_SLACK_MM`] of the object's declared width; a closing that the
+/// fingers ended (closed end, contact stop) only after the estimate read the largest
+/// target it serves (a rigid object) or half the crush force (one that gave way); and
+/// Λ_max above [`lambda_floor`] from the finger's press in the model's training
+/// samples.
 ///
 /// # Errors
 /// [`GraspRunError::Invalid`] naming every disagreement with its numbers and what to
