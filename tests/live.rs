@@ -146,16 +146,7 @@ fn live_presses_on_the_simulated_rig_and_bench_grasp_writes_its_table() {
     // `grasp follow --rig` with a real Hand-E: K is --gain or the rig's calibration of
     // --object (no simulator to measure Λ), and a finger camera that cannot be opened
     // is a runtime failure.
-    let rig = softtouch_schemas::defaults::RIG_TOML
-        .replace(
-            "[gripper]\ndriver = \"sim\"",
-            "[gripper]\ndriver = \"hand-e\"\nport = \"/dev/softtouch-no-such-port\"\nslave_id = 9\n",
-        )
-        .replace(
-            "[camera]\ndriver = \"sim\"",
-            "[camera]\ndriver = \"v4l\"\ndevice = \"/dev/softtouch-no-such-camera\"\n",
-        )
-        .replace("fps = 120.0\n", "");
+    let rig = with_real_hand_e_and_camera(softtouch_schemas::defaults::RIG_TOML);
     assert!(
         rig.contains("hand-e") && rig.contains("v4l"),
         "the default rig's layout changed"
@@ -322,16 +313,7 @@ fn an_fr3_rig_from_config_show_passes_its_check_and_grasp_calibrate_reaches_the_
     );
 
     tiny_model(d);
-    let real = rig
-        .replace(
-            "[gripper]\ndriver = \"sim\"",
-            "[gripper]\ndriver = \"hand-e\"\nport = \"/dev/softtouch-no-such-port\"\nslave_id = 9\n",
-        )
-        .replace(
-            "[camera]\ndriver = \"sim\"",
-            "[camera]\ndriver = \"v4l\"\ndevice = \"/dev/softtouch-no-such-camera\"\n",
-        )
-        .replace("fps = 120.0\n", "");
+    let real = with_real_hand_e_and_camera(&rig);
     assert!(
         real.contains("hand-e") && real.contains("v4l"),
         "the FR3 rig's layout changed"
@@ -356,4 +338,18 @@ fn an_fr3_rig_from_config_show_passes_its_check_and_grasp_calibrate_reaches_the_
         "{}",
         text(&out.stderr)
     );
+}
+
+/// `rig` with its simulated gripper and finger camera made a real Hand-E and a v4l
+/// camera, at a port and a device that are not there.
+fn with_real_hand_e_and_camera(rig: &str) -> String {
+    rig.replace(
+        "[gripper]\ndriver = \"sim\"",
+        "[gripper]\ndriver = \"hand-e\"\nport = \"/dev/softtouch-no-such-port\"\nslave_id = 9\n",
+    )
+    .replace(
+        "[camera]\ndriver = \"sim\"",
+        "[camera]\ndriver = \"v4l\"\ndevice = \"/dev/softtouch-no-such-camera\"\n",
+    )
+    .replace("fps = 120.0\n", "")
 }

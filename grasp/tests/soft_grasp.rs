@@ -93,9 +93,9 @@ fn rig<E: ForceEstimator>(
     (c, handle, clock)
 }
 
-/// Λ_max = ∂F/∂P, N/mm, over the counts from first touch to where the squeeze reaches
-/// `up_to_n`, measured on the simulator's contact physics.
-fn measured_stiffness(up_to_n: f64) -> f64 {
+/// The rod's contact as the simulator has it: its handle, the first count the
+/// fingers touch it and the true grip force at each count from there to the closed end.
+fn true_curve() -> (SoftGraspHandle, u8, Vec<(u8, f64)>) {
     let (_, _, handle) = soft_grasp(
         &softtouch_schemas::defaults::scene(),
         GraspObject::cylinder(ROD, DIAMETER_M),
@@ -107,6 +107,13 @@ fn measured_stiffness(up_to_n: f64) -> f64 {
     let touch = handle.contact_count(0.02).expect("curve").expect("touches");
     let counts: Vec<u8> = (touch..=255).collect();
     let curve = handle.grip_force_curve(&counts).expect("curve");
+    (handle, touch, curve)
+}
+
+/// Λ_max = ∂F/∂P, N/mm, over the counts from first touch to where the squeeze reaches
+/// `up_to_n`, measured on the simulator's contact physics.
+fn measured_stiffness(up_to_n: f64) -> f64 {
+    let (handle, touch, curve) = true_curve();
     let end = curve
         .iter()
         .find(|(_, f)| *f > up_to_n)
@@ -205,17 +212,7 @@ impl ForceEstimator for Fixed {
 /// unbounded closes on.
 #[tokio::test(start_paused = true)]
 async fn an_estimate_that_does_not_rise_stops_at_the_squeeze_bound() {
-    let (_, _, h) = soft_grasp(
-        &softtouch_schemas::defaults::scene(),
-        GraspObject::cylinder(ROD, DIAMETER_M),
-        60.0,
-        7,
-        TokioClock::new(),
-    )
-    .expect("builds");
-    let touch = h.contact_count(0.02).expect("curve").expect("touches");
-    let counts: Vec<u8> = (touch..=255).collect();
-    let curve = h.grip_force_curve(&counts).expect("curve");
+    let (_, touch, curve) = true_curve();
     // A perfect calibration: the estimate's rise is the true squeeze, up to 4.5 N.
     let points: Vec<(u8, Option<f64>)> = curve
         .iter()

@@ -1,16 +1,13 @@
 //! The grasp tables' migrations that rebuild them to widen a CHECK: every trial,
 //! trace and frame survives. (Tests of `grasp.rs`, apart to keep that file small.)
 
-/// The migration that lets a refused trial be stored rebuilds both grasp tables:
-/// on a database made before it, every trial and its trace survive, and a refused
-/// trial (never counted as held) can then be written.
-#[tokio::test]
-async fn the_refused_reason_migration_keeps_every_trial_and_trace() {
-    use sqlx::{ConnectOptions, Connection};
-    let dir = tempfile::tempdir().expect("temp dir");
-    let path = dir.path().join("old.db");
+use sqlx::{ConnectOptions, Connection, SqliteConnection};
+
+/// A new SQLite database in `dir` with every migration before the one whose
+/// description contains `named` applied, and that migration's index.
+async fn migrated_before(dir: &std::path::Path, named: &str) -> (SqliteConnection, usize) {
     let mut conn = sqlx::sqlite::SqliteConnectOptions::new()
-        .filename(&path)
+        .filename(dir.join("old.db"))
         .create_if_missing(true)
         .foreign_keys(true)
         .connect()
@@ -19,14 +16,34 @@ async fn the_refused_reason_migration_keeps_every_trial_and_trace() {
     let all: Vec<&sqlx::migrate::Migration> = crate::MIGRATOR.iter().collect();
     let at = all
         .iter()
-        .position(|m| m.description.contains("grasp trial refused"))
+        .position(|m| m.description.contains(named))
         .expect("the migration is embedded");
-    for m in &all[..at] {
+    run(&mut conn, &all[..at]).await;
+    (conn, at)
+}
+
+/// Applies the migrations from index `at` on.
+async fn migrate_from(conn: &mut SqliteConnection, at: usize) {
+    let all: Vec<&sqlx::migrate::Migration> = crate::MIGRATOR.iter().collect();
+    run(conn, &all[at..]).await;
+}
+
+async fn run(conn: &mut SqliteConnection, migrations: &[&sqlx::migrate::Migration]) {
+    for m in migrations {
         sqlx::raw_sql(sqlx::AssertSqlSafe(m.sql.as_str().to_owned()))
-            .execute(&mut conn)
+            .execute(&mut *conn)
             .await
             .unwrap_or_else(|e| panic!("{}: {e}", m.description));
     }
+}
+
+/// The migration that lets a refused trial be stored rebuilds both grasp tables:
+/// on a database made before it, every trial and its trace survive, and a refused
+/// trial (never counted as held) can then be written.
+#[tokio::test]
+async fn the_refused_reason_migration_keeps_every_trial_and_trace() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (mut conn, at) = migrated_before(dir.path(), "grasp trial refused").await;
     sqlx::raw_sql(
         "INSERT INTO grasp_sessions (session_id, created_at, model, seed, scenes_json, config_json, software_version) VALUES (1, 'then', 'm', 0, '[]', '{}', 'v');
          INSERT INTO grasp_trials VALUES (7, 1, 0, 0, 'cake', 'open', 0, 'land', 0.005, 0.001, 0.0, 0.0, 0.02, 0.02, 1.2, NULL, 0, 'slip', NULL, NULL, 0.4, 'then');
@@ -40,12 +57,7 @@ async fn the_refused_reason_migration_keeps_every_trial_and_trace() {
         sqlx::raw_sql(refused).execute(&mut conn).await.is_err(),
         "refused is new"
     );
-    for m in &all[at..] {
-        sqlx::raw_sql(sqlx::AssertSqlSafe(m.sql.as_str().to_owned()))
-            .execute(&mut conn)
-            .await
-            .unwrap_or_else(|e| panic!("{}: {e}", m.description));
-    }
+    migrate_from(&mut conn, at).await;
     sqlx::raw_sql(refused)
         .execute(&mut conn)
         .await
@@ -75,26 +87,8 @@ async fn the_refused_reason_migration_keeps_every_trial_and_trace() {
 /// trial failed with `estimate_stalled` can then be written.
 #[tokio::test]
 async fn the_estimate_stalled_migration_keeps_every_trial_trace_and_frame() {
-    use sqlx::{ConnectOptions, Connection};
     let dir = tempfile::tempdir().expect("temp dir");
-    let mut conn = sqlx::sqlite::SqliteConnectOptions::new()
-        .filename(dir.path().join("old.db"))
-        .create_if_missing(true)
-        .foreign_keys(true)
-        .connect()
-        .await
-        .expect("connects");
-    let all: Vec<&sqlx::migrate::Migration> = crate::MIGRATOR.iter().collect();
-    let at = all
-        .iter()
-        .position(|m| m.description.contains("grasp trial estimate stalled"))
-        .expect("the migration is embedded");
-    for m in &all[..at] {
-        sqlx::raw_sql(sqlx::AssertSqlSafe(m.sql.as_str().to_owned()))
-            .execute(&mut conn)
-            .await
-            .unwrap_or_else(|e| panic!("{}: {e}", m.description));
-    }
+    let (mut conn, at) = migrated_before(dir.path(), "grasp trial estimate stalled").await;
     sqlx::raw_sql(
         "INSERT INTO grasp_sessions (session_id, created_at, model, seed, scenes_json, config_json, software_version) VALUES (1, 'then', 'm', 0, '[]', '{}', 'v');
          INSERT INTO grasp_trials VALUES (7, 1, 0, 0, 'cake', 'closed', 0, 'land', 0.005, 0.001, 0.0, 0.0, 0.02, 0.02, 1.2, NULL, 0, 'crush', NULL, NULL, 0.4, 'then');
@@ -109,12 +103,7 @@ async fn the_estimate_stalled_migration_keeps_every_trial_trace_and_frame() {
         sqlx::raw_sql(stalled).execute(&mut conn).await.is_err(),
         "estimate_stalled is new"
     );
-    for m in &all[at..] {
-        sqlx::raw_sql(sqlx::AssertSqlSafe(m.sql.as_str().to_owned()))
-            .execute(&mut conn)
-            .await
-            .unwrap_or_else(|e| panic!("{}: {e}", m.description));
-    }
+    migrate_from(&mut conn, at).await;
     sqlx::raw_sql(stalled)
         .execute(&mut conn)
         .await

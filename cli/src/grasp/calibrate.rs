@@ -230,11 +230,8 @@ fn accept_or_refuse(
     checked: Result<(), softtouch_lab::grasp::soft::GraspRunError>,
     accept: bool,
 ) -> Result<(), softtouch_lab::grasp::soft::GraspRunError> {
-    match checked {
-        Err(e) if accept => {
-            eprintln!("warning: --accept-calibration: stored against its check: {e}");
-            Ok(())
-        }
-        other => other,
+    if let Some(refusal) = softtouch_lab::grasp::calibration::accepted(checked, accept)? {
+        eprintln!("warning: --accept-calibration: stored against its check: {refusal}");
     }
+    Ok(())
 }

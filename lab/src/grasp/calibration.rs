@@ -321,6 +321,23 @@ pub fn check_calibration(
     )))
 }
 
+/// A check's verdict under `--accept-calibration`: passed (`None`), refused (the
+/// error), or refused and accepted all the same (`Some` of the refusal, for the
+/// caller to say).
+///
+/// # Errors
+/// The check's refusal when `accept` is false.
+pub fn accepted(
+    checked: Result<(), GraspRunError>,
+    accept: bool,
+) -> Result<Option<String>, GraspRunError> {
+    match checked {
+        Ok(()) => Ok(None),
+        Err(e) if accept => Ok(Some(e.to_string())),
+        Err(e) => Err(e),
+    }
+}
+
 /// The evidence for a simulated object: its declared open-loop opening and crush
 /// force, and the press of `model`'s training samples in `store`.
 ///
@@ -471,11 +488,8 @@ pub async fn calibration_for(
         .await
         .map_err(|e| GraspRunError::Failed(e.to_string()))?;
     let evidence = sim_evidence(store, model, object).await?;
-    let checked = |row: &GraspCalibrationRow| match check_calibration(row, top_n, &evidence) {
-        Ok(()) => Ok(None),
-        Err(e) if accept => Ok(Some(e.to_string())),
-        Err(e) => Err(e),
-    };
+    let checked =
+        |row: &GraspCalibrationRow| accepted(check_calibration(row, top_n, &evidence), accept);
     if let Some(row) = stored {
         // One stored before the check existed is held to it too.
         let accepted_against = checked(&row).map_err(|e| {
