@@ -466,6 +466,133 @@ slave_id = 9
     sim.judge();
 }
 
+/// The FR3 rig a lab gets from `config show rig fr3`, as a lab edits it for a grasp:
+/// `config check` passes it as shown; with the arm's two lines set for this host
+/// (franka-sim's address, `realtime = "ignore"`: no PREEMPT_RT kernel here) and the
+/// gripper on the Hand-E's pty, `rig check` passes with the arm on franka-sim; with
+/// the gripper and the camera set (two edits) `grasp calibrate --rig` reads the
+/// Hand-E's status over the pty and stops at the camera this host lacks, naming it,
+/// having moved nothing and stored nothing.
+#[test]
+#[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
+fn the_fr3_rig_from_config_show_passes_rig_check_and_reaches_the_grasp_devices() {
+    use softtouch_drivers::hande::{self, HandEService};
+    let py = python();
+    let pair = fcisim::pty();
+    let dir = tempdir();
+    let sim = FrankaSim::start(&py, dir.path());
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .expect("runtime");
+    let service = rt.block_on(async {
+        let rig = softtouch_schemas::defaults::rig();
+        let scene = softtouch_schemas::defaults::scene();
+        let gripper_rig =
+            softtouch_sim::SimRig::new(&rig, &scene, 2, TokioClock::new()).expect("sim");
+        let service = HandEService::new(gripper_rig.gripper, 9);
+        tokio::spawn(hande::serve_serial(
+            service.clone(),
+            hande::open_port(&pair.b).expect("open pty b"),
+            std::future::pending(),
+        ));
+        service
+    });
+    let shown = ok(&run(dir.path(), &["config", "show", "rig", "fr3"]), &sim);
+    std::fs::write(dir.path().join("fr3.toml"), &shown).expect("write");
+    ok(
+        &run(dir.path(), &["config", "check", "--rig", "fr3.toml"]),
+        &sim,
+    );
+    let edit = |text: &str, from: &str, to: &str| -> String {
+        assert_eq!(text.matches(from).count(), 1, "`{from}` once in:\n{text}");
+        text.replace(from, to)
+    };
+    let gripper = |text: &str| {
+        edit(
+            text,
+            "driver = \"sim\"            # or \"hand-e\"",
+            &format!("driver = \"hand-e\"\nport = \"{}\"\nslave_id = 9 #", pair.a),
+        )
+    };
+    // The arm as this host reaches it, and the gripper on the pty: every row passes.
+    let arm = edit(
+        &edit(&shown, "172.16.0.2", &sim.address()),
+        "# realtime = \"ignore\"",
+        "realtime = \"ignore\"",
+    );
+    std::fs::write(dir.path().join("checked.toml"), gripper(&arm)).expect("write");
+    let table = ok(
+        &run(dir.path(), &["rig", "check", "--rig", "checked.toml"]),
+        &sim,
+    );
+    for row in ["arm", "gripper"] {
+        let line = table
+            .lines()
+            .find(|l| l.trim_start().starts_with(row))
+            .unwrap_or_default();
+        assert_eq!(
+            line.split_whitespace().nth(2),
+            Some("pass"),
+            "{row}: {table}"
+        );
+    }
+    // The grasp's two edits: the gripper's section and the finger camera's (a V4L2
+    // camera runs at its own rate: no `fps`).
+    let absent = dir.path().join("video-absent");
+    let grasp = edit(
+        &gripper(&shown),
+        "driver = \"sim\"            # or \"v4l\" with device = \"/dev/video0\"\nfps = 120.0               # the simulated camera's rate (a \"v4l\" camera has its own: no fps)",
+        &format!("driver = \"v4l\"\ndevice = \"{}\"", absent.display()),
+    );
+    std::fs::write(dir.path().join("grasp.toml"), grasp).expect("write");
+    common::simulated_dataset(dir.path(), "64", "3", "air");
+    let mut train = vec!["train", "--dataset", "air"];
+    train.extend(common::TINY);
+    ok(&run(dir.path(), &train), &sim);
+    let before = service.requests();
+    let out = run(
+        dir.path(),
+        &[
+            "grasp",
+            "calibrate",
+            "--rig",
+            "grasp.toml",
+            "--model",
+            "air-svae",
+            "--object",
+            "cylinder",
+        ],
+    );
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}\n{}", text(&out.stdout));
+    assert!(
+        err.contains("camera") && err.contains(&absent.display().to_string()),
+        "the refusal names the camera and its device: {err}"
+    );
+    assert!(
+        service.requests() > before,
+        "the Hand-E's status was read over the pty before the camera: {err}"
+    );
+    let stored: i64 = runtime().block_on(async {
+        use sqlx::Connection as _;
+        let url = format!(
+            "sqlite://{}?mode=ro",
+            dir.path().join("softtouch.db").display()
+        );
+        let mut conn = sqlx::SqliteConnection::connect(&url).await.expect("db");
+        sqlx::query_scalar("SELECT COUNT(*) FROM grasp_calibrations")
+            .fetch_one(&mut conn)
+            .await
+            .expect("count")
+    });
+    assert_eq!(stored, 0, "nothing stored");
+    eprintln!("{table}\n{err}");
+    drop(rt);
+    sim.judge();
+}
+
 // ---------------------------------------------------------------------- collect
 
 /// A few dozen samples on one rod through FCI, killed (-9) mid-run and resumed with

@@ -440,7 +440,28 @@ fn stored_results_match_the_exports_and_the_report(d: &std::path::Path) {
             .and_then(|v| v.parse().ok())
             .expect("ss");
         assert_eq!(cell(&format!("follow-1-{i}-ss")), format!("{ss:.3}"));
+        // The grip a lab cannot see: the hold's peak true force and its closing past
+        // the touch, as exported, and the true force bounded by the squeeze.
+        let grip: Vec<f64> = line
+            .split(',')
+            .skip(11)
+            .map(|v| v.parse().expect("peak_true_n, past_touch_mm"))
+            .collect();
+        assert_eq!(grip.len(), 2, "{line}");
+        assert_eq!(
+            cell(&format!("follow-1-{i}-peak-true")),
+            format!("{:.2}", grip[0])
+        );
+        assert_eq!(
+            cell(&format!("follow-1-{i}-past-touch")),
+            format!("{:.2}", grip[1])
+        );
+        assert!(grip[0] > 0.0 && grip[1] >= 0.0, "{line}");
     }
+    let follow = ok(&softtouch(d, &["results", "show", "1"]));
+    assert!(follow.contains(", peak true "), "{follow}");
+    let disturb = ok(&softtouch(d, &["results", "show", "2"]));
+    assert!(disturb.contains("; peak true "), "{disturb}");
     // Twist: the true τz RMS per wrist-loop state is the metrics table's, in the report
     // and in the stored summary alike.
     let twist = std::fs::read_to_string(d.join("g/grasp-twist-metrics.csv")).expect("csv");
@@ -456,7 +477,9 @@ fn stored_results_match_the_exports_and_the_report(d: &std::path::Path) {
             cell(&format!("twist-3-{state}-true-rms")),
             format!("{rms:.3}")
         );
-        let said = format!("wrist loop {state}: true τz RMS {rms:.3} N·mm from the first turn");
+        let said = format!(
+            "wrist loop {state}: true τz RMS {rms:.3} N·mm from the first turn, peak true "
+        );
         assert!(summary.contains(&said), "`{said}` in:\n{summary}");
     }
     assert!(

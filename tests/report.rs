@@ -471,7 +471,13 @@ async fn grasp_session(db: &Path) -> i64 {
             commanded_width_m: 0.022,
             final_width_m: 0.022,
             peak_estimate_n: Some(1.4),
-            peak_true_n: Some(1.5),
+            // The refused trial's 9 N would show if it were counted.
+            peak_true_n: Some(if reason == Some("refused") {
+                9.0
+            } else {
+                1.5 + 0.25 * f64::from(trial)
+            }),
+            past_touch_mm: Some(0.5),
             success: reason.is_none(),
             reason: reason.map(str::to_owned),
             detail: None,
@@ -535,6 +541,12 @@ fn the_grasping_section_shows_each_stored_session_and_draws_chosen_trials() {
         "the refused trial counts in no cell"
     );
     assert_eq!(value(&html, &format!("grasp-{id}-0-0-all-closed")), "0/2");
+    // The grip at its firmest: the largest true force of the counted trials.
+    assert_eq!(
+        value(&html, &format!("grasp-{id}-0-0-cylinder-closed-grip")),
+        "1.75 N"
+    );
+    assert_eq!(value(&html, &format!("grasp-{id}-0-1-all-open-grip")), "–");
     // Open held both, closed held neither: 2 discordant pairs one way, p = 2 · 2⁻² = 0.5
     // (the refused closed trial 2 pairs with nothing).
     assert_eq!(value(&html, &format!("grasp-{id}-0-0-mcnemar")), "0.5000");

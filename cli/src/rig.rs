@@ -29,7 +29,8 @@ pub struct CheckArgs {
     /// Rig file; default: the embedded all-simulated rig.
     #[arg(long)]
     pub rig: Option<PathBuf>,
-    /// Scene file for the simulated devices; default: the built-in scene.
+    /// Scene file for the simulated devices, checked against the rig; default: the
+    /// built-in scene (its poses not checked: only its physics is used).
     #[arg(long)]
     pub scene: Option<PathBuf>,
     /// How long the force/torque stream is read, s.
@@ -67,11 +68,23 @@ async fn check_verb(args: CheckArgs, out: &mut dyn Write) -> Result<(), Failure>
             args.timeout_s, args.window_s
         )));
     }
-    let resolved =
-        softtouch_collector::configs::resolve(args.rig.as_deref(), args.scene.as_deref())?;
+    // A named scene must fit the rig (its poses are the ones a collection would visit);
+    // without one the built-in scene only gives the simulated devices their physics,
+    // and its poses (θ over ±π) are not held against a rig that turns less (an FR3's).
+    let (rig, scene) = match args.scene.as_deref() {
+        Some(_) => {
+            let r =
+                softtouch_collector::configs::resolve(args.rig.as_deref(), args.scene.as_deref())?;
+            (r.rig, r.scene)
+        }
+        None => (
+            softtouch_collector::configs::rig(args.rig.as_deref())?.0,
+            softtouch_collector::configs::scene(None)?.0,
+        ),
+    };
     let rows = check_rig(
-        &resolved.rig,
-        &resolved.scene,
+        &rig,
+        &scene,
         Duration::from_secs_f64(args.window_s),
         Duration::from_secs_f64(args.timeout_s),
     )

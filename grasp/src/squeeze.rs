@@ -81,6 +81,12 @@ pub struct SqueezeBound {
 }
 
 impl SqueezeBound {
+    /// How far `position` lies past the calibrated first touch, mm (0 short of it):
+    /// the grip a rig can show without a true force.
+    #[must_use]
+    pub fn past_touch_mm(&self, position: u8) -> f64 {
+        f64::from(position.saturating_sub(self.touch_count)) * self.mm_per_count
+    }
     /// The bound of a calibration: its touch, its closing and its Λ_max.
     #[must_use]
     pub fn from_calibration(cal: &StiffnessCalibration, mm_per_count: f64) -> Self {
@@ -260,6 +266,15 @@ mod tests {
             .map(|c: u8| (c, Some(0.1 * f64::from(c.saturating_sub(100)))))
             .collect();
         SqueezeBound::from_points(100, 0.0, &points, 0.1 / MM, MM)
+    }
+
+    #[test]
+    fn the_closing_past_the_touch_is_zero_short_of_it() {
+        let b = linear();
+        assert!((b.past_touch_mm(110) - 10.0 * MM).abs() < 1e-12);
+        assert!(b.past_touch_mm(100).abs() < 1e-12);
+        assert!(b.past_touch_mm(0).abs() < 1e-12);
+        assert!((b.past_touch_mm(255) - 155.0 * MM).abs() < 1e-12);
     }
 
     #[test]

@@ -66,6 +66,9 @@ pub struct GraspTrialRow {
     pub peak_estimate_n: Option<f64>,
     /// Largest true grip force, N (simulation).
     pub peak_true_n: Option<f64>,
+    /// How far past the calibrated first touch the fingers closed at most, mm (the
+    /// grip a rig can show without a true force; `None`: stored before it was kept).
+    pub past_touch_mm: Option<f64>,
     /// Held after the lift and the hold.
     pub success: bool,
     /// Why not (`slip`, `crush`, `miss`, `timeout`, `device_fault`).
@@ -266,8 +269,8 @@ impl Store {
         let k = &trial.key;
         let inserted = sqlx::query(Dialect::of(&tx).sql(concat!(
             "INSERT INTO grasp_trials (session_id, sigma_index, scene_index, object, mode, trial, medium, sigma_m, dx_m, dy_m, dz_m, ",
-            "commanded_width_m, final_width_m, peak_estimate_n, peak_true_n, success, reason, detail, confirmed_after_s, wall_s, created_at) ",
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ",
+            "commanded_width_m, final_width_m, peak_estimate_n, peak_true_n, past_touch_mm, success, reason, detail, confirmed_after_s, wall_s, created_at) ",
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ",
             now_sql!(),
             ") ON CONFLICT (session_id, sigma_index, scene_index, object, mode, trial) DO NOTHING RETURNING trial_id"
         )))
@@ -286,6 +289,7 @@ impl Store {
         .bind(trial.final_width_m)
         .bind(crate::dialect::NullableF64(trial.peak_estimate_n))
         .bind(crate::dialect::NullableF64(trial.peak_true_n))
+        .bind(crate::dialect::NullableF64(trial.past_touch_mm))
         .bind(i64::from(trial.success))
         .bind(trial.reason.as_deref())
         .bind(trial.detail.as_deref())
@@ -427,7 +431,7 @@ pub(crate) async fn trials_of(
 ) -> Result<Vec<GraspTrialRow>, StoreError> {
     let rows = sqlx::query(d.sql(
         "SELECT sigma_index, scene_index, object, mode, trial, medium, sigma_m, dx_m, dy_m, dz_m, commanded_width_m, final_width_m, \
-         peak_estimate_n, peak_true_n, success, reason, detail, confirmed_after_s, wall_s \
+         peak_estimate_n, peak_true_n, success, reason, detail, confirmed_after_s, wall_s, past_touch_mm \
          FROM grasp_trials WHERE session_id = ? ORDER BY trial_id"),
     )
     .bind(session_id)
@@ -456,6 +460,7 @@ pub(crate) async fn trials_of(
                 detail: r.get(16),
                 confirmed_after_s: r.get(17),
                 wall_s: r.get(18),
+                past_touch_mm: r.get(19),
             })
         })
         .collect()
@@ -551,6 +556,7 @@ mod tests {
             final_width_m: 0.0285,
             peak_estimate_n: Some(1.5),
             peak_true_n: None,
+            past_touch_mm: Some(1.2),
             success,
             reason: (!success).then(|| "slip".to_owned()),
             detail: None,

@@ -52,7 +52,8 @@ async fn the_refused_reason_migration_keeps_every_trial_and_trace() {
     .execute(&mut conn)
     .await
     .expect("an old session");
-    let refused = "INSERT INTO grasp_trials VALUES (8, 1, 0, 0, 'cake', 'open', 1, 'land', 0.005, 0.9, 0.0, 0.0, 0.0, 0.0, NULL, NULL, 0, 'refused', 'outside', NULL, 0.0, 'now')";
+    let refused = "INSERT INTO grasp_trials (trial_id, session_id, sigma_index, scene_index, object, mode, trial, medium, sigma_m, dx_m, dy_m, dz_m, commanded_width_m, final_width_m, peak_estimate_n, peak_true_n, success, reason, detail, confirmed_after_s, wall_s, created_at) \
+         VALUES (8, 1, 0, 0, 'cake', 'open', 1, 'land', 0.005, 0.9, 0.0, 0.0, 0.0, 0.0, NULL, NULL, 0, 'refused', 'outside', NULL, 0.0, 'now')";
     assert!(
         sqlx::raw_sql(refused).execute(&mut conn).await.is_err(),
         "refused is new"
@@ -98,7 +99,8 @@ async fn the_estimate_stalled_migration_keeps_every_trial_trace_and_frame() {
     .execute(&mut conn)
     .await
     .expect("an old session");
-    let stalled = "INSERT INTO grasp_trials VALUES (8, 1, 0, 0, 'cake', 'closed', 1, 'land', 0.005, 0.0, 0.0, 0.0, 0.02, 0.01, 0.2, 30.0, 0, 'estimate_stalled', 'bound', NULL, 0.5, 'now')";
+    let stalled = "INSERT INTO grasp_trials (trial_id, session_id, sigma_index, scene_index, object, mode, trial, medium, sigma_m, dx_m, dy_m, dz_m, commanded_width_m, final_width_m, peak_estimate_n, peak_true_n, success, reason, detail, confirmed_after_s, wall_s, created_at) \
+         VALUES (8, 1, 0, 0, 'cake', 'closed', 1, 'land', 0.005, 0.0, 0.0, 0.0, 0.02, 0.01, 0.2, 30.0, 0, 'estimate_stalled', 'bound', NULL, 0.5, 'now')";
     assert!(
         sqlx::raw_sql(stalled).execute(&mut conn).await.is_err(),
         "estimate_stalled is new"

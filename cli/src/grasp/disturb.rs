@@ -142,7 +142,14 @@ pub(super) async fn run(
         format!(" and {}", png.display())
     };
     writeln!(out, "wrote {}{drawn}", csv.display()).map_err(w)?;
-    let summary = disturb_summary(&disturb_rows(&run, &settings), target);
+    let grip = softtouch_lab::grasp::soft::grip_words(
+        &run.cycles,
+        (
+            run.setup.touch,
+            softtouch_drivers::gripper::STROKE_MM / 255.0,
+        ),
+    );
+    let summary = disturb_summary(&disturb_rows(&run, &settings), target, &grip);
     super::setup::loop_recorder("grasp disturb", c)
         .setting("object", args.object.as_str())
         .setting("target_n", target)

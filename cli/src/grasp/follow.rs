@@ -266,7 +266,7 @@ fn print_follow(
     out_dir: &Path,
     out: &mut dyn Write,
 ) -> Result<([PathBuf; 2], String), Failure> {
-    let rows = follow_rows(cycles, targets, tolerance_n);
+    let rows = follow_rows(cycles, targets, tolerance_n, touch);
     softtouch_lab::grasp::follow::print_follow_table(&rows, tolerance_n, out)
         .map_err(io_failure)?;
     create_out_dir(out_dir)?;
@@ -287,7 +287,7 @@ fn print_follow(
     let summary = rows
         .iter()
         .map(|r| {
-            let grip = match (r.peak_true_n, r.past_touch_mm(touch.0, touch.1)) {
+            let grip = match (r.peak_true_n, r.past_touch_mm) {
                 (Some(p), _) => format!(", peak true {p:.2} N"),
                 (None, Some(mm)) => format!(", closed {mm:.2} mm past the touch"),
                 (None, None) => String::new(),

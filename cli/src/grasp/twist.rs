@@ -155,7 +155,16 @@ pub(super) async fn run(
         format!(" and {}", png.display())
     };
     writeln!(out, "wrote {}, {}{drawn}", csv.display(), metrics.display()).map_err(w)?;
-    let summary = twist_summary(&rows);
+    let grips: Vec<String> = runs
+        .iter()
+        .map(|r| {
+            softtouch_lab::grasp::soft::grip_words(
+                &r.cycles,
+                (setup.touch, softtouch_drivers::gripper::STROKE_MM / 255.0),
+            )
+        })
+        .collect();
+    let summary = twist_summary(&rows, &grips);
     twist_recorder(&args)
         .setting("turn_deg", args.turn_deg)
         .setting("settle_s", args.settle_s)

@@ -523,5 +523,13 @@ pub struct TrialResult {
     pub snapshots: Vec<Snapshot>,
 }
 
+impl TrialResult {
+    /// The furthest the fingers closed in the trial, counts (`None`: no cycle ran).
+    #[must_use]
+    pub fn deepest_position(&self) -> Option<u8> {
+        self.trace.iter().map(|r| r.measured_position).max()
+    }
+}
+
 #[cfg(test)]
 mod tests;

@@ -55,10 +55,13 @@ fn refuse(device: &'static str, message: String) -> SelectError {
 
 /// Opens the Hand-E and the finger cameras the rig names. A real gripper needs real
 /// finger cameras (`driver = "v4l"`): a simulated camera would show a finger that is
-/// not the one being squeezed.
+/// not the one being squeezed. The gripper is opened first and its status read (a
+/// read moves nothing), so a lab learns whether the Modbus link answers before a
+/// camera is tried; nothing moves until every device has opened.
 ///
 /// # Errors
-/// The rig's gripper is simulated, a camera is simulated, or a device cannot be opened.
+/// The rig's gripper is simulated, a camera is simulated, the gripper does not
+/// answer, or a device cannot be opened.
 pub async fn real_grasp_devices(
     rig: &RigConfig,
     clock: Arc<dyn Clock>,
@@ -94,18 +97,20 @@ pub async fn real_grasp_devices(
                 .ok_or_else(|| refuse(name, "expected a real camera".into()))
         }
     };
+    let as_gripper = |source| SelectError::Device {
+        device: "gripper",
+        source,
+    };
+    let mut gripper = real_gripper(&rig.gripper, clock.clone())
+        .await
+        .map_err(as_gripper)?
+        .ok_or_else(|| refuse("gripper", "expected a real gripper".into()))?;
+    gripper.status().await.map_err(as_gripper)?;
     let camera = open_camera(rig.camera.clone(), "camera").await?;
     let second_camera = match &rig.second_camera {
         Some(d) => Some(open_camera(d.clone(), "second_camera").await?),
         None => None,
     };
-    let gripper = real_gripper(&rig.gripper, clock.clone())
-        .await
-        .map_err(|source| SelectError::Device {
-            device: "gripper",
-            source,
-        })?
-        .ok_or_else(|| refuse("gripper", "expected a real gripper".into()))?;
     Ok(GraspRig {
         gripper,
         camera,

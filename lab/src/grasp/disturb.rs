@@ -312,16 +312,17 @@ pub fn print_disturb_table(
 }
 
 /// A disturbance run in one line, as the results table stores it: the force held, the
-/// turns and the largest deviation (the truth's where the simulator has it).
+/// turns, the largest deviation (the truth's where the simulator has it) and the grip
+/// at its firmest (`grip`: [`super::soft::grip_words`]).
 #[must_use]
-pub fn disturb_summary(rows: &[DisturbRow], target_n: f64) -> String {
+pub fn disturb_summary(rows: &[DisturbRow], target_n: f64, grip: &str) -> String {
     let worst = rows
         .iter()
         .filter_map(|r| r.truth.or(r.estimate))
         .map(|m| m.peak_deviation_n)
         .fold(f64::NAN, f64::max);
     format!(
-        "{target_n} N held through {} turns; largest force deviation {} N",
+        "{target_n} N held through {} turns; largest force deviation {} N; {grip}",
         rows.len(),
         if worst.is_finite() {
             format!("{worst:.3}")

@@ -89,23 +89,20 @@ pub struct FollowRow {
     pub truth: Option<HoldMetrics>,
     /// The largest true force of the hold, N (`None` on a rig): what a crush would show.
     pub peak_true_n: Option<f64>,
-    /// The furthest the fingers closed during the hold, counts (P_m): on a rig, with
-    /// the calibrated touch, how deep past contact the grip went.
-    pub deepest_count: Option<u8>,
+    /// How far past the calibrated first touch the fingers closed during the hold, mm
+    /// (`None`: no cycle): on a rig, how deep past contact the grip went.
+    pub past_touch_mm: Option<f64>,
 }
 
-impl FollowRow {
-    /// How far past the calibrated first touch `touch_count` the fingers closed, mm.
-    #[must_use]
-    pub fn past_touch_mm(&self, touch_count: u8, mm_per_count: f64) -> Option<f64> {
-        self.deepest_count
-            .map(|c| f64::from(c.saturating_sub(touch_count)) * mm_per_count)
-    }
-}
-
-/// The numbers per target of a run's cycles.
+/// The numbers per target of a run's cycles; `touch` is the calibrated first touch,
+/// counts, and the opening per count, mm.
 #[must_use]
-pub fn follow_rows(cycles: &[Cycle], targets_n: &[f64], tolerance_n: f64) -> Vec<FollowRow> {
+pub fn follow_rows(
+    cycles: &[Cycle],
+    targets_n: &[f64],
+    tolerance_n: f64,
+    touch: (u8, f64),
+) -> Vec<FollowRow> {
     targets_n
         .iter()
         .enumerate()
@@ -125,7 +122,11 @@ pub fn follow_rows(cycles: &[Cycle], targets_n: &[f64], tolerance_n: f64) -> Vec
                     .filter_map(|c| c.true_n)
                     .filter(|f| f.is_finite())
                     .reduce(f64::max),
-                deepest_count: hold.iter().map(|c| c.measured_position).max(),
+                past_touch_mm: hold
+                    .iter()
+                    .map(|c| c.measured_position)
+                    .max()
+                    .map(|c| f64::from(c.saturating_sub(touch.0)) * touch.1),
             }
         })
         .collect()
@@ -158,13 +159,14 @@ pub fn write_follow_csv(path: &Path, cycles: &[Cycle]) -> Result<(), GraspRunErr
 }
 
 /// `grasp-follow-metrics.csv`: one line per target (`est_`: from the estimate,
-/// `true_`: from the simulator's truth; empty where there is none).
+/// `true_`: from the simulator's truth; empty where there is none), with the hold's
+/// peak true force and its deepest closing past the calibrated touch.
 ///
 /// # Errors
 /// The file cannot be written.
 pub fn write_follow_metrics_csv(path: &Path, rows: &[FollowRow]) -> Result<(), GraspRunError> {
     let mut text = String::from(
-        "target_n,est_rise_s,est_settle_s,est_overshoot_n,est_ss_error_n,est_rms_n,true_rise_s,true_settle_s,true_overshoot_n,true_ss_error_n,true_rms_n\n",
+        "target_n,est_rise_s,est_settle_s,est_overshoot_n,est_ss_error_n,est_rms_n,true_rise_s,true_settle_s,true_overshoot_n,true_ss_error_n,true_rms_n,peak_true_n,past_touch_mm\n",
     );
     let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
     let cells = |m: Option<HoldMetrics>| {
@@ -184,10 +186,12 @@ pub fn write_follow_metrics_csv(path: &Path, rows: &[FollowRow]) -> Result<(), G
     };
     for r in rows {
         text.push_str(&format!(
-            "{},{},{}\n",
+            "{},{},{},{},{}\n",
             r.target_n,
             cells(r.estimate),
-            cells(r.truth)
+            cells(r.truth),
+            opt(r.peak_true_n),
+            opt(r.past_touch_mm)
         ));
     }
     write_text(path, &text)
@@ -256,7 +260,7 @@ pub fn print_follow_table(
     let settle = |v: Option<f64>| v.map_or_else(|| "not yet".to_owned(), |s| format!("{s:.3}"));
     writeln!(
         out,
-        "{:>8} {:>9} {:>10} {:>11} {:>11} {:>9} {:>13} {:>10}",
+        "{:>8} {:>9} {:>10} {:>11} {:>11} {:>9} {:>13} {:>10} {:>11} {:>14}",
         "target N",
         "rise s",
         "settle s",
@@ -264,15 +268,25 @@ pub fn print_follow_table(
         "ss error N",
         "RMS N",
         "true ss err N",
-        "true RMS N"
+        "true RMS N",
+        "peak true N",
+        "past touch mm"
     )?;
+    let opt = |v: Option<f64>, digits: usize| {
+        v.map_or_else(|| "-".to_owned(), |v| format!("{v:.digits$}"))
+    };
     for row in rows {
         let target = row.target_n;
         let tru = row.truth;
+        let grip = format!(
+            "{:>11} {:>14}",
+            opt(row.peak_true_n, 2),
+            opt(row.past_touch_mm, 2)
+        );
         match row.estimate {
             Some(m) => writeln!(
                 out,
-                "{:>8.2} {:>9} {:>10} {:>11.3} {:>11.3} {:>9.3} {:>13} {:>10}",
+                "{:>8.2} {:>9} {:>10} {:>11.3} {:>11.3} {:>9.3} {:>13} {:>10} {grip}",
                 target,
                 rise(&m),
                 settle(m.settling_time_s),
@@ -282,7 +296,7 @@ pub fn print_follow_table(
                 tru.map_or_else(|| "-".into(), |t| format!("{:.3}", t.steady_state_error_n)),
                 tru.map_or_else(|| "-".into(), |t| format!("{:.3}", t.rms_error_n)),
             ),
-            None => writeln!(out, "{target:>8.2} (no usable estimate)"),
+            None => writeln!(out, "{target:>8.2} (no usable estimate) {grip}"),
         }?;
     }
     let said = |word: &str| {

@@ -280,6 +280,27 @@ pub fn write_text(path: &std::path::Path, text: &str) -> Result<(), GraspRunErro
         .map_err(|e| GraspRunError::Failed(format!("cannot write {}: {e}", path.display())))
 }
 
+/// The grip at its firmest over `cycles`, in words for a run's one-line summary: the
+/// largest true force where the simulator gives one, else (a rig) how far past the
+/// calibrated first touch the fingers closed (`touch`: its count and mm per count).
+#[must_use]
+pub fn grip_words(cycles: &[softtouch_grasp::Cycle], touch: (u8, f64)) -> String {
+    let peak = cycles
+        .iter()
+        .filter_map(|c| c.true_n)
+        .filter(|f| f.is_finite())
+        .reduce(f64::max);
+    let deepest = cycles.iter().map(|c| c.measured_position).max();
+    match (peak, deepest) {
+        (Some(p), _) => format!("peak true {p:.2} N"),
+        (None, Some(c)) => format!(
+            "closed {:.2} mm past the touch",
+            f64::from(c.saturating_sub(touch.0)) * touch.1
+        ),
+        (None, None) => "no cycle ran".to_owned(),
+    }
+}
+
 /// Seconds of a timestamp.
 #[must_use]
 pub fn t_s(t: softtouch_schemas::TimestampNs) -> f64 {
@@ -289,6 +310,61 @@ pub fn t_s(t: softtouch_schemas::TimestampNs) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn cycle(hold: usize, true_n: Option<f64>, measured_position: u8) -> softtouch_grasp::Cycle {
+        softtouch_grasp::Cycle {
+            t: softtouch_schemas::TimestampNs(0),
+            frame_sequence: 0,
+            hold,
+            target_n: 1.0,
+            estimate_n: Some(1.0),
+            true_n,
+            measured_position,
+            position_request: measured_position,
+            outcome: None,
+            object: softtouch_drivers::ObjectStatus::Moving,
+            finger_estimates_n: [Some(1.0), None],
+            single_finger: None,
+            torque_z_nm: None,
+            wrist_target_rad: None,
+        }
+    }
+
+    /// The grip in words: the truth's peak (a NaN skipped), else the deepest closing
+    /// past the touch (0 short of it), else that nothing ran.
+    #[test]
+    fn the_grip_is_the_true_peak_else_the_closing_past_the_touch() {
+        let mm = 0.2;
+        let sim = [
+            cycle(0, Some(1.5), 120),
+            cycle(0, Some(f64::NAN), 125),
+            cycle(0, Some(2.25), 110),
+        ];
+        assert_eq!(grip_words(&sim, (100, mm)), "peak true 2.25 N");
+        let rig = [
+            cycle(0, None, 104),
+            cycle(0, None, 112),
+            cycle(0, None, 108),
+        ];
+        assert_eq!(grip_words(&rig, (100, mm)), "closed 2.40 mm past the touch");
+        let short = [cycle(0, None, 90)];
+        assert_eq!(
+            grip_words(&short, (100, mm)),
+            "closed 0.00 mm past the touch"
+        );
+        assert_eq!(grip_words(&[], (100, mm)), "no cycle ran");
+        // follow's rows: per hold, the same two numbers.
+        let all = [
+            cycle(0, Some(1.0), 105),
+            cycle(1, None, 130),
+            cycle(1, None, 140),
+        ];
+        let rows = super::super::follow::follow_rows(&all, &[1.0, 2.0], 0.1, (100, mm));
+        assert_eq!(rows[0].peak_true_n, Some(1.0));
+        assert!((rows[0].past_touch_mm.expect("hold 0") - 1.0).abs() < 1e-12);
+        assert_eq!(rows[1].peak_true_n, None);
+        assert!((rows[1].past_touch_mm.expect("hold 1") - 8.0).abs() < 1e-12);
+    }
 
     #[test]
     fn an_unknown_object_is_named_with_the_scenes_objects_or_told_there_are_none() {

@@ -355,13 +355,15 @@ pub fn print_twist_table(rows: &[TwistRow], out: &mut dyn std::io::Write) -> std
 }
 
 /// A twist in one line, as the results table stores it: the true τz RMS from the
-/// first turn, without and with the wrist loop.
+/// first turn, without and with the wrist loop, and each run's grip at its firmest
+/// (`grips`: [`super::soft::grip_words`] per run, in the rows' order).
 #[must_use]
-pub fn twist_summary(rows: &[TwistRow]) -> String {
+pub fn twist_summary(rows: &[TwistRow], grips: &[String]) -> String {
     rows.iter()
-        .map(|r| {
+        .zip(grips)
+        .map(|(r, grip)| {
             format!(
-                "wrist loop {}: true τz RMS {:.3} N·mm from the first turn",
+                "wrist loop {}: true τz RMS {:.3} N·mm from the first turn, {grip}",
                 if r.wrist_loop { "on" } else { "off" },
                 r.true_tz_rms_nmm
             )

@@ -349,7 +349,7 @@ async fn run_on_rig(
             let row = &t.row;
             writeln!(
                 out,
-                "σ {} mm {} {} #{}: {}{} ({:.1} s)",
+                "σ {} mm {} {} #{}: {}{}{} ({:.1} s)",
                 row.sigma_m * 1000.0,
                 row.key.object,
                 row.key.mode,
@@ -358,6 +358,10 @@ async fn run_on_rig(
                 row.detail
                     .as_deref()
                     .map_or_else(String::new, |d| format!(": {d}")),
+                // The grip a rig can show: no true force, the closing past the touch.
+                row.past_touch_mm.map_or_else(String::new, |mm| format!(
+                    ", closed {mm:.2} mm past the touch"
+                )),
                 t.timing.wall_s
             )
             .map_err(written)

@@ -117,8 +117,8 @@ pub async fn run_trials(
         let gain = plan.gain_over_lambda * setup.calibration.lambda_max().max(0.05);
         let dither_n = setup.count_n;
         let tolerance_n = setup.tolerance_n;
-        let mut controller =
-            ControllerConfig::new(projection()?).with_squeeze(setup.calibration.squeeze()?);
+        let squeeze = setup.calibration.squeeze()?;
+        let mut controller = ControllerConfig::new(projection()?).with_squeeze(squeeze.clone());
         controller.stepper.gain_n_per_mm = gain;
         controller.stepper.tolerance_n = tolerance_n;
         let grasp_mm = plan
@@ -187,6 +187,7 @@ pub async fn run_trials(
             final_width_m: opening_mm(result.final_position) / 1000.0,
             peak_estimate_n: result.peak_estimate_n,
             peak_true_n: result.peak_true_n,
+            past_touch_mm: result.deepest_position().map(|c| squeeze.past_touch_mm(c)),
             success: result.verdict.success(),
             reason: result.verdict.reason().map(|r| r.as_str().to_owned()),
             detail: result.detail.clone(),

@@ -37,6 +37,11 @@ pub struct Cell {
     pub interval: [f64; 2],
     /// Failures per reason.
     pub reasons: BTreeMap<&'static str, u64>,
+    /// The largest true grip force of its trials, N (`None` on a rig: no truth).
+    pub peak_true_max_n: Option<f64>,
+    /// The deepest closing past the calibrated touch of its trials, mm (what a rig
+    /// shows of the grip; `None` where no trial kept it).
+    pub past_touch_max_mm: Option<f64>,
 }
 
 impl Cell {
@@ -44,6 +49,16 @@ impl Cell {
     #[must_use]
     pub fn rate(&self) -> Option<f64> {
         (self.trials > 0).then(|| self.held as f64 / self.trials as f64)
+    }
+    /// The grip at its firmest, as the tables print it: the largest true force where
+    /// the simulator knows it, else the deepest closing past the calibrated touch.
+    #[must_use]
+    pub fn grip_text(&self) -> String {
+        match (self.peak_true_max_n, self.past_touch_max_mm) {
+            (Some(n), _) => format!("{n:.2} N"),
+            (None, Some(mm)) => format!("{mm:.2} mm"),
+            (None, None) => "–".to_owned(),
+        }
     }
     /// The failures that happened, `reason n` joined by commas (`crush 2, slip 9`), as
     /// the terminal, the report and the sweep table print them.
@@ -108,6 +123,16 @@ pub fn summarise(
                             .count() as u64;
                         reasons.insert(r.as_str(), n);
                     }
+                    let counted = mine.iter().filter(|r| r.reason.as_deref() != Some(refused));
+                    let largest = |f: fn(&GraspTrialRow) -> Option<f64>| {
+                        counted
+                            .clone()
+                            .filter_map(|r| f(r))
+                            .filter(|v| v.is_finite())
+                            .reduce(f64::max)
+                    };
+                    let peak_true_max_n = largest(|r| r.peak_true_n);
+                    let past_touch_max_mm = largest(|r| r.past_touch_mm);
                     cells.push(Cell {
                         sigma_index: si,
                         sigma_mm: plan.sigmas_mm[si as usize],
@@ -119,6 +144,8 @@ pub fn summarise(
                         held,
                         interval: wilson_interval(held, trials, Z_95)?,
                         reasons,
+                        peak_true_max_n,
+                        past_touch_max_mm,
                     });
                 }
             }
@@ -382,13 +409,13 @@ pub fn csv_field(s: &str) -> String {
 /// The file cannot be written.
 pub fn write_summary_csv(path: &Path, cells: &[Cell]) -> Result<(), TrialsError> {
     let mut text = String::from(
-        "sigma_index,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,paper_rate,slip,crush,miss,timeout,device_fault,estimate_stalled,refused\n",
+        "sigma_index,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,paper_rate,slip,crush,miss,timeout,device_fault,estimate_stalled,refused,peak_true_max_n,past_touch_max_mm\n",
     );
     let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
     for c in cells {
         let r = |k: &str| c.reasons.get(k).copied().unwrap_or(0);
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             c.sigma_index,
             medium_name(c.medium),
             csv_field(c.object.as_deref().unwrap_or("all")),
@@ -406,6 +433,8 @@ pub fn write_summary_csv(path: &Path, cells: &[Cell]) -> Result<(), TrialsError>
             r("device_fault"),
             r("estimate_stalled"),
             r("refused"),
+            opt(c.peak_true_max_n),
+            opt(c.past_touch_max_mm),
         ));
     }
     write_file(path, &text)
@@ -417,12 +446,12 @@ pub fn write_summary_csv(path: &Path, cells: &[Cell]) -> Result<(), TrialsError>
 /// The file cannot be written.
 pub fn write_rows_csv(path: &Path, rows: &[GraspTrialRow]) -> Result<(), TrialsError> {
     let mut text = String::from(
-        "sigma_m,medium,object,mode,trial,dx_m,dy_m,dz_m,commanded_width_m,final_width_m,peak_estimate_n,peak_true_n,success,reason,confirmed_after_s,wall_s\n",
+        "sigma_m,medium,object,mode,trial,dx_m,dy_m,dz_m,commanded_width_m,final_width_m,peak_estimate_n,peak_true_n,past_touch_mm,success,reason,confirmed_after_s,wall_s\n",
     );
     let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
     for r in rows {
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             r.sigma_m,
             r.medium,
             csv_field(&r.key.object),
@@ -435,6 +464,7 @@ pub fn write_rows_csv(path: &Path, rows: &[GraspTrialRow]) -> Result<(), TrialsE
             r.final_width_m,
             opt(r.peak_estimate_n),
             opt(r.peak_true_n),
+            opt(r.past_touch_mm),
             u8::from(r.success),
             r.reason.as_deref().unwrap_or(""),
             opt(r.confirmed_after_s),
@@ -639,6 +669,7 @@ mod tests {
             final_width_m: 0.02,
             peak_estimate_n: None,
             peak_true_n: None,
+            past_touch_mm: None,
             success: reason.is_none(),
             reason: reason.map(str::to_owned),
             detail: None,
@@ -702,5 +733,52 @@ mod tests {
             );
         }
         assert_eq!(cells.iter().filter(|c| c.paper().is_some()).count(), 4);
+    }
+
+    /// A cell's grip is the firmest of its counted trials: the true force where the
+    /// simulator gave one, else the closing past the touch; a refused trial, a NaN and
+    /// a cell with no trial add nothing.
+    #[test]
+    fn a_cells_grip_is_its_firmest_counted_trial() {
+        let plan = TrialPlan {
+            objects: vec!["ball".into(), "cake".into()],
+            ..TrialPlan::default()
+        };
+        let with = |mut r: GraspTrialRow, true_n: Option<f64>, mm: Option<f64>| {
+            r.peak_true_n = true_n;
+            r.past_touch_mm = mm;
+            r
+        };
+        let rows = vec![
+            with(row("ball", "closed", 0, None), Some(1.6), Some(2.0)),
+            with(row("ball", "closed", 1, Some("slip")), Some(2.4), Some(3.0)),
+            with(row("ball", "closed", 2, None), Some(f64::NAN), Some(9.0)),
+            // Refused: nothing moved, whatever it says.
+            with(
+                row("ball", "closed", 3, Some("refused")),
+                Some(99.0),
+                Some(99.0),
+            ),
+            // A rig's trials: no truth.
+            with(row("cake", "closed", 0, None), None, Some(1.25)),
+            with(row("cake", "closed", 1, None), None, None),
+        ];
+        let cells = summarise(&plan, &[Medium::Air], &rows).expect("cells");
+        let cell = |object: Option<&str>, mode: Mode| {
+            cells
+                .iter()
+                .find(|c| c.object.as_deref() == object && c.mode == mode)
+                .expect("cell")
+        };
+        let ball = cell(Some("ball"), Mode::Closed);
+        assert_eq!(ball.peak_true_max_n, Some(2.4));
+        assert_eq!(ball.past_touch_max_mm, Some(9.0));
+        assert_eq!(ball.grip_text(), "2.40 N");
+        let cake = cell(Some("cake"), Mode::Closed);
+        assert_eq!(cake.peak_true_max_n, None);
+        assert_eq!(cake.grip_text(), "1.25 mm");
+        assert_eq!(cell(None, Mode::Closed).peak_true_max_n, Some(2.4));
+        let empty = cell(Some("ball"), Mode::Open);
+        assert_eq!((empty.trials, empty.grip_text().as_str()), (0, "–"));
     }
 }

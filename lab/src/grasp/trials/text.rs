@@ -171,7 +171,7 @@ pub fn print_table(cells: &[Cell], plan: &TrialPlan, out: &mut dyn Write) -> io:
                 .unwrap_or_default();
             writeln!(
                 out,
-                "\nσ = {} mm, {} (scene {}{swept}):\n{:<14} {:<7} {:>7} {:>6} {:>15} {:>7}  failures",
+                "\nσ = {} mm, {} (scene {}{swept}):\n{:<14} {:<7} {:>7} {:>6} {:>15} {:>7} {:>10}  failures",
                 plan.sigmas_mm[c.sigma_index as usize],
                 medium_name(c.medium),
                 c.scene_index,
@@ -180,12 +180,13 @@ pub fn print_table(cells: &[Cell], plan: &TrialPlan, out: &mut dyn Write) -> io:
                 "held/n",
                 "rate",
                 "Wilson 95%",
-                "paper"
+                "paper",
+                "grip max"
             )?;
         }
         writeln!(
             out,
-            "{:<14} {:<7} {:>7} {:>6} {:>15} {:>7}  {}",
+            "{:<14} {:<7} {:>7} {:>6} {:>15} {:>7} {:>10}  {}",
             c.object.as_deref().unwrap_or("all"),
             c.mode.as_str(),
             format!("{}/{}", c.held, c.trials),
@@ -196,9 +197,14 @@ pub fn print_table(cells: &[Cell], plan: &TrialPlan, out: &mut dyn Write) -> io:
                 100.0 * c.interval[1]
             ),
             pct(c.paper()),
+            c.grip_text(),
             c.failures_text()
         )?;
     }
+    writeln!(
+        out,
+        "\ngrip max: the largest true grip force of the trials (simulator), or on a rig the deepest closing past the calibrated touch"
+    )?;
     Ok(())
 }
 

@@ -97,10 +97,14 @@ fn follow_part(r: &StoredResult) -> Result<Markup, ReportError> {
             "true_ss_error_n",
             "true_rms_n",
         ];
-        let values = cols
+        let mut values = cols
             .iter()
             .map(|c| m.num(c))
             .collect::<Result<Vec<_>, _>>()?;
+        // The grip columns came later: a follow stored before them shows "–".
+        for c in ["peak_true_n", "past_touch_mm"] {
+            values.push(m.num(c).unwrap_or_else(|_| vec![f64::NAN; m.len()]));
+        }
         Ok((series, values, m.len()))
     };
     let (series, v, n) = match read() {
@@ -111,16 +115,18 @@ fn follow_part(r: &StoredResult) -> Result<Markup, ReportError> {
     Ok(html! {
         (prov(r))
         table {
-            tr { th { "target N" } th { "rise s" } th { "settle s" } th { "overshoot N" } th { "ss error N" } th { "RMS N" } th { "true ss error N" } th { "true RMS N" } }
+            tr { th { "target N" } th { "rise s" } th { "settle s" } th { "overshoot N" } th { "ss error N" } th { "RMS N" } th { "true ss error N" } th { "true RMS N" } th { "peak true N" } th { "past touch mm" } }
             @for i in 0..n {
                 tr {
                     td { (f(v[0][i], 2)) } td { (f(v[1][i], 3)) } td { (f(v[2][i], 3)) } td { (f(v[3][i], 3)) }
                     td data-k=(format!("follow-{id}-{i}-ss")) { (f(v[4][i], 3)) }
                     td { (f(v[5][i], 3)) } td { (f(v[6][i], 3)) } td { (f(v[7][i], 3)) }
+                    td data-k=(format!("follow-{id}-{i}-peak-true")) { (f(v[8][i], 2)) }
+                    td data-k=(format!("follow-{id}-{i}-past-touch")) { (f(v[9][i], 2)) }
                 }
             }
         }
-        p.note { "Settle: the first time after which the force stays within ±δ of the target; – never. Errors are the estimate's (the loop sees nothing else) and, where the simulator gives it, the true force's." }
+        p.note { "Settle: the first time after which the force stays within ±δ of the target; – never. Errors are the estimate's (the loop sees nothing else) and, where the simulator gives it, the true force's. Peak true: the largest true grip force of the hold (simulator); past touch: the deepest closing past the calibrated first touch, what a rig shows of the grip without a true force." }
         div.figs { (fig) }
     })
 }

@@ -74,7 +74,7 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
         }
         @for p in &g.problems { p.todo { "Could not read: " (p) } }
         table {
-            tr { th { "σ mm" } th.l { "medium" } th.l { "object" } th.l { "mode" } th { "held/n" } th { "rate" } th { "Wilson 95 %" } th { "paper" } th.l { "failures" } }
+            tr { th { "σ mm" } th.l { "medium" } th.l { "object" } th.l { "mode" } th { "held/n" } th { "rate" } th { "Wilson 95 %" } th { "paper" } th { "grip max" } th.l { "failures" } }
             @for c in &g.cells {
                 @let object = c.object.clone().unwrap_or_else(|| "all".into());
                 tr {
@@ -86,10 +86,12 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
                     td { (pct(c.rate())) }
                     td.nw { "[" (format!("{:.0}", 100.0 * c.interval[0])) ", " (format!("{:.0}", 100.0 * c.interval[1])) "] %" }
                     td { (pct(c.paper())) }
+                    td data-k=(format!("grasp-{id}-{}-{}-{}-{}-grip", c.sigma_index, c.scene_index, object, c.mode.as_str())) { (c.grip_text()) }
                     td.l { (c.failures_text()) }
                 }
             }
         }
+        p.note { "Grip max: the largest true grip force of the cell's trials where the simulator knows it (N); on a rig, where no true force is known, the deepest closing past the calibrated first touch (mm). Every closed loop is bounded by its calibration's squeeze (docs/grasping.md)." }
         @let pairs = g.plan.as_ref().map(|p| crate::grasp::trials::table::paired(p, &g.media, &g.rows)).unwrap_or_default();
         @if !pairs.is_empty() {
             p.note { "Open against closed loop on the same perturbations: trials pair by object and trial number, which draw the same grasp-point offset in both modes; McNemar's exact test (two-sided) asks whether the pairs that differ lean one way more than chance." }

@@ -504,6 +504,7 @@ async fn run_inner(
             final_width_m: 0.0,
             peak_estimate_n: None,
             peak_true_n: None,
+            past_touch_mm: None,
             success: false,
             reason: None,
             detail: None,
@@ -569,8 +570,8 @@ async fn run_inner(
         or_stop(stop, arm_to(devices, moves, &pose, moves.slow())).await??;
 
         let gain = plan.gain_over_lambda * setup.calibration.lambda_max().max(0.05);
-        let mut controller =
-            ControllerConfig::new(projection).with_squeeze(setup.calibration.squeeze()?);
+        let squeeze = setup.calibration.squeeze()?;
+        let mut controller = ControllerConfig::new(projection).with_squeeze(squeeze.clone());
         controller.stepper.gain_n_per_mm = gain;
         controller.stepper.tolerance_n = setup.tolerance_n;
         controller.stepper.stroke = stroke;
@@ -661,6 +662,7 @@ async fn run_inner(
         row.commanded_width_m = stroke_opening_m(&stroke, result.commanded_position);
         row.final_width_m = stroke_opening_m(&stroke, result.final_position);
         row.peak_estimate_n = result.peak_estimate_n;
+        row.past_touch_mm = result.deepest_position().map(|c| squeeze.past_touch_mm(c));
         row.success = verdict.success();
         row.reason = verdict.reason().map(|r| r.as_str().to_owned());
         row.detail = detail.clone();

@@ -270,8 +270,13 @@ pub async fn twist_without_then_with_wrist(
                 opt(cy.wrist_target_rad.map(f64::to_degrees))
             ));
         }
+        let squeeze = calibration.calibration.squeeze()?;
+        let grip = crate::grasp::soft::grip_words(
+            &run.cycles,
+            (squeeze.touch_count, squeeze.mm_per_count),
+        );
         summary.push(format!(
-            "wrist loop {on_off}: estimated τz RMS {rms:.3} N·mm"
+            "wrist loop {on_off}: estimated τz RMS {rms:.3} N·mm, {grip}"
         ));
         writeln!(
             out,
