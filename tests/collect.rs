@@ -388,10 +388,11 @@ fn a_tare_per_sample_removes_offset_and_drift_from_the_labels() {
                 &out_arg,
             ],
         ));
-        // The table row: settle window accepted force_rmse_N torque_rmse_Nmm ...
+        // The table row: settle settle_s mean_s window accepted force_rmse_N
+        // torque_rmse_Nmm ... (the fixed 0.3 s).
         let row = out
             .lines()
-            .find(|l| l.trim_start().starts_with("0.3 "))
+            .find(|l| l.split_whitespace().take(2).eq(["fixed", "0.3"]))
             .unwrap_or_else(|| panic!("no table row in:\n{out}"));
         let cols: Vec<&str> = row.split_whitespace().collect();
         let num = |i: usize| {
@@ -399,7 +400,7 @@ fn a_tare_per_sample_removes_offset_and_drift_from_the_labels() {
                 .and_then(|c| c.parse::<f64>().ok())
                 .unwrap_or_else(|| panic!("column {i} of `{row}`"))
         };
-        (num(3), num(4))
+        (num(5), num(6))
     };
     let (none_n, none_nmm) = rmse("none");
     let (tared_n, tared_nmm) = rmse("per-sample");

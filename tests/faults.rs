@@ -99,15 +99,26 @@ fn toward_rod(base_from_rod: &ArmPose, home: &ArmPose, target: &ArmPose) -> bool
 #[async_trait]
 impl Arm for ProbeArm {
     async fn move_to(&mut self, target: &ArmPose, speed_m_s: f64) -> Result<ArmState, DeviceError> {
-        let approach = toward_rod(&self.base_from_rod, &self.home, target);
+        // An approach moves toward the rod, nearer it than the retreat plane; a leave
+        // that stops at the stand-off on its way out is none.
+        let inward = |from: &ArmPose, to: &ArmPose| {
+            let x =
+                |p: &ArmPose| softtouch_schemas::ContactPose::from_arm(&self.base_from_rod, p).x_m;
+            toward_rod(&self.base_from_rod, &self.home, to) && x(to) > x(from) + 1e-6
+        };
         let (n, starts) = {
             let mut p = probe(&self.probe);
-            // An approach is one or two moves (its slow end); it starts from its
-            // retreat point.
-            let starts = approach
-                && p.moves
-                    .last()
-                    .is_none_or(|m| !toward_rod(&self.base_from_rod, &self.home, m));
+            let k = p.moves.len();
+            let here = p.moves.last().copied().unwrap_or(self.home);
+            let approach = inward(&here, target);
+            // An approach is two or three moves (free space, contact, its slow end); it
+            // starts from its retreat point.
+            let was_approach = match k {
+                0 => false,
+                1 => inward(&self.home, &p.moves[0]),
+                _ => inward(&p.moves[k - 2], &p.moves[k - 1]),
+            };
+            let starts = approach && !was_approach;
             p.moves.push(*target);
             if let Some(q) = p.joints.as_mut() {
                 q[2] += 0.002;

@@ -60,6 +60,18 @@ pub struct ContactParams {
     pub relaxation_time_s: f64,
 }
 
+impl ContactParams {
+    /// The `x` of the finger's first touch of a rod, m: where the penetration
+    /// (`penetration_at_zero_m + penetration_per_m · x`) reaches zero. The law holds
+    /// for every rod section and θ, so one stand-off serves every pose. `None` where
+    /// the penetration does not grow with `x`.
+    #[must_use]
+    pub fn first_touch_x_m(&self) -> Option<f64> {
+        let x = -self.penetration_at_zero_m / self.penetration_per_m;
+        (self.penetration_per_m > 0.0 && x.is_finite()).then_some(x)
+    }
+}
+
 impl Default for ContactParams {
     fn default() -> Self {
         Self {

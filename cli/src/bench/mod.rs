@@ -12,7 +12,7 @@ use crate::{Failure, io_failure};
 use anyhow::anyhow;
 use clap::Args;
 use clap::Subcommand;
-use softtouch_collector::collect::bench::{Breakdown, SweepPoint, sweep_point};
+use softtouch_collector::collect::bench::{Breakdown, SweepPoint, sweep, sweep_point};
 use softtouch_collector::collect::bench_out::{
     db_size_line, sweep_table, time_ingest, write_sweep_files,
 };
@@ -57,8 +57,9 @@ SOFTTOUCH_CONV=burn trains with burn's own convolutions and batch norm instead o
 softtouch's kernels, to compare the two.")]
     Train(BenchTrainArgs),
     /// Accuracy costs time: sweep settle time and force/torque window on the simulated
-    /// scene (whose true wrench is known); print label error against samples per hour,
-    /// and write a CSV and PNG plots. Also reports where a sample's time goes.
+    /// scene (whose true wrench is known), each fixed settle and the settle ended by the
+    /// signal (bounded by the rig's settle_s); print label error against samples per
+    /// hour, and write a CSV and PNG plots. Also reports where a sample's time goes.
     #[command(after_help = "Examples:
   softtouch bench collection
   softtouch bench collection --samples 100 --settle 0,0.1,0.3 --window 0.01,0.05 --out bench-out
@@ -178,20 +179,17 @@ pub async fn run(
             )
             .await
             .map_err(|e| Failure::Runtime(e.into()))?;
-            let mut points = Vec::new();
-            for &s in &settle {
-                for &w in &window {
-                    let (p, _) =
-                        sweep_point(&store, &resolved.rig, &resolved.scene, seed, s, w, samples)
-                            .await
-                            .map_err(|e| Failure::Runtime(e.into()))?;
-                    eprintln!(
-                        "settle {s} s, window {w} s: {:.4} N, {:.2} N·mm, {:.0} samples/h",
-                        p.force_rmse_n, p.torque_rmse_nmm, p.samples_per_hour
-                    );
-                    points.push(p);
-                }
-            }
+            let points = sweep(
+                &store,
+                &resolved.rig,
+                &resolved.scene,
+                seed,
+                (&settle, &window),
+                samples,
+                |p| eprintln!("{}", p.line()),
+            )
+            .await
+            .map_err(|e| Failure::Runtime(e.into()))?;
             store.close();
             report_collection(&dir, &points, &breakdown, default_point, out)
         }

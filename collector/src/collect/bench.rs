@@ -157,8 +157,13 @@ impl Progress for Recorder {
 /// One point of the sweep.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SweepPoint {
-    /// Settle time, s.
+    /// Settle time, s (with a signal-ended settle, its bound).
     pub settle_s: f64,
+    /// What ended the settle (the rig's `procedure.settle_end`).
+    pub settle_end: softtouch_schemas::rig::SettleEnd,
+    /// The settle as it ran, mean per sample, s (with a fixed settle, `settle_s` and
+    /// the read of the arm's pose).
+    pub mean_settle_s: f64,
     /// Window length, s.
     pub window_s: f64,
     /// Samples taken.
@@ -173,6 +178,23 @@ pub struct SweepPoint {
     pub samples_per_hour: f64,
     /// Wall time of the point, s.
     pub wall_s: f64,
+}
+
+impl SweepPoint {
+    /// The point in one line, as the sweep prints it while it runs.
+    #[must_use]
+    pub fn line(&self) -> String {
+        format!(
+            "settle {} {} s (mean {:.3} s), window {} s: {:.4} N, {:.2} N·mm, {:.0} samples/h",
+            self.settle_end.as_str(),
+            self.settle_s,
+            self.mean_settle_s,
+            self.window_s,
+            self.force_rmse_n,
+            self.torque_rmse_nmm,
+            self.samples_per_hour
+        )
+    }
 }
 
 /// Where a sample's time went.
@@ -228,6 +250,47 @@ impl RodChanger for NoRods {
     }
 }
 
+/// The sweep: each fixed settle time at each window, then the settle ended by the
+/// signal (bounded by the rig's `settle_s`) at each window, `samples` samples a point
+/// ([`sweep_point`]); `on_point` sees each point as it is measured. What the time a
+/// signal-ended settle saves costs in accuracy.
+///
+/// # Errors
+/// As [`sweep_point`].
+pub async fn sweep(
+    store: &SyncStore,
+    rig: &RigConfig,
+    scene: &SceneSpec,
+    seed: u64,
+    (settle_s, window_s): (&[f64], &[f64]),
+    samples: u64,
+    mut on_point: impl FnMut(&SweepPoint),
+) -> Result<Vec<SweepPoint>, BenchError> {
+    use softtouch_schemas::rig::SettleEnd;
+    let with = |end: SettleEnd| {
+        let mut r = rig.clone();
+        r.procedure.settle_end = end;
+        r
+    };
+    let (fixed, signal) = (with(SettleEnd::Fixed), with(SettleEnd::Signal));
+    let mut cases: Vec<(&RigConfig, f64, f64)> = Vec::new();
+    for &s in settle_s {
+        cases.extend(window_s.iter().map(|&w| (&fixed, s, w)));
+    }
+    cases.extend(
+        window_s
+            .iter()
+            .map(|&w| (&signal, rig.procedure.settle_s, w)),
+    );
+    let mut points = Vec::new();
+    for (rig, s, w) in cases {
+        let (p, _) = sweep_point(store, rig, scene, seed, s, w, samples).await?;
+        on_point(&p);
+        points.push(p);
+    }
+    Ok(points)
+}
+
 /// Run `samples` samples with `settle_s` and `window_s` on the simulated rig (virtual
 /// time: the runtime must be paused), and measure label error against the truth.
 pub async fn sweep_point(
@@ -241,6 +304,7 @@ pub async fn sweep_point(
 ) -> Result<(SweepPoint, Breakdown), BenchError> {
     let mut rig = rig.clone();
     rig.procedure.settle_s = settle_s;
+    let plan_settle_end = rig.procedure.settle_end;
     rig.procedure.ft_window_s = window_s;
     let rate_hz = match rig.force_sensor {
         softtouch_schemas::ForceSensorDevice::Sim { rate_hz } => rate_hz,
@@ -263,8 +327,9 @@ pub async fn sweep_point(
         rod_schedule: vec![rod.clone()],
         rod_block: samples.max(1),
         scene_name: format!(
-            "{} (bench settle {settle_s} s, window {window_s} s)",
-            scene.name
+            "{} (bench settle {} {settle_s} s, window {window_s} s)",
+            scene.name,
+            plan_settle_end.as_str()
         ),
         medium: scene.medium,
         rig_toml: to_toml(&rig),
@@ -350,6 +415,12 @@ pub async fn sweep_point(
     };
     let point = SweepPoint {
         settle_s,
+        settle_end: plan_settle_end,
+        mean_settle_s: if counters.phases.samples > 0 {
+            counters.phases.settle_ns as f64 * 1e-9 / counters.phases.samples as f64
+        } else {
+            f64::NAN
+        },
         window_s,
         samples,
         accepted: counters.ok,

@@ -29,12 +29,14 @@ pub fn sweep_table(points: &[SweepPoint], b: &Breakdown, default_point: (f64, f6
         b.write_ms
     );
     table.push_str(
-        "settle_s  window_s  accepted  force_rmse_N  torque_rmse_Nmm  samples_per_hour\n",
+        "settle    settle_s  mean_s  window_s  accepted  force_rmse_N  torque_rmse_Nmm  samples_per_hour\n",
     );
     for p in points {
         table.push_str(&format!(
-            "{:>8}  {:>8}  {:>4}/{:<3}  {:>12.5}  {:>15.3}  {:>16.0}\n",
+            "{:<8}  {:>8}  {:>6.3}  {:>8}  {:>4}/{:<3}  {:>12.5}  {:>15.3}  {:>16.0}\n",
+            p.settle_end.as_str(),
             p.settle_s,
+            p.mean_settle_s,
             p.window_s,
             p.accepted,
             p.samples,
@@ -53,12 +55,14 @@ pub fn sweep_table(points: &[SweepPoint], b: &Breakdown, default_point: (f64, f6
 /// [`BenchError::Output`] naming the file that could not be written or drawn.
 pub fn write_sweep_files(dir: &Path, points: &[SweepPoint]) -> Result<Vec<PathBuf>, BenchError> {
     let mut csv = String::from(
-        "settle_s,window_s,samples,accepted,force_rmse_n,torque_rmse_nmm,samples_per_hour,wall_s\n",
+        "settle_end,settle_s,mean_settle_s,window_s,samples,accepted,force_rmse_n,torque_rmse_nmm,samples_per_hour,wall_s\n",
     );
     for p in points {
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{}\n",
+            p.settle_end.as_str(),
             p.settle_s,
+            p.mean_settle_s,
             p.window_s,
             p.samples,
             p.accepted,
@@ -74,6 +78,7 @@ pub fn write_sweep_files(dir: &Path, points: &[SweepPoint]) -> Result<Vec<PathBu
     let mut windows: Vec<f64> = points.iter().map(|p| p.window_s).collect();
     windows.sort_by(f64::total_cmp);
     windows.dedup();
+    let fixed = |p: &&SweepPoint| p.settle_end == softtouch_schemas::rig::SettleEnd::Fixed;
     let mut written = vec![csv_path];
     for (name, unit, pick) in [
         (
@@ -83,20 +88,34 @@ pub fn write_sweep_files(dir: &Path, points: &[SweepPoint]) -> Result<Vec<PathBu
         ),
         ("torque", "N·mm", |p: &SweepPoint| p.torque_rmse_nmm),
     ] {
-        let series: Vec<Series> = windows
+        let mut series: Vec<Series> = windows
             .iter()
             .map(|w| Series {
                 label: format!("window {w} s"),
                 points: points
                     .iter()
+                    .filter(fixed)
                     .filter(|p| p.window_s.total_cmp(w).is_eq())
                     .map(|p| (p.samples_per_hour, pick(p)))
                     .collect(),
                 style: SeriesStyle::LinePoints,
             })
             .collect();
+        // The signal-ended settles: one point per window, apart from the fixed lines.
+        let signal: Vec<(f64, f64)> = points
+            .iter()
+            .filter(|p| !fixed(p))
+            .map(|p| (p.samples_per_hour, pick(p)))
+            .collect();
+        if !signal.is_empty() {
+            series.push(Series {
+                label: "settle ended by the signal".into(),
+                points: signal,
+                style: SeriesStyle::Points,
+            });
+        }
         let path = dir.join(format!("collection-sweep-{name}.png"));
-        let title = format!("{name} label error vs throughput (points: settle times)");
+        let title = format!("{name} label error vs throughput (lines: fixed settle times)");
         let y = format!("{name} RMS error [{unit}]");
         xy_chart(
             &path,

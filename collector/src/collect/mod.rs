@@ -58,6 +58,7 @@ mod procedure;
 pub mod rods;
 pub mod route;
 pub mod sampler;
+pub mod settle;
 pub mod window;
 
 pub use devices::{CollectDevices, build_devices, build_devices_at};

@@ -15,6 +15,9 @@ pub struct PhaseTimes {
     pub travel_ns: u64,
     /// Zeroing the force/torque sensor (`tare = "per-sample"`).
     pub tare_ns: u64,
+    /// Free space crossed at `travel_speed_m_s` up to the stand-off short of the
+    /// finger's first touch (`procedure.standoff_m`).
+    pub free_approach_ns: u64,
     /// The approach at `approach_speed_m_s`.
     pub approach_ns: u64,
     /// The approach's last millimetres at `slow_approach_speed_m_s`.
@@ -31,9 +34,10 @@ pub struct PhaseTimes {
 }
 
 /// The phases in the order a sample goes through them, with their names.
-const PHASES: [&str; 7] = [
+const PHASES: [&str; 8] = [
     "travel",
     "tare",
+    "free approach",
     "approach",
     "slow approach",
     "settle",
@@ -42,10 +46,11 @@ const PHASES: [&str; 7] = [
 ];
 
 impl PhaseTimes {
-    fn phase_ns(&self) -> [u64; 7] {
+    fn phase_ns(&self) -> [u64; 8] {
         [
             self.travel_ns,
             self.tare_ns,
+            self.free_approach_ns,
             self.approach_ns,
             self.slow_approach_ns,
             self.settle_ns,

@@ -6,7 +6,7 @@ use super::{CollectError, Job, recovery_backoff};
 use crate::store::{EventKind, EventLevel};
 use softtouch_drivers::{Clock as _, DeviceError, Frame};
 use softtouch_drivers::{ForceGuard, GuardTrip};
-use softtouch_schemas::rig::{Tare, VisitOrder};
+use softtouch_schemas::rig::{SettleEnd, Tare, VisitOrder};
 use softtouch_schemas::sample::RejectReason;
 use softtouch_schemas::{
     ArmPose, ContactPose, DurationNs, FtReading, Sample, SampleStatus, TimestampNs, Wrench,
@@ -512,22 +512,36 @@ impl Job<'_> {
         // From here the finger may touch the rod: whatever ends the attempt, the arm
         // leaves along the approach axis first (`leave_rod`).
         self.near_rod = Some(pose);
-        let from = clear;
-        let legs = approach_legs(&from, &target, p);
+        // Free space first, at the travel speed, up to the stand-off short of the
+        // finger's first touch; the contact is entered at the approach speed.
+        let mut legs = Vec::with_capacity(3);
+        let from = match standoff_x_m(clear_x_m(w), &pose, p) {
+            Some(x_m) => {
+                let standoff =
+                    ArmPose::from_contact(&w.base_from_rod, &ContactPose { x_m, ..pose });
+                legs.push((standoff, p.travel_speed_m_s));
+                standoff
+            }
+            None => clear,
+        };
+        let free = legs.len();
+        legs.extend(approach_legs(&from, &target, p));
         let took = self.guarded(&legs, &limits).await?;
         // The last leg is the slow one unless the slow end is off.
         let slow_last = p.slow_approach_m > 0.0;
         for (k, ns) in took.iter().enumerate() {
-            if slow_last && k + 1 == took.len() {
+            if k < free {
+                self.counters.phases.free_approach_ns += ns;
+            } else if slow_last && k + 1 == took.len() {
                 self.counters.phases.slow_approach_ns += ns;
             } else {
                 self.counters.phases.approach_ns += ns;
             }
         }
 
-        // settle
+        // settle: until the signal has settled (at most settle_s), or settle_s
         let t0 = self.clock.now();
-        tokio::time::sleep(Duration::from_secs_f64(p.settle_s)).await;
+        self.settle().await;
         if self.forced() {
             return Err(AttemptError::Interrupted);
         }
@@ -586,6 +600,60 @@ impl Job<'_> {
     }
 }
 
+impl Job<'_> {
+    /// Wait before recording: with `settle_end = "signal"`, until the signal has
+    /// settled ([`super::settle::settled`], its noise read from the same readings) or
+    /// `settle_s` has passed; otherwise `settle_s`.
+    async fn settle(&mut self) {
+        let p = &self.plan.rig.procedure;
+        let bound = Duration::from_secs_f64(p.settle_s);
+        if p.settle_end == SettleEnd::Fixed {
+            tokio::time::sleep(bound).await;
+            return;
+        }
+        let w_ns = DurationNs::from_secs_f64(p.ft_window_s);
+        let started = tokio::time::Instant::now();
+        let poll = Duration::from_secs_f64(super::settle::SETTLE_POLL_S);
+        let two_windows = Duration::from_nanos(2 * w_ns.0);
+        loop {
+            let waited = started.elapsed();
+            if waited >= bound {
+                return;
+            }
+            if waited >= two_windows {
+                let now = self.clock.now();
+                let mid = now.saturating_sub(w_ns);
+                let earlier = self.ft.take_window(mid.saturating_sub(w_ns), mid);
+                let later = self.ft.take_window(mid, now);
+                if super::settle::settled(&earlier, &later) {
+                    return;
+                }
+            }
+            tokio::time::sleep(poll.min(bound - waited)).await;
+        }
+    }
+}
+
+/// The retreat plane's `x`, m: every approach starts there (home's `x`).
+fn clear_x_m(w: &softtouch_schemas::rig::WorkspaceBounds) -> f64 {
+    w.home.x_m
+}
+
+/// Where an approach to `pose` from the retreat plane at `clear_x_m` stops crossing
+/// free space fast: `standoff_m` short of the finger's first touch (the finger model's
+/// [`softtouch_sim::ContactParams::first_touch_x_m`], the same for every rod and θ).
+/// `None` (the whole approach at the approach speed) where that point is not between
+/// the retreat plane and the pose, or a setting is not finite.
+pub(super) fn standoff_x_m(
+    clear_x_m: f64,
+    pose: &ContactPose,
+    p: &softtouch_schemas::rig::Procedure,
+) -> Option<f64> {
+    let touch = softtouch_sim::ContactParams::default().first_touch_x_m()?;
+    let x = touch - p.standoff_m;
+    (x.is_finite() && x > clear_x_m && x < pose.x_m).then_some(x)
+}
+
 /// The moves of an approach from `from` to `target`: the straight line, its last
 /// `slow_approach_m` at the slow speed (one slow move when the whole path is shorter;
 /// one move at the approach speed when the slow end is off).
@@ -612,6 +680,35 @@ fn approach_legs(
 #[cfg(test)]
 mod approach_tests {
     use super::*;
+
+    /// Free space is crossed fast up to the stand-off short of the first touch, only
+    /// where that point lies between the retreat plane and the pose.
+    #[test]
+    fn free_space_ends_a_stand_off_short_of_the_first_touch() {
+        let mut p = softtouch_schemas::defaults::rig().procedure;
+        let touch = softtouch_sim::ContactParams::default()
+            .first_touch_x_m()
+            .expect("the model's first touch");
+        // The default finger first touches 3.57 mm short of x = 0.
+        assert!((touch + 0.0003 / 0.084).abs() < 1e-12, "{touch}");
+        let pose = |x_m: f64| ContactPose {
+            x_m,
+            z_m: 0.01,
+            theta_rad: 0.3,
+        };
+        let x = standoff_x_m(-0.03, &pose(0.02), &p).expect("a free leg");
+        assert!((x - (touch - 0.005)).abs() < 1e-12);
+        // A pose short of the stand-off, or a retreat plane past it: no free leg.
+        assert_eq!(standoff_x_m(-0.03, &pose(touch - 0.006), &p), None);
+        assert_eq!(standoff_x_m(touch - 0.004, &pose(0.02), &p), None);
+        // A stand-off beyond the retreat plane: none either; NaN never makes a pose.
+        p.standoff_m = 0.05;
+        assert_eq!(standoff_x_m(-0.03, &pose(0.02), &p), None);
+        p.standoff_m = f64::NAN;
+        assert_eq!(standoff_x_m(-0.03, &pose(0.02), &p), None);
+        p.standoff_m = 0.0;
+        assert!(standoff_x_m(-0.03, &pose(0.02), &p).is_some());
+    }
 
     #[test]
     #[allow(clippy::float_cmp)] // the speeds are copied, not computed

@@ -332,8 +332,15 @@ pub struct Procedure {
     /// [`DEFAULT_SLOW_APPROACH_SPEED_M_S`].
     #[serde(default = "default_slow_approach_speed_m_s")]
     pub slow_approach_speed_m_s: f64,
-    /// Wait after reaching the pose before recording, s.
+    /// Wait after reaching the pose before recording, s: with `settle_end = "signal"`
+    /// the longest wait, with `"fixed"` the wait.
     pub settle_s: f64,
+    /// What ends the settle: `signal` (default: the force/torque signal has settled,
+    /// its drift between the last two `ft_window_s` within half the noise the sensor
+    /// showed at its tare, at most `settle_s`) or `fixed` (always `settle_s`). Without
+    /// a tare (`tare = "none"`) no noise is known and the settle is fixed.
+    #[serde(default)]
+    pub settle_end: SettleEnd,
     /// Length of the force/torque window around the frame's time, s.
     pub ft_window_s: f64,
     /// Fewest readings a window may hold and still be a label.
@@ -372,6 +379,37 @@ pub struct Procedure {
     /// of its limit. Absent: [`DEFAULT_TRAVEL_SPEED_M_S`].
     #[serde(default = "default_travel_speed_m_s")]
     pub travel_speed_m_s: f64,
+    /// How far short of the finger's first touch of the rod an approach stops crossing
+    /// free space at `travel_speed_m_s`, m (guarded as every move is); from there it
+    /// goes on at `approach_speed_m_s`, its last `slow_approach_m` slowly. The first
+    /// touch is the finger model's (`softtouch_sim::first_touch_x_m`). Absent:
+    /// [`DEFAULT_STANDOFF_M`]; a stand-off past the retreat point leaves the whole
+    /// approach at the approach speed.
+    #[serde(default = "default_standoff_m")]
+    pub standoff_m: f64,
+}
+
+/// What ends the settle before a sample is recorded ([`Procedure::settle_end`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SettleEnd {
+    /// The signal: settled once its drift is within the sensor's noise (at most
+    /// `settle_s`).
+    #[default]
+    Signal,
+    /// Always `settle_s`.
+    Fixed,
+}
+
+impl SettleEnd {
+    /// Name as in the config.
+    #[must_use]
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            Self::Signal => "signal",
+            Self::Fixed => "fixed",
+        }
+    }
 }
 
 /// The order a block's samples are taken in ([`Procedure::visit_order`]).
@@ -525,6 +563,13 @@ const fn default_slow_approach_speed_m_s() -> f64 {
 /// default motion margin; the moves between neighbouring poses are short, so their
 /// acceleration, not this speed, sets how long they take.
 pub const DEFAULT_TRAVEL_SPEED_M_S: f64 = 0.5;
+
+/// Default [`Procedure::standoff_m`], m.
+pub const DEFAULT_STANDOFF_M: f64 = 0.005;
+
+const fn default_standoff_m() -> f64 {
+    DEFAULT_STANDOFF_M
+}
 
 const fn default_travel_speed_m_s() -> f64 {
     DEFAULT_TRAVEL_SPEED_M_S

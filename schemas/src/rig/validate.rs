@@ -283,6 +283,7 @@ impl Validate for RigConfig {
             FRANKA_MAX_SPEED_M_S,
             "m/s",
         );
+        c.within("procedure.standoff_m", p.standoff_m, 0.0, 0.1, "m");
         c.within("procedure.settle_s", p.settle_s, 0.0, MAX_DURATION_S, "s");
         c.within(
             "procedure.ft_window_s",
