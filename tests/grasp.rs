@@ -481,6 +481,10 @@ fn stored_results_match_the_exports_and_the_report(d: &std::path::Path) {
             "wrist loop {state}: true τz RMS {rms:.3} N·mm from the first turn, peak true "
         );
         assert!(summary.contains(&said), "`{said}` in:\n{summary}");
+        assert!(
+            cell("twist-3-summary").contains(&said),
+            "the report's twist summary"
+        );
     }
     assert!(
         html.html().contains("τz RMS from the first turn on"),

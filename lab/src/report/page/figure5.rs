@@ -235,6 +235,9 @@ fn twist_part(r: &StoredResult) -> Result<Markup, ReportError> {
     };
     Ok(html! {
         (prov(r))
+        // The stored summary says each run's grip at its firmest (peak true force, or
+        // on a rig the closing past the touch).
+        p data-k=(format!("twist-{id}-summary")) { (r.row.summary) }
         p { "τz RMS " (scored) "." }
         table {
             tr { th.l { "wrist loop" } th { "cycles" } th { "estimated τz RMS N·mm" } th { "true τz RMS N·mm" } }
