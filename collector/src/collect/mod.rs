@@ -3,13 +3,18 @@
 //!
 //! One sample is a small state machine, `approach → settle → record → retreat`:
 //! - **approach**: the target is checked against the workspace before it reaches the
-//!   arm; the move races a force guard (contact force or torque over the rig's limit
-//!   stops the arm and aborts the attempt);
-//! - **settle**: wait the configured time;
+//!   arm; free space is crossed at the travel speed up to `standoff_m` short of the
+//!   finger's first touch, then the approach speed, the last millimetres slow; every
+//!   move races a force guard (contact force or torque over the rig's limit stops the
+//!   arm and aborts the attempt);
+//! - **settle**: until the force/torque signal has settled (its drift within the
+//!   sensor's noise, [`settle`]), at most `settle_s`; or `settle_s` (`settle_end =
+//!   "fixed"`);
 //! - **record**: ask the camera for the first frame after settling, and take the
 //!   force/torque readings in a window around that frame's time;
 //! - **retreat**: straight back along the approach axis (the rod frame's x, z and θ
-//!   kept) to the sample's retreat point (home's x), guarded; only then does anything
+//!   kept), at the retreat speed to the stand-off and at the travel speed on to the
+//!   sample's retreat point (home's x), guarded; only then does anything
 //!   turn or travel: on to the next sample of the [`route`], or home between rods and
 //!   after an error (with `visit_order = "index"`, home after every sample). Every
 //!   approach starts from its retreat point, so it runs along the approach axis alone.
@@ -42,6 +47,7 @@
 //! - [`devices`]: the devices of a collection, built from the rig config;
 //! - [`sampler`]: contact poses and the rod schedule;
 //! - [`window`]: the force/torque stream and a sample's label window;
+//! - [`settle`]: when the signal has settled (the settle ended by the signal);
 //! - [`route`]: the order a rod's block is visited in, and the retreat points;
 //! - [`phases`]: where a sample's time goes;
 //! - [`rods`]: changing the rod (an operator, or the simulator);
