@@ -621,7 +621,18 @@ impl Job<'_> {
                 return;
             }
             if waited >= two_windows {
+                // Every reading up to now first (the reader task may not have run yet
+                // at this instant): the decision is the stream's, not the scheduler's,
+                // and a resumed run settles as the uninterrupted one did.
                 let now = self.clock.now();
+                let deadline =
+                    tokio::time::Instant::now() + Duration::from_secs_f64(p.frame_timeout_s);
+                if !matches!(self.ft.wait_until(now, deadline).await, Ok(true)) {
+                    // A stalled or failing stream: the record step says so; the
+                    // settle waits out its bound as a fixed one would.
+                    tokio::time::sleep(bound.saturating_sub(started.elapsed())).await;
+                    return;
+                }
                 let mid = now.saturating_sub(w_ns);
                 let earlier = self.ft.take_window(mid.saturating_sub(w_ns), mid);
                 let later = self.ft.take_window(mid, now);
