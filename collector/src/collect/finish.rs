@@ -226,20 +226,12 @@ impl Job<'_> {
             }
         };
         let clear = self.retreat_pose(&from);
-        let p = &self.plan.rig.procedure;
-        let (slow, fast) = (p.retreat_speed_m_s, p.travel_speed_m_s);
-        // Out of the contact at the retreat speed, to the approach's stand-off; the
-        // free space beyond it at the travel speed. Both along the approach axis.
-        if let Some(x_m) = super::procedure::standoff_x_m(w.home.x_m, &from, p) {
-            let standoff = ArmPose::from_contact(&w.base_from_rod, &ContactPose { x_m, ..from });
-            self.guarded_move(&standoff, slow, index, "leaving the rod")
-                .await?;
-            self.guarded_move(&clear, fast, index, "leaving the rod")
-                .await?;
-        } else {
-            self.guarded_move(&clear, slow, index, "leaving the rod")
-                .await?;
-        }
+        // One move at the retreat speed: on an FR3 (franka-sim, side by side) a stop at
+        // the approach's stand-off on the way out cost more than the faster free leg
+        // saved (retreat 0.75 s to 0.91 s a sample).
+        let speed = self.plan.rig.procedure.retreat_speed_m_s;
+        self.guarded_move(&clear, speed, index, "leaving the rod")
+            .await?;
         self.near_rod = None;
         Ok(())
     }

@@ -13,10 +13,10 @@
 //! - **record**: ask the camera for the first frame after settling, and take the
 //!   force/torque readings in a window around that frame's time;
 //! - **retreat**: straight back along the approach axis (the rod frame's x, z and θ
-//!   kept), at the retreat speed to the stand-off and at the travel speed on to the
-//!   sample's retreat point (home's x), guarded; only then does anything
-//!   turn or travel: on to the next sample of the [`route`], or home between rods and
-//!   after an error (with `visit_order = "index"`, home after every sample). Every
+//!   kept) at the retreat speed to the sample's retreat point (home's x), guarded;
+//!   only then does anything turn or travel: on to the next sample of the [`route`],
+//!   or home between rods and after an error (with `visit_order = "index"`, home
+//!   after every sample). Every
 //!   approach starts from its retreat point, so it runs along the approach axis alone.
 //!   From wherever the finger may touch the rod (a guard trip, a fault, a stop, the end
 //!   of a run, a start after a crash) the arm leaves the same way; a force that rises

@@ -655,7 +655,7 @@ fn clear_x_m(w: &softtouch_schemas::rig::WorkspaceBounds) -> f64 {
 /// [`softtouch_sim::ContactParams::first_touch_x_m`], the same for every rod and θ).
 /// `None` (the whole approach at the approach speed) where that point is not between
 /// the retreat plane and the pose, or a setting is not finite.
-pub(super) fn standoff_x_m(
+fn standoff_x_m(
     clear_x_m: f64,
     pose: &ContactPose,
     p: &softtouch_schemas::rig::Procedure,
