@@ -385,6 +385,32 @@ const BROKEN_RATE_SCALE: f64 = 3.0;
 
 // -------------------------------------------------------------------- rig check
 
+/// A one-worker runtime for the servers a test runs beside the CLI.
+fn server_runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .expect("runtime")
+}
+
+/// The project's Hand-E Modbus server (slave 9) on `port`, the far end of a pty pair,
+/// backed by the simulated gripper; spawned on the runtime it is called within. The
+/// handle shares the server's state (its request count).
+fn serve_hand_e(port: &str) -> softtouch_drivers::hande::HandEService<softtouch_sim::SimGripper> {
+    use softtouch_drivers::hande::{self, HandEService};
+    let rig = softtouch_schemas::defaults::rig();
+    let scene = softtouch_schemas::defaults::scene();
+    let gripper_rig = softtouch_sim::SimRig::new(&rig, &scene, 2, TokioClock::new()).expect("sim");
+    let service = HandEService::new(gripper_rig.gripper, 9);
+    tokio::spawn(hande::serve_serial(
+        service.clone(),
+        hande::open_port(port).expect("open pty b"),
+        std::future::pending(),
+    ));
+    service
+}
+
 /// `rig check` with every row real but the camera: the Franka on franka-sim, a Net F/T
 /// server (the simulated sensor behind the real protocol), the Hand-E's Modbus server
 /// over a pty pair. Every row passes, the arm's with the share of real-time commands
@@ -392,17 +418,12 @@ const BROKEN_RATE_SCALE: f64 = 3.0;
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn rig_check_passes_every_row_with_the_arm_on_franka_sim() {
-    use softtouch_drivers::hande::{self, HandEService};
     use softtouch_drivers::netft::{NetFtServer, ServerConfig};
     let py = python();
     let pair = fcisim::pty();
     let dir = tempdir();
     let sim = FrankaSim::start(&py, dir.path());
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(1)
-        .enable_all()
-        .build()
-        .expect("runtime");
+    let rt = server_runtime();
     let rdt = rt.block_on(async {
         let clock = TokioClock::new();
         let rig = softtouch_schemas::defaults::rig();
@@ -415,13 +436,7 @@ fn rig_check_passes_every_row_with_the_arm_on_franka_sim() {
             .expect("bind");
         let rdt = server.rdt_addr().expect("addr");
         tokio::spawn(server.run(std::future::pending()));
-        let gripper_rig = softtouch_sim::SimRig::new(&rig, &scene, 2, clock).expect("sim");
-        let service = HandEService::new(gripper_rig.gripper, 9);
-        tokio::spawn(hande::serve_serial(
-            service,
-            hande::open_port(&pair.b).expect("open pty b"),
-            std::future::pending(),
-        ));
+        serve_hand_e(&pair.b);
         rdt
     });
     let devices = format!(
@@ -476,29 +491,12 @@ slave_id = 9
 #[test]
 #[ignore = "franka-sim tier: needs SOFTTOUCH_FRANKA_SIM_PYTHON (TESTING.md)"]
 fn the_fr3_rig_from_config_show_passes_rig_check_and_reaches_the_grasp_devices() {
-    use softtouch_drivers::hande::{self, HandEService};
     let py = python();
     let pair = fcisim::pty();
     let dir = tempdir();
     let sim = FrankaSim::start(&py, dir.path());
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(1)
-        .enable_all()
-        .build()
-        .expect("runtime");
-    let service = rt.block_on(async {
-        let rig = softtouch_schemas::defaults::rig();
-        let scene = softtouch_schemas::defaults::scene();
-        let gripper_rig =
-            softtouch_sim::SimRig::new(&rig, &scene, 2, TokioClock::new()).expect("sim");
-        let service = HandEService::new(gripper_rig.gripper, 9);
-        tokio::spawn(hande::serve_serial(
-            service.clone(),
-            hande::open_port(&pair.b).expect("open pty b"),
-            std::future::pending(),
-        ));
-        service
-    });
+    let rt = server_runtime();
+    let service = rt.block_on(async { serve_hand_e(&pair.b) });
     let shown = ok(&run(dir.path(), &["config", "show", "rig", "fr3"]), &sim);
     std::fs::write(dir.path().join("fr3.toml"), &shown).expect("write");
     ok(

@@ -80,12 +80,18 @@ pub struct SqueezeBound {
     pub search_counts: u8,
 }
 
+/// How far `position` lies past the first touch at `touch_count`, mm (0 short of it),
+/// at `mm_per_count`: the grip a rig can show without a true force.
+#[must_use]
+pub fn past_touch_mm(position: u8, touch_count: u8, mm_per_count: f64) -> f64 {
+    f64::from(position.saturating_sub(touch_count)) * mm_per_count
+}
+
 impl SqueezeBound {
-    /// How far `position` lies past the calibrated first touch, mm (0 short of it):
-    /// the grip a rig can show without a true force.
+    /// How far `position` lies past the calibrated first touch, mm ([`past_touch_mm`]).
     #[must_use]
     pub fn past_touch_mm(&self, position: u8) -> f64 {
-        f64::from(position.saturating_sub(self.touch_count)) * self.mm_per_count
+        past_touch_mm(position, self.touch_count, self.mm_per_count)
     }
     /// The bound of a calibration: its touch, its closing and its Λ_max.
     #[must_use]

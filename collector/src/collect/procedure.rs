@@ -515,7 +515,8 @@ impl Job<'_> {
         // Free space first, at the travel speed, up to the stand-off short of the
         // finger's first touch; the contact is entered at the approach speed.
         let mut legs = Vec::with_capacity(3);
-        let from = match standoff_x_m(clear_x_m(w), &pose, p) {
+        // The retreat point lies at home's x (`retreat_pose`).
+        let from = match standoff_x_m(w.home.x_m, &pose, p) {
             Some(x_m) => {
                 let standoff =
                     ArmPose::from_contact(&w.base_from_rod, &ContactPose { x_m, ..pose });
@@ -643,11 +644,6 @@ impl Job<'_> {
             tokio::time::sleep(poll.min(bound - waited)).await;
         }
     }
-}
-
-/// The retreat plane's `x`, m: every approach starts there (home's `x`).
-fn clear_x_m(w: &softtouch_schemas::rig::WorkspaceBounds) -> f64 {
-    w.home.x_m
 }
 
 /// Where an approach to `pose` from the retreat plane at `clear_x_m` stops crossing

@@ -126,7 +126,7 @@ pub fn follow_rows(
                     .iter()
                     .map(|c| c.measured_position)
                     .max()
-                    .map(|c| f64::from(c.saturating_sub(touch.0)) * touch.1),
+                    .map(|c| softtouch_grasp::squeeze::past_touch_mm(c, touch.0, touch.1)),
             }
         })
         .collect()

@@ -295,7 +295,7 @@ pub fn grip_words(cycles: &[softtouch_grasp::Cycle], touch: (u8, f64)) -> String
         (Some(p), _) => format!("peak true {p:.2} N"),
         (None, Some(c)) => format!(
             "closed {:.2} mm past the touch",
-            f64::from(c.saturating_sub(touch.0)) * touch.1
+            softtouch_grasp::squeeze::past_touch_mm(c, touch.0, touch.1)
         ),
         (None, None) => "no cycle ran".to_owned(),
     }
