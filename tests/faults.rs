@@ -74,6 +74,8 @@ struct ProbeArm {
     inner: Arc<tokio::sync::Mutex<Box<dyn Arm>>>,
     probe: Probe,
     home: ArmPose,
+    /// The retreat plane's x, rod frame.
+    plane_x_m: f64,
     base_from_rod: ArmPose,
     /// At the start of approach `n`: the stop requests `level` stands for (1: SIGTERM,
     /// finish the sample and stop; 2: a second Ctrl-C, stop where it is).
@@ -89,11 +91,10 @@ impl Drop for Approaching {
     }
 }
 
-/// Whether `target` lies nearer the rod than the retreat plane (home's x): a move
-/// there is an approach.
-fn toward_rod(base_from_rod: &ArmPose, home: &ArmPose, target: &ArmPose) -> bool {
-    let x = |p: &ArmPose| softtouch_schemas::ContactPose::from_arm(base_from_rod, p).x_m;
-    x(target) > x(home) + 1e-6
+/// Whether `target` lies nearer the rod than the retreat plane (at `plane_x_m`, rod
+/// frame): a move there is an approach.
+fn toward_rod(base_from_rod: &ArmPose, plane_x_m: f64, target: &ArmPose) -> bool {
+    softtouch_schemas::ContactPose::from_arm(base_from_rod, target).x_m > plane_x_m + 1e-6
 }
 
 #[async_trait]
@@ -104,7 +105,7 @@ impl Arm for ProbeArm {
         let inward = |from: &ArmPose, to: &ArmPose| {
             let x =
                 |p: &ArmPose| softtouch_schemas::ContactPose::from_arm(&self.base_from_rod, p).x_m;
-            toward_rod(&self.base_from_rod, &self.home, to) && x(to) > x(from) + 1e-6
+            toward_rod(&self.base_from_rod, self.plane_x_m, to) && x(to) > x(from) + 1e-6
         };
         let (n, starts) = {
             let mut p = probe(&self.probe);
@@ -389,6 +390,8 @@ struct Ended {
     done: Vec<u64>,
     probe: ProbeState,
     home: ArmPose,
+    /// The retreat plane's x, rod frame.
+    plane_x_m: f64,
     /// The arm's pose at the end, and 5 s (virtual) later.
     final_pose: ArmPose,
     later_pose: ArmPose,
@@ -406,18 +409,18 @@ impl Ended {
 
     /// Every approach starts at its retreat point, and every move after an approach
     /// (whatever ended it: the sample, a guard trip, a fault, a stop) goes straight
-    /// back along the approach axis: to the retreat plane (home's x) with the
+    /// back along the approach axis: to the retreat plane (`plane_x_m`) with the
     /// approach's z and θ, nothing turned. How many departures there were.
     fn departures_along_the_approach_axis(&self, base_from_rod: &ArmPose) -> usize {
         use softtouch_schemas::ContactPose;
         let c = |p: &ArmPose| ContactPose::from_arm(base_from_rod, p);
-        let plane_x = c(&self.home).x_m;
+        let plane_x = self.plane_x_m;
         let moves = &self.probe.moves;
         let mut departures = 0;
         for (k, pair) in moves.windows(2).enumerate() {
             let (a, b) = (c(&pair[0]), c(&pair[1]));
-            let into = toward_rod(base_from_rod, &self.home, &pair[1]);
-            let from = toward_rod(base_from_rod, &self.home, &pair[0]);
+            let into = toward_rod(base_from_rod, self.plane_x_m, &pair[1]);
+            let from = toward_rod(base_from_rod, self.plane_x_m, &pair[0]);
             let same_line =
                 (a.z_m - b.z_m).abs() < 1e-9 && (a.theta_rad - b.theta_rad).abs() < 1e-9;
             if into && !from {
@@ -485,6 +488,7 @@ fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
             .unwrap_or_else(|e| panic!("{e}"));
         let w = &plan.rig.workspace;
         let home = ArmPose::from_contact(&w.base_from_rod, &w.home);
+        let plane_x_m = softtouch_collector::collect::retreat_x_m(w.home.x_m, &plan.rig.procedure);
         let shared: Probe = Probe::default();
         if faults.joints {
             probe(&shared).joints = Some([0.0, -0.3, 0.0, -2.2, 0.0, 1.9, 0.6]);
@@ -496,6 +500,7 @@ fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
                 inner: Arc::clone(&arm),
                 probe: Arc::clone(&shared),
                 home,
+                plane_x_m,
                 base_from_rod: w.base_from_rod,
                 stop_on_approach: faults
                     .stop_on_approach
@@ -543,6 +548,7 @@ fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
             done: done.0,
             probe: state,
             home,
+            plane_x_m,
             final_pose,
             later_pose,
             run_id: plan.run_id,

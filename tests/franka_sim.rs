@@ -897,7 +897,13 @@ fn departures_hold(sim: &FrankaSim, base_from_rod: &ArmPose) -> usize {
         .collect();
     // The tier's scene samples x from 0 (within reach of the rod from 5 mm before) and
     // z within ±50 mm.
-    let ds = fcisim::departures::departures(&poses, base_from_rod, -0.03, -0.005, (-0.06, 0.06));
+    // The retreat plane of the tier's rig (home at x = −0.03 m, the default stand-off).
+    let plane_x_m = softtouch_collector::collect::retreat_x_m(
+        -0.03,
+        &softtouch_schemas::defaults::rig().procedure,
+    );
+    let ds =
+        fcisim::departures::departures(&poses, base_from_rod, plane_x_m, -0.005, (-0.06, 0.06));
     eprintln!(
         "departures from the rod (commanded):\n{}",
         fcisim::departures::table(&ds)

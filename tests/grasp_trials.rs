@@ -256,6 +256,39 @@ fn grasp_trials_are_stored_reproducible_resumable_and_checked() {
         "{trace}"
     );
     assert!(trace.lines().count() > 5, "{trace}");
+    // A row's peak true force is either finger's, as the verdict's: never below the
+    // loop's finger in its trace, and above it where the other finger pressed harder.
+    let peaks: Vec<(i64, Option<f64>)> = rt.block_on(async {
+        let options = sqlx::sqlite::SqliteConnectOptions::new()
+            .filename(&db)
+            .read_only(true);
+        let mut conn = sqlx::ConnectOptions::connect(&options)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"));
+        sqlx::query_as("SELECT trial_id, peak_true_n FROM grasp_trials WHERE session_id = 1")
+            .fetch_all(&mut conn)
+            .await
+            .unwrap_or_else(|e| panic!("{e}"))
+    });
+    let mut other_finger_higher = 0;
+    for (id, peak) in &peaks {
+        let trace = ok(&softtouch(d, &["results", "trace", &id.to_string()]));
+        let watched = trace
+            .lines()
+            .skip(1)
+            .filter_map(|l| l.split(',').nth(2)?.parse::<f64>().ok())
+            .filter(|f| f.is_finite())
+            .fold(f64::NEG_INFINITY, f64::max);
+        let Some(peak) = peak else { continue };
+        assert!(
+            *peak >= watched - 1e-4,
+            "trial {id}: {peak} below its trace's {watched}"
+        );
+        if *peak > watched + 1e-3 {
+            other_finger_higher += 1;
+        }
+    }
+    assert!(other_finger_higher > 0, "{peaks:?}");
     fails_with(
         &softtouch(d, &["results", "trace", "999"]),
         2,
@@ -705,8 +738,13 @@ fn a_scene_value_is_set_or_swept_over_the_same_trials() {
     let png = std::fs::read(d.join("g/grasp-trials-sweep.png")).expect("png");
     assert!(png.starts_with(b"\x89PNG"));
 
-    // --set of one value runs as the sweep's trials at that value, bit for bit.
-    ok(&with(&["--set", "objects.bottle.wet_friction=2.0"]));
+    // --set of one value runs as the sweep's trials at that value, bit for bit, and
+    // says the value beside its results.
+    let said = ok(&with(&["--set", "objects.bottle.wet_friction=2.0"]));
+    assert!(
+        said.contains("scene values set: objects.bottle.wet_friction=2.0"),
+        "{said}"
+    );
     let set = rt.block_on(session_rows(&db, 2));
     assert_eq!(set, at_two.to_vec());
     // Each session stored the scenes it ran: the value is in them.
@@ -730,4 +768,13 @@ fn a_scene_value_is_set_or_swept_over_the_same_trials() {
         "no sweep figure"
     );
     assert!(page.contains("water, objects.bottle.wet_friction = 2.0"));
+    let sets = html
+        .select(&scraper::Selector::parse("[data-k=\"grasp-2-sets\"]").expect("selector"))
+        .map(|e| e.text().collect::<String>())
+        .collect::<Vec<_>>();
+    assert_eq!(
+        sets,
+        ["objects.bottle.wet_friction=2.0"],
+        "the set beside session 2"
+    );
 }

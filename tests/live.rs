@@ -79,6 +79,11 @@ fn live_presses_on_the_simulated_rig_and_bench_grasp_writes_its_table() {
     let mut lines = csv.lines();
     let header = lines.next().expect("header");
     assert!(header.starts_with("t_s,frame,est_fx_n"), "{header}");
+    // Torques in N·mm, as everywhere else.
+    assert!(
+        header.contains("est_tz_nmm") && header.ends_with("ft_tz_nmm"),
+        "{header}"
+    );
     let rows: Vec<Vec<f64>> = lines
         .map(|l| {
             l.split(',')
@@ -96,6 +101,12 @@ fn live_presses_on_the_simulated_rig_and_bench_grasp_writes_its_table() {
     assert!(force(&rows[0]) < 0.3, "{:?}", rows[0]);
     let peak = rows.iter().map(force).fold(0.0, f64::max);
     assert!(peak > 1.0, "peak {peak} N");
+    // The press's torques reach tens of N·mm (in N·m they would stay below 1).
+    let torque_peak = rows
+        .iter()
+        .map(|r| r[11].abs().max(r[12].abs()).max(r[13].abs()))
+        .fold(0.0, f64::max);
+    assert!(torque_peak > 1.0, "peak torque {torque_peak} N·mm");
     // Frames in order, on the 120 Hz grid.
     assert!(rows.windows(2).all(|w| w[1][0] > w[0][0]));
     // And as a plot: the estimate beside the sensor, one panel per axis (3 × 2).

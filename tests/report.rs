@@ -187,6 +187,19 @@ fn the_page_parses_has_every_section_and_shows_the_databases_numbers() {
         v
     });
     assert_eq!(value(&html, "summary-best-r2"), format!("{best:.4}"));
+    // The hints for what is not stored name this database's model and dataset.
+    let todo = select(&html, ".todo").join("\n");
+    for hinted in [
+        "softtouch grasp follow --model air-svae --targets",
+        "softtouch transfer --model air-svae --land air --water water-v1",
+        "softtouch collect --scene water --poses-from 1",
+    ] {
+        assert!(todo.contains(hinted), "`{hinted}` in: {todo}");
+    }
+    assert!(!todo.contains("land-v1"), "{todo}");
+    // The paper's SVAE (Table 1, α = 1: 99.45 %) has one value wherever it is quoted.
+    assert_eq!(value(&html, "summary-paper-r2"), "0.9945");
+    assert_eq!(value(&html, "models-paper-r2"), "0.9945");
 
     // Datasets: the splits as stored.
     let splits = ints(
@@ -350,10 +363,29 @@ fn stored_sweeps_show_without_their_csv_and_a_bad_stored_table_costs_only_its_pa
         }
         store.close().await;
     });
-    ok(&softtouch(d, &["report", "--out", "s.html"]));
+    // An older α sweep as a CSV beside the stored one (its SVAE row at 99.10 %).
+    std::fs::write(
+        d.join("old-alpha.csv"),
+        SWEEP_CSV.replace("0.998041,0.998781", "0.991000,0.998781"),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    ok(&softtouch(
+        d,
+        &["report", "--out", "s.html", "--sweep", "old-alpha.csv"],
+    ));
     let (_, html) = parse(&d.join("s.html"));
     assert_eq!(value(&html, "sweep-alpha-1-r2"), "99.80");
     assert_eq!(value(&html, "sweep-alpha-1-mse"), "1.36e-2");
+    // The stored sweep first, then the file, each titled by where it came from, each
+    // number under its own key.
+    let titles = select(&html, "#sweeps h3");
+    let alpha: Vec<&String> = titles.iter().filter(|t| t.contains("α sweep")).collect();
+    assert_eq!(alpha.len(), 2, "{titles:?}");
+    assert!(
+        alpha[0].contains("result 1 (sweep-alpha.csv)") && alpha[1].contains("old-alpha.csv"),
+        "{titles:?}"
+    );
+    assert_eq!(value(&html, "sweep2-alpha-1-r2"), "99.10");
     let sweeps = select(&html, "#sweeps").join("\n");
     assert!(
         sweeps.contains("result 1 (sweep-alpha.csv)")
@@ -387,7 +419,7 @@ fn an_empty_database_gives_a_page_saying_which_verbs_to_run() {
         "softtouch sweep alpha",
         "softtouch sweep latent",
         "softtouch bench collection",
-        "softtouch collect --scene scenes/water.toml --poses-from",
+        "softtouch collect --scene water --poses-from",
         "softtouch transfer",
         "softtouch sweep finetune --init",
         "softtouch latent",
@@ -410,6 +442,12 @@ fn an_empty_database_gives_a_page_saying_which_verbs_to_run() {
         assert!(todo.contains(said), "`{said}` in: {todo}");
     }
     let summary = select(&html, "#summary").join("\n");
+    // With nothing stored, the hints name what the first verbs would make.
+    assert!(
+        todo.contains("softtouch grasp follow --model land-v1-svae"),
+        "{todo}"
+    );
+    assert!(todo.contains("--land land-v1 --water water-v1"), "{todo}");
     assert!(
         summary.contains("Collected: 0 accepted samples in 0 run(s)")
             && summary.contains("No model that reads force yet")

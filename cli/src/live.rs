@@ -196,13 +196,13 @@ fn plot_csv(csv: &Path, png: &Path, model: &str) -> Result<(), Failure> {
         let Some(t) = cells.first().and_then(|c| c.parse::<f64>().ok()) else {
             continue;
         };
+        // Torques are in N·mm already (the header says `_nmm`).
         for axis in 0..6 {
-            let scale = if axis < 3 { 1.0 } else { 1000.0 };
             let at = |i: usize| {
                 cells
                     .get(i)
                     .and_then(|c| c.parse::<f64>().ok())
-                    .map_or(f64::NAN, |v| v * scale)
+                    .unwrap_or(f64::NAN)
             };
             est[axis].push((t, at(2 + axis)));
             ft[axis].push((t, at(8 + axis)));

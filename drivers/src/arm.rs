@@ -38,6 +38,29 @@ pub trait Arm: Send {
     /// [`DeviceError::Fault`] and leaves the arm faulted.
     async fn move_to(&mut self, target: &ArmPose, speed_m_s: f64) -> Result<ArmState, DeviceError>;
 
+    /// Move through `legs` (pose of the finger in the base frame, speed m/s) in turn,
+    /// returning the state at the end and when each leg ended, on the rig's clock. An
+    /// arm that can ([`crate::franka`]) runs legs along one straight line as one
+    /// motion: it slows to a slower leg's speed before that leg begins and does not stop
+    /// between legs, where one move per leg would start and stop each. The default
+    /// moves leg by leg.
+    async fn move_through(
+        &mut self,
+        legs: &[(ArmPose, f64)],
+    ) -> Result<(ArmState, Vec<TimestampNs>), DeviceError> {
+        let mut ends = Vec::with_capacity(legs.len());
+        let mut last = None;
+        for (pose, speed_m_s) in legs {
+            let s = self.move_to(pose, *speed_m_s).await?;
+            ends.push(s.t);
+            last = Some(s);
+        }
+        match last {
+            Some(s) => Ok((s, ends)),
+            None => self.state().await.map(|s| (s, ends)),
+        }
+    }
+
     /// Read the current state.
     async fn state(&mut self) -> Result<ArmState, DeviceError>;
 
@@ -79,6 +102,12 @@ pub trait Arm: Send {
 impl<T: Arm + ?Sized> Arm for Box<T> {
     async fn move_to(&mut self, target: &ArmPose, speed_m_s: f64) -> Result<ArmState, DeviceError> {
         (**self).move_to(target, speed_m_s).await
+    }
+    async fn move_through(
+        &mut self,
+        legs: &[(ArmPose, f64)],
+    ) -> Result<(ArmState, Vec<TimestampNs>), DeviceError> {
+        (**self).move_through(legs).await
     }
     async fn state(&mut self) -> Result<ArmState, DeviceError> {
         (**self).state().await

@@ -233,9 +233,15 @@ pub fn measure_row(
     Ok((latency, frame_latency))
 }
 
-/// `–` for a missing value, else the value formatted by `f`.
+/// `–` for a missing value, else the value formatted by `f` (a terminal's table).
 pub fn fmt_opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {
     v.map_or_else(|| "–".to_owned(), f)
+}
+
+/// A CSV cell: empty for a missing or non-finite value (what pandas and R read as
+/// missing; a `–` would make the whole column text), else the value formatted by `f`.
+pub fn csv_opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {
+    v.filter(|x| x.is_finite()).map_or_else(String::new, f)
 }
 
 /// CSV columns `,r2_fx … ,r2_tz` (header) for [`push_axis_r2`].
@@ -249,7 +255,7 @@ pub(crate) fn push_axis_r2_header(s: &mut String) {
 pub(crate) fn push_axis_r2(s: &mut String, m: &Metrics) {
     for i in 0..6 {
         s.push(',');
-        s.push_str(&fmt_opt(m.r2.map(|x| x[i].r2), |v| format!("{v:.6}")));
+        s.push_str(&csv_opt(m.r2.map(|x| x[i].r2), |v| format!("{v:.6}")));
     }
 }
 
@@ -275,10 +281,10 @@ pub fn rows_csv(rows: &[Row]) -> String {
             r.epochs,
             r.seconds_per_epoch,
             r.images_per_s,
-            fmt_opt(r.latency_ms, |v| format!("{v:.4}")),
-            fmt_opt(r.frame_latency_ms, |v| format!("{v:.4}")),
-            fmt_opt(r.test.image_mse, |v| format!("{v:.6e}")),
-            fmt_opt(r.test.r2_mean, |v| format!("{v:.6}")),
+            csv_opt(r.latency_ms, |v| format!("{v:.4}")),
+            csv_opt(r.frame_latency_ms, |v| format!("{v:.4}")),
+            csv_opt(r.test.image_mse, |v| format!("{v:.6e}")),
+            csv_opt(r.test.r2_mean, |v| format!("{v:.6}")),
         ));
         push_axis_r2(&mut s, &r.test);
         s.push('\n');
@@ -433,7 +439,7 @@ mod tests {
     }
 
     #[test]
-    fn the_csv_has_a_header_and_one_line_per_row_with_dashes_for_missing_values() {
+    fn the_csv_has_a_header_and_one_line_per_row_with_empty_cells_for_missing_values() {
         let row = Row {
             label: "x".into(),
             config: ModelConfig::default(),
@@ -453,6 +459,15 @@ mod tests {
             lines[1].split(',').count(),
             "{csv}"
         );
-        assert!(lines[1].contains(",–,0.2500,"), "{csv}");
+        // Missing values are empty cells (pandas reads them as NaN; a `–` would make
+        // the column text), every other cell a number.
+        assert!(lines[1].contains(",,0.2500,"), "{csv}");
+        assert!(!csv.contains('–'), "{csv}");
+        for cell in lines[1].split(',').skip(2) {
+            assert!(
+                cell.is_empty() || cell.parse::<f64>().is_ok(),
+                "`{cell}` in {csv}"
+            );
+        }
     }
 }

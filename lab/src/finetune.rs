@@ -7,7 +7,7 @@
 //! samples as the dataset's split ratio gives n training samples: a lab with 100 water
 //! samples does not have the full validation split either.
 
-use crate::experiments::{ExperimentError, fmt_opt, push_axis_r2, push_axis_r2_header};
+use crate::experiments::{ExperimentError, csv_opt, fmt_opt, push_axis_r2, push_axis_r2_header};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -248,8 +248,8 @@ pub fn rows_csv(rows: &[FinetuneRow]) -> String {
             r.best_epoch,
             r.epochs_to_target.map_or(String::new(), |e| e.to_string()),
             r.seconds,
-            fmt_opt(r.test.r2_mean, |v| format!("{v:.6}")),
-            fmt_opt(r.test.r2_min(), |v| format!("{v:.6}")),
+            csv_opt(r.test.r2_mean, |v| format!("{v:.6}")),
+            csv_opt(r.test.r2_min(), |v| format!("{v:.6}")),
         ));
         push_axis_r2(&mut s, &r.test);
         s.push('\n');

@@ -261,6 +261,15 @@ impl Output<'_> {
             sensor,
         };
         let (e, s) = (axes(row.estimate), axes(row.sensor));
+        // Torques in N·mm, as the terminal, the report and every other CSV give them.
+        let in_csv = |a: &[f64; 6]| {
+            let mut a = *a;
+            for v in &mut a[3..] {
+                *v *= 1000.0;
+            }
+            a
+        };
+        let (e_csv, s_csv) = (in_csv(&e), in_csv(&s));
         let cell = |v: f64| {
             if v.is_finite() {
                 format!("{v}")
@@ -268,7 +277,7 @@ impl Output<'_> {
                 String::new()
             }
         };
-        let cells: Vec<String> = e.iter().chain(s.iter()).map(|v| cell(*v)).collect();
+        let cells: Vec<String> = e_csv.iter().chain(s_csv.iter()).map(|v| cell(*v)).collect();
         writeln!(self.csv, "{},{},{}", row.t_s, row.frame, cells.join(","))
             .map_err(|e| format!("cannot write the CSV: {e}"))?;
         if self.summary.frames.is_multiple_of(self.every) {
@@ -314,7 +323,7 @@ impl Session<'_> {
     ) -> Result<Summary, String> {
         writeln!(
             csv,
-            "t_s,frame,est_fx_n,est_fy_n,est_fz_n,est_tx_nm,est_ty_nm,est_tz_nm,ft_fx_n,ft_fy_n,ft_fz_n,ft_tx_nm,ft_ty_nm,ft_tz_nm"
+            "t_s,frame,est_fx_n,est_fy_n,est_fz_n,est_tx_nmm,est_ty_nmm,est_tz_nmm,ft_fx_n,ft_fy_n,ft_fz_n,ft_tx_nmm,ft_ty_nmm,ft_tz_nmm"
         )
         .map_err(|e| format!("cannot write the CSV: {e}"))?;
         sensor

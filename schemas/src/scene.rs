@@ -440,6 +440,29 @@ impl Effect {
     }
 }
 
+impl Effect {
+    /// The density of the fluid an effect acts through, kg/m³, where it names one.
+    #[must_use]
+    pub const fn fluid_density_kg_m3(&self) -> Option<f64> {
+        match self {
+            Self::ObjectBuoyancy {
+                fluid_density_kg_m3,
+            }
+            | Self::ObjectDrag {
+                fluid_density_kg_m3,
+            }
+            | Self::ObjectAddedMass {
+                fluid_density_kg_m3,
+            }
+            | Self::ObjectFlow {
+                fluid_density_kg_m3,
+                ..
+            } => Some(*fluid_density_kg_m3),
+            _ => None,
+        }
+    }
+}
+
 impl SceneSpec {
     /// The first declared effect of the given kind, if any.
     #[must_use]

@@ -207,6 +207,18 @@ impl FingerGeometry {
         }
     }
 
+    /// How much nearer the rod the finger's surface can come when the wrist turns it,
+    /// m. The contact law reads `x` from the side facing the rod; a turn about the
+    /// finger's axis brings another radius of its elliptical cross-section to face
+    /// the rod, longer by at most the difference of half-depth and half-width (largest
+    /// at an end of the taper: 4 mm at the default finger's base). A retreat plane this
+    /// far out beyond the stand-off lets any turn between retreat points clear the rod.
+    #[must_use]
+    pub fn turn_clearance_m(&self) -> f64 {
+        let at = |k: usize| (self.half_depth_m[k] - self.half_width_m[k]).abs();
+        at(0).max(at(1))
+    }
+
     /// Height of the finger's tip above the sensor origin, m.
     pub(crate) fn tip_height(&self) -> f64 {
         self.base_height_m + self.length_m

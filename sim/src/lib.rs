@@ -107,7 +107,8 @@ pub use contact::{ContactParams, FingerGeometry};
 pub use force::{BUFFER_READINGS, COUNTS_PER_FORCE, COUNTS_PER_TORQUE, SimForceSensor};
 pub use grasp::{
     GraspObject, SoftFingerCamera, SoftGrasp, SoftGraspArm, SoftGraspHandle, SoftGripper,
-    check_scene_objects, default_drag_coefficient, soft_grasp, spheroid_added_mass,
+    check_scene_objects, default_drag_coefficient, default_drag_coefficients, soft_grasp,
+    spheroid_added_mass,
 };
 pub use grasp::{HoldState, WRIST_MAX_RAD_S};
 pub use gripper::{

@@ -36,7 +36,7 @@ pub(crate) struct Departure {
 /// each starts where the finger, beyond `near_x_m` along the approach axis (within
 /// reach of the rod: the scene's poses begin at x = 0) and along the rod within `z_m`
 /// (the scene's poses, with a margin), first moves away from it, and runs until the
-/// retreat plane `plane_x_m` (home's x). The arm's first move home from wherever the
+/// retreat plane `plane_x_m`. The arm's first move home from wherever the
 /// robot stood is not one (franka-sim's ready pose is 25 mm out and 60-130 mm down).
 pub(crate) fn departures(
     poses: &[ArmPose],

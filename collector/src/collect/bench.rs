@@ -69,6 +69,13 @@ impl Arm for Timed<Box<dyn Arm>> {
         let timer = self.timer.clone();
         timer.time(self.inner.move_to(target, speed_m_s)).await
     }
+    async fn move_through(
+        &mut self,
+        legs: &[(ArmPose, f64)],
+    ) -> Result<(ArmState, Vec<TimestampNs>), DeviceError> {
+        let timer = self.timer.clone();
+        timer.time(self.inner.move_through(legs)).await
+    }
     async fn state(&mut self) -> Result<ArmState, DeviceError> {
         let timer = self.timer.clone();
         timer.time(self.inner.state()).await

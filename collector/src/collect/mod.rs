@@ -61,6 +61,7 @@ mod finish;
 pub mod phases;
 pub mod plan;
 mod procedure;
+pub use procedure::retreat_x_m;
 pub mod rods;
 pub mod route;
 pub mod sampler;

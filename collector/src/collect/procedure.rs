@@ -420,11 +420,13 @@ impl Job<'_> {
         let mut took = Vec::with_capacity(legs.len());
         let guard = self.ft.guard(limits);
         let feed = arm.pose_feed();
+        // One motion where the arm blends the legs (a Franka: no stop between them).
         let moves = async {
-            for (pose, speed_m_s) in legs {
-                let t0 = clock.now();
-                arm.move_to(pose, *speed_m_s).await?;
-                took.push(clock.now().0.saturating_sub(t0.0));
+            let mut t0 = clock.now();
+            let (_, ends) = arm.move_through(legs).await?;
+            for end in ends {
+                took.push(end.0.saturating_sub(t0.0));
+                t0 = t0.max(end);
             }
             Ok::<(), DeviceError>(())
         };
@@ -515,8 +517,8 @@ impl Job<'_> {
         // Free space first, at the travel speed, up to the stand-off short of the
         // finger's first touch; the contact is entered at the approach speed.
         let mut legs = Vec::with_capacity(3);
-        // The retreat point lies at home's x (`retreat_pose`).
-        let from = match standoff_x_m(w.home.x_m, &pose, p) {
+        // The retreat point lies on the retreat plane (`retreat_pose`).
+        let from = match standoff_x_m(retreat_x_m(w.home.x_m, p), &pose, p) {
             Some(x_m) => {
                 let standoff =
                     ArmPose::from_contact(&w.base_from_rod, &ContactPose { x_m, ..pose });
@@ -646,12 +648,30 @@ impl Job<'_> {
     }
 }
 
+/// The retreat plane's x (rod frame), where the arm waits and turns between samples:
+/// `standoff_m` short of the finger model's first touch, and further out by what a
+/// wrist turn needs to clear the rod ([`softtouch_sim::FingerGeometry::turn_clearance_m`],
+/// 4 mm): −12.57 mm with the defaults. Never further out than home's x (which the rig
+/// declares clear), and home's x where a setting is not finite or the model has no
+/// first touch.
+pub fn retreat_x_m(home_x_m: f64, p: &softtouch_schemas::rig::Procedure) -> f64 {
+    let Some(touch) = softtouch_sim::ContactParams::default().first_touch_x_m() else {
+        return home_x_m;
+    };
+    let x = touch - p.standoff_m - softtouch_sim::FingerGeometry::default().turn_clearance_m();
+    if x.is_finite() && x > home_x_m {
+        x
+    } else {
+        home_x_m
+    }
+}
+
 /// Where an approach to `pose` from the retreat plane at `clear_x_m` stops crossing
 /// free space fast: `standoff_m` short of the finger's first touch (the finger model's
 /// [`softtouch_sim::ContactParams::first_touch_x_m`], the same for every rod and θ).
 /// `None` (the whole approach at the approach speed) where that point is not between
 /// the retreat plane and the pose, or a setting is not finite.
-fn standoff_x_m(
+pub(super) fn standoff_x_m(
     clear_x_m: f64,
     pose: &ContactPose,
     p: &softtouch_schemas::rig::Procedure,
@@ -685,75 +705,4 @@ fn approach_legs(
 }
 
 #[cfg(test)]
-mod approach_tests {
-    use super::*;
-
-    /// Free space is crossed fast up to the stand-off short of the first touch, only
-    /// where that point lies between the retreat plane and the pose.
-    #[test]
-    fn free_space_ends_a_stand_off_short_of_the_first_touch() {
-        let mut p = softtouch_schemas::defaults::rig().procedure;
-        let touch = softtouch_sim::ContactParams::default()
-            .first_touch_x_m()
-            .expect("the model's first touch");
-        // The default finger first touches 3.57 mm short of x = 0.
-        assert!((touch + 0.0003 / 0.084).abs() < 1e-12, "{touch}");
-        let pose = |x_m: f64| ContactPose {
-            x_m,
-            z_m: 0.01,
-            theta_rad: 0.3,
-        };
-        let x = standoff_x_m(-0.03, &pose(0.02), &p).expect("a free leg");
-        assert!((x - (touch - 0.005)).abs() < 1e-12);
-        // A pose short of the stand-off, or a retreat plane past it: no free leg.
-        assert_eq!(standoff_x_m(-0.03, &pose(touch - 0.006), &p), None);
-        assert_eq!(standoff_x_m(touch - 0.004, &pose(0.02), &p), None);
-        // A stand-off beyond the retreat plane: none either; NaN never makes a pose.
-        p.standoff_m = 0.05;
-        assert_eq!(standoff_x_m(-0.03, &pose(0.02), &p), None);
-        p.standoff_m = f64::NAN;
-        assert_eq!(standoff_x_m(-0.03, &pose(0.02), &p), None);
-        p.standoff_m = 0.0;
-        assert!(standoff_x_m(-0.03, &pose(0.02), &p).is_some());
-    }
-
-    #[test]
-    #[allow(clippy::float_cmp)] // the speeds are copied, not computed
-    fn the_last_millimetres_of_an_approach_are_slow() {
-        let mut p = softtouch_schemas::defaults::rig().procedure;
-        let from = ArmPose {
-            translation_m: [0.4, 0.0, 0.3],
-            rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
-        };
-        let mut target = from;
-        target.translation_m[0] += 0.03;
-        let legs = approach_legs(&from, &target, &p);
-        assert_eq!(legs.len(), 2);
-        // 27 mm fast, then the last 3 mm slow.
-        assert!(
-            (legs[0].0.translation_m[0] - 0.427).abs() < 1e-12,
-            "{legs:?}"
-        );
-        assert_eq!(legs[0].1, p.approach_speed_m_s);
-        assert_eq!(legs[1], (target, p.slow_approach_speed_m_s));
-        // A short path is all slow; a zero slow end is one move at full speed.
-        let mut near = from;
-        near.translation_m[0] += 0.002;
-        assert_eq!(
-            approach_legs(&from, &near, &p),
-            vec![(near, p.slow_approach_speed_m_s)]
-        );
-        assert_eq!(approach_legs(&from, &from, &p).len(), 1);
-        p.slow_approach_m = 0.0;
-        assert_eq!(
-            approach_legs(&from, &target, &p),
-            vec![(target, p.approach_speed_m_s)]
-        );
-        // A NaN setting (refused by the rig's check anyway) never yields a NaN pose.
-        p.slow_approach_m = f64::NAN;
-        assert_eq!(
-            approach_legs(&from, &target, &p),
-            vec![(target, p.approach_speed_m_s)]
-        );
-    }
-}
+mod approach_tests;

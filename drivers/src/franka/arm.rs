@@ -130,21 +130,17 @@ impl FrankaArm {
         rx.await.map_err(|_| gone())?
     }
 
-    /// The clock the states are stamped with.
-    #[must_use]
-    pub fn clock(&self) -> &Arc<dyn Clock> {
-        &self.clock
-    }
-}
-
-#[async_trait]
-impl Arm for FrankaArm {
-    async fn move_to(&mut self, target: &ArmPose, speed_m_s: f64) -> Result<ArmState, DeviceError> {
-        if !(target.is_valid()
-            && speed_m_s.is_finite()
-            && speed_m_s > 0.0
-            && speed_m_s <= MAX_SPEED_M_S)
-        {
+    /// Send one motion through `legs` and wait for it; dropping the future cancels it.
+    async fn move_path(
+        &mut self,
+        legs: Vec<(ArmPose, f64)>,
+    ) -> Result<(ArmState, Vec<TimestampNs>), DeviceError> {
+        if let Some((target, speed_m_s)) = legs.iter().find(|(target, speed_m_s)| {
+            !(target.is_valid()
+                && speed_m_s.is_finite()
+                && *speed_m_s > 0.0
+                && *speed_m_s <= MAX_SPEED_M_S)
+        }) {
             return Err(DeviceError::InvalidCommand {
                 device: DEVICE.into(),
                 message: format!(
@@ -154,12 +150,10 @@ impl Arm for FrankaArm {
         }
         self.generation += 1;
         let generation = self.generation;
-        let target = *target;
         let (reply, rx) = oneshot::channel();
         self.tx
             .send(Cmd::Move {
-                target,
-                speed: speed_m_s,
+                legs,
                 generation,
                 reply,
             })
@@ -172,6 +166,34 @@ impl Arm for FrankaArm {
         let r = rx.await.map_err(|_| gone())?;
         guard.armed = false;
         r
+    }
+
+    /// The clock the states are stamped with.
+    #[must_use]
+    pub fn clock(&self) -> &Arc<dyn Clock> {
+        &self.clock
+    }
+}
+
+#[async_trait]
+impl Arm for FrankaArm {
+    async fn move_to(&mut self, target: &ArmPose, speed_m_s: f64) -> Result<ArmState, DeviceError> {
+        self.move_path(vec![(*target, speed_m_s)])
+            .await
+            .map(|(s, _)| s)
+    }
+
+    /// One motion where the legs lie along one straight line (it slows to a slower
+    /// leg's speed before that leg and never stops between legs: [`super::blend`]);
+    /// otherwise leg by leg.
+    async fn move_through(
+        &mut self,
+        legs: &[(ArmPose, f64)],
+    ) -> Result<(ArmState, Vec<TimestampNs>), DeviceError> {
+        if legs.is_empty() {
+            return self.state().await.map(|s| (s, Vec::new()));
+        }
+        self.move_path(legs.to_vec()).await
     }
 
     async fn state(&mut self) -> Result<ArmState, DeviceError> {

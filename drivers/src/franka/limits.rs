@@ -67,7 +67,7 @@ impl MotionLimits {
     /// Cartesian limits. An abort brakes at least as hard as the move it stops: the
     /// harder of the move's own acceleration and jerk and the default brake's (1.5
     /// m/s², 200 m/s³: what one FER accepted), softened only where the joints need it
-    /// (`run_move`). Its stopping distance at a rig's approach speeds is
+    /// (`run_path`). Its stopping distance at a rig's approach speeds is
     /// [`MotionLimits::stopping_distance_m`] (RIG.md gives the table).
     #[must_use]
     pub fn for_robot(robot: reach::Robot, margin: f64) -> Self {

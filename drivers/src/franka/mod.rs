@@ -40,7 +40,7 @@ use crate::arm::{Arm, ArmState, PoseFeed};
 use crate::clock::Clock;
 use crate::error::DeviceError;
 use async_trait::async_trait;
-use softtouch_schemas::{ArmPose, Wrench};
+use softtouch_schemas::{ArmPose, TimestampNs, Wrench};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc;
@@ -48,7 +48,7 @@ use tokio::sync::{oneshot, watch};
 
 /// The measured pose's publisher (every [`FEED_EVERY`] control cycles, and every state
 /// read).
-type FeedTx = Arc<watch::Sender<Option<(softtouch_schemas::TimestampNs, ArmPose)>>>;
+type FeedTx = Arc<watch::Sender<Option<(TimestampNs, ArmPose)>>>;
 
 /// Control cycles between two poses published on the feed (4 ms at 1 kHz).
 const FEED_EVERY: usize = 4;
@@ -56,6 +56,7 @@ const FEED_EVERY: usize = 4;
 const DEVICE: &str = "franka";
 
 mod arm;
+pub mod blend;
 mod brake;
 mod connect;
 pub mod joints;

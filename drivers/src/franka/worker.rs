@@ -7,12 +7,14 @@ use super::*;
 pub(super) type Reply<T> = oneshot::Sender<Result<T, DeviceError>>;
 
 pub(super) enum Cmd {
+    /// One motion through legs (pose, speed m/s) along a straight line
+    /// ([`run_path`]); a plain move is one leg.
     Move {
-        target: ArmPose,
-        speed: f64,
+        legs: Vec<(ArmPose, f64)>,
         /// This move's number: cancelled once [`Cancel::through`] reaches it.
         generation: u64,
-        reply: Reply<ArmState>,
+        /// The state at the end, and when each leg's end was commanded.
+        reply: Reply<(ArmState, Vec<TimestampNs>)>,
     },
     /// A joint-space move ([`super::joints`]).
     MoveJoints {
@@ -206,30 +208,95 @@ impl MoveJob<'_> {
     }
 }
 
-pub(super) fn run_move(
+/// How far a leg's end may lie off the line from where the robot is to the last leg's
+/// end and still be blended, m and rad: a leg's end only says where its speed changes
+/// (the commanded poses are on the line), and the robot's commanded pose at rest is
+/// the last target only to its own rounding (about 1e-5 rad seen against franka-sim).
+const ON_LINE_M: f64 = 5e-4;
+const ON_LINE_RAD: f64 = 5e-3;
+
+/// Whether `legs` (poses and speeds) lie in order along the straight line from `from`
+/// to the last one, each pose on the line (within [`ON_LINE_M`] and [`ON_LINE_RAD`]):
+/// their ends as path parameters, else `None` (the legs are then moved one by one).
+pub(super) fn collinear_ends(from: &ArmPose, legs: &[(ArmPose, f64)]) -> Option<Vec<f64>> {
+    let target = legs.last()?.0;
+    let dist = from.distance_to(&target);
+    let angle = from.angle_to(&target);
+    if !(dist > 1e-6 && dist.is_finite() && angle.is_finite()) {
+        return None;
+    }
+    let mut ends = Vec::with_capacity(legs.len());
+    for (pose, _) in legs {
+        let s = from.distance_to(pose) / dist;
+        let on = from.slerp(&target, s);
+        let after = ends.last().map_or(0.0, |e| *e);
+        if !(s.is_finite()
+            && s > after
+            && on.distance_to(pose) < ON_LINE_M
+            && on.angle_to(pose) < ON_LINE_RAD)
+        {
+            return None;
+        }
+        ends.push(s);
+    }
+    Some(ends)
+}
+
+/// One motion through `legs` (poses along one straight line from where the robot is,
+/// each at up to its speed, [`super::blend`]); a single leg is a plain move. When each
+/// leg's end was commanded, on the rig's clock. Legs that are not along one line are
+/// moved one by one.
+pub(super) fn run_path(
     robot: &franka::Robot,
-    target: &ArmPose,
-    speed: f64,
+    legs: &[(ArmPose, f64)],
     limits: &MotionLimits,
     joints: &JointCheck,
     job: &mut MoveJob<'_>,
-) -> Result<(), DeviceError> {
+) -> Result<Vec<TimestampNs>, DeviceError> {
+    let Some(&(target, _)) = legs.last() else {
+        return Ok(Vec::new());
+    };
     let start = robot.read_once().map_err(err)?;
     let from = ArmPose::from_matrix(&start.O_T_EE_c);
-    let dist = from.distance_to(target);
-    let angle = from.angle_to(target);
-    let mut path = path_limits(dist, angle, speed, limits);
-    let mut brake_path = path_limits(dist, angle, speed, &limits.braking());
+    let ends = if legs.len() == 1 {
+        vec![1.0]
+    } else {
+        match collinear_ends(&from, legs) {
+            Some(ends) => ends,
+            None => {
+                tracing::debug!(
+                    "franka: move {}: its legs are not along one line from {from:?}; moved one by one",
+                    job.generation
+                );
+                let mut stamps = Vec::with_capacity(legs.len());
+                for leg in legs {
+                    stamps.extend(run_path(
+                        robot,
+                        std::slice::from_ref(leg),
+                        limits,
+                        joints,
+                        job,
+                    )?);
+                }
+                return Ok(stamps);
+            }
+        }
+    };
+    let fastest = legs.iter().map(|l| l.1).fold(0.0, f64::max);
+    let dist = from.distance_to(&target);
+    let angle = from.angle_to(&target);
+    let mut path = path_limits(dist, angle, fastest, limits);
+    let mut brake_path = path_limits(dist, angle, fastest, &limits.braking());
     // Slowed (or refused) here where a joint would turn faster, or speed up or jerk
     // harder, than its limits allow: the robot would abort the motion (FR3: velocity
-    // limits that depend on the joint's position).
+    // limits that depend on the joint's position). Checked at the fastest leg's speed.
     if let Some((kin, robot_kind)) = joints {
         let (scale, brake_scale) = reach::path_and_brake_scales(
             kin,
             *robot_kind,
             &start.q,
             &from,
-            target,
+            &target,
             [path.max_velocity, path.max_acceleration, path.max_jerk],
             [brake_path.max_acceleration, brake_path.max_jerk],
         )
@@ -267,16 +334,31 @@ pub(super) fn run_move(
             rot_jerk_rad_s3: rj * k,
             ..*limits
         };
-        let p = path_limits(dist, angle, speed, &broken);
+        let p = path_limits(dist, angle, fastest, &broken);
         path.max_acceleration = p.max_acceleration;
         path.max_jerk = p.max_jerk;
     }
-    let mut otg = franka::Otg::new(0.0, path).map_err(err)?;
-    otg.set_target(1.0).map_err(err)?;
+    // Each leg's speed in path units, within the fastest leg's as the joints allow it
+    // (a joint's velocity is the path's times a factor of the pose alone, so every
+    // speed below the allowed one is allowed).
+    let legs_s: Vec<(f64, f64)> = ends
+        .iter()
+        .zip(legs)
+        .map(|(end, (_, speed))| {
+            let v = path_limits(dist, angle, *speed, limits).max_velocity;
+            (*end, v.min(path.max_velocity))
+        })
+        .collect();
+    let mut blend =
+        super::blend::Blend::new(legs_s, path).ok_or_else(|| DeviceError::InvalidCommand {
+            device: DEVICE.into(),
+            message: format!("legs {legs:?} do not form a path from {from:?}"),
+        })?;
+    let leg_ends: Vec<f64> = blend.ends().collect();
+    let mut stamps: Vec<TimestampNs> = Vec::with_capacity(legs.len());
     let mut seed: Option<ArmPose> = None;
     let mut brake: Option<Brake> = None;
     let mut aborted = false;
-    let target = *target;
     robot
         .control_cartesian_pose(
             |state, dt| {
@@ -289,10 +371,11 @@ pub(super) fn run_move(
                 // slowing, stops at the target sooner and within the move's limits.
                 if !aborted && job.cancelled() {
                     aborted = true;
+                    let o = blend.otg();
                     let b = Brake::new(
-                        otg.position(),
-                        otg.velocity(),
-                        otg.acceleration(),
+                        o.position(),
+                        o.velocity(),
+                        o.acceleration(),
                         brake_path.max_acceleration,
                         brake_path.max_jerk,
                     );
@@ -304,10 +387,14 @@ pub(super) fn run_move(
                     // `stops_before` holds it within [s, 1] all the way to rest.
                     Some(b) => (b.step(dt.as_secs_f64()), b.finished()),
                     None => {
-                        let s = otg.step(dt.as_secs_f64());
-                        (s, s >= 1.0 - 1e-9 && otg.velocity().abs() < 1e-9)
+                        let s = blend.step(dt.as_secs_f64());
+                        (s, blend.finished())
                     }
                 };
+                // Each leg's end, as it is commanded (the last at rest there).
+                while stamps.len() + 1 < leg_ends.len() && s >= leg_ends[stamps.len()] {
+                    stamps.push(job.clock.now());
+                }
                 let cmd = franka::CartesianPose::new(a.slerp(&target, s).to_matrix());
                 if done {
                     franka::motion_finished(cmd)
@@ -326,7 +413,9 @@ pub(super) fn run_move(
             false,
             franka::MAX_CUTOFF_FREQUENCY,
         )
-        .map_err(err)
+        .map_err(err)?;
+    stamps.push(job.clock.now());
+    Ok(stamps)
 }
 
 /// The kinematics each move is checked with against the joints' velocity limits
@@ -353,8 +442,7 @@ pub(super) fn worker(
     while let Ok(cmd) = rx.recv() {
         match cmd {
             Cmd::Move {
-                target,
-                speed,
+                legs,
                 generation,
                 reply,
             } => {
@@ -375,18 +463,24 @@ pub(super) fn worker(
                     clock: clock.as_ref(),
                 };
                 let began = std::time::Instant::now();
-                let moved = run_move(&robot, &target, speed, &limits, &joints, &mut job);
-                // Where a sample's time goes on a robot: each move's speed and duration
+                let moved = run_path(&robot, &legs, &limits, &joints, &mut job);
+                // Where a sample's time goes on a robot: each move's speeds and duration
                 // (`RUST_LOG=softtouch_drivers::franka=debug`).
                 tracing::debug!(
-                    "franka: move {generation} at {speed} m/s took {:.0} ms over {} control cycles{}",
+                    "franka: move {generation} at {:?} m/s took {:.0} ms over {} control cycles{}",
+                    legs.iter().map(|l| l.1).collect::<Vec<_>>(),
                     began.elapsed().as_secs_f64() * 1000.0,
                     job.success.cycles,
                     if moved.is_ok() { "" } else { " (failed)" }
                 );
-                let r = moved.and_then(|()| state(&robot)).map(|s| ArmState {
-                    command_success_rate: job.success.rate(),
-                    ..s
+                let r = moved.and_then(|stamps| {
+                    state(&robot).map(|s| {
+                        let s = ArmState {
+                            command_success_rate: job.success.rate(),
+                            ..s
+                        };
+                        (s, stamps)
+                    })
                 });
                 let _ = reply.send(r);
             }

@@ -53,6 +53,41 @@ impl TrueForce for SimTruth {
     }
 }
 
+/// The truth of a trial, whose verdict the physics gives with both fingers: each cycle
+/// the loop's finger (0) as the trace records it, and the largest true grip force on
+/// either finger so far in `peak_n` (each projected like the estimate): what a row's
+/// `peak_true_n` and a cell's grip max report, since either finger can crush.
+#[derive(Debug)]
+pub struct BothFingersTruth {
+    /// The grasp.
+    pub handle: SoftGraspHandle,
+    /// Each finger's projection onto the grip axis.
+    pub projections: [Projection; 2],
+    /// The largest true grip force on either finger at a cycle so far, N.
+    pub peak_n: Arc<Mutex<Option<f64>>>,
+}
+
+impl TrueForce for BothFingersTruth {
+    fn true_force_n(&mut self, t: TimestampNs) -> Option<f64> {
+        let on = |k: usize| {
+            self.handle
+                .true_wrench_on(k, t)
+                .ok()
+                .and_then(|w| self.projections[k].grip_force_n(&w))
+                .filter(|f| f.is_finite())
+        };
+        let (watched, other) = (on(0), on(1));
+        let both = match (watched, other) {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            (a, b) => a.or(b),
+        };
+        if let (Some(f), Ok(mut peak)) = (both, self.peak_n.lock()) {
+            *peak = Some(peak.map_or(f, |p| p.max(f)));
+        }
+        watched
+    }
+}
+
 /// The simulator's truth at one cycle, as [`LoggedTruth`] records it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TruthSample {

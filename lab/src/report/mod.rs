@@ -206,7 +206,9 @@ async fn gather(
         .as_deref()
         .map(csv::read_collection)
         .transpose()?;
-    let mut sweeps = sweeps;
+    // Stored sweeps first, then the CSV files given (the order the page's note says).
+    let files = sweeps;
+    let mut sweeps = Vec::new();
     let results = results::Results {
         all: crate::store::report::results(pool).await?,
     };
@@ -220,6 +222,7 @@ async fn gather(
             }
         }
     }
+    sweeps.extend(files);
     let runs = data::runs(pool, options.runs.as_deref()).await?;
     let datasets = data::datasets(pool, options.runs.as_deref()).await?;
     let rows = data::models(pool, options.models.as_deref()).await?;

@@ -177,6 +177,8 @@ impl Validate for SceneSpec {
             }
         }
         let mut kinds = HashSet::new();
+        // A scene has one fluid: every effect that names its density names the same.
+        let mut fluid: Option<(usize, &'static str, f64)> = None;
         for (i, e) in self.effects.iter().enumerate() {
             let at = format!("effects[{i}]");
             if !kinds.insert(e.kind()) {
@@ -186,6 +188,19 @@ impl Validate for SceneSpec {
                 );
             }
             e.validate(c, &at);
+            let Some(rho) = e.fluid_density_kg_m3() else {
+                continue;
+            };
+            match fluid {
+                None => fluid = Some((i, e.kind(), rho)),
+                Some((j, kind, first)) if rho.to_bits() != first.to_bits() => c.fail(
+                    format!("{at}.fluid_density_kg_m3"),
+                    format!(
+                        "{rho} kg/m³, but effects[{j}] (`{kind}`) declares {first} kg/m³: a scene has one fluid, so every effect's fluid_density_kg_m3 must be the same"
+                    ),
+                ),
+                Some(_) => {}
+            }
         }
     }
 }

@@ -182,3 +182,40 @@ fn support_added_mass_and_gust_spectra_are_checked_by_field() {
         assert!(e.contains(field), "{effect}: {e}");
     }
 }
+
+/// A scene has one fluid: effects that name different densities are refused, naming
+/// the second effect's field and the first effect with its value.
+#[test]
+fn every_effect_names_the_same_fluid_density() {
+    let scene = |effects: &str| {
+        let text = format!("{}\n{effects}\n", crate::defaults::SCENE_TOML);
+        parse_toml::<SceneSpec>(&text, &ConfigSource::Embedded("test")).map_err(|e| e.to_string())
+    };
+    let effect = |kind: &str, rho: &str| {
+        format!("[[effects]]\nkind = \"{kind}\"\nfluid_density_kg_m3 = {rho}\n")
+    };
+    let same = format!(
+        "{}{}{}",
+        effect("object_buoyancy", "1000.0"),
+        effect("object_drag", "1000.0"),
+        effect("object_added_mass", "1000.0")
+    );
+    assert!(scene(&same).is_ok(), "{:?}", scene(&same));
+    let sea = format!(
+        "{}{}mean_m_s = 0.05\n",
+        effect("object_buoyancy", "1000.0"),
+        effect("object_flow", "1025.0")
+    );
+    let err = scene(&sea).expect_err("two fluids");
+    // The default scene's own effects come first: the buoyancy is one past them.
+    assert!(
+        err.contains("effects[2].fluid_density_kg_m3")
+            && err.contains("1025 kg/m³")
+            && err.contains("(`object_buoyancy`) declares 1000 kg/m³"),
+        "{err}"
+    );
+    // Any two that differ, not only the first pair.
+    let third = format!("{same}{}mean_m_s = 0.05\n", effect("object_flow", "998.0"));
+    let err = scene(&third).expect_err("a third fluid");
+    assert!(err.contains("998 kg/m³"), "{err}");
+}

@@ -63,7 +63,9 @@ mod object;
 mod tests;
 mod touch;
 
-pub use object::{GraspObject, default_drag_coefficient, spheroid_added_mass};
+pub use object::{
+    GraspObject, default_drag_coefficient, default_drag_coefficients, spheroid_added_mass,
+};
 
 use super::SimError;
 use super::contact::{Contact, ContactParams, FingerGeometry};

@@ -51,8 +51,12 @@ pub struct GraspObject {
     pub grasp_width_m: f64,
     /// Volume of fluid it displaces, m³.
     pub volume_m3: f64,
-    /// Drag coefficient C_d.
+    /// Drag coefficient C_d across the object (a current along the gripping
+    /// direction; a lying object's lift).
     pub drag_coefficient: f64,
+    /// Drag coefficient C_d along a standing object's axis (its lift, end-on); a
+    /// lying object's is `drag_coefficient`.
+    pub lift_drag_coefficient: f64,
     /// Area the fluid's drag acts on, m².
     pub drag_area_m2: f64,
     /// Area a current along the gripping direction (x) meets, m²: the object's
@@ -91,7 +95,8 @@ impl GraspObject {
             grasp_height_m: 0.0,
             grasp_width_m: 0.0,
             volume_m3: 0.0,
-            drag_coefficient: default_drag_coefficient(RodShape::Circle, None),
+            drag_coefficient: 0.0,
+            lift_drag_coefficient: 0.0,
             drag_area_m2: 0.0,
             flow_area_m2: 0.0,
             wet_friction: None,
@@ -99,7 +104,7 @@ impl GraspObject {
             support_friction: None,
             added_mass_xz: [0.5; 2],
         };
-        o.fill_defaults(None, None, None, None);
+        o.fill_defaults(None, None, None, None, None);
         o
     }
 
@@ -120,10 +125,9 @@ impl GraspObject {
             width_m,
             size_m: width_m,
             aspect,
-            drag_coefficient: default_drag_coefficient(shape, Some(profile)),
             ..Self::cylinder(name, width_m)
         };
-        o.fill_defaults(None, None, None, None);
+        o.fill_defaults(None, None, None, None, None);
         o
     }
 
@@ -144,9 +148,8 @@ impl GraspObject {
             grasp_height_m: 0.0,
             grasp_width_m: 0.0,
             volume_m3: 0.0,
-            drag_coefficient: spec
-                .drag_coefficient
-                .unwrap_or_else(|| default_drag_coefficient(spec.shape, spec.profile)),
+            drag_coefficient: 0.0,
+            lift_drag_coefficient: 0.0,
             drag_area_m2: 0.0,
             flow_area_m2: 0.0,
             wet_friction: spec.wet_friction,
@@ -159,6 +162,7 @@ impl GraspObject {
             spec.grasp_width_m,
             spec.volume_m3,
             spec.drag_area_m2,
+            spec.drag_coefficient,
         );
         o
     }
@@ -170,6 +174,7 @@ impl GraspObject {
         grasp_width_m: Option<f64>,
         volume_m3: Option<f64>,
         drag_area_m2: Option<f64>,
+        drag_coefficient: Option<f64>,
     ) {
         self.grasp_height_m = grasp_height_m.unwrap_or(match self.profile {
             Some(p) => 0.5 * p.height_m(self.width_m),
@@ -235,6 +240,15 @@ impl GraspObject {
             Some(_) => [across, along],
             None => [across, across],
         };
+        // A lying object meets the current and its lift across its length `w`; a
+        // standing one meets the current across its height and its lift end-on.
+        let [across, end_on] =
+            default_drag_coefficients(self.shape, self.profile, length / self.size_m.max(1e-9));
+        self.drag_coefficient = drag_coefficient.unwrap_or(across);
+        self.lift_drag_coefficient = drag_coefficient.unwrap_or(match self.profile {
+            Some(_) => end_on,
+            None => across,
+        });
     }
 
     /// Area of the section at width 1 (depth `aspect`).
@@ -306,6 +320,7 @@ impl GraspObject {
         for (field, v) in [
             ("friction", self.friction),
             ("drag_coefficient", self.drag_coefficient),
+            ("lift_drag_coefficient", self.lift_drag_coefficient),
             ("drag_area_m2", self.drag_area_m2),
             ("flow_area_m2", self.flow_area_m2),
             ("grasp_width_m", self.grasp_width_m),
@@ -520,16 +535,13 @@ impl GraspObject {
     }
 }
 
-/// The drag coefficient C_d of an object with no `drag_coefficient` of its own, by
-/// its section, in the subcritical range a grasp's currents and lifts reach (a 30 mm
-/// object at 0.01–0.3 m/s in water: Re ≈ 300–9 000). F. M. White, *Fluid Mechanics*
-/// (7th ed., 2011), Table 7.2 (two-dimensional bodies, Re ≥ 10⁴, a face towards the
-/// flow: a circle 1.2, a square 2.1, an equilateral triangle 2.0, a hexagon 1.0) and
-/// Table 7.3 (a sphere, 10³ < Re < 2·10⁵: 0.47); an oval is taken as its circle. The
-/// same C_d serves a current across the object and its lift along its axis (the
-/// simulator has one per object): the lift's is a short body's end-on value, which
-/// the tables put lower (a 2:1 cylinder end-on 0.85), so the lift's drag is on the high
-/// side. A scene overrides it per object with `drag_coefficient`.
+/// The drag coefficient C_d of an infinitely long body of `shape`'s section, a face
+/// towards the flow, in the subcritical range a grasp's currents and lifts reach (a
+/// 30 mm object at 0.01–0.3 m/s in water: Re ≈ 300–9 000): F. M. White, *Fluid
+/// Mechanics* (7th ed., 2011), Table 7.2 (two-dimensional bodies, Re ≥ 10⁴: a circle
+/// 1.2, a square 2.1, an equilateral triangle 2.0, a hexagon 1.0); an oval is taken as
+/// its circle. A sphere's is Table 7.3's 0.47. What an object of finite length sees is
+/// [`default_drag_coefficients`].
 #[must_use]
 pub fn default_drag_coefficient(shape: RodShape, profile: Option<ObjectProfile>) -> f64 {
     if matches!(profile, Some(ObjectProfile::Sphere {})) {
@@ -541,6 +553,73 @@ pub fn default_drag_coefficient(shape: RodShape, profile: Option<ObjectProfile>)
         RodShape::Triangle => 2.0,
         RodShape::Hexagon => 1.0,
     }
+}
+
+/// White (2011) Table 7.3, three-dimensional bodies, Re ≥ 10⁴: a short circular
+/// cylinder crosswise, `(L/D, C_d)` (∞: 1.2, the two-dimensional value).
+const CROSSWISE_L_D: [(f64, f64); 8] = [
+    (1.0, 0.64),
+    (2.0, 0.68),
+    (3.0, 0.72),
+    (5.0, 0.74),
+    (10.0, 0.82),
+    (20.0, 0.91),
+    (40.0, 0.98),
+    (1e6, 1.2),
+];
+
+/// The same table's flat-faced cylinder end-on (along its axis), `(L/D, C_d)`.
+const END_ON_L_D: [(f64, f64); 5] = [
+    (0.5, 1.15),
+    (1.0, 0.90),
+    (2.0, 0.85),
+    (4.0, 0.87),
+    (8.0, 0.99),
+];
+
+/// Piecewise linear in ln(L/D) through `table`, held at its ends.
+fn by_slenderness(table: &[(f64, f64)], l_over_d: f64) -> f64 {
+    let x = l_over_d.clamp(table[0].0, table[table.len() - 1].0);
+    for w in table.windows(2) {
+        let ((x0, y0), (x1, y1)) = (w[0], w[1]);
+        if x <= x1 {
+            let t = (x.ln() - x0.ln()) / (x1.ln() - x0.ln());
+            return y0 + t * (y1 - y0);
+        }
+    }
+    table[table.len() - 1].1
+}
+
+/// The drag coefficients `[across, end-on]` of an object with no `drag_coefficient` of
+/// its own, `l_over_d` its length along its axis over its width (a standing object's
+/// height, a lying one's length across the fingers): a short body lets the flow pass
+/// round its ends, so it sees far less than the two-dimensional value. Across: the
+/// section's two-dimensional value ([`default_drag_coefficient`]) times the short
+/// circular cylinder's share of its own (White 2011, Table 7.3: 0.64, 0.68, 0.72, 0.74
+/// of 1.2 at L/D 1, 2, 3, 5; the finite-span reduction Hoerner, *Fluid-Dynamic Drag*
+/// (1965) ch. 3, applies to every prism); a square at L/D 1 so comes to 1.12 against
+/// the table's cube, 1.07. End-on (a standing object's lift): the flat-faced cylinder
+/// (1.15, 0.90, 0.85, 0.87, 0.99 at L/D 0.5, 1, 2, 4, 8). A sphere: 0.47 either way. A
+/// slenderness that is not finite and positive is taken as 1.
+#[must_use]
+pub fn default_drag_coefficients(
+    shape: RodShape,
+    profile: Option<ObjectProfile>,
+    l_over_d: f64,
+) -> [f64; 2] {
+    if matches!(profile, Some(ObjectProfile::Sphere {})) {
+        return [0.47; 2];
+    }
+    let l_over_d = if l_over_d.is_finite() && l_over_d > 0.0 {
+        l_over_d
+    } else {
+        1.0
+    };
+    let share = by_slenderness(&CROSSWISE_L_D, l_over_d) / 1.2;
+    [
+        default_drag_coefficient(shape, profile) * share,
+        by_slenderness(&END_ON_L_D, l_over_d),
+    ]
 }
 
 /// Added-mass coefficients `(along its axis, across it)` of a spheroid whose length

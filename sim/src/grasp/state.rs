@@ -92,6 +92,33 @@ impl FlowSeries {
         0.5 * self.flow.density_kg_m3 * obj.drag_coefficient * obj.flow_area_m2
     }
 
+    /// The current's own acceleration along G's +x at `t_s`, m/s²: the time derivative
+    /// of [`FlowSeries::speed_m_s`] (the gusts'; a steady current has none).
+    pub(super) fn accel_m_s2(&self, t_s: f64) -> f64 {
+        let d: f64 = self
+            .waves
+            .iter()
+            .map(|(omega, phase, weight)| weight * omega * (omega * t_s + phase).cos())
+            .sum();
+        if self.flow.spectrum.is_empty() {
+            self.flow.gust_m_s * d
+        } else {
+            d
+        }
+    }
+
+    /// The inertia force of an accelerating current on `obj` per m/s² of its
+    /// acceleration, kg (Morison et al. 1950, "The force exerted by surface waves on
+    /// piles", Petroleum Transactions 189:149-154; Newman 1977 §4.17): `ρ·V·(1 + C_a)`,
+    /// the pressure gradient that accelerates the water (Froude–Krylov, `ρ·V`) and the
+    /// water the object's presence makes accelerate with it (`C_a·ρ·V`, across the
+    /// object: `C_a` of its equivalent spheroid, as the added mass uses). Part of the
+    /// declared current, whether or not the scene lists `object_added_mass` (which is
+    /// the object's own acceleration in still water).
+    pub(super) fn inertia_kg(&self, obj: &GraspObject) -> f64 {
+        self.flow.density_kg_m3 * obj.volume_m3 * (1.0 + obj.added_mass_xz[0])
+    }
+
     /// Speed along G's +x at `t_s`, m/s.
     pub(super) fn speed_m_s(&self, t_s: f64) -> f64 {
         let gust: f64 = self
@@ -403,6 +430,7 @@ impl State {
         &mut self,
         mu: f64,
         u_m_s: f64,
+        du_dt_m_s2: f64,
         dt_s: f64,
     ) -> Result<(), SimError> {
         let Some(obj) = self.object.clone() else {
@@ -413,6 +441,11 @@ impl State {
         let hold_n = mu * (obj.mass_kg * G_M_S2 - self.buoyancy_n(&obj)).max(0.0);
         let mass_kg = obj.mass_kg + self.added_mass_kg(&obj, 0);
         let drag = self.flow.as_ref().map_or(0.0, |f| f.side_drag(&obj));
+        // The accelerating current's inertia force along +x (Morison).
+        let inertia_n = self
+            .flow
+            .as_ref()
+            .map_or(0.0, |f| f.inertia_kg(&obj) * du_dt_m_s2);
         let Some(along) = self.squeezes_along(&obj)? else {
             return Ok(());
         };
@@ -425,7 +458,7 @@ impl State {
             let a = st.probe(&along, 0, s1)?.1;
             let b = st.probe(&along, 1, s1)?.1;
             let rel = u_m_s + w1;
-            Ok(mass_kg * (w1 - w0) / dt_s + a - b + drag * rel * rel.abs())
+            Ok(mass_kg * (w1 - w0) / dt_s + a - b + drag * rel * rel.abs() + inertia_n)
         };
         let h0 = h(self, s0)?;
         if !h0.is_finite() {
@@ -597,11 +630,12 @@ impl State {
         };
         let t_s = t.0 as f64 * 1e-9;
         let u = self.flow.as_ref().map_or(0.0, |f| f.speed_m_s(t_s));
+        let du_dt = self.flow.as_ref().map_or(0.0, |f| f.accel_m_s2(t_s));
         // A current that is not a number has no physical outcome: an error, never a
         // shift solved to the end of the reach.
-        if !u.is_finite() {
+        if !(u.is_finite() && du_dt.is_finite()) {
             return Err(SimError::InvalidParameter(format!(
-                "object `{}`: the current at {t_s:.3} s is not finite ({u} m/s)",
+                "object `{}`: the current at {t_s:.3} s is not finite ({u} m/s, {du_dt} m/s²)",
                 obj.name
             )));
         }
@@ -609,18 +643,18 @@ impl State {
         match self.effects.support_friction {
             // On its support: friction and inertia decide where it goes.
             Some(mu) if !lifted => {
-                self.slide_on_support(mu, u, dt_s)?;
+                self.slide_on_support(mu, u, du_dt, dt_s)?;
                 if self.object.is_none() {
                     return Ok(());
                 }
             }
             _ if self.flow.is_some() || self.effects.support_friction.is_some() => {
                 self.slide_m_s = 0.0;
-                // On the outline the current meets: the object's side, not its top.
-                let push_n = self
-                    .flow
-                    .as_ref()
-                    .map_or(0.0, |f| f.side_drag(&obj) * u * u.abs());
+                // On the outline the current meets: the object's side, not its top;
+                // and its inertia force as it gusts (Morison).
+                let push_n = self.flow.as_ref().map_or(0.0, |f| {
+                    f.side_drag(&obj) * u * u.abs() + f.inertia_kg(&obj) * du_dt
+                });
                 self.shift_m = self.balance_shift(push_n)?;
             }
             _ => {}
@@ -647,7 +681,7 @@ impl State {
             let buoyancy_n = self.buoyancy_n(&obj);
             // Drag opposes the motion: a rising object is pulled down.
             let drag_n = self.effects.object_drag_kg_m3.map_or(0.0, |rho| {
-                0.5 * rho * obj.drag_coefficient * obj.drag_area_m2 * v * v.abs()
+                0.5 * rho * obj.lift_drag_coefficient * obj.drag_area_m2 * v * v.abs()
             });
             // The fluid the object carries along adds to the inertia, not the weight.
             let added_kg = self.added_mass_kg(&obj, 1);

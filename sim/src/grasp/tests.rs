@@ -342,7 +342,8 @@ async fn a_load_or_a_current_that_is_not_a_number_is_an_error_not_an_outcome() {
     if let Ok(mut s) = h.state.lock()
         && let Some(o) = s.object.as_mut()
     {
-        o.drag_coefficient = f64::NAN;
+        // The lift's drag is the end-on one.
+        o.lift_drag_coefficient = f64::NAN;
     }
     h.start_lift(TimestampNs(clock.now().0 + 5_000_000), 0.1, 0.1, 1.0)
         .expect("lift");
@@ -712,8 +713,16 @@ async fn a_declared_current_squeezes_one_finger_more_than_the_other() {
         "{:?}",
         spreads[0]
     );
-    // Pushed towards finger 1 (+x): finger 1 squeezed harder, by a varying amount.
-    assert!(spreads[1].iter().all(|d| *d < -0.01), "{:?}", spreads[1]);
+    // Pushed towards finger 1 (+x): finger 1 squeezed harder on the whole, by a
+    // varying amount (the gusts' inertia, Morison's ρV(1 + C_a)·du/dt, pushes back
+    // while the current slows, more than the drag at these gusts).
+    let mean = spreads[1].iter().sum::<f64>() / spreads[1].len() as f64;
+    assert!(mean < -0.01, "{mean}: {:?}", spreads[1]);
+    assert!(
+        spreads[1].iter().filter(|d| **d < 0.0).count() >= 15,
+        "{:?}",
+        spreads[1]
+    );
     let (lo, hi) = spreads[1]
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), d| {
@@ -1214,6 +1223,20 @@ fn a_ball_carries_half_its_volume_of_fluid_both_ways() {
     );
     let [across, along] = tall.added_mass_xz;
     assert!(along < 0.5 && across > 0.5, "{:?}", tall.added_mass_xz);
+    // The water scene's cylinder (30 mm wide, 50 mm tall) carries what its comment
+    // says: 0.343 along its axis, 0.593 across (the comment once said 0.27 and 0.65).
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let scene: SceneSpec =
+        softtouch_schemas::config::load_toml(&root.join("scenes/grasp-water.toml")).expect("loads");
+    let cylinder = GraspObject::from_spec(scene.object("cylinder").expect("a cylinder"));
+    let [across, along] = cylinder.added_mass_xz;
+    assert!(
+        (along - 0.343).abs() < 5e-4 && (across - 0.593).abs() < 5e-4,
+        "{:?}",
+        cylinder.added_mass_xz
+    );
+    let text = std::fs::read_to_string(root.join("scenes/grasp-water.toml")).expect("reads");
+    assert!(text.contains("0.343 for the cylinder") && text.contains("0.593 for the cylinder"));
 }
 
 #[test]
@@ -1261,10 +1284,33 @@ fn an_object_lighter_than_the_fluid_is_refused_not_floated() {
 fn drag_coefficients_follow_the_section() {
     let sphere = GraspObject::standing("b", RodShape::Circle, 0.04, 1.0, ObjectProfile::Sphere {});
     assert!((sphere.drag_coefficient - 0.47).abs() < 1e-12);
-    let prism = ObjectProfile::Prism { height_m: 0.05 };
-    let cd = |shape| GraspObject::standing("o", shape, 0.03, 1.0, prism).drag_coefficient;
-    assert!((cd(RodShape::Circle) - 1.2).abs() < 1e-12);
-    assert!((cd(RodShape::Square) - 2.1).abs() < 1e-12);
+    assert!((sphere.lift_drag_coefficient - 0.47).abs() < 1e-12);
+    // A short body, not an infinite one (White 2011, Table 7.3): a 60 mm × 30 mm
+    // standing cylinder (L/D 2) sees 0.68 across, not 1.2, and 0.85 end-on on its lift;
+    // a square prism the same share of its 2.1.
+    let prism = ObjectProfile::Prism { height_m: 0.06 };
+    let o = |shape| GraspObject::standing("o", shape, 0.03, 1.0, prism);
+    assert!((o(RodShape::Circle).drag_coefficient - 0.68).abs() < 1e-12);
+    assert!((o(RodShape::Circle).lift_drag_coefficient - 0.85).abs() < 1e-12);
+    assert!((o(RodShape::Square).drag_coefficient - 2.1 * 0.68 / 1.2).abs() < 1e-12);
+    // Between the table's rows, along ln(L/D): 0.64 at 1 and 0.68 at 2 give 0.66 at √2.
+    let [across, _] = default_drag_coefficients(RodShape::Circle, Some(prism), 2f64.sqrt());
+    assert!((across - 0.66).abs() < 1e-12, "{across}");
+    // Beyond its ends it holds them; a slenderness that is no number is a cube's.
+    let cd = |l_d: f64| default_drag_coefficients(RodShape::Circle, Some(prism), l_d);
+    assert!((cd(0.1)[0] - 0.64).abs() < 1e-12 && (cd(0.1)[1] - 1.15).abs() < 1e-12);
+    assert!((cd(1e9)[0] - 1.2).abs() < 1e-12 && (cd(1e9)[1] - 0.99).abs() < 1e-12);
+    for bad in [f64::NAN, f64::INFINITY, 0.0, -1.0] {
+        assert_eq!(
+            cd(bad).map(f64::to_bits),
+            cd(1.0).map(f64::to_bits),
+            "{bad}"
+        );
+    }
+    // A lying cylinder as long as it is wide: 0.64 across, its lift across it too.
+    let lying = GraspObject::cylinder("c", 0.03);
+    assert!((lying.drag_coefficient - 0.64).abs() < 1e-12);
+    assert!((lying.lift_drag_coefficient - 0.64).abs() < 1e-12);
     // A scene's own value wins.
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let scene: SceneSpec =
@@ -1274,6 +1320,7 @@ fn drag_coefficients_follow_the_section() {
         ..scene.objects.first().cloned().expect("an object")
     };
     assert!((GraspObject::from_spec(&spec).drag_coefficient - 0.8).abs() < 1e-12);
+    assert!((GraspObject::from_spec(&spec).lift_drag_coefficient - 0.8).abs() < 1e-12);
     spec.drag_coefficient = None;
     assert!(GraspObject::from_spec(&spec).drag_coefficient > 0.4);
 }
@@ -1513,6 +1560,62 @@ fn a_declared_gust_spectrum_is_its_components() {
     // None at all: a steady current.
     let steady = FlowSeries::new(flow(Vec::new()), 3);
     assert!((steady.speed_m_s(12.3) - 0.05).abs() < 1e-15);
+    assert!(steady.accel_m_s2(12.3).abs() < 1e-15);
+    // The acceleration is the speed's derivative (central differences, 1 µs).
+    for series in [&one, &two] {
+        for i in 0..50 {
+            let t = f64::from(i) * 0.037;
+            let numeric = (series.speed_m_s(t + 1e-6) - series.speed_m_s(t - 1e-6)) / 2e-6;
+            assert!((series.accel_m_s2(t) - numeric).abs() < 1e-5, "{t}");
+        }
+    }
+}
+
+/// Morison's inertia force: a neutrally buoyant object in an accelerating current, its
+/// added mass declared, accelerates with the water (`ρV(1 + C_a)·du/dt` on
+/// `m + C_a·ρV` with `m = ρV`); without `object_added_mass` its own inertia is `m`
+/// alone and it accelerates `1 + C_a` times as fast. Without the force, a current at
+/// rest that speeds up moved nothing in its first step.
+#[test]
+fn an_accelerating_current_pushes_by_the_water_it_accelerates() {
+    let obj = cylinder_standing();
+    let obj = GraspObject {
+        mass_kg: 1000.0 * obj.volume_m3,
+        ..obj
+    };
+    let flow = Effect::ObjectFlow {
+        fluid_density_kg_m3: 1000.0,
+        mean_m_s: 0.0,
+        gust_m_s: 0.0,
+        period_s: 1.0,
+        spectrum: None,
+    };
+    let added = Effect::ObjectAddedMass {
+        fluid_density_kg_m3: 1000.0,
+    };
+    let c_a = obj.added_mass_xz[0];
+    assert!(c_a > 0.3, "{c_a}");
+    for (effects, want) in [
+        (vec![buoyancy(), flow.clone(), added], 1.0),
+        (vec![buoyancy(), flow], 1.0 + c_a),
+    ] {
+        let scene = on_support(0.5, effects);
+        let (_, _, h) =
+            soft_grasp(&scene, obj.clone(), 60.0, 1, TokioClock::new()).expect("builds");
+        let mut s = h.state.lock().expect("state");
+        s.opening_mm = 60.0;
+        s.shift_m = 0.0;
+        s.slide_m_s = 0.0;
+        let du_dt = 2.0;
+        s.slide_on_support(0.5, 0.0, du_dt, 1e-3).expect("a step");
+        // The object's velocity along +x is −slide.
+        let accel = -s.slide_m_s / 1e-3;
+        assert!(
+            (accel - du_dt * want).abs() < 1e-3 * du_dt * want,
+            "{accel} m/s², want {}",
+            du_dt * want
+        );
+    }
 }
 
 #[tokio::test(start_paused = true)]
@@ -1568,6 +1671,7 @@ proptest::proptest! {
         opening_mm in 20.0..50.0f64,
         shift in -0.01..0.01f64,
         speed in -1.0..1.0f64,
+        du_dt in -100.0..100.0f64,
     ) {
         let obj = GraspObject { mass_kg, ..cylinder_standing() };
         // The current's drag is in the law only where the scene declares a flow; the
@@ -1596,7 +1700,7 @@ proptest::proptest! {
         s.slide_m_s = speed;
         let dt_s = 10f64.powf(dt_exp);
         for _ in 0..5 {
-            s.slide_on_support(mu, u, dt_s).expect("a step");
+            s.slide_on_support(mu, u, du_dt, dt_s).expect("a step");
             if s.object.is_none() {
                 proptest::prop_assert!(matches!(s.hold, HoldState::Absent));
                 break;

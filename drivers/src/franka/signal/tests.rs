@@ -16,7 +16,7 @@ fn from_and_to() -> (ArmPose, ArmPose) {
     (from, k.pose(&q))
 }
 
-/// The commands of one straight move as the driver plans it (run_move: franka-rs's
+/// The commands of one straight move as the driver plans it (run_path: franka-rs's
 /// OTG on the path parameter, the pose slerped), one per cycle from message `first`.
 fn planned(limits: &MotionLimits, speed_m_s: f64, first: u64) -> Vec<Commanded> {
     let (from, to) = from_and_to();

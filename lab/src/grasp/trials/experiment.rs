@@ -21,8 +21,8 @@ use super::text::{
     print_timings,
 };
 use super::{
-    RunEnd, TrialDone, TrialPlan, TrialsError, load_scenes, resume_session, run_trials,
-    start_session, swept_scenes,
+    RunEnd, SceneSweep, TrialDone, TrialPlan, TrialsError, load_scenes, resume_session, run_trials,
+    set_and_sweep_apart, start_session, swept_scenes,
 };
 use crate::store::Store;
 
@@ -72,6 +72,8 @@ pub struct SimRun {
     pub sigmas_mm: Vec<f64>,
     /// Its cells per scene, σ, object and mode.
     pub table: Vec<Cell>,
+    /// The scene value it swept, if any (which value each scene has).
+    pub sweep: Option<SceneSweep>,
 }
 
 fn written(e: std::io::Error) -> TrialsError {
@@ -152,7 +154,9 @@ async fn run_sim(
         None => {
             // Settings are checked before the scenes are read or anything is stored.
             let mut plan = request.plan.clone().checked()?;
+            set_and_sweep_apart(&request.sets, request.sweep.as_ref())?;
             let mut scenes = load_scenes(&request.scenes, &request.sets)?;
+            plan.sets = request.sets.iter().map(ToString::to_string).collect();
             if let Some(sweep) = &request.sweep {
                 let (swept, stored) = swept_scenes(&scenes, sweep)?;
                 scenes = swept;
@@ -268,6 +272,7 @@ async fn run_sim(
         stopped,
         sigmas_mm: session.plan.sigmas_mm.clone(),
         table,
+        sweep: session.plan.sweep.clone(),
     })
 }
 

@@ -56,6 +56,10 @@ pub struct TrialPlan {
     /// scenes at each value in turn (absent: no sweep).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sweep: Option<SceneSweep>,
+    /// The scene values the session set (`--set PATH=VALUE`, as typed): shown beside
+    /// its results, which they changed. Absent: none (or a session stored before).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sets: Vec<String>,
 }
 
 /// What a rig session runs on, stored with it: the fingerprint of the rig's gripper
@@ -96,6 +100,7 @@ impl Default for TrialPlan {
             accept_calibration: false,
             rig: None,
             sweep: None,
+            sets: Vec::new(),
         }
     }
 }

@@ -2,7 +2,7 @@
 //! its own thread with the model, stored as it ends.
 
 use std::collections::HashMap;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use softtouch_drivers::gripper::{opening_mm, position_for_opening};
@@ -17,7 +17,7 @@ use softtouch_trainer::Predictor;
 
 use super::{Planned, Session, TrialsError, invalid, medium_name, objects_of};
 use crate::grasp::calibration::{Calibrated, calibration_for, top_for};
-use crate::grasp::sim::{SimJudge, SimLift, SimTruth, projection};
+use crate::grasp::sim::{BothFingersTruth, SimJudge, SimLift, projection};
 use crate::grasp::soft::GraspRunError;
 use crate::store::{GraspTrace, GraspTrialRow, Store, TraceFrame};
 
@@ -335,11 +335,21 @@ fn run_job(job: Job, mut predictor: Predictor) -> (Predictor, Result<TrialResult
             handle.set_object(false).map_err(sim_err)?;
         }
         let shared: Arc<dyn Clock> = Arc::new(clock);
+        // The row's peak true force is either finger's (the verdict's fingers); the
+        // trace keeps the loop's finger beside its estimate.
+        let peak_n = Arc::new(Mutex::new(None));
         let devices = TrialDevices {
             gripper,
             camera,
             estimator: &mut predictor,
-            truth: SimTruth(handle.clone(), job.controller.projection),
+            truth: BothFingersTruth {
+                handle: handle.clone(),
+                projections: [
+                    job.controller.projection,
+                    crate::grasp::soft::projections()?[1],
+                ],
+                peak_n: Arc::clone(&peak_n),
+            },
             lift: SimLift {
                 handle: handle.clone(),
                 clock: Arc::clone(&shared),
@@ -347,7 +357,12 @@ fn run_job(job: Job, mut predictor: Predictor) -> (Predictor, Result<TrialResult
             judge: SimJudge(handle),
             clock: shared,
         };
-        run_trial(devices, job.controller, &job.trial).await
+        let mut result = run_trial(devices, job.controller, &job.trial).await?;
+        let both = peak_n.lock().ok().and_then(|p| *p);
+        if both.is_some() {
+            result.peak_true_n = both;
+        }
+        Ok(result)
     });
     (predictor, result)
 }

@@ -83,6 +83,13 @@ pub fn load_scenes(
             })
             .collect::<Result<_, TrialsError>>()?
     };
+    // The medium is a label the tables group by; the physics are the effects a scene
+    // declares. A set medium would relabel trials whose physics it does not change.
+    if let Some(o) = sets.iter().find(|o| o.path == "medium") {
+        return Err(invalid(format!(
+            "--set {o}: the medium only labels a scene (its physics are the effects it declares); choose a scene of that medium instead (--scene water, --scene grasp-water or a file)"
+        )));
+    }
     let mut scenes = Vec::with_capacity(read.len());
     for (mut scene, source) in read {
         let here: Vec<Override> = sets
@@ -99,6 +106,25 @@ pub fn load_scenes(
         in_some_scene(&scenes, &o.path, &format!("--set {o}"))?;
     }
     Ok(scenes)
+}
+
+/// Refuses `--set` and `--sweep` on one path: the sweep sets the value at each of its
+/// values, so the `--set` would never apply, and the scenes it was applied to would
+/// report it as the value they ship with.
+///
+/// # Errors
+/// A `--set` whose path the sweep sweeps, named with both flags.
+pub fn set_and_sweep_apart(sets: &[Override], sweep: Option<&Sweep>) -> Result<(), TrialsError> {
+    let Some(sweep) = sweep else {
+        return Ok(());
+    };
+    match sets.iter().find(|o| o.path == sweep.path) {
+        Some(o) => Err(invalid(format!(
+            "--set {o} and --sweep {}: the sweep sets `{}` at each of its values, so the --set would never apply; leave one out",
+            sweep.path, sweep.path
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// Refuses a path that no scene has (its parent table), naming the scenes.
@@ -140,6 +166,12 @@ pub fn swept_scenes(
     base: &[SceneSpec],
     sweep: &Sweep,
 ) -> Result<(Vec<SceneSpec>, SceneSweep), TrialsError> {
+    if sweep.path == "medium" {
+        return Err(invalid(format!(
+            "--sweep {}: the medium only labels a scene (its physics are the effects it declares); give the scenes of each medium with --scene instead",
+            sweep.path
+        )));
+    }
     in_some_scene(base, &sweep.path, &format!("--sweep {}", sweep.path))?;
     let mut out = Vec::with_capacity(base.len() * sweep.values.len());
     for i in 0..sweep.values.len() {

@@ -33,7 +33,11 @@ impl Session {
         let mut keys: Vec<&(u32, String)> = self.calibrations.keys().collect();
         keys.sort();
         let keys_in_order = keys.clone();
-        keys.into_iter()
+        // The scene values set for the session first: every result below is theirs.
+        let sets = (!self.plan.sets.is_empty())
+            .then(|| format!("scene values set: {}", self.plan.sets.join(", ")));
+        sets.into_iter()
+            .chain(keys.into_iter()
             .filter_map(|k| {
                 let o = self.calibrations.get(k)?;
                 let medium = self
@@ -101,7 +105,7 @@ impl Session {
                 ) + &c.accepted_against.as_ref().map_or_else(String::new, |r| {
                     format!("; ACCEPTED against its check (--accept-calibration): {r}")
                 }))
-            })
+            }))
             .collect()
     }
 }

@@ -245,9 +245,9 @@ pub fn write_outputs(
     std::fs::create_dir_all(dir)
         .map_err(|e| TrialsError::Failed(format!("cannot create {}: {e}", dir.display())))?;
     let csv = dir.join("grasp-trials.csv");
-    write_summary_csv(&csv, cells)?;
+    write_summary_csv(&csv, cells, plan.sweep.as_ref())?;
     let rows_csv = dir.join("grasp-trials-rows.csv");
-    write_rows_csv(&rows_csv, rows)?;
+    write_rows_csv(&rows_csv, rows, plan.sweep.as_ref())?;
     let png = dir.join("grasp-trials.png");
     write_bars(&png, cells, plan)?;
     let mut written = vec![csv, rows_csv, png];
@@ -407,15 +407,19 @@ pub fn csv_field(s: &str) -> String {
 ///
 /// # Errors
 /// The file cannot be written.
-pub fn write_summary_csv(path: &Path, cells: &[Cell]) -> Result<(), TrialsError> {
+pub fn write_summary_csv(
+    path: &Path,
+    cells: &[Cell],
+    sweep: Option<&SceneSweep>,
+) -> Result<(), TrialsError> {
     let mut text = String::from(
-        "sigma_index,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,paper_rate,slip,crush,miss,timeout,device_fault,estimate_stalled,refused,peak_true_max_n,past_touch_max_mm\n",
+        "sigma_index,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,paper_rate,slip,crush,miss,timeout,device_fault,estimate_stalled,refused,peak_true_max_n,past_touch_max_mm,scene_index,scene_value\n",
     );
     let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
     for c in cells {
         let r = |k: &str| c.reasons.get(k).copied().unwrap_or(0);
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             c.sigma_index,
             medium_name(c.medium),
             csv_field(c.object.as_deref().unwrap_or("all")),
@@ -435,23 +439,37 @@ pub fn write_summary_csv(path: &Path, cells: &[Cell]) -> Result<(), TrialsError>
             r("refused"),
             opt(c.peak_true_max_n),
             opt(c.past_touch_max_mm),
+            c.scene_index,
+            scene_value(sweep, c.scene_index),
         ));
     }
     write_file(path, &text)
+}
+
+/// The swept value of scene `scene_index` as a CSV field (empty without a sweep): rows
+/// of different values are told apart in every table.
+fn scene_value(sweep: Option<&SceneSweep>, scene_index: u32) -> String {
+    sweep
+        .and_then(|s| s.value_of(scene_index))
+        .map_or_else(String::new, csv_field)
 }
 
 /// `grasp-trials-rows.csv`: one line per trial.
 ///
 /// # Errors
 /// The file cannot be written.
-pub fn write_rows_csv(path: &Path, rows: &[GraspTrialRow]) -> Result<(), TrialsError> {
+pub fn write_rows_csv(
+    path: &Path,
+    rows: &[GraspTrialRow],
+    sweep: Option<&SceneSweep>,
+) -> Result<(), TrialsError> {
     let mut text = String::from(
-        "sigma_m,medium,object,mode,trial,dx_m,dy_m,dz_m,commanded_width_m,final_width_m,peak_estimate_n,peak_true_n,past_touch_mm,success,reason,confirmed_after_s,wall_s\n",
+        "sigma_m,medium,object,mode,trial,dx_m,dy_m,dz_m,commanded_width_m,final_width_m,peak_estimate_n,peak_true_n,past_touch_mm,success,reason,confirmed_after_s,wall_s,scene_index,scene_value\n",
     );
     let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
     for r in rows {
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             r.sigma_m,
             r.medium,
             csv_field(&r.key.object),
@@ -468,7 +486,9 @@ pub fn write_rows_csv(path: &Path, rows: &[GraspTrialRow]) -> Result<(), TrialsE
             u8::from(r.success),
             r.reason.as_deref().unwrap_or(""),
             opt(r.confirmed_after_s),
-            r.wall_s
+            r.wall_s,
+            r.key.scene_index,
+            scene_value(sweep, r.key.scene_index),
         ));
     }
     write_file(path, &text)
@@ -500,7 +520,7 @@ pub fn write_bars(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), T
                 .iter()
                 .find(|c| c.scene_index == *si)
                 .map_or("?", |c| medium_name(c.medium));
-            format!("{medium}/{}", o.as_deref().unwrap_or("all"))
+            bar_group_name(plan, medium, *si, o.as_deref())
         })
         .collect();
     let series: Vec<BarSeries> = modes
@@ -519,7 +539,11 @@ pub fn write_bars(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), T
                     .collect(),
                 reference: groups
                     .iter()
-                    .map(|g| cell(g).and_then(|c| c.paper()))
+                    .map(|g| {
+                        cell(g)
+                            .filter(|_| paper_tick_applies(plan, g.0))
+                            .and_then(|c| c.paper())
+                    })
                     .collect(),
                 notes: groups
                     .iter()
@@ -547,6 +571,39 @@ pub fn write_bars(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), T
         ((180 * names.len() as u32).clamp(640, 2400), 520),
     )
     .map_err(|e| TrialsError::Failed(e.to_string()))
+}
+
+/// A Figure 4f group's name: `water/all`, and in a swept session its scene's value
+/// (`water/all, wet_friction=0.2`), so no two groups read alike.
+#[must_use]
+pub fn bar_group_name(
+    plan: &TrialPlan,
+    medium: &str,
+    scene_index: u32,
+    object: Option<&str>,
+) -> String {
+    let object = object.unwrap_or("all");
+    match plan.sweep.as_ref().and_then(|s| {
+        let i = s.value_index(scene_index)?;
+        let last = s.path.rsplit('.').next().unwrap_or(&s.path);
+        Some(format!("{last}={}", s.value_label(i)))
+    }) {
+        Some(value) => format!("{medium}/{object}, {value}"),
+        None => format!("{medium}/{object}"),
+    }
+}
+
+/// Whether the paper's rate is drawn beside scene `scene_index`'s bars: the paper's
+/// scenes are the shipped ones, so in a swept session only at the value they ship
+/// with (none where the scenes do not agree on one).
+#[must_use]
+pub fn paper_tick_applies(plan: &TrialPlan, scene_index: u32) -> bool {
+    match &plan.sweep {
+        None => true,
+        Some(s) => s
+            .value_of(scene_index)
+            .is_some_and(|v| s.shipped.as_deref() == Some(v)),
+    }
 }
 
 /// Success of all objects against σ, per medium and mode.
@@ -612,27 +669,57 @@ pub fn write_sweep(path: &Path, cells: &[Cell], plan: &TrialPlan) -> Result<(), 
     .map_err(|e| TrialsError::Failed(e.to_string()))
 }
 
-/// Successes per medium and mode, `air open 23/50, …`, refused trials left out.
+/// Successes per medium and mode, `air open 23/50, …`, refused trials left out; per σ
+/// where the session has several (`σ 2 mm`), and per scene where a medium has several
+/// (a swept value, or a scene that does not have the swept path replayed at each value:
+/// `scene 2`). Trials of different σ or scenes are never pooled into one n.
 #[must_use]
 pub fn session_summary(trials: &[crate::store::GraspTrialRow]) -> String {
-    let mut cells: Vec<(String, String, usize, usize)> = Vec::new();
-    for t in trials
+    let kept: Vec<&crate::store::GraspTrialRow> = trials
         .iter()
         .filter(|t| t.reason.as_deref() != Some("refused"))
-    {
-        let i = cells
+        .collect();
+    let mut sigmas: Vec<u32> = kept.iter().map(|t| t.key.sigma_index).collect();
+    sigmas.sort_unstable();
+    sigmas.dedup();
+    let scenes_of = |medium: &str| {
+        let mut v: Vec<u32> = kept
             .iter()
-            .position(|c| c.0 == t.medium && c.1 == t.key.mode)
-            .unwrap_or_else(|| {
-                cells.push((t.medium.clone(), t.key.mode.clone(), 0, 0));
-                cells.len() - 1
-            });
+            .filter(|t| t.medium == medium)
+            .map(|t| t.key.scene_index)
+            .collect();
+        v.sort_unstable();
+        v.dedup();
+        v.len()
+    };
+    // (medium, mode, σ index, scene index), its label, held, n
+    type Key = (String, String, u32, u32);
+    let mut cells: Vec<(Key, String, usize, usize)> = Vec::new();
+    for t in &kept {
+        let key = (
+            t.medium.clone(),
+            t.key.mode.clone(),
+            t.key.sigma_index,
+            t.key.scene_index,
+        );
+        let i = cells.iter().position(|c| c.0 == key).unwrap_or_else(|| {
+            let mut label = format!("{} {}", t.medium, t.key.mode);
+            if sigmas.len() > 1 {
+                // To the micrometre: 0.007 m prints as 7, not 7.000000000000001.
+                label.push_str(&format!(" σ {} mm", (t.sigma_m * 1e6).round() / 1e3));
+            }
+            if scenes_of(&t.medium) > 1 {
+                label.push_str(&format!(" scene {}", t.key.scene_index));
+            }
+            cells.push((key, label, 0, 0));
+            cells.len() - 1
+        });
         cells[i].2 += usize::from(t.success);
         cells[i].3 += 1;
     }
     cells
         .iter()
-        .map(|(m, mode, s, n)| format!("{m} {mode} {s}/{n}"))
+        .map(|(_, label, s, n)| format!("{label} {s}/{n}"))
         .collect::<Vec<_>>()
         .join(", ")
 }
@@ -648,137 +735,4 @@ pub fn id_span(first: i64, last: i64) -> String {
 }
 
 #[cfg(test)]
-#[allow(clippy::float_cmp)] // exact p-values of exact counts
-mod tests {
-    use super::*;
-    use crate::store::GraspTrialKey;
-
-    fn row(object: &str, mode: &str, trial: u32, reason: Option<&str>) -> GraspTrialRow {
-        GraspTrialRow {
-            key: GraspTrialKey {
-                sigma_index: 0,
-                scene_index: 0,
-                object: object.into(),
-                mode: mode.into(),
-                trial,
-            },
-            medium: "land".into(),
-            sigma_m: 0.005,
-            offset_m: [0.0; 3],
-            commanded_width_m: 0.02,
-            final_width_m: 0.02,
-            peak_estimate_n: None,
-            peak_true_n: None,
-            past_touch_mm: None,
-            success: reason.is_none(),
-            reason: reason.map(str::to_owned),
-            detail: None,
-            confirmed_after_s: None,
-            wall_s: 0.1,
-        }
-    }
-
-    #[test]
-    fn open_and_closed_pair_by_object_and_trial_and_refused_trials_pair_with_nothing() {
-        let plan = TrialPlan::default();
-        let rows = vec![
-            row("ball", "open", 0, None),
-            row("ball", "closed", 0, None),
-            row("ball", "open", 1, Some("slip")),
-            row("ball", "closed", 1, None),
-            row("cake", "open", 0, None),
-            row("cake", "closed", 0, Some("crush")),
-            row("cake", "open", 1, Some("miss")),
-            row("cake", "closed", 1, Some("miss")),
-            row("cake", "open", 2, Some("miss")),
-            row("cake", "closed", 2, None),
-            // Unpaired: no closed trial 3; a refused one.
-            row("cake", "open", 3, None),
-            row("cake", "open", 4, None),
-            row("cake", "closed", 4, Some("refused")),
-        ];
-        let p = paired(&plan, &[Medium::Air], &rows);
-        assert_eq!(p.len(), 1);
-        let p = &p[0];
-        assert_eq!(
-            (p.pairs, p.both, p.open_only, p.closed_only, p.neither),
-            (5, 1, 1, 2, 1)
-        );
-        assert_eq!(p.p, softtouch_grasp::mcnemar_exact_p(1, 2));
-        assert_eq!(p.p, 1.0);
-        // One mode only: nothing to pair.
-        let open_only: Vec<GraspTrialRow> = rows
-            .iter()
-            .filter(|r| r.key.mode == "open")
-            .cloned()
-            .collect();
-        assert!(paired(&plan, &[Medium::Air], &open_only).is_empty());
-        assert!(paired(&plan, &[Medium::Air], &[]).is_empty());
-    }
-
-    #[test]
-    fn the_papers_rates_stand_beside_the_papers_sigma_only() {
-        let plan = TrialPlan {
-            sigmas_mm: vec![0.0, 5.0, 8.0],
-            ..TrialPlan::default()
-        };
-        let cells = summarise(&plan, &[Medium::Air, Medium::Water], &[]).expect("cells");
-        for c in &cells {
-            let expected = (c.object.is_none() && (c.sigma_mm - 5.0).abs() < 1e-12)
-                .then(|| paper_rate(c.medium, c.mode));
-            assert_eq!(c.paper(), expected, "{c:?}");
-            assert_eq!(
-                c.sigma_mm.to_bits(),
-                plan.sigmas_mm[c.sigma_index as usize].to_bits()
-            );
-        }
-        assert_eq!(cells.iter().filter(|c| c.paper().is_some()).count(), 4);
-    }
-
-    /// A cell's grip is the firmest of its counted trials: the true force where the
-    /// simulator gave one, else the closing past the touch; a refused trial, a NaN and
-    /// a cell with no trial add nothing.
-    #[test]
-    fn a_cells_grip_is_its_firmest_counted_trial() {
-        let plan = TrialPlan {
-            objects: vec!["ball".into(), "cake".into()],
-            ..TrialPlan::default()
-        };
-        let with = |mut r: GraspTrialRow, true_n: Option<f64>, mm: Option<f64>| {
-            r.peak_true_n = true_n;
-            r.past_touch_mm = mm;
-            r
-        };
-        let rows = vec![
-            with(row("ball", "closed", 0, None), Some(1.6), Some(2.0)),
-            with(row("ball", "closed", 1, Some("slip")), Some(2.4), Some(3.0)),
-            with(row("ball", "closed", 2, None), Some(f64::NAN), Some(9.0)),
-            // Refused: nothing moved, whatever it says.
-            with(
-                row("ball", "closed", 3, Some("refused")),
-                Some(99.0),
-                Some(99.0),
-            ),
-            // A rig's trials: no truth.
-            with(row("cake", "closed", 0, None), None, Some(1.25)),
-            with(row("cake", "closed", 1, None), None, None),
-        ];
-        let cells = summarise(&plan, &[Medium::Air], &rows).expect("cells");
-        let cell = |object: Option<&str>, mode: Mode| {
-            cells
-                .iter()
-                .find(|c| c.object.as_deref() == object && c.mode == mode)
-                .expect("cell")
-        };
-        let ball = cell(Some("ball"), Mode::Closed);
-        assert_eq!(ball.peak_true_max_n, Some(2.4));
-        assert_eq!(ball.past_touch_max_mm, Some(9.0));
-        assert_eq!(ball.grip_text(), "2.40 N");
-        let cake = cell(Some("cake"), Mode::Closed);
-        assert_eq!(cake.peak_true_max_n, None);
-        assert_eq!(cake.grip_text(), "1.25 mm");
-        assert_eq!(cell(None, Mode::Closed).peak_true_max_n, Some(2.4));
-        let empty = cell(Some("ball"), Mode::Open);
-        assert_eq!((empty.trials, empty.grip_text().as_str()), (0, "–"));
-    }
-}
+mod tests;

@@ -206,3 +206,208 @@ fn the_paper_figures_are_the_published_ones() {
     assert_eq!(paper_rate(Medium::Water, Mode::Closed), 0.90);
     assert_eq!(table::csv_field("a,b"), "\"a,b\"");
 }
+
+/// `--set` and `--sweep` on one path are refused (the set would never apply and be
+/// shown as the value the scenes ship with); on different paths both apply.
+#[test]
+fn a_set_and_a_sweep_of_one_path_are_refused() {
+    let set: Override = "objects.bottle.wet_friction=0.3"
+        .parse()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let sweep: Sweep = "objects.bottle.wet_friction=0.05,0.2"
+        .parse()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let err =
+        set_and_sweep_apart(std::slice::from_ref(&set), Some(&sweep)).expect_err("the same path");
+    let said = err.to_string();
+    assert!(
+        said.contains("--set objects.bottle.wet_friction=0.3")
+            && said.contains("--sweep objects.bottle.wet_friction"),
+        "{said}"
+    );
+    let other: Sweep = "objects.bottle.friction=0.3,0.9"
+        .parse()
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(set_and_sweep_apart(std::slice::from_ref(&set), Some(&other)).is_ok());
+    assert!(set_and_sweep_apart(&[set], None).is_ok());
+}
+
+/// `--models A,B --sweep …`: the spread across models is one row per swept value, each
+/// with one rate per model; values are never averaged as if they were models.
+#[test]
+fn the_spread_across_models_keeps_each_swept_value_apart() {
+    let cell = |scene_index: u32, held: u64| super::table::Cell {
+        sigma_index: 0,
+        sigma_mm: 5.0,
+        scene_index,
+        medium: Medium::Water,
+        object: None,
+        mode: Mode::Closed,
+        trials: 10,
+        held,
+        interval: [0.0, 1.0],
+        reasons: std::collections::BTreeMap::new(),
+        peak_true_max_n: None,
+        past_touch_max_mm: None,
+    };
+    let sweep = SceneSweep {
+        path: "objects.bottle.wet_friction".into(),
+        values: vec!["0.05".into(), "0.2".into()],
+        per_value: 1,
+        shipped: Some("0.05".into()),
+    };
+    let run = |held: [u64; 2]| super::experiment::SimRun {
+        stopped: false,
+        sigmas_mm: vec![5.0],
+        table: vec![cell(0, held[0]), cell(1, held[1])],
+        sweep: Some(sweep.clone()),
+    };
+    let runs = vec![("a".to_owned(), run([2, 9])), ("b".to_owned(), run([4, 7]))];
+    let rows = super::text::model_spread(&runs);
+    assert_eq!(rows.len(), 2, "{rows:?}");
+    for (row, want) in rows.iter().zip([[2, 4], [9, 7]]) {
+        assert_eq!(row.1.len(), 2, "one rate per model: {row:?}");
+        assert_eq!(
+            row.1
+                .iter()
+                .map(|(m, h, _)| (m.as_str(), *h))
+                .collect::<Vec<_>>(),
+            vec![("a", want[0]), ("b", want[1])]
+        );
+    }
+    assert!(
+        rows[0].0.contains("wet_friction=0.05 (shipped)"),
+        "{}",
+        rows[0].0
+    );
+    assert!(rows[1].0.ends_with("wet_friction=0.2"), "{}", rows[1].0);
+}
+
+/// A swept session's CSVs carry each row's scene and its swept value: rows of
+/// different values are never the same row repeated.
+#[test]
+fn a_swept_sessions_csvs_say_each_rows_value() {
+    let cell = |scene_index: u32| super::table::Cell {
+        sigma_index: 0,
+        sigma_mm: 5.0,
+        scene_index,
+        medium: Medium::Water,
+        object: None,
+        mode: Mode::Closed,
+        trials: 10,
+        held: 9,
+        interval: [0.6, 0.98],
+        reasons: std::collections::BTreeMap::new(),
+        peak_true_max_n: None,
+        past_touch_max_mm: None,
+    };
+    let sweep = SceneSweep {
+        path: "objects.bottle.wet_friction".into(),
+        values: vec!["0.05".into(), "0.2".into()],
+        per_value: 1,
+        shipped: None,
+    };
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let path = dir.path().join("s.csv");
+    super::table::write_summary_csv(&path, &[cell(0), cell(1)], Some(&sweep))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{e}"));
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(lines[0].ends_with(",scene_index,scene_value"), "{text}");
+    assert!(
+        lines[1].ends_with(",0,0.05") && lines[2].ends_with(",1,0.2"),
+        "{text}"
+    );
+    assert_ne!(lines[1], lines[2]);
+    // Without a sweep the value is empty, the scene still there.
+    super::table::write_summary_csv(&path, &[cell(1)], None).unwrap_or_else(|e| panic!("{e}"));
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        text.lines().nth(1).is_some_and(|l| l.ends_with(",1,")),
+        "{text}"
+    );
+    // The rows' file alike.
+    let row = |scene_index: u32| crate::store::GraspTrialRow {
+        key: crate::store::GraspTrialKey {
+            sigma_index: 0,
+            scene_index,
+            object: "bottle".into(),
+            mode: "closed".into(),
+            trial: 0,
+        },
+        medium: "water".into(),
+        sigma_m: 0.005,
+        offset_m: [0.0; 3],
+        commanded_width_m: 0.03,
+        final_width_m: 0.03,
+        peak_estimate_n: Some(1.5),
+        peak_true_n: Some(1.4),
+        past_touch_mm: None,
+        success: true,
+        reason: None,
+        detail: None,
+        confirmed_after_s: Some(0.5),
+        wall_s: 1.0,
+    };
+    super::table::write_rows_csv(&path, &[row(0), row(1)], Some(&sweep))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{e}"));
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(lines[0].ends_with(",scene_index,scene_value"), "{text}");
+    assert!(
+        lines[1].ends_with(",0,0.05") && lines[2].ends_with(",1,0.2"),
+        "{text}"
+    );
+}
+
+/// `--set medium=water` would relabel the land scene's trials as water ones without any
+/// of water's physics: refused, saying what to choose instead.
+#[test]
+fn a_set_medium_is_refused_not_relabelled() {
+    let set: Override = "medium=water".parse().unwrap_or_else(|e| panic!("{e}"));
+    let err = load_scenes(&[], &[set]).expect_err("refused");
+    let said = err.to_string();
+    assert!(
+        said.contains("--set medium=water") && said.contains("--scene water"),
+        "{said}"
+    );
+    let scenes = load_scenes(&[], &[]).unwrap_or_else(|e| panic!("{e}"));
+    let sweep: Sweep = "medium=air,water".parse().unwrap_or_else(|e| panic!("{e}"));
+    let said = swept_scenes(&scenes, &sweep)
+        .expect_err("refused")
+        .to_string();
+    assert!(said.contains("--sweep medium"), "{said}");
+}
+
+/// Figure 4f of a swept session: each group says its value (no two read alike) and the
+/// paper's tick stands only beside the value the scenes ship with.
+#[test]
+fn figure_4f_names_each_swept_value_and_ticks_the_paper_at_the_shipped_one() {
+    let plan = TrialPlan {
+        sweep: Some(SceneSweep {
+            path: "objects.bottle.wet_friction".into(),
+            values: vec!["0.05".into(), "0.2".into()],
+            per_value: 2,
+            shipped: Some("0.05".into()),
+        }),
+        ..TrialPlan::default()
+    };
+    use super::table::{bar_group_name, paper_tick_applies};
+    assert_eq!(
+        bar_group_name(&plan, "water", 1, None),
+        "water/all, wet_friction=0.05 (shipped)"
+    );
+    assert_eq!(
+        bar_group_name(&plan, "water", 3, Some("bottle")),
+        "water/bottle, wet_friction=0.2"
+    );
+    assert_ne!(
+        bar_group_name(&plan, "water", 1, None),
+        bar_group_name(&plan, "water", 3, None)
+    );
+    assert!(paper_tick_applies(&plan, 1) && !paper_tick_applies(&plan, 3));
+    // Without a sweep: the plain name, the paper beside every bar.
+    let plain = TrialPlan::default();
+    assert_eq!(bar_group_name(&plain, "land", 0, None), "land/all");
+    assert!(paper_tick_applies(&plain, 0));
+}

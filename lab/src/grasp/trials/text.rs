@@ -95,8 +95,15 @@ pub fn model_spread(runs: &[(String, SimRun)]) -> Vec<SpreadRow> {
     let mut rows: Vec<SpreadRow> = Vec::new();
     for (model, run) in runs {
         for c in run.table.iter().filter(|c| c.object.is_none()) {
+            // A swept value is part of the row: different values are not different
+            // models of one row.
+            let value = run.sweep.as_ref().map_or(String::new(), |s| {
+                s.value_index(c.scene_index).map_or(String::new(), |i| {
+                    format!(" {}={}", s.path, s.value_label(i))
+                })
+            });
             let key = format!(
-                "σ {} mm {} {}",
+                "σ {} mm {} {}{value}",
                 run.sigmas_mm[c.sigma_index as usize],
                 medium_name(c.medium),
                 c.mode.as_str()

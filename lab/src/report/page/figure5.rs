@@ -55,22 +55,22 @@ pub(super) fn figure5_section(c: &Content) -> Result<Markup, ReportError> {
             h3 { "Force following" }
             @match follow {
                 Some(r) => (follow_part(r)?),
-                None => (todo("No force following stored. The paper holds 0.4, 1.6 and 3 N in turn:", &["softtouch grasp follow --model land-v1-svae --targets 0.4,1.6,3"])),
+                None => (todo_in(c, "No force following stored. The paper holds 0.4, 1.6 and 3 N in turn:", &["softtouch grasp follow --model {model} --targets 0.4,1.6,3"])),
             }
             h3 { "Disturbance" }
             @match disturb {
                 Some(r) => (disturb_part(r)?),
-                None => (todo("No disturbance run stored. The paper turns the tube 45°, 60°, then −90°:", &["softtouch grasp disturb --model land-v1-svae"])),
+                None => (todo_in(c, "No disturbance run stored. The paper turns the tube 45°, 60°, then −90°:", &["softtouch grasp disturb --model {model}"])),
             }
             h3 { "Twist" }
             @match twist {
                 Some(r) => (twist_part(r)?),
-                None => (todo("No twist stored:", &["softtouch grasp twist --model land-v1-svae"])),
+                None => (todo_in(c, "No twist stored:", &["softtouch grasp twist --model {model}"])),
             }
             h3 { "Gain, tolerance and rate (bench grasp)" }
             @match bench {
                 Some(r) => (bench_part(r)),
-                None => (todo("No grasp benchmark stored:", &["softtouch bench grasp --model land-v1-svae"])),
+                None => (todo_in(c, "No grasp benchmark stored:", &["softtouch bench grasp --model {model}"])),
             }
         }
     })

@@ -29,9 +29,9 @@ pub(super) fn grasping_section(c: &Content) -> Result<Markup, ReportError> {
         section #grasping {
             h2 { "Grasping" }
             @if c.grasp.is_empty() {
-                (todo("No grasp sessions in this database yet. The trials are stored as grasp sessions as they run:",
-                      &["softtouch grasp trials --model land-v1-svae --trials 10 --sigma-mm 5",
-                        "softtouch grasp trials --model land-v1-svae --rig lab.toml --objects bottle,ball"]))
+                (todo_in(c, "No grasp sessions in this database yet. The trials are stored as grasp sessions as they run:",
+                      &["softtouch grasp trials --model {model} --trials 10 --sigma-mm 5",
+                        "softtouch grasp trials --model {model} --rig lab.toml --objects bottle,ball"]))
             } @else {
                 (criterion())
                 @for s in &sessions { (s) }
@@ -69,6 +69,10 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
             span data-k=(format!("grasp-{id}-stored")) { (g.rows.len()) } " of " (planned) " trials stored"
             @if let Some(p) = &g.plan {
                 "; σ " (join(p.sigmas_mm.iter())) " mm, lift " (p.lift_mm) " mm, hold " (p.hold_s) " s, F_ref " (p.target_n) " N ± " (p.tolerance_n) " N"
+                @if !p.sets.is_empty() {
+                    "; scene values set: "
+                    span data-k=(format!("grasp-{id}-sets")) { (p.sets.join(", ")) }
+                }
             }
             "."
         }

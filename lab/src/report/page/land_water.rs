@@ -27,20 +27,20 @@ pub(super) fn land_to_water_section(c: &Content) -> Result<Markup, ReportError> 
             h3 { "The same model on both media" }
             @match transfer {
                 Some(r) => (transfer_part(r)?),
-                None => (todo("No land-to-water comparison stored. Collect the water run with the land run's poses, then:",
-                              &["softtouch collect --scene scenes/water.toml --poses-from 1",
+                None => (todo_in(c, "No land-to-water comparison stored. Collect the water run with the land run's poses, then:",
+                              &["softtouch collect --scene water --poses-from 1",
                                 "softtouch dataset create water-v1 --runs 2",
-                                "softtouch transfer --model land-v1-svae --land land-v1 --water water-v1"])),
+                                "softtouch transfer --model {model} --land {dataset} --water water-v1"])),
             }
             h3 { "Fine-tuning on water" }
             @match finetune {
                 Some(r) => (finetune_part(r)?),
-                None => (todo("No fine-tuning curve stored:", &["softtouch sweep finetune --init land-v1-svae --dataset water-v1"])),
+                None => (todo_in(c, "No fine-tuning curve stored:", &["softtouch sweep finetune --init {model} --dataset water-v1"])),
             }
             h3 { "Latent correlation maps (Figure 3)" }
             @match latent {
                 Some(r) => (latent_part(r)),
-                None => (todo("No latent maps stored:", &["softtouch latent land-v1-svae --dataset land-v1 --water water-v1"])),
+                None => (todo_in(c, "No latent maps stored:", &["softtouch latent {model} --dataset {dataset} --water water-v1"])),
             }
         }
     })

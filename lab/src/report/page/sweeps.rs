@@ -4,8 +4,13 @@ use super::*;
 
 pub(super) fn sweeps_section(c: &Content) -> Result<Markup, ReportError> {
     let mut parts = Vec::new();
+    // The nth sweep of a kind keys its cells `sweep{n}-…` from the second on: every
+    // number on the page has one key.
+    let mut seen: Vec<SweepKind> = Vec::new();
     for s in &c.sweeps {
-        parts.push(sweep_part(s)?);
+        seen.push(s.kind);
+        let n = seen.iter().filter(|k| **k == s.kind).count();
+        parts.push(sweep_part(s, n)?);
     }
     let has = |k: SweepKind| c.sweeps.iter().any(|s| s.kind == k);
     Ok(html! {
@@ -15,12 +20,12 @@ pub(super) fn sweeps_section(c: &Content) -> Result<Markup, ReportError> {
             @for p in &c.result_problems { p.todo { "Could not read: " (p) } }
             @for p in parts { (p) }
             @if !has(SweepKind::Alpha) {
-                (todo("No Table 1 (α sweep) stored. Run it on a dataset:",
-                      &["softtouch sweep alpha --dataset land-v1"]))
+                (todo_in(c, "No Table 1 (α sweep) stored. Run it on a dataset:",
+                      &["softtouch sweep alpha --dataset {dataset}"]))
             }
             @if !has(SweepKind::Latent) {
-                (todo("No latent-size sweep (Method S2) stored. Run it:",
-                      &["softtouch sweep latent --dataset land-v1"]))
+                (todo_in(c, "No latent-size sweep (Method S2) stored. Run it:",
+                      &["softtouch sweep latent --dataset {dataset}"]))
             }
         }
     })
@@ -41,7 +46,14 @@ pub(super) fn paper_row(row: &crate::report::csv::SweepRow) -> Option<(Option<f6
         .map(|(_, _, mse, r2)| (*mse, *r2))
 }
 
-pub(super) fn sweep_part(s: &SweepFile) -> Result<Markup, ReportError> {
+pub(super) fn sweep_part(s: &SweepFile, nth: usize) -> Result<Markup, ReportError> {
+    let key = if nth > 1 {
+        format!("sweep{nth}")
+    } else {
+        "sweep".to_owned()
+    };
+    // Each sweep's title says where it came from: a stored result or a CSV file.
+    let origin = s.path.display().to_string();
     let source = html! {
         p.prov { "From " code { (s.path.display().to_string()) } " (sha256 " code { (s.hash) } "), " (s.rows.len()) " rows (the sweep verbs train every row on one dataset's split)." }
     };
@@ -85,7 +97,7 @@ pub(super) fn sweep_part(s: &SweepFile) -> Result<Markup, ReportError> {
                 (560, 330),
             )?;
             html! {
-                h3 { "Table 1: α sweep" }
+                h3 { "Table 1: α sweep — " (origin) }
                 (source)
                 table {
                     tr { th.l { "row" } th { "epochs" } th { "image MSE" } th { "paper image MSE" } th { "R², mean, %" } th { "paper R², %" } }
@@ -93,9 +105,9 @@ pub(super) fn sweep_part(s: &SweepFile) -> Result<Markup, ReportError> {
                         @let paper = paper_row(r);
                         tr {
                             td.l { (r.label) } td { (r.epochs) }
-                            td data-k=(format!("sweep-alpha-{i}-mse")) { (sci(r.image_mse)) }
+                            td data-k=(format!("{key}-alpha-{i}-mse")) { (sci(r.image_mse)) }
                             td { (sci(paper.and_then(|p| p.0))) }
-                            td data-k=(format!("sweep-alpha-{i}-r2")) { (opt(r.r2_mean.map(|v| v * 100.0), 2)) }
+                            td data-k=(format!("{key}-alpha-{i}-r2")) { (opt(r.r2_mean.map(|v| v * 100.0), 2)) }
                             td { (opt(paper.and_then(|p| p.1), 2)) }
                         }
                     }
@@ -126,7 +138,7 @@ pub(super) fn sweep_part(s: &SweepFile) -> Result<Markup, ReportError> {
                 (560, 330),
             )?;
             html! {
-                h3 { "Latent-size sweep (Method S2)" }
+                h3 { "Latent-size sweep (Method S2) — " (origin) }
                 (source)
                 p.note { "The paper compares 6, 16, 32, 64, 128 and 256 latent dimensions and chooses 32; it publishes no numbers for the others." }
                 table {
@@ -134,7 +146,7 @@ pub(super) fn sweep_part(s: &SweepFile) -> Result<Markup, ReportError> {
                     @for (i, r) in s.rows.iter().enumerate() {
                         tr {
                             td { (r.latent) } td { (r.epochs) } td { (sci(r.image_mse)) }
-                            td data-k=(format!("sweep-latent-{i}-r2")) { (opt(r.r2_mean, 4)) }
+                            td data-k=(format!("{key}-latent-{i}-r2")) { (opt(r.r2_mean, 4)) }
                             @for v in r.r2 { td { (opt(v, 4)) } }
                         }
                     }
@@ -143,7 +155,7 @@ pub(super) fn sweep_part(s: &SweepFile) -> Result<Markup, ReportError> {
             }
         }
         SweepKind::Model => html! {
-            h3 { "Model benchmark" }
+            h3 { "Model benchmark — " (origin) }
             (source)
             table {
                 tr { th.l { "row" } th { "input, px" } th { "width" } th { "latent" } th { "epochs" } th { "latency, ms" } th { "image MSE" } th { "R², mean" } }
