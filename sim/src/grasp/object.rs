@@ -596,8 +596,8 @@ fn by_slenderness(table: &[(f64, f64)], l_over_d: f64) -> f64 {
 /// round its ends, so it sees far less than the two-dimensional value. Across: the
 /// section's two-dimensional value ([`default_drag_coefficient`]) times the short
 /// circular cylinder's share of its own (White 2011, Table 7.3: 0.64, 0.68, 0.72, 0.74
-/// of 1.2 at L/D 1, 2, 3, 5; the finite-span reduction Hoerner, *Fluid-Dynamic Drag*
-/// (1965) ch. 3, applies to every prism); a square at L/D 1 so comes to 1.12 against
+/// of 1.2 at L/D 1, 2, 3, 5; Hoerner, *Fluid-Dynamic Drag* (1965), reduces every
+/// prism's drag for its finite length alike); a square at L/D 1 so comes to 1.12 against
 /// the table's cube, 1.07. End-on (a standing object's lift): the flat-faced cylinder
 /// (1.15, 0.90, 0.85, 0.87, 0.99 at L/D 0.5, 1, 2, 4, 8). A sphere: 0.47 either way. A
 /// slenderness that is not finite and positive is taken as 1.
