@@ -110,8 +110,9 @@ impl FlowSeries {
     /// The inertia force of an accelerating current on `obj` per m/s² of its
     /// acceleration, kg (Morison et al. 1950, "The force exerted by surface waves on
     /// piles", Petroleum Transactions 189:149-154; Newman 1977, *Marine Hydrodynamics*,
-    /// ch. 4): `ρ·V·(1 + C_a)`, the pressure gradient that accelerates the water (Froude–Krylov, `ρ·V`) and the
-    /// water the object's presence makes accelerate with it (`C_a·ρ·V`, across the
+    /// ch. 4): `ρ·V·(1 + C_a)`, the pressure gradient that accelerates the water
+    /// (Froude–Krylov, `ρ·V`) and the water the object's presence makes accelerate
+    /// with it (`C_a·ρ·V`, across the
     /// object: `C_a` of its equivalent spheroid, as the added mass uses). Part of the
     /// declared current, whether or not the scene lists `object_added_mass` (which is
     /// the object's own acceleration in still water).
