@@ -119,6 +119,12 @@ impl Blend {
         &self.otg
     }
 
+    /// The leg the generator is in (0-based).
+    #[must_use]
+    pub fn leg(&self) -> usize {
+        self.leg
+    }
+
     /// At rest at the path's end.
     #[must_use]
     pub fn finished(&self) -> bool {

@@ -349,6 +349,30 @@ pub(super) fn run_path(
             (*end, v.min(path.max_velocity))
         })
         .collect();
+    // Each leg's brake within the joints' limits at that leg's own speed: the room a
+    // joint has to brake shrinks with the speed squared (the path's curvature), so the
+    // fast leg's share would stretch a brake in the slow legs, where the guard trips
+    // (franka-sim: 20 mm from 0.2 m/s against the 18 mm bound).
+    let mut leg_brakes = vec![(brake_path.max_acceleration, brake_path.max_jerk); legs_s.len()];
+    if let Some((kin, robot_kind)) = joints {
+        let unscaled = path_limits(dist, angle, fastest, &limits.braking());
+        for (k, (_, v)) in legs_s.iter().enumerate() {
+            if let Ok((_, b)) = reach::path_and_brake_scales(
+                kin,
+                *robot_kind,
+                &start.q,
+                &from,
+                &target,
+                [*v, path.max_acceleration, path.max_jerk],
+                [unscaled.max_acceleration, unscaled.max_jerk],
+            ) {
+                leg_brakes[k] = (
+                    unscaled.max_acceleration * b.acceleration,
+                    unscaled.max_jerk * b.jerk,
+                );
+            }
+        }
+    }
     let mut blend =
         super::blend::Blend::new(legs_s, path).ok_or_else(|| DeviceError::InvalidCommand {
             device: DEVICE.into(),
@@ -372,12 +396,13 @@ pub(super) fn run_path(
                 if !aborted && job.cancelled() {
                     aborted = true;
                     let o = blend.otg();
+                    let (brake_accel, brake_jerk) = leg_brakes[blend.leg()];
                     let b = Brake::new(
                         o.position(),
                         o.velocity(),
                         o.acceleration(),
-                        brake_path.max_acceleration,
-                        brake_path.max_jerk,
+                        brake_accel,
+                        brake_jerk,
                     );
                     if b.stops_before(1.0) {
                         brake = Some(b);
