@@ -236,20 +236,7 @@ fn a_set_and_a_sweep_of_one_path_are_refused() {
 /// with one rate per model; values are never averaged as if they were models.
 #[test]
 fn the_spread_across_models_keeps_each_swept_value_apart() {
-    let cell = |scene_index: u32, held: u64| super::table::Cell {
-        sigma_index: 0,
-        sigma_mm: 5.0,
-        scene_index,
-        medium: Medium::Water,
-        object: None,
-        mode: Mode::Closed,
-        trials: 10,
-        held,
-        interval: [0.0, 1.0],
-        reasons: std::collections::BTreeMap::new(),
-        peak_true_max_n: None,
-        past_touch_max_mm: None,
-    };
+    let cell = water_closed_cell;
     let sweep = SceneSweep {
         path: "objects.bottle.wet_friction".into(),
         values: vec!["0.05".into(), "0.2".into()],
@@ -287,20 +274,7 @@ fn the_spread_across_models_keeps_each_swept_value_apart() {
 /// different values are never the same row repeated.
 #[test]
 fn a_swept_sessions_csvs_say_each_rows_value() {
-    let cell = |scene_index: u32| super::table::Cell {
-        sigma_index: 0,
-        sigma_mm: 5.0,
-        scene_index,
-        medium: Medium::Water,
-        object: None,
-        mode: Mode::Closed,
-        trials: 10,
-        held: 9,
-        interval: [0.6, 0.98],
-        reasons: std::collections::BTreeMap::new(),
-        peak_true_max_n: None,
-        past_touch_max_mm: None,
-    };
+    let cell = |scene_index: u32| water_closed_cell(scene_index, 9);
     let sweep = SceneSweep {
         path: "objects.bottle.wet_friction".into(),
         values: vec!["0.05".into(), "0.2".into()],
@@ -410,4 +384,22 @@ fn figure_4f_names_each_swept_value_and_ticks_the_paper_at_the_shipped_one() {
     let plain = TrialPlan::default();
     assert_eq!(bar_group_name(&plain, "land", 0, None), "land/all");
     assert!(paper_tick_applies(&plain, 0));
+}
+
+/// The all-objects closed-loop water cell of scene `scene_index`, `held` of 10.
+fn water_closed_cell(scene_index: u32, held: u64) -> super::table::Cell {
+    super::table::Cell {
+        sigma_index: 0,
+        sigma_mm: 5.0,
+        scene_index,
+        medium: Medium::Water,
+        object: None,
+        mode: Mode::Closed,
+        trials: 10,
+        held,
+        interval: [0.0, 1.0],
+        reasons: std::collections::BTreeMap::new(),
+        peak_true_max_n: None,
+        past_touch_max_mm: None,
+    }
 }
