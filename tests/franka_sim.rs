@@ -877,9 +877,10 @@ fn a_force_guard_trip_on_franka_sim_stops_the_arm_and_rejects_the_sample() {
             mm.iter().copied().fold(0.0, f64::max)
         );
     }
+    // The verdict first: it prints the aborts the departures are measured around.
+    sim.judge();
     let ds = departures_hold(&sim, &fcisim::base_from_rod());
     assert!(ds >= 8, "a departure per trip: {ds}");
-    sim.judge();
 }
 
 /// Every departure from the rod in the commands the driver sent runs straight back
@@ -888,13 +889,29 @@ fn a_force_guard_trip_on_franka_sim_stops_the_arm_and_rejects_the_sample() {
 fn departures_hold(sim: &FrankaSim, base_from_rod: &ArmPose) -> usize {
     // Cartesian commands (a joint-space move of the elbow, at home, starts and ends
     // there).
-    let poses: Vec<ArmPose> = sim
-        .recorded()
+    let rec = sim.recorded();
+    let cartesian: Vec<_> = rec
         .commands
         .iter()
         .filter(|c| c.q_commanded.is_none())
-        .map(|c| c.pose)
         .collect();
+    let poses: Vec<ArmPose> = cartesian.iter().map(|c| c.pose).collect();
+    // The first command after each abort (franka-sim's, the host's lost cycles: the
+    // judge fails the run on any other): the robot stopped off the last command by its
+    // tracking error, and the driver's retry starts where it stands.
+    let restarts: Vec<usize> = (1..cartesian.len())
+        .filter(|&j| {
+            rec.aborts.iter().any(|a| {
+                cartesian[j - 1].message_id <= a.at_id && a.at_id < cartesian[j].message_id
+            })
+        })
+        .collect();
+    if !restarts.is_empty() {
+        eprintln!(
+            "departures: {} motions begun after an abort, measured again from where the robot stood",
+            restarts.len()
+        );
+    }
     // The tier's scene samples x from 0 (within reach of the rod from 5 mm before) and
     // z within ±50 mm.
     // The retreat plane of the tier's rig (home at x = −0.03 m, the default stand-off).
@@ -902,8 +919,14 @@ fn departures_hold(sim: &FrankaSim, base_from_rod: &ArmPose) -> usize {
         -0.03,
         &softtouch_schemas::defaults::rig().procedure,
     );
-    let ds =
-        fcisim::departures::departures(&poses, base_from_rod, plane_x_m, -0.005, (-0.06, 0.06));
+    let ds = fcisim::departures::departures(
+        &poses,
+        &restarts,
+        base_from_rod,
+        plane_x_m,
+        -0.005,
+        (-0.06, 0.06),
+    );
     eprintln!(
         "departures from the rod (commanded):\n{}",
         fcisim::departures::table(&ds)
@@ -978,11 +1001,11 @@ fn sigterm_on_franka_sim_finishes_the_sample_and_leaves_the_arm_home() {
         "{:?}",
         s.events
     );
+    sim.judge();
     assert!(
         departures_hold(&sim, &fcisim::base_from_rod()) >= n,
         "a departure per sample"
     );
-    sim.judge();
     ends_home_and_still(&sim, "");
 }
 
@@ -1047,8 +1070,8 @@ fn a_store_failure_on_franka_sim_ends_in_a_safe_stop_at_home() {
         "{:?}",
         s.events
     );
-    assert!(departures_hold(&sim, &fcisim::base_from_rod()) >= s.samples.len());
     sim.judge();
+    assert!(departures_hold(&sim, &fcisim::base_from_rod()) >= s.samples.len());
     ends_home_and_still(&sim, "");
 }
 

@@ -38,8 +38,14 @@ pub(crate) struct Departure {
 /// (the scene's poses, with a margin), first moves away from it, and runs until the
 /// retreat plane `plane_x_m`. The arm's first move home from wherever the
 /// robot stood is not one (franka-sim's ready pose is 25 mm out and 60-130 mm down).
+///
+/// `restarts` (ascending indices into `poses`) are the first commands of motions begun
+/// after an abort: the robot's reflex stops it off the last command by its tracking
+/// error and the driver's retry starts from where it stands, so the jump between the
+/// two is not a way the driver sent; the departure is measured again from there.
 pub(crate) fn departures(
     poses: &[ArmPose],
+    restarts: &[usize],
     base_from_rod: &ArmPose,
     plane_x_m: f64,
     near_x_m: f64,
@@ -56,7 +62,7 @@ pub(crate) fn departures(
             k += 1;
             continue;
         }
-        let start = in_rod[k];
+        let mut start = in_rod[k];
         let mut d = Departure {
             from: ContactPose::from_arm(base_from_rod, &poses[k]),
             turn_rad: 0.0,
@@ -68,6 +74,9 @@ pub(crate) fn departures(
         let mut j = k + 1;
         while j < in_rod.len() {
             let p = &in_rod[j];
+            if restarts.binary_search(&j).is_ok() {
+                start = *p;
+            }
             let way: Vec<f64> = (0..3)
                 .map(|i| p.translation_m[i] - start.translation_m[i])
                 .collect();
@@ -176,14 +185,14 @@ mod tests {
         // In along x, out along x: nothing.
         let mut poses = line((-0.03, 0.01, 0.2), (0.002, 0.01, 0.2), 64);
         poses.extend(line((0.002, 0.01, 0.2), (-0.03, 0.01, 0.2), 64));
-        let ds = departures(&poses, &rod(), -0.03, NEAR, Z);
+        let ds = departures(&poses, &[], &rod(), -0.03, NEAR, Z);
         assert_eq!(ds.len(), 1, "{ds:?}");
         assert!(ds[0].reached_plane);
         assert!(ds[0].turn_rad < 1e-9 && ds[0].side_deg < 1e-4, "{ds:?}");
         // Home in one move from the pressed pose: x, z and θ together.
         let mut poses = line((-0.03, 0.01, 0.2), (0.002, 0.01, 0.2), 64);
         poses.extend(line((0.002, 0.01, 0.2), (-0.03, 0.0, 0.0), 64));
-        let ds = departures(&poses, &rod(), -0.03, NEAR, Z);
+        let ds = departures(&poses, &[], &rod(), -0.03, NEAR, Z);
         assert_eq!(ds.len(), 1, "{ds:?}");
         // 10 mm of z over 32 mm of x: 17° off the axis; 0.2 rad turned over the whole
         // way, 4/33.5 of it in the first 4 mm.
@@ -197,23 +206,39 @@ mod tests {
     }
 
     #[test]
+    fn a_jump_to_where_the_robot_stood_after_an_abort_is_not_a_drag() {
+        // In to 50 mm, out 2 mm, an abort; the retry starts from the robot's pose 0.5 mm
+        // along the rod and goes straight out from there.
+        let mut poses = line((-0.03, 0.01, 0.2), (0.05, 0.01, 0.2), 80);
+        poses.extend(line((0.05, 0.01, 0.2), (0.048, 0.01, 0.2), 2));
+        let restart = poses.len();
+        poses.extend(line((0.048, 0.0105, 0.2), (-0.03, 0.0105, 0.2), 78));
+        let ds = departures(&poses, &[], &rod(), -0.03, NEAR, Z);
+        assert_eq!(ds.len(), 1, "{ds:?}");
+        assert!(ds[0].side_deg > 2.0, "the jump reads as a drag: {ds:?}");
+        let ds = departures(&poses, &[restart], &rod(), -0.03, NEAR, Z);
+        assert_eq!(ds.len(), 1, "{ds:?}");
+        assert!(ds[0].reached_plane && ds[0].side_deg < 1e-3, "{ds:?}");
+    }
+
+    #[test]
     fn nothing_near_the_rod_an_empty_stream_and_a_turn_back_are_no_departures() {
-        assert!(departures(&[], &rod(), -0.03, NEAR, Z).is_empty());
+        assert!(departures(&[], &[], &rod(), -0.03, NEAR, Z).is_empty());
         // Travel in the retreat plane is not a departure.
         let poses = line((-0.03, 0.0, 0.0), (-0.03, 0.02, 0.3), 20);
-        assert!(departures(&poses, &rod(), -0.03, NEAR, Z).is_empty());
+        assert!(departures(&poses, &[], &rod(), -0.03, NEAR, Z).is_empty());
         // Out 2 mm and back in: one departure that never reached the plane.
         let mut poses = line((-0.03, 0.0, 0.0), (0.002, 0.0, 0.0), 32);
         poses.extend(line((0.002, 0.0, 0.0), (0.0, 0.0, 0.0), 2));
         poses.extend(line((0.0, 0.0, 0.0), (0.003, 0.0, 0.0), 3));
-        let ds = departures(&poses, &rod(), -0.03, NEAR, Z);
+        let ds = departures(&poses, &[], &rod(), -0.03, NEAR, Z);
         assert_eq!(ds.len(), 1, "{ds:?}");
         assert!(!ds[0].reached_plane);
         // Far down the rod (the robot's ready pose) is not near it.
         let mut poses = line((-0.018, -0.13, 0.0), (-0.03, 0.0, 0.0), 20);
         poses.insert(0, at(-0.018, -0.13, 0.0));
-        assert!(departures(&poses, &rod(), -0.03, NEAR, Z).is_empty());
+        assert!(departures(&poses, &[], &rod(), -0.03, NEAR, Z).is_empty());
         // A constant stream: nothing.
-        assert!(departures(&vec![at(0.0, 0.0, 0.0); 10], &rod(), -0.03, NEAR, Z).is_empty());
+        assert!(departures(&vec![at(0.0, 0.0, 0.0); 10], &[], &rod(), -0.03, NEAR, Z).is_empty());
     }
 }
