@@ -933,10 +933,36 @@ fn departures_hold(sim: &FrankaSim, base_from_rod: &ArmPose) -> usize {
     );
     for d in &ds {
         assert!(d.reached_plane, "{d:?}");
-        assert!(
-            d.turn_to_plane_rad <= 0.02 && d.side_to_plane_deg <= 10.0,
-            "a departure that turns or drags: {d:?}"
-        );
+        if d.turn_to_plane_rad > 0.02 || d.side_to_plane_deg > 10.0 {
+            // Its first commands, relative to where it began (the rod frame), for the
+            // failure's message.
+            let rod_from_base = base_from_rod.inverse();
+            let start = rod_from_base.compose(&poses[d.start_index]);
+            let around: Vec<String> = (d.start_index.saturating_sub(5)
+                ..(d.start_index + 80).min(poses.len()))
+                .step_by(3)
+                .map(|j| {
+                    let p = rod_from_base.compose(&poses[j]);
+                    let t: Vec<String> = (0..3)
+                        .map(|i| {
+                            format!(
+                                "{:+.4}",
+                                (p.translation_m[i] - start.translation_m[i]) * 1e3
+                            )
+                        })
+                        .collect();
+                    format!(
+                        "{j}: {} mm, turn {:.2e} rad",
+                        t.join(" "),
+                        start.angle_to(&p)
+                    )
+                })
+                .collect();
+            panic!(
+                "a departure that turns or drags: {d:?}\nits commands from 5 before:\n{}",
+                around.join("\n")
+            );
+        }
     }
     ds.len()
 }

@@ -92,10 +92,10 @@ pub async fn run_latent(
         let preprocess = h.config.preprocess;
         if loaded.as_ref().is_none_or(|(p, _, _)| *p != preprocess) {
             let table = FingerTable::new(&preprocess);
-            let land = test_split(&store, &args.dataset, &table).await?;
+            let land = test_split(&store, &args.dataset, &table, None).await?;
             let pairs = match &args.water {
                 Some(w) => {
-                    let water = test_split(&store, w, &table).await?;
+                    let water = test_split(&store, w, &table, None).await?;
                     Some(paired_test(&store, &land, &water, &table).await?)
                 }
                 None => None,

@@ -9,7 +9,7 @@ use futures_util::TryStreamExt as _;
 use softtouch_collector::dataset::{self, DatasetError};
 use softtouch_schemas::FrameFormat;
 use softtouch_trainer::labels::label_from_si;
-use softtouch_trainer::{Example, FingerTable, Preprocess, Splits, Trained};
+use softtouch_trainer::{Example, FingerTable, ImageTare, Preprocess, Splits, Trained};
 
 pub use crate::store::ModelInfo;
 
@@ -72,20 +72,31 @@ pub(crate) use crate::store::MemberRow;
 
 /// Decodes a stored frame into RGB8.
 fn decode(row: &MemberRow) -> Result<(usize, usize, Vec<u8>), String> {
-    match row.format.parse::<FrameFormat>()? {
+    decode_stored(&row.format, row.width, row.height, &row.data)
+}
+
+/// Decodes a frame stored as `format` (`png`, `jpeg`, `rgb8`) into RGB8 `(width,
+/// height, bytes)`.
+pub(crate) fn decode_stored(
+    format: &str,
+    width: i64,
+    height: i64,
+    data: &[u8],
+) -> Result<(usize, usize, Vec<u8>), String> {
+    match format.parse::<FrameFormat>()? {
         FrameFormat::Rgb8 => {
             let (w, h) = (
-                usize::try_from(row.width).map_err(|_| "bad width")?,
-                usize::try_from(row.height).map_err(|_| "bad height")?,
+                usize::try_from(width).map_err(|_| "bad width")?,
+                usize::try_from(height).map_err(|_| "bad height")?,
             );
-            if row.data.len() != w * h * 3 {
+            if data.len() != w * h * 3 {
                 return Err(format!(
                     "rgb8 frame holds {} bytes, {w}×{h} needs {}",
-                    row.data.len(),
+                    data.len(),
                     w * h * 3
                 ));
             }
-            Ok((w, h, row.data.clone()))
+            Ok((w, h, data.to_vec()))
         }
         format @ (FrameFormat::Png | FrameFormat::Jpeg) => {
             let format = if format == FrameFormat::Png {
@@ -93,8 +104,8 @@ fn decode(row: &MemberRow) -> Result<(usize, usize, Vec<u8>), String> {
             } else {
                 image::ImageFormat::Jpeg
             };
-            let img = image::load_from_memory_with_format(&row.data, format)
-                .map_err(|e| format!("cannot decode its {} frame: {e}", row.format))?
+            let img = image::load_from_memory_with_format(data, format)
+                .map_err(|e| format!("cannot decode its {format:?} frame: {e}"))?
                 .into_rgb8();
             let (w, h) = (img.width() as usize, img.height() as usize);
             Ok((w, h, img.into_raw()))
@@ -144,7 +155,7 @@ pub async fn load_splits_where(
         if chunk.len() >= 256 || (last && !chunk.is_empty()) {
             let rows = std::mem::take(&mut chunk);
             done += rows.len() as u64;
-            for (split, example) in preprocess_parallel(rows, &table)? {
+            for (split, example) in preprocess_parallel(rows, &table, None)? {
                 match split.as_str() {
                     "train" => splits.train.push(example),
                     "val" => splits.val.push(example),
@@ -187,6 +198,7 @@ pub async fn first_test_frame(
 pub(crate) fn preprocess_parallel(
     rows: Vec<MemberRow>,
     table: &FingerTable,
+    tare: Option<&ImageTare>,
 ) -> Result<Vec<(String, Example)>, ModelError> {
     let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
     let per = rows.len().div_ceil(threads).max(1);
@@ -196,7 +208,10 @@ pub(crate) fn preprocess_parallel(
             index: row.sample_index,
             why,
         };
-        let (w, h, rgb) = decode(row).map_err(frame_err)?;
+        let (w, h, mut rgb) = decode(row).map_err(frame_err)?;
+        if let Some(t) = tare {
+            rgb = t.apply(w, h, &rgb).map_err(|e| frame_err(e.to_string()))?;
+        }
         let image = table.apply(w, h, &rgb)?;
         let label = label_from_si(row.wrench.force_n(), row.wrench.torque_nm());
         if label.iter().any(|v| !v.is_finite()) {

@@ -8,7 +8,7 @@ use crate::models::{MemberRow, ModelError, preprocess_parallel};
 use crate::store::{Members, Store};
 use futures_util::TryStreamExt as _;
 use softtouch_collector::dataset;
-use softtouch_trainer::{Example, FingerTable};
+use softtouch_trainer::{Example, FingerTable, ImageTare, RestFrame, TareError, TareFit};
 use std::collections::HashMap;
 
 /// Paired test examples: `land[i]` and `water[i]` are the same pose and rod.
@@ -31,6 +31,21 @@ pub enum TransferError {
     /// A run pairs with another in name but not pose by pose.
     #[error(transparent)]
     Store(#[from] crate::store::StoreError),
+    /// A dataset whose runs kept no rest frame.
+    #[error(
+        "dataset `{0}` has no rest frames: its runs were collected before softtouch kept them (collect its runs again to fit an image tare)"
+    )]
+    NoRestFrames(String),
+    /// The tare could not be fitted.
+    #[error("the image tare of `{water}` against `{land}`: {error}")]
+    Tare {
+        /// The land dataset.
+        land: String,
+        /// The water dataset.
+        water: String,
+        /// Why.
+        error: TareError,
+    },
     /// Nothing to pair.
     #[error(
         "no test sample of dataset `{water}` pairs with a sample of dataset `{land}`: collect the water run with `collect --poses-from RUN` from a run of `{land}`, and put it in `{water}`"
@@ -49,7 +64,7 @@ impl TransferError {
     pub fn is_bad_input(&self) -> bool {
         match self {
             Self::Model(e) => e.is_bad_input(),
-            Self::NoPairs { .. } => true,
+            Self::NoPairs { .. } | Self::NoRestFrames(_) | Self::Tare { .. } => true,
             Self::Store(_) => false,
         }
     }
@@ -65,6 +80,7 @@ async fn load_keyed(
     dataset_id: i64,
     which: Members,
     table: &FingerTable,
+    tare: Option<&ImageTare>,
 ) -> Result<Vec<(Key, Example)>, ModelError> {
     let mut rows = store.member_rows(dataset_id, which);
     let mut out = Vec::new();
@@ -78,7 +94,7 @@ async fn load_keyed(
         if chunk.len() >= 256 || (last && !chunk.is_empty()) {
             let rows = std::mem::take(&mut chunk);
             let keys: Vec<Key> = rows.iter().map(|r| (r.run_id, r.sample_index)).collect();
-            let examples = preprocess_parallel(rows, table)?;
+            let examples = preprocess_parallel(rows, table, tare)?;
             out.extend(keys.into_iter().zip(examples.into_iter().map(|(_, e)| e)));
         }
         if last {
@@ -101,7 +117,7 @@ pub struct TestSplit {
 }
 
 /// Dataset `name`'s test split only, preprocessed for `table` (cheaper than loading
-/// every split).
+/// every split), each frame corrected by `tare` first where one is given.
 ///
 /// # Errors
 /// No such dataset, a query, an undecodable frame.
@@ -109,9 +125,10 @@ pub async fn test_split(
     store: &Store,
     name: &str,
     table: &FingerTable,
+    tare: Option<&ImageTare>,
 ) -> Result<TestSplit, ModelError> {
     let info = dataset::get(store, name).await?;
-    let (keys, examples) = load_keyed(store, info.dataset_id, Members::Test, table)
+    let (keys, examples) = load_keyed(store, info.dataset_id, Members::Test, table, tare)
         .await?
         .into_iter()
         .unzip();
@@ -171,7 +188,7 @@ pub async fn paired_test(
             .map(|k| (k.land_run, k.sample_index))
             .filter(|k| !land_at.contains_key(k))
             .collect();
-        for (k, e) in load_keyed(store, land.dataset_id, Members::NotTest, table).await? {
+        for (k, e) in load_keyed(store, land.dataset_id, Members::NotTest, table, None).await? {
             if wanted.contains(&k) {
                 extra.insert(k, e);
             }
@@ -196,4 +213,43 @@ pub async fn paired_test(
         }
     }
     Ok(pairs)
+}
+
+/// Dataset `name`'s rest frames (every run with a sample in it), decoded.
+async fn rest_frames(store: &Store, name: &str) -> Result<Vec<RestFrame>, TransferError> {
+    let info = dataset::get(store, name).await.map_err(ModelError::from)?;
+    let rows = store.dataset_rest_frames(info.dataset_id).await?;
+    if rows.is_empty() {
+        return Err(TransferError::NoRestFrames(name.to_owned()));
+    }
+    rows.iter()
+        .map(|r| {
+            let (width, height, rgb) = crate::models::decode_stored(
+                &r.format, r.width, r.height, &r.data,
+            )
+            .map_err(|why| ModelError::Frame {
+                run: r.run_id,
+                index: r.rest_index,
+                why: format!("rest frame: {why}"),
+            })?;
+            Ok(RestFrame { width, height, rgb })
+        })
+        .collect()
+}
+
+/// The image tare that maps the rest frames of dataset `water`'s runs onto those of
+/// dataset `land`'s (no label of either is read).
+///
+/// # Errors
+/// A dataset without rest frames, frames that cannot be decoded or compared.
+pub async fn fit_tare(store: &Store, land: &str, water: &str) -> Result<TareFit, TransferError> {
+    let (l, w) = (
+        rest_frames(store, land).await?,
+        rest_frames(store, water).await?,
+    );
+    softtouch_trainer::fit_image_tare(&l, &w).map_err(|error| TransferError::Tare {
+        land: land.to_owned(),
+        water: water.to_owned(),
+        error,
+    })
 }

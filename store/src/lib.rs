@@ -34,6 +34,7 @@ mod grasp_calibration;
 mod grasp_migrations;
 mod models;
 pub mod report;
+mod rest_frames;
 mod results;
 pub mod sqlite_file;
 pub use event::EventKind;
@@ -42,6 +43,7 @@ pub use grasp::{
     unpack_f32,
 };
 pub use grasp_calibration::GraspCalibrationRow;
+pub use rest_frames::RestFrameRow;
 pub use results::{NewResult, ResultRow, StoredResult};
 pub mod rows;
 mod runs;

@@ -19,6 +19,8 @@ const SIDE_FROM_M: f64 = 0.0002;
 pub(crate) struct Departure {
     /// Where it began (the rod frame).
     pub(crate) from: ContactPose,
+    /// Its first pose's index in the stream.
+    pub(crate) start_index: usize,
     /// Largest turn from the starting orientation in the first [`WATCHED_M`], rad.
     pub(crate) turn_rad: f64,
     /// Largest angle between the way travelled and the approach axis (backwards) in
@@ -65,6 +67,7 @@ pub(crate) fn departures(
         let mut start = in_rod[k];
         let mut d = Departure {
             from: ContactPose::from_arm(base_from_rod, &poses[k]),
+            start_index: k,
             turn_rad: 0.0,
             side_deg: 0.0,
             turn_to_plane_rad: 0.0,

@@ -61,7 +61,9 @@ mod finish;
 pub mod phases;
 pub mod plan;
 mod procedure;
+mod rest;
 pub use procedure::retreat_x_m;
+pub use rest::REST_FRAMES;
 pub mod rods;
 pub mod route;
 pub mod sampler;
@@ -431,6 +433,11 @@ impl<'a> Job<'a> {
             && let Err(e) = self.ft.bias().await
         {
             let reason = format!("cannot zero the force/torque sensor at home: {e}");
+            return Ok((Outcome::SafeStop { reason }, index));
+        }
+        // The finger at rest (home, no contact), once per run: what a tare for another
+        // medium is fitted against.
+        if let Some(reason) = self.take_rest_frames().await? {
             return Ok((Outcome::SafeStop { reason }, index));
         }
         // A run resumed within a block starts where the uninterrupted run was: at the

@@ -44,7 +44,7 @@ async fn subset(
         }
     }
     let table = FingerTable::new(preprocess);
-    let examples = crate::models::preprocess_parallel(rows, &table)
+    let examples = crate::models::preprocess_parallel(rows, &table, None)
         .map_err(|e| match e {
             ModelError::Frame { run, index, why } => ReportError::Frame { run, index, why },
             other => ReportError::Frame {

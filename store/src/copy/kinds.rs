@@ -88,6 +88,13 @@ pub(super) const KINDS: &[Kind] = &[
                 refs: &[("run_id", "run")],
             },
             Child {
+                table: "rest_frames",
+                select_where: "run_id = ?",
+                order: "rest_index",
+                key: ChildKey::Natural("(run_id, rest_index)"),
+                refs: &[("run_id", "run")],
+            },
+            Child {
                 table: "ft_windows",
                 select_where: "run_id = ?",
                 order: "sample_index",

@@ -85,6 +85,11 @@ enum Op {
         rig_toml: String,
         reply: Reply<()>,
     },
+    RestFrames {
+        run_id: RunId,
+        frames: Vec<(FrameMeta, Vec<u8>)>,
+        reply: Reply<u64>,
+    },
     Event {
         run_id: RunId,
         index: Option<u64>,
@@ -402,6 +407,19 @@ impl SyncStore {
         self.call(|reply| Op::SetRig {
             run_id,
             rig_toml: rig_toml.to_owned(),
+            reply,
+        })
+    }
+
+    /// See [`Store::insert_rest_frames`]: `frames` as [`encode_for_store`] gives them.
+    pub fn insert_rest_frames(
+        &self,
+        run_id: RunId,
+        frames: Vec<(FrameMeta, Vec<u8>)>,
+    ) -> Result<u64, StoreError> {
+        self.call(|reply| Op::RestFrames {
+            run_id,
+            frames,
             reply,
         })
     }

@@ -125,6 +125,17 @@ pub(super) async fn serve(store: &Store, op: Op, shared: &Mutex<Shared>) {
         } => {
             let _ = reply.send(store.set_run_rig(run_id, &rig_toml).await);
         }
+        Op::RestFrames {
+            run_id,
+            frames,
+            reply,
+        } => {
+            let records: Vec<crate::FrameRecord<'_>> = frames
+                .iter()
+                .map(|(meta, data)| crate::FrameRecord { meta: *meta, data })
+                .collect();
+            let _ = reply.send(store.insert_rest_frames(run_id, &records).await);
+        }
         Op::Event {
             run_id,
             index,

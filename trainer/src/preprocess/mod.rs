@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use crate::TrainError;
 
 mod rule;
+pub mod tare;
 
 /// Parameters of [`Preprocess::apply`]; stored in every model artifact.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

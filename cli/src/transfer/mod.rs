@@ -1,6 +1,9 @@
 //! `softtouch transfer`: how a model fares on land and underwater, and how alike its
 //! latents are for the same deformation in both media (Figure 3, Method S2).
 
+mod plot;
+mod tare;
+
 use super::{Failure, io_failure, open_existing};
 use anyhow::anyhow;
 use clap::Args;
@@ -12,7 +15,7 @@ use softtouch_trainer::similarity::{
 };
 use softtouch_trainer::{Example, FingerTable, Metrics, ModelArtifact, evaluate, latent_means};
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// `softtouch transfer`.
@@ -40,6 +43,12 @@ pub struct TransferArgs {
     /// Seed of the MMD test's subsample and permutations.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Fit an image tare from the rest frames of both datasets' runs (the finger at
+    /// rest, taken at each run's start; no water label) and score the water side
+    /// with it as well: R², CKA and cosines with and without it
+    /// (docs/land-to-water.md).
+    #[arg(long)]
+    pub tare: bool,
     /// The CSV written (long format: section, model, tested_on, axis, metric, value).
     #[arg(long, default_value = "transfer.csv")]
     pub out: PathBuf,
@@ -97,8 +106,8 @@ pub async fn run_transfer(
     let artifact = load_model(&store, &args.model, &device).await?;
     let preprocess = &artifact.header.config.preprocess;
     let table = FingerTable::new(preprocess);
-    let land = test_split(&store, &args.land, &table).await?;
-    let water = test_split(&store, &args.water, &table).await?;
+    let land = test_split(&store, &args.land, &table, None).await?;
+    let water = test_split(&store, &args.water, &table, None).await?;
     if land.examples.is_empty() || water.examples.is_empty() {
         return Err(Failure::BadInput(anyhow!(
             "an empty test split: `{}` has {}, `{}` has {} test samples",
@@ -110,6 +119,13 @@ pub async fn run_transfer(
     }
     let pairs = paired_test(&store, &land, &water, &table).await?;
     let w = |e| io_failure(e);
+    let mut csv = String::from("section,model,tested_on,axis,metric,value\n");
+    // The water side again through the image tare (`--tare`).
+    let tared = if args.tare {
+        Some(tare::fit_and_load(&store, &args, &land, &table, out, &mut csv).await?)
+    } else {
+        None
+    };
 
     // 1. The same model on both media.
     let on_land = score(&artifact, &land.examples, &device)?;
@@ -124,12 +140,22 @@ pub async fn run_transfer(
         water.examples.len()
     )
     .map_err(w)?;
-    let mut csv = String::from("section,model,tested_on,axis,metric,value\n");
+    let on_tared = match &tared {
+        Some((split, _)) => Some(score(&artifact, &split.examples, &device)?),
+        None => None,
+    };
     match (&on_land.r2, &on_water.r2, &on_land.rmse, &on_water.rmse) {
         (Some(rl), Some(rw), Some(el), Some(ew)) => {
+            let rt = on_tared.as_ref().and_then(|m| m.r2.clone());
+            let et = on_tared.as_ref().and_then(|m| m.rmse.clone());
             writeln!(
                 out,
-                "axis   R² land   R² water   drop      RMSE land   RMSE water  unit"
+                "axis   R² land   R² water   drop      RMSE land   RMSE water  unit{}",
+                if rt.is_some() {
+                    "   R² water, tare   RMSE water, tare"
+                } else {
+                    ""
+                }
             )
             .map_err(w)?;
             for (i, axis) in AXES.iter().enumerate() {
@@ -145,6 +171,22 @@ pub async fn run_transfer(
                     axis.report_unit
                 )
                 .map_err(w)?;
+                if let (Some(rt), Some(et)) = (&rt, &et) {
+                    writeln!(
+                        out,
+                        "{:<6} with the tare: R² {:.5} (drop {:+.5}), RMSE {:.4} {}",
+                        axis.name,
+                        rt[i].r2,
+                        rl[i].r2 - rt[i].r2,
+                        et[i],
+                        axis.report_unit
+                    )
+                    .map_err(w)?;
+                    csv.push_str(&format!(
+                        "accuracy,{},water_tare,{},r2,{}\naccuracy,{},water_tare,{},rmse,{}\n",
+                        args.model, axis.key, rt[i].r2, args.model, axis.key, et[i]
+                    ));
+                }
                 for (tested_on, r2, rmse) in [("land", rl[i].r2, el[i]), ("water", rw[i].r2, ew[i])]
                 {
                     csv.push_str(&format!(
@@ -212,6 +254,19 @@ pub async fn run_transfer(
         ));
     }
 
+    // The same through the tare.
+    let tared_latents = match &tared {
+        Some((_, tp)) => Some(tare::latents(
+            &artifact,
+            tp,
+            &args.model,
+            &device,
+            out,
+            &mut csv,
+        )?),
+        None => None,
+    };
+
     // 3. Trained on land, water, both; tested on land and water.
     let mut scored = vec![
         Scored {
@@ -225,6 +280,13 @@ pub async fn run_transfer(
             metrics: on_water,
         },
     ];
+    if let Some(m) = on_tared {
+        scored.push(Scored {
+            model: args.model.clone(),
+            tested_on: "water_tare",
+            metrics: m,
+        });
+    }
     for name in [&args.water_model, &args.both_model].into_iter().flatten() {
         let other = load_model(&store, name, &device).await?;
         let (l, wa) = if other.header.config.preprocess == *preprocess {
@@ -235,8 +297,8 @@ pub async fn run_transfer(
         } else {
             // Another input size or threshold: its own preprocessing of the same splits.
             let t = FingerTable::new(&other.header.config.preprocess);
-            let l = test_split(&store, &args.land, &t).await?;
-            let wa = test_split(&store, &args.water, &t).await?;
+            let l = test_split(&store, &args.land, &t, None).await?;
+            let wa = test_split(&store, &args.water, &t, None).await?;
             (
                 score(&other, &l.examples, &device)?,
                 score(&other, &wa.examples, &device)?,
@@ -281,26 +343,7 @@ pub async fn run_transfer(
         }
     }
     store.close().await;
-    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Failure::Runtime(anyhow!("cannot create {}: {e}", dir.display())))?;
-    }
-    std::fs::write(&args.out, csv)
-        .map_err(|e| Failure::Runtime(anyhow!("cannot write {}: {e}", args.out.display())))?;
-    // The cosine of every pair, for its distribution (the report's histogram).
-    let stem = args
-        .out
-        .file_stem()
-        .map_or_else(|| "transfer".into(), |s| s.to_string_lossy().into_owned());
-    let cos_path = args.out.with_file_name(format!("{stem}-cosines.csv"));
-    let mut cos_csv = String::from("pair,cosine\n");
-    for (i, c) in cosines.iter().enumerate() {
-        cos_csv.push_str(&format!("{i},{c}\n"));
-    }
-    std::fs::write(&cos_path, cos_csv)
-        .map_err(|e| Failure::Runtime(anyhow!("cannot write {}: {e}", cos_path.display())))?;
-    let png = args.out.with_extension("png");
-    plot_r2(&png, &scored)?;
+    let (cos_path, png) = plot::write_files(&args.out, &csv, &cosines, &scored)?;
     writeln!(
         out,
         "wrote {}, {} and {} in {:.1} s",
@@ -310,10 +353,19 @@ pub async fn run_transfer(
         started.elapsed().as_secs_f64()
     )
     .map_err(w)?;
-    let drop_mean = match (scored[0].metrics.r2_mean, scored[1].metrics.r2_mean) {
+    let mut drop_mean = match (scored[0].metrics.r2_mean, scored[1].metrics.r2_mean) {
         (Some(l), Some(wa)) => format!("R² mean {l:.4} on land, {wa:.4} on water"),
         _ => "no R² (a VAE)".into(),
     };
+    if let Some(m) = scored.iter().find(|s| s.tested_on == "water_tare") {
+        let (cos, cka) = tared_latents.unwrap_or((f64::NAN, f64::NAN));
+        drop_mean.push_str(&format!(
+            " ({} with the image tare: CKA {cka:.3}, cosine mean {cos:.3})",
+            m.metrics
+                .r2_mean
+                .map_or_else(|| "-".into(), |v| format!("{v:.4}"))
+        ));
+    }
     super::results::Recorder::new("transfer")
         .model(&args.model)
         .dataset(&args.land)
@@ -323,6 +375,7 @@ pub async fn run_transfer(
         .setting("both_model", args.both_model.clone())
         .setting("permutations", args.permutations)
         .setting("seed", args.seed)
+        .setting("tare", args.tare)
         .table(&args.out)
         .table(&cos_path)
         .store(
@@ -337,49 +390,4 @@ pub async fn run_transfer(
         )
         .await
         .map(drop)
-}
-
-/// The table as a plot: R² per axis of every model on each medium's test split.
-fn plot_r2(png: &Path, scored: &[Scored]) -> Result<(), Failure> {
-    use softtouch_collector::plot::{BarChart, BarSeries, bar_chart};
-    let groups: Vec<String> = AXES.iter().map(|a| a.name.to_owned()).collect();
-    let series: Vec<BarSeries> = scored
-        .iter()
-        .filter_map(|s| {
-            let r2 = s.metrics.r2.as_ref()?;
-            Some(BarSeries {
-                label: format!("{} on {}", s.model, s.tested_on),
-                bars: r2
-                    .iter()
-                    .map(|a| Some((a.r2, f64::NAN, f64::NAN)))
-                    .collect(),
-                reference: Vec::new(),
-                notes: Vec::new(),
-            })
-        })
-        .collect();
-    if series.is_empty() {
-        return Ok(());
-    }
-    // A model that transfers badly has R² below 0: the axis shows how far.
-    let lowest = series
-        .iter()
-        .flat_map(|s| s.bars.iter().flatten().map(|b| b.0))
-        .filter(|v| v.is_finite())
-        .fold(0.0_f64, f64::min);
-    bar_chart(
-        png,
-        &BarChart {
-            title: "Land to water: test R² per axis",
-            x_label: Some("axis"),
-            y_label: "R², dimensionless",
-            groups: &groups,
-            series: &series,
-            // Beyond −5 a bar ends at the axis, labelled with its value.
-            y_range: (lowest.max(-5.0) - 0.05, 1.05),
-            y_labels_up_to: Some(1.0),
-        },
-        (1100, 520),
-    )
-    .map_err(|e| Failure::Runtime(anyhow!("{e}")))
 }

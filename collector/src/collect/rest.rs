@@ -1,0 +1,32 @@
+//! The finger's rest frames, taken once at a run's start with the arm at home (no
+//! contact) and stored with the run: what an image tare for another medium is fitted
+//! against (`softtouch transfer --tare`), with no label of that medium.
+
+use super::*;
+
+/// Rest frames a run keeps: their mean cancels the camera's noise (σ/√8).
+pub const REST_FRAMES: usize = 8;
+
+impl Job<'_> {
+    /// Takes [`REST_FRAMES`] frames and stores them with the run (a resumed run keeps
+    /// those of its first start). `Some(reason)`: the camera did not answer, a safe
+    /// stop.
+    pub(super) async fn take_rest_frames(&mut self) -> Result<Option<String>, CollectError> {
+        let timeout_ms = (self.plan.rig.procedure.frame_timeout_s * 1000.0).ceil() as u64;
+        let mut frames = Vec::with_capacity(REST_FRAMES);
+        for _ in 0..REST_FRAMES {
+            let after = frames.last().map_or_else(
+                || self.clock.now(),
+                |(meta, _): &(softtouch_schemas::FrameMeta, _)| meta.t,
+            );
+            match self.camera.frame_after(after, timeout_ms).await {
+                Ok(frame) => frames.push(crate::store::encode_for_store(&frame)?),
+                Err(e) => {
+                    return Ok(Some(format!("no rest frame from the camera at home: {e}")));
+                }
+            }
+        }
+        self.store.insert_rest_frames(self.plan.run_id, frames)?;
+        Ok(None)
+    }
+}

@@ -1,0 +1,16 @@
+-- Frames of the finger at rest (no contact: the arm at home, the force/torque sensor
+-- just zeroed), taken once at a run's start, as each sample's frame is stored. What an
+-- image tare for a medium compares (`transfer --tare`): a water run's rest frames
+-- against those of the land runs a model learned from, with no water label. A run
+-- stored before this migration has none.
+CREATE TABLE rest_frames (
+    run_id     INTEGER NOT NULL REFERENCES runs (run_id) ON DELETE CASCADE,
+    rest_index INTEGER NOT NULL CHECK (rest_index >= 0),
+    format     TEXT    NOT NULL CHECK (format IN ('png', 'jpeg', 'rgb8')),
+    width      INTEGER NOT NULL CHECK (width > 0),
+    height     INTEGER NOT NULL CHECK (height > 0),
+    sequence   INTEGER NOT NULL,
+    t_ns       INTEGER NOT NULL,
+    data       BLOB    NOT NULL CHECK (length(data) > 0),
+    PRIMARY KEY (run_id, rest_index)
+);
