@@ -3,7 +3,7 @@
 //! and written as a CSV; unpaired datasets and bad options exit 2.
 
 use crate::common;
-use common::{TINY, fails_with, ok, softtouch, tempdir};
+use common::{TINY, fails_with, ok, runtime, softtouch, tempdir};
 use std::path::Path;
 
 /// A database with a land run (run 1, `samples` samples, seed 4) and a water run
@@ -142,6 +142,57 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
         ],
     ));
     assert!(out.contains("paired latents (30 pairs;"), "{out}");
+
+    // The image tare, fitted from the runs' rest frames (8 each).
+    let out = ok(&softtouch(
+        d,
+        &[
+            "transfer", "--model", "land-svae", "--land", "land", "--water", "water", "--tare",
+            "--out", "tare/t.csv",
+        ],
+    ));
+    for needle in [
+        "image tare of `water` against `land` (8 water and 8 land rest frames): scale 1.3",
+        "Fz     with the tare: R²",
+        "with the image tare: cosine mean",
+        "land-svae             water_tare",
+    ] {
+        assert!(out.contains(needle), "expected `{needle}` in:\n{out}");
+    }
+    // The scene's refraction index, 1.333, found from the rest frames alone.
+    let csv = std::fs::read_to_string(d.join("tare/t.csv")).expect("tare/t.csv");
+    let scale: f64 = csv
+        .lines()
+        .find_map(|l| l.strip_prefix("tare,,water,,scale,"))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(f64::NAN);
+    assert!((scale - 1.333).abs() < 0.01, "{csv}");
+    for needle in [
+        "accuracy,land-svae,water_tare,fz,r2,",
+        "latents,land-svae,paired_tare,,cka,",
+        "table,land-svae,water_tare,,r2_mean,",
+    ] {
+        assert!(csv.contains(needle), "expected `{needle}` in:\n{csv}");
+    }
+    // A dataset whose runs kept no rest frame (collected before they were kept).
+    runtime().block_on(async {
+        let store = common::open_store(&d.join("softtouch.db")).await;
+        sqlx::raw_sql("DELETE FROM rest_frames WHERE run_id = 1")
+            .execute(store.pool())
+            .await
+            .expect("delete");
+        store.close().await;
+    });
+    fails_with(
+        &softtouch(
+            d,
+            &[
+                "transfer", "--model", "land-svae", "--land", "land", "--water", "water", "--tare",
+            ],
+        ),
+        2,
+        "dataset `land` has no rest frames",
+    );
 
     // No pairs, unknown names, bad options: exit 2.
     fails_with(

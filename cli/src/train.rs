@@ -141,6 +141,11 @@ pub struct TrainArgs {
     /// The model's settings come from it (default name: DATASET-from-MODEL).
     #[arg(long, value_name = "MODEL")]
     pub init: Option<String>,
+    /// Also learn N copies of each training frame as a camera in water shows it after
+    /// `transfer --tare` (the field narrowed to 0.7–1 of the frame, each channel's
+    /// gain and offset jittered): a land model that reads water (docs/land-to-water.md).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub augment_media: usize,
     #[command(flatten)]
     pub model: ModelArgs,
 }
@@ -222,7 +227,30 @@ pub async fn run_train(
             "a model named `{name}` already exists: pass --name to choose another"
         )));
     }
-    let splits = load(&store, &args.dataset, &model.preprocess, out).await?;
+    let mut splits = load(&store, &args.dataset, &model.preprocess, out).await?;
+    if args.augment_media > 0 {
+        let augment = softtouch_trainer::MediaAugment::water(args.augment_media, train.seed);
+        let bar = progress_bar(0, true, "augmenting");
+        let extra = models::augmented_train(
+            &store,
+            &args.dataset,
+            &model.preprocess,
+            &augment,
+            &|done, total| {
+                bar.set_length(total);
+                bar.set_position(done);
+            },
+        )
+        .await?;
+        bar.finish_and_clear();
+        writeln!(
+            out,
+            "augmented: {} more training images ({augment:?})",
+            extra.len()
+        )
+        .map_err(io_failure)?;
+        splits.train.extend(extra);
+    }
     let dir = args
         .checkpoints
         .clone()

@@ -9,7 +9,9 @@ use futures_util::TryStreamExt as _;
 use softtouch_collector::dataset::{self, DatasetError};
 use softtouch_schemas::FrameFormat;
 use softtouch_trainer::labels::label_from_si;
-use softtouch_trainer::{Example, FingerTable, ImageTare, Preprocess, Splits, Trained};
+use softtouch_trainer::{
+    Example, FingerTable, ImageTare, MediaAugment, Preprocess, Splits, Trained,
+};
 
 pub use crate::store::ModelInfo;
 
@@ -169,6 +171,70 @@ pub async fn load_splits_where(
         }
     }
     Ok(splits)
+}
+
+/// Augmented copies of dataset `name`'s training frames (`augment.copies` of each, see
+/// [`MediaAugment`]), preprocessed, for a training to learn beside the frames
+/// themselves. `progress` is told the frames done so far.
+pub async fn augmented_train(
+    store: &Store,
+    name: &str,
+    preprocess: &Preprocess,
+    augment: &MediaAugment,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<Vec<Example>, ModelError> {
+    let info = dataset::get(store, name).await?;
+    let total = u64::try_from(info.sample_count).unwrap_or(0);
+    let mut rows = store.member_rows(info.dataset_id, Members::NotTest);
+    let table = FingerTable::new(preprocess);
+    let (mut out, mut chunk, mut done) = (Vec::new(), Vec::with_capacity(256), 0u64);
+    loop {
+        let row = rows.try_next().await?;
+        let last = row.is_none();
+        if let Some(row) = row.filter(|r| r.split == "train") {
+            chunk.push(row);
+        }
+        if chunk.len() >= 256 || (last && !chunk.is_empty()) {
+            let rows = std::mem::take(&mut chunk);
+            done += rows.len() as u64;
+            for copy in 0..augment.copies {
+                let one = |row: &MemberRow| -> Result<Example, ModelError> {
+                    let (w, h, rgb) = decode(row).map_err(|why| ModelError::Frame {
+                        run: row.run_id,
+                        index: row.sample_index,
+                        why,
+                    })?;
+                    let rgb = augment.frame((row.run_id, row.sample_index), copy, w, h, &rgb);
+                    let image = table.apply(w, h, &rgb)?;
+                    let label = label_from_si(row.wrench.force_n(), row.wrench.torque_nm());
+                    Ok(Example { image, label })
+                };
+                let part: Result<Vec<Example>, ModelError> = std::thread::scope(|scope| {
+                    let per = rows.len().div_ceil(2).max(1);
+                    let handles: Vec<_> = rows
+                        .chunks(per)
+                        .map(|p| {
+                            scope.spawn(move || p.iter().map(one).collect::<Result<Vec<_>, _>>())
+                        })
+                        .collect();
+                    let mut all = Vec::new();
+                    for h in handles {
+                        all.extend(h.join().map_err(|_| ModelError::Frame {
+                            run: 0,
+                            index: 0,
+                            why: "an augmentation thread panicked".into(),
+                        })??);
+                    }
+                    Ok(all)
+                });
+                out.extend(part?);
+            }
+            progress(done, total);
+        }
+        if last {
+            return Ok(out);
+        }
+    }
 }
 
 /// Dataset `name`'s first test frame as stored, decoded to RGB8 `(width, height,

@@ -8,7 +8,9 @@ use crate::models::{MemberRow, ModelError, preprocess_parallel};
 use crate::store::{Members, Store};
 use futures_util::TryStreamExt as _;
 use softtouch_collector::dataset;
-use softtouch_trainer::{Example, FingerTable, ImageTare, RestFrame, TareError, TareFit};
+use softtouch_trainer::{
+    Example, FingerTable, ImageTare, Preprocess, RestFrame, TareError, TareFit,
+};
 use std::collections::HashMap;
 
 /// Paired test examples: `land[i]` and `water[i]` are the same pose and rod.
@@ -238,16 +240,23 @@ async fn rest_frames(store: &Store, name: &str) -> Result<Vec<RestFrame>, Transf
 }
 
 /// The image tare that maps the rest frames of dataset `water`'s runs onto those of
-/// dataset `land`'s (no label of either is read).
+/// dataset `land`'s (no label of either is read), its gain and offset fitted on the
+/// pixels `preprocess` keeps as the finger's.
 ///
 /// # Errors
 /// A dataset without rest frames, frames that cannot be decoded or compared.
-pub async fn fit_tare(store: &Store, land: &str, water: &str) -> Result<TareFit, TransferError> {
+pub async fn fit_tare(
+    store: &Store,
+    land: &str,
+    water: &str,
+    preprocess: &Preprocess,
+) -> Result<TareFit, TransferError> {
     let (l, w) = (
         rest_frames(store, land).await?,
         rest_frames(store, water).await?,
     );
-    softtouch_trainer::fit_image_tare(&l, &w).map_err(|error| TransferError::Tare {
+    let keep = |r, g, b| preprocess.is_finger(r, g, b);
+    softtouch_trainer::fit_image_tare(&l, &w, Some(&keep)).map_err(|error| TransferError::Tare {
         land: land.to_owned(),
         water: water.to_owned(),
         error,

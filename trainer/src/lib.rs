@@ -30,6 +30,7 @@ pub use infer::{Latency, Prediction, Predictor, measure_frame_latency, measure_l
 pub use labels::{AXES, LabelNorm, UNITS, WrenchLabel};
 pub use metrics::Metrics;
 pub use model::{ModelConfig, ModelKind};
+pub use preprocess::augment::MediaAugment;
 pub use preprocess::tare::{ImageTare, RestFrame, TareError, TareFit, fit_image_tare};
 pub use preprocess::{FingerTable, Fork, Preprocess, ScopedThread};
 pub use train::{

@@ -49,6 +49,9 @@ pub struct TransferArgs {
     /// (docs/land-to-water.md).
     #[arg(long)]
     pub tare: bool,
+    /// With `--tare`: the scale, gain and offset only, no per-pixel gain map.
+    #[arg(long, requires = "tare")]
+    pub no_gain_map: bool,
     /// The CSV written (long format: section, model, tested_on, axis, metric, value).
     #[arg(long, default_value = "transfer.csv")]
     pub out: PathBuf,
@@ -122,7 +125,7 @@ pub async fn run_transfer(
     let mut csv = String::from("section,model,tested_on,axis,metric,value\n");
     // The water side again through the image tare (`--tare`).
     let tared = if args.tare {
-        Some(tare::fit_and_load(&store, &args, &land, &table, out, &mut csv).await?)
+        Some(tare::fit_and_load(&store, &args, &land, &table, preprocess, out, &mut csv).await?)
     } else {
         None
     };

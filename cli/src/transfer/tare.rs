@@ -16,20 +16,25 @@ pub(super) async fn fit_and_load(
     args: &TransferArgs,
     land: &TestSplit,
     table: &FingerTable,
+    preprocess: &softtouch_trainer::Preprocess,
     out: &mut dyn Write,
     csv: &mut String,
 ) -> Result<(TestSplit, Pairs), Failure> {
-    let fit = fit_tare(store, &args.land, &args.water).await?;
+    let mut fit = fit_tare(store, &args.land, &args.water, preprocess).await?;
+    if args.no_gain_map {
+        fit.tare.gain_map = None;
+    }
     writeln!(
         out,
-        "image tare of `{}` against `{}` ({} water and {} land rest frames): {}; RMS difference of the rest frames {:.1} → {:.1} (0–255)",
+        "image tare of `{}` against `{}` ({} water and {} land rest frames): {}; RMS difference of the rest frames on the finger {:.1} → {:.1}, with the gain map {:.1} (0–255)",
         args.water,
         args.land,
         fit.water_frames,
         fit.land_frames,
         fit.tare.describe(),
         fit.rms_before,
-        fit.rms_after
+        fit.rms_after,
+        fit.rms_after_map
     )
     .map_err(io_failure)?;
     let t = &fit.tare;
@@ -43,10 +48,12 @@ pub(super) async fn fit_and_load(
         ("offset_b", t.offset[2]),
         ("rms_before", fit.rms_before),
         ("rms_after", fit.rms_after),
+        ("rms_after_map", fit.rms_after_map),
     ] {
         csv.push_str(&format!("tare,,water,,{metric},{value}\n"));
     }
     let split = test_split(store, &args.water, table, Some(t)).await?;
+    tracing::debug!("the tare: {t:?}");
     let pairs = paired_test(store, land, &split, table).await?;
     Ok((split, pairs))
 }

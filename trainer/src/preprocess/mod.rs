@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::TrainError;
 
+pub mod augment;
 mod rule;
 pub mod tare;
 

@@ -27,7 +27,7 @@ const MIN_INSIDE: f64 = 0.25;
 /// A correction of raw RGB8 frames: output pixel `p` takes the input at
 /// `principal_px + (p − principal_px) · scale` (bilinear; black outside the frame),
 /// then `gain[c] · v + offset[c]` per channel, rounded and clamped to 0..=255.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ImageTare {
     /// Magnification undone (the water frame's, relative to land), dimensionless.
     pub scale: f64,
@@ -38,6 +38,21 @@ pub struct ImageTare {
     pub gain: [f64; 3],
     /// Per-channel offset (R, G, B), in 0–255 units.
     pub offset: [f64; 3],
+    /// What is left per pixel after the global gain and offset, where the finger is
+    /// at rest (a flat field: the water's attenuation grows with each pixel's light
+    /// path, which a global gain cannot follow); `None`: none fitted.
+    pub gain_map: Option<GainMap>,
+}
+
+/// A gain per pixel and channel on a coarse grid (the frame shrunk `shrink`×),
+/// sampled bilinearly.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GainMap {
+    pub shrink: usize,
+    pub width: usize,
+    pub height: usize,
+    /// RGB triples, row-major.
+    pub gains: Vec<f32>,
 }
 
 impl ImageTare {
@@ -49,15 +64,25 @@ impl ImageTare {
             principal_px: [width as f64 / 2.0, height as f64 / 2.0],
             gain: [1.0; 3],
             offset: [0.0; 3],
+            gain_map: None,
         }
     }
 
     /// One line for people: `scale 1.333 about (320, 240) px, gain R 1.41 G 1.38 B
-    /// 1.22, offset R −3.1 G −2.0 B −9.5`.
+    /// 1.22, offset R −3.1 G −2.0 B −9.5, a gain map 160×120 (0.82–1.31)`.
     #[must_use]
     pub fn describe(&self) -> String {
+        let map = self.gain_map.as_ref().map_or_else(String::new, |m| {
+            let (lo, hi) = m
+                .gains
+                .iter()
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &g| {
+                    (lo.min(g), hi.max(g))
+                });
+            format!(", a gain map {}×{} ({lo:.2}–{hi:.2})", m.width, m.height)
+        });
         format!(
-            "scale {:.4} about ({:.0}, {:.0}) px, gain R {:.3} G {:.3} B {:.3}, offset R {:+.1} G {:+.1} B {:+.1}",
+            "scale {:.4} about ({:.0}, {:.0}) px, gain R {:.3} G {:.3} B {:.3}, offset R {:+.1} G {:+.1} B {:+.1}{map}",
             self.scale,
             self.principal_px[0],
             self.principal_px[1],
@@ -84,13 +109,20 @@ impl ImageTare {
             height,
             data: rgb.iter().map(|&v| f32::from(v)).collect(),
         };
+        let map = match &self.gain_map {
+            Some(m) => Some(m.plane(width, height)?),
+            None => None,
+        };
         let mut out = vec![0u8; rgb.len()];
         for y in 0..height {
             for x in 0..width {
                 let (sx, sy) = self.source(x, y, 1.0);
                 let v = src.bilinear(sx, sy);
+                let m = map.as_ref().map_or([1.0; 3], |(p, k)| {
+                    p.bilinear((x as f64 + 0.5) / k - 0.5, (y as f64 + 0.5) / k - 0.5)
+                });
                 for c in 0..3 {
-                    let w = self.gain[c] * f64::from(v[c]) + self.offset[c];
+                    let w = (self.gain[c] * f64::from(v[c]) + self.offset[c]) * f64::from(m[c]);
                     out[(y * width + x) * 3 + c] = w.round().clamp(0.0, 255.0) as u8;
                 }
             }
@@ -103,7 +135,11 @@ impl ImageTare {
             .into_iter()
             .chain(self.gain)
             .chain(self.offset);
-        if all.into_iter().any(|v| !v.is_finite()) || self.scale <= 0.0 {
+        let map_bad = self
+            .gain_map
+            .as_ref()
+            .is_some_and(|m| m.gains.iter().any(|g| !g.is_finite() || *g < 0.0));
+        if all.into_iter().any(|v| !v.is_finite()) || self.scale <= 0.0 || map_bad {
             return Err(TareError::Invalid(format!(
                 "{self:?}: expected finite numbers and a positive scale"
             )));
@@ -122,6 +158,35 @@ impl ImageTare {
     }
 }
 
+impl GainMap {
+    /// The map as a plane over a `width × height` frame, and its shrink.
+    fn plane(&self, width: usize, height: usize) -> Result<(Plane, f64), TareError> {
+        if self.shrink == 0
+            || self.width == 0
+            || self.height == 0
+            || self.gains.len() != self.width * self.height * 3
+            || width / self.shrink != self.width
+            || height / self.shrink != self.height
+        {
+            return Err(TareError::Size(format!(
+                "a gain map of {}×{} (shrink {}, {} gains) for a {width}×{height} frame: it was fitted on frames of another size",
+                self.width,
+                self.height,
+                self.shrink,
+                self.gains.len()
+            )));
+        }
+        Ok((
+            Plane {
+                width: self.width,
+                height: self.height,
+                data: self.gains.clone(),
+            },
+            self.shrink as f64,
+        ))
+    }
+}
+
 /// One rest frame: raw RGB8, `width × height × 3`, row-major.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RestFrame {
@@ -131,14 +196,18 @@ pub struct RestFrame {
 }
 
 /// A fitted tare and how well it fits.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TareFit {
     pub tare: ImageTare,
     /// RMS difference, 0–255 units over the three channels, between the land mean
-    /// and the water mean as it is, and corrected; both on the pixels the corrected
-    /// frame sees (shrunk [`FIT_SHRINK`]×).
+    /// and the water mean as it is, and corrected by the scale, gain and offset; on
+    /// the pixels the corrected frame sees (shrunk [`FIT_SHRINK`]×) that are the
+    /// finger's in the land mean (all of them without a `keep`).
     pub rms_before: f64,
     pub rms_after: f64,
+    /// The same with the gain map too (0 where it holds at rest by construction, up
+    /// to its clamp).
+    pub rms_after_map: f64,
     /// Rest frames averaged on each side.
     pub land_frames: usize,
     pub water_frames: usize,
@@ -258,7 +327,12 @@ impl Plane {
 
 /// The best gain and offset per channel at `scale`, and the RMS residual with them
 /// and without any correction (`None`: too few pixels inside the frame).
-fn fit_at(land: &Plane, water: &Plane, scale: f64) -> Option<([f64; 3], [f64; 3], f64, f64)> {
+fn fit_at(
+    land: &Plane,
+    water: &Plane,
+    scale: f64,
+    mask: Option<&[bool]>,
+) -> Option<([f64; 3], [f64; 3], f64, f64)> {
     let mut t = ImageTare::identity(land.width * FIT_SHRINK, land.height * FIT_SHRINK);
     t.scale = scale;
     // Per channel: n, Σx, Σy, Σxx, Σxy, Σyy (x the corrected water, y the land); and
@@ -268,7 +342,7 @@ fn fit_at(land: &Plane, water: &Plane, scale: f64) -> Option<([f64; 3], [f64; 3]
     for y in 0..land.height {
         for x in 0..land.width {
             let (sx, sy) = t.source(x, y, FIT_SHRINK as f64);
-            if water.inside(sx, sy).is_none() {
+            if water.inside(sx, sy).is_none() || mask.is_some_and(|m| !m[y * land.width + x]) {
                 continue;
             }
             let v = water.bilinear(sx, sy);
@@ -288,7 +362,11 @@ fn fit_at(land: &Plane, water: &Plane, scale: f64) -> Option<([f64; 3], [f64; 3]
         }
     }
     let n = s[0][0];
-    if n < MIN_INSIDE * (land.width * land.height) as f64 {
+    let enough = match mask {
+        Some(m) => MIN_INSIDE * m.iter().filter(|&&k| k).count() as f64,
+        None => MIN_INSIDE * (land.width * land.height) as f64,
+    };
+    if n < enough.max(1.0) {
         return None;
     }
     let (mut gain, mut offset, mut sse) = ([1.0; 3], [0.0; 3], 0.0);
@@ -313,12 +391,22 @@ fn fit_at(land: &Plane, water: &Plane, scale: f64) -> Option<([f64; 3], [f64; 3]
     ))
 }
 
+/// Which colours are the finger's (the model's threshold, `Preprocess::is_finger`).
+pub type Keep<'a> = &'a (dyn Fn(u8, u8, u8) -> bool + Sync);
+
 /// Fits the tare that maps the `water` rest frames onto the `land` ones (both of one
-/// size, any number of each).
+/// size, any number of each): the scale on every pixel, the gain and offset and the
+/// gain map on the pixels whose land mean colour `keep` takes (the finger's: the
+/// only pixels a model reads; every pixel without `keep`, or where fewer than 1 %
+/// are kept).
 ///
 /// # Errors
 /// No frames on a side, frames of different sizes or with wrong buffers, flat frames.
-pub fn fit_image_tare(land: &[RestFrame], water: &[RestFrame]) -> Result<TareFit, TareError> {
+pub fn fit_image_tare(
+    land: &[RestFrame],
+    water: &[RestFrame],
+    keep: Option<Keep<'_>>,
+) -> Result<TareFit, TareError> {
     if land.is_empty() {
         return Err(TareError::NoFrames("land"));
     }
@@ -348,7 +436,7 @@ pub fn fit_image_tare(land: &[RestFrame], water: &[RestFrame]) -> Result<TareFit
     if m.is_flat() {
         return Err(TareError::Flat("water"));
     }
-    let cost = |s: f64| fit_at(&l, &m, s).map_or(f64::INFINITY, |f| f.2);
+    let cost = |s: f64| fit_at(&l, &m, s, None).map_or(f64::INFINITY, |f| f.2);
     let steps = ((SCALE_RANGE.1 - SCALE_RANGE.0) / SCALE_STEP).round() as usize;
     let grid = (0..=steps).map(|i| SCALE_RANGE.0 + i as f64 * SCALE_STEP);
     let best = grid.fold((1.0, f64::INFINITY), |b, s| {
@@ -368,18 +456,127 @@ pub fn fit_image_tare(land: &[RestFrame], water: &[RestFrame]) -> Result<TareFit
     }
     let mid = (a + b) / 2.0;
     let scale = if cost(mid) <= best.1 { mid } else { best.0 };
-    let (gain, offset, rms_after, rms_before) =
-        fit_at(&l, &m, scale).ok_or(TareError::Flat("water"))?;
+    let mask: Option<Vec<bool>> = keep
+        .map(|k| {
+            (0..l.width * l.height)
+                .map(|i| {
+                    let v = l.at(i % l.width, i / l.width);
+                    let [r, g, b] = v.map(|c| c.round().clamp(0.0, 255.0) as u8);
+                    k(r, g, b)
+                })
+                .collect::<Vec<bool>>()
+        })
+        .filter(|m| m.iter().filter(|&&k| k).count() * 100 >= m.len());
+    let (gain, offset, rms_after, rms_before) = fit_at(&l, &m, scale, mask.as_deref())
+        .or_else(|| fit_at(&l, &m, scale, None))
+        .ok_or(TareError::Flat("water"))?;
     let mut tare = ImageTare::identity(w, h);
     (tare.scale, tare.gain, tare.offset) = (scale, gain, offset);
+    let map = gain_map(&l, &m, &tare, k, mask.as_deref());
+    tare.gain_map = Some(map);
+    let rms_after_map = residual(&l, &m, &tare, k, mask.as_deref());
     Ok(TareFit {
         tare,
         rms_before,
         rms_after,
+        rms_after_map,
         land_frames: land.len(),
         water_frames: water.len(),
     })
 }
+
+/// The water mean (shrunk `k`×) corrected by `tare`'s scale, gain, offset and map
+/// at shrunk pixel (x, y); `None` outside what the water frame saw.
+fn corrected(water: &Plane, tare: &ImageTare, k: usize, x: usize, y: usize) -> Option<[f64; 3]> {
+    let (sx, sy) = tare.source(x, y, k as f64);
+    water.inside(sx, sy)?;
+    let v = water.bilinear(sx, sy);
+    let m = tare.gain_map.as_ref().map_or([1.0; 3], |g| {
+        let i = (y * g.width + x) * 3;
+        [g.gains[i], g.gains[i + 1], g.gains[i + 2]]
+    });
+    Some(std::array::from_fn(|c| {
+        (tare.gain[c] * f64::from(v[c]) + tare.offset[c]) * f64::from(m[c])
+    }))
+}
+
+/// The gain map: per shrunk pixel and channel, land over the globally corrected water
+/// where the finger is (and both are brighter than [`MAP_FLOOR`]), else 1; clamped to
+/// [`MAP_RANGE`] and smoothed over 3×3 pixels (the camera's noise, the edge's
+/// rounding).
+fn gain_map(
+    land: &Plane,
+    water: &Plane,
+    tare: &ImageTare,
+    k: usize,
+    mask: Option<&[bool]>,
+) -> GainMap {
+    let (w, h) = (land.width, land.height);
+    let mut raw = vec![1f32; w * h * 3];
+    for y in 0..h {
+        for x in 0..w {
+            if mask.is_some_and(|m| !m[y * w + x]) {
+                continue;
+            }
+            let Some(v) = corrected(water, tare, k, x, y) else {
+                continue;
+            };
+            let l = land.at(x, y);
+            for c in 0..3 {
+                let (a, b) = (v[c], f64::from(l[c]));
+                if a > MAP_FLOOR && b > MAP_FLOOR {
+                    raw[(y * w + x) * 3 + c] = (b / a).clamp(MAP_RANGE.0, MAP_RANGE.1) as f32;
+                }
+            }
+        }
+    }
+    let mut gains = vec![1f32; w * h * 3];
+    for y in 0..h {
+        for x in 0..w {
+            for c in 0..3 {
+                let (mut sum, mut n) = (0f32, 0f32);
+                for yy in y.saturating_sub(1)..(y + 2).min(h) {
+                    for xx in x.saturating_sub(1)..(x + 2).min(w) {
+                        sum += raw[(yy * w + xx) * 3 + c];
+                        n += 1.0;
+                    }
+                }
+                gains[(y * w + x) * 3 + c] = sum / n;
+            }
+        }
+    }
+    GainMap {
+        shrink: k,
+        width: w,
+        height: h,
+        gains,
+    }
+}
+
+/// RMS of land − corrected water over the pixels the water saw and `mask` keeps.
+fn residual(land: &Plane, water: &Plane, tare: &ImageTare, k: usize, mask: Option<&[bool]>) -> f64 {
+    let (mut sse, mut n) = (0f64, 0f64);
+    for y in 0..land.height {
+        for x in 0..land.width {
+            if mask.is_some_and(|m| !m[y * land.width + x]) {
+                continue;
+            }
+            if let Some(v) = corrected(water, tare, k, x, y) {
+                let l = land.at(x, y);
+                for c in 0..3 {
+                    sse += (f64::from(l[c]) - v[c].clamp(0.0, 255.0)).powi(2);
+                    n += 1.0;
+                }
+            }
+        }
+    }
+    if n > 0.0 { (sse / n).sqrt() } else { 0.0 }
+}
+
+/// Below this (0–255) a pixel is too dark for its ratio to mean anything.
+const MAP_FLOOR: f64 = 8.0;
+/// The gain map's clamp.
+const MAP_RANGE: (f64, f64) = (0.25, 4.0);
 
 #[cfg(test)]
 mod tests;

@@ -49,8 +49,8 @@ fn the_fit_undoes_a_flat_ports_magnification_and_the_waters_colour() {
     let l = land();
     let (g, o) = ([0.7, 0.75, 0.9], [4.0, 8.0, 20.0]);
     let w = through_water(&l, 1.333, g, o);
-    let fit = fit_image_tare(std::slice::from_ref(&l), &[w.clone(), w]).expect("fit");
-    let t = fit.tare;
+    let fit = fit_image_tare(std::slice::from_ref(&l), &[w.clone(), w], None).expect("fit");
+    let t = &fit.tare;
     assert!((t.scale - 1.333).abs() < 0.01, "{t:?}");
     for c in 0..3 {
         assert!((t.gain[c] - 1.0 / g[c]).abs() < 0.06, "{t:?}");
@@ -69,8 +69,9 @@ fn the_fit_undoes_a_flat_ports_magnification_and_the_waters_colour() {
 #[test]
 fn the_same_medium_fits_the_identity() {
     let l = land();
-    let fit = fit_image_tare(std::slice::from_ref(&l), std::slice::from_ref(&l)).expect("fit");
-    let t = fit.tare;
+    let fit =
+        fit_image_tare(std::slice::from_ref(&l), std::slice::from_ref(&l), None).expect("fit");
+    let t = &fit.tare;
     assert!((t.scale - 1.0).abs() < 0.005, "{t:?}");
     for c in 0..3 {
         assert!(
@@ -124,11 +125,11 @@ fn a_magnified_frame_corrected_matches_land_inside_the_field_it_still_sees() {
 fn bad_inputs_are_named_not_panicked_on() {
     let l = land();
     assert_eq!(
-        fit_image_tare(&[], std::slice::from_ref(&l)),
+        fit_image_tare(&[], std::slice::from_ref(&l), None),
         Err(TareError::NoFrames("land"))
     );
     assert_eq!(
-        fit_image_tare(std::slice::from_ref(&l), &[]),
+        fit_image_tare(std::slice::from_ref(&l), &[], None),
         Err(TareError::NoFrames("water"))
     );
     let small = RestFrame {
@@ -136,13 +137,13 @@ fn bad_inputs_are_named_not_panicked_on() {
         height: 60,
         rgb: vec![9; 80 * 60 * 3],
     };
-    let e = fit_image_tare(std::slice::from_ref(&l), &[small]).expect_err("sizes");
+    let e = fit_image_tare(std::slice::from_ref(&l), &[small], None).expect_err("sizes");
     assert!(e.to_string().contains("water rest frame 1 is 80×60"), "{e}");
     let short = RestFrame {
         rgb: vec![0; 10],
         ..l.clone()
     };
-    let e = fit_image_tare(std::slice::from_ref(&l), &[short]).expect_err("buffer");
+    let e = fit_image_tare(std::slice::from_ref(&l), &[short], None).expect_err("buffer");
     assert!(e.to_string().contains("10 bytes"), "{e}");
     // A capped camera: every pixel alike.
     let flat = RestFrame {
@@ -150,11 +151,11 @@ fn bad_inputs_are_named_not_panicked_on() {
         ..l.clone()
     };
     assert_eq!(
-        fit_image_tare(std::slice::from_ref(&l), std::slice::from_ref(&flat)),
+        fit_image_tare(std::slice::from_ref(&l), std::slice::from_ref(&flat), None),
         Err(TareError::Flat("water"))
     );
     assert_eq!(
-        fit_image_tare(std::slice::from_ref(&flat), std::slice::from_ref(&l)),
+        fit_image_tare(std::slice::from_ref(&flat), std::slice::from_ref(&l), None),
         Err(TareError::Flat("land"))
     );
     // A one-pixel frame: flat, named.
@@ -163,7 +164,7 @@ fn bad_inputs_are_named_not_panicked_on() {
         height: 1,
         rgb: vec![1, 2, 3],
     };
-    assert!(fit_image_tare(std::slice::from_ref(&one), std::slice::from_ref(&one)).is_err());
+    assert!(fit_image_tare(std::slice::from_ref(&one), std::slice::from_ref(&one), None).is_err());
     // A tare with a NaN or a zero scale is refused, and a wrong buffer.
     let mut t = ImageTare::identity(W, H);
     t.gain[1] = f64::NAN;
