@@ -147,8 +147,16 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
     let out = ok(&softtouch(
         d,
         &[
-            "transfer", "--model", "land-svae", "--land", "land", "--water", "water", "--tare",
-            "--out", "tare/t.csv",
+            "transfer",
+            "--model",
+            "land-svae",
+            "--land",
+            "land",
+            "--water",
+            "water",
+            "--tare",
+            "--out",
+            "tare/t.csv",
         ],
     ));
     for needle in [
@@ -187,7 +195,14 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
         &softtouch(
             d,
             &[
-                "transfer", "--model", "land-svae", "--land", "land", "--water", "water", "--tare",
+                "transfer",
+                "--model",
+                "land-svae",
+                "--land",
+                "land",
+                "--water",
+                "water",
+                "--tare",
             ],
         ),
         2,

@@ -41,10 +41,11 @@ pub(crate) struct Departure {
 /// retreat plane `plane_x_m`. The arm's first move home from wherever the
 /// robot stood is not one (franka-sim's ready pose is 25 mm out and 60-130 mm down).
 ///
-/// `restarts` (ascending indices into `poses`) are the first commands of motions begun
-/// after an abort: the robot's reflex stops it off the last command by its tracking
-/// error and the driver's retry starts from where it stands, so the jump between the
-/// two is not a way the driver sent; the departure is measured again from there.
+/// `restarts` (ascending indices into `poses`) are the first commands of motions: a
+/// motion starts where the robot reports its last command to be (after an abort, where
+/// its reflex stopped it off the last command by its tracking error), so a jump to a
+/// motion's first command is not a way the driver sent; the departure is measured
+/// again from there.
 pub(crate) fn departures(
     poses: &[ArmPose],
     restarts: &[usize],

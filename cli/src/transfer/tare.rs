@@ -26,7 +26,7 @@ pub(super) async fn fit_and_load(
     }
     writeln!(
         out,
-        "image tare of `{}` against `{}` ({} water and {} land rest frames): {}; RMS difference of the rest frames on the finger {:.1} → {:.1}, with the gain map {:.1} (0–255)",
+        "image tare of `{}` against `{}` ({} water and {} land rest frames): {}; RMS difference of the rest frames on the finger {:.1} → {:.1} without a gain map, {:.1} with it (0–255)",
         args.water,
         args.land,
         fit.water_frames,
@@ -49,6 +49,7 @@ pub(super) async fn fit_and_load(
         ("rms_before", fit.rms_before),
         ("rms_after", fit.rms_after),
         ("rms_after_map", fit.rms_after_map),
+        ("gain_map", f64::from(u8::from(t.gain_map.is_some()))),
     ] {
         csv.push_str(&format!("tare,,water,,{metric},{value}\n"));
     }

@@ -142,6 +142,9 @@ fn transfer_part(r: &StoredResult) -> Result<Markup, ReportError> {
         )?)
     };
     let r2 = |on: &str, i: usize| t.get("accuracy", &main, on, axis_keys[i], "r2");
+    // `transfer --tare`: the water side through the image tare too.
+    let tared = (0..6).any(|i| r2("water_tare", i).is_finite());
+    let tare = |m: &str| t.get("tare", "", "water", "", m);
     let rmse = |on: &str, i: usize| t.get("accuracy", &main, on, axis_keys[i], "rmse");
     let bars_svg = svg::bars(
         "Test R² per axis: land and water",
@@ -159,7 +162,12 @@ fn transfer_part(r: &StoredResult) -> Result<Markup, ReportError> {
                 (0..6).map(|i| r2("water", i)).collect(),
                 vec![None; 6],
             ),
-        ],
+            (
+                format!("{main} on water, image tare"),
+                (0..6).map(|i| r2("water_tare", i)).collect(),
+                vec![None; 6],
+            ),
+        ][..if tared { 3 } else { 2 }],
         R2_FLOOR,
         (560, 320),
     )?;
@@ -189,7 +197,7 @@ fn transfer_part(r: &StoredResult) -> Result<Markup, ReportError> {
     Ok(html! {
         (prov(r))
         table {
-            tr { th.l { "axis" } th { "R² land" } th { "R² water" } th { "drop" } th { "RMSE land" } th { "RMSE water" } th.l { "unit" } }
+            tr { th.l { "axis" } th { "R² land" } th { "R² water" } th { "drop" } th { "RMSE land" } th { "RMSE water" } @if tared { th { "R² water, tare" } th { "drop, tare" } } th.l { "unit" } }
             @for (i, a) in AXES.iter().enumerate() {
                 tr {
                     td.l { (a) }
@@ -197,6 +205,10 @@ fn transfer_part(r: &StoredResult) -> Result<Markup, ReportError> {
                     td data-k=(format!("transfer-{id}-water-{}", axis_keys[i])) { (f(r2("water", i), 4)) }
                     td { (f(r2("land", i) - r2("water", i), 4)) }
                     td { (f(rmse("land", i), 4)) } td { (f(rmse("water", i), 4)) }
+                    @if tared {
+                        td data-k=(format!("transfer-{id}-water-tare-{}", axis_keys[i])) { (f(r2("water_tare", i), 4)) }
+                        td { (f(r2("land", i) - r2("water_tare", i), 4)) }
+                    }
                     td.l { (UNITS[i]) }
                 }
             }
@@ -207,6 +219,10 @@ fn transfer_part(r: &StoredResult) -> Result<Markup, ReportError> {
             tr { td.l { "cosine similarity, median [quartiles]" } td { (f(latent("cosine_median"), 4)) " [" (f(latent("cosine_p25"), 4)) ", " (f(latent("cosine_p75"), 4)) "]" } }
             tr { td.l { "cosine similarity, mean ± std" } td { (f(latent("cosine_mean"), 4)) " ± " (f(latent("cosine_std"), 4)) } }
             tr { td.l { "linear CKA" } td data-k=(format!("transfer-{id}-cka")) { (f(latent("cka"), 4)) } }
+            @if tared {
+                tr { td.l { "linear CKA, image tare" } td data-k=(format!("transfer-{id}-cka-tare")) { (f(t.get("latents", &main, "paired_tare", "", "cka"), 4)) } }
+                tr { td.l { "cosine similarity, mean, image tare" } td { (f(t.get("latents", &main, "paired_tare", "", "cosine_mean"), 4)) } }
+            }
             tr { td.l { "MMD² (RBF)" } td { (format!("{:.3e}", latent("mmd2"))) } }
             tr { td.l { "MMD permutation p-value" } td data-k=(format!("transfer-{id}-mmd-p")) { (f(latent("mmd_p"), 4)) } }
         }
@@ -216,6 +232,15 @@ fn transfer_part(r: &StoredResult) -> Result<Markup, ReportError> {
                 @for m in &models {
                     tr { td.l { (m) } td { (f(t.get("table", m, "land", "", "r2_mean"), 4)) } td { (f(t.get("table", m, "water", "", "r2_mean"), 4)) } }
                 }
+            }
+        }
+        @if tared {
+            p.note {
+                "Image tare (from the runs' rest frames, no water label): scale " (f(tare("scale"), 4))
+                " about the image centre, gain R " (f(tare("gain_r"), 3)) " G " (f(tare("gain_g"), 3)) " B " (f(tare("gain_b"), 3))
+                @if tare("gain_map") > 0.5 { ", a per-pixel gain map" }
+                "; the rest frames' RMS difference on the finger " (f(tare("rms_before"), 1)) " → "
+                (f(if tare("gain_map") > 0.5 { tare("rms_after_map") } else { tare("rms_after") }, 1)) " (0–255)."
             }
         }
         p.note { "Bars from 0; an R² below 0 is worse than predicting the mean and hangs below the axis; one below −1 is drawn to the axis's end and labelled with its value." }
