@@ -285,16 +285,29 @@ impl ForceSensor for FaultySensor {
     }
 }
 
-/// A camera that times out on the frame calls `timeouts` says.
+/// A camera that times out on the frame calls `timeouts` says (and on the rest
+/// frames, where `rest_timeout`).
 struct FaultyCamera {
     inner: Box<dyn Camera>,
     probe: Probe,
     timeout: fn(u32) -> bool,
+    rest_timeout: bool,
 }
 
 #[async_trait]
 impl Camera for FaultyCamera {
     async fn frame_after(&mut self, t: TimestampNs, timeout_ms: u64) -> Result<Frame, DeviceError> {
+        // The run's rest frames at home, before its first approach: not a sample's
+        // frame, not counted.
+        if probe(&self.probe).approaches == 0 {
+            if self.rest_timeout {
+                return Err(DeviceError::Timeout {
+                    device: "injected camera".into(),
+                    timeout_ms,
+                });
+            }
+            return self.inner.frame_after(t, timeout_ms).await;
+        }
         let call = {
             let mut p = probe(&self.probe);
             p.frame_calls += 1;
@@ -351,6 +364,8 @@ impl Progress for Done {
 struct Faults {
     sensor: SensorFault,
     camera_timeout: fn(u32) -> bool,
+    /// The camera gives no rest frame at the run's start (before its first approach).
+    rest_camera_timeout: bool,
     /// A double stop request at the start of this approach.
     stop_on_approach: Option<u32>,
     /// One stop request (as SIGTERM sends) at the start of this approach.
@@ -372,6 +387,7 @@ impl Default for Faults {
         Self {
             sensor: SensorFault::None,
             camera_timeout: |_| false,
+            rest_camera_timeout: false,
             stop_on_approach: None,
             term_on_approach: None,
             absent_operator: false,
@@ -517,6 +533,7 @@ fn faulty_run(db: &Path, samples: u64, faults: Faults) -> Ended {
                 inner: devices.camera,
                 probe: Arc::clone(&shared),
                 timeout: faults.camera_timeout,
+                rest_timeout: faults.rest_camera_timeout,
             }),
             rods: if faults.absent_operator {
                 Box::new(AbsentOperator {
@@ -892,6 +909,55 @@ fn a_frame_timeout_is_retried_and_logged() {
     assert_eq!(s.samples[1], (1, "ok".into(), None, 2), "retried once");
     assert!(e.at_home() && e.still());
     nothing_lost(&e, &s);
+}
+
+/// No rest frame at home: a warning, and the run collects every sample without them.
+#[test]
+fn a_camera_that_gives_no_rest_frame_is_a_warning_and_the_run_goes_on() {
+    let dir = tempdir();
+    let db = dir.path().join("t.db");
+    let e = faulty_run(
+        &db,
+        3,
+        Faults {
+            rest_camera_timeout: true,
+            ..Faults::default()
+        },
+    );
+    let s = stored(&db, e.run_id);
+    assert_eq!(e.outcome, Outcome::Completed);
+    assert_eq!(s.status, "completed");
+    let warned = s.kinds("frame_timeout");
+    assert!(
+        warned.len() == 1 && warned[0].contains("no rest frame from the camera at home"),
+        "{:?}",
+        s.events
+    );
+    let kept: i64 = runtime().block_on(async {
+        let store = common::open_store(&db).await;
+        let n = sqlx::query_scalar("SELECT COUNT(*) FROM rest_frames")
+            .fetch_one(store.pool())
+            .await
+            .expect("count");
+        store.close().await;
+        n
+    });
+    assert_eq!(kept, 0);
+    nothing_lost(&e, &s);
+    // The same run with a camera that answers keeps 8.
+    let db = dir.path().join("u.db");
+    let e = faulty_run(&db, 3, Faults::default());
+    assert_eq!(e.outcome, Outcome::Completed);
+    let kept: i64 = runtime().block_on(async {
+        let store = common::open_store(&db).await;
+        let n = sqlx::query_scalar("SELECT COUNT(*) FROM rest_frames")
+            .fetch_one(store.pool())
+            .await
+            .expect("count");
+        store.close().await;
+        n
+    });
+    assert_eq!(kept, 8);
 }
 
 #[test]

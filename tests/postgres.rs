@@ -123,7 +123,7 @@ fn db_copy_moves_everything_checks_it_and_never_copies_twice() {
     ));
     assert!(first.contains("new: 2 run, 1 dataset"), "{first}");
     assert!(
-        first.contains("16 samples, 16 frames, 16 ft_windows"),
+        first.contains("16 samples, 16 frames, 16 rest_frames, 16 ft_windows"),
         "{first}"
     );
     assert!(!first.contains("hunter"), "{first}");

@@ -21,8 +21,12 @@ pub struct RestFrameRow {
 }
 
 impl Store {
-    /// Stores run `run_id`'s rest frames in one transaction, unless it has some
-    /// already (a resumed run keeps those of its first start). How many were stored.
+    /// Stores run `run_id`'s rest frames in one transaction; those it has already
+    /// keep their place (a resumed run keeps the frames of its first start). How many
+    /// were stored. Every statement writes: on SQLite the transaction takes the write
+    /// lock at its first statement, waiting for it as any writer does (a read first
+    /// would have to upgrade its lock, which SQLite refuses at once while another rig
+    /// writes).
     pub async fn insert_rest_frames(
         &self,
         run_id: RunId,
@@ -33,20 +37,11 @@ impl Store {
             .begin()
             .await
             .map_err(query_err("starting the rest frames' transaction"))?;
-        let (had,): (i64,) = sqlx::query_as(
-            Dialect::of(&tx).sql("SELECT COUNT(*) FROM rest_frames WHERE run_id = ?"),
-        )
-        .bind(run_id)
-        .fetch_one(&mut *tx)
-        .await
-        .map_err(query_err("counting a run's rest frames"))?;
-        if had > 0 {
-            return Ok(0);
-        }
+        let mut stored = 0;
         for (i, f) in frames.iter().enumerate() {
-            sqlx::query(Dialect::of(&tx).sql(
+            stored += sqlx::query(Dialect::of(&tx).sql(
                 "INSERT INTO rest_frames (run_id, rest_index, format, width, height, sequence, t_ns, data)
-                 VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                 VALUES (?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (run_id, rest_index) DO NOTHING",
             ))
             .bind(run_id)
             .bind(to_i64("rest frame index", i as u64)?)
@@ -58,12 +53,13 @@ impl Store {
             .bind(f.data)
             .execute(&mut *tx)
             .await
-            .map_err(query_err("inserting a rest frame"))?;
+            .map_err(query_err("inserting a rest frame"))?
+            .rows_affected();
         }
         tx.commit()
             .await
             .map_err(query_err("committing the rest frames"))?;
-        Ok(frames.len() as u64)
+        Ok(stored)
     }
 
     /// The rest frames of every run with a sample in dataset `dataset_id`, by run and

@@ -149,8 +149,8 @@ pub async fn run_transfer(
     };
     match (&on_land.r2, &on_water.r2, &on_land.rmse, &on_water.rmse) {
         (Some(rl), Some(rw), Some(el), Some(ew)) => {
-            let rt = on_tared.as_ref().and_then(|m| m.r2.clone());
-            let et = on_tared.as_ref().and_then(|m| m.rmse.clone());
+            let rt = on_tared.as_ref().and_then(|m| m.r2);
+            let et = on_tared.as_ref().and_then(|m| m.rmse);
             writeln!(
                 out,
                 "axis   R² land   R² water   drop      RMSE land   RMSE water  unit{}",

@@ -437,9 +437,7 @@ impl<'a> Job<'a> {
         }
         // The finger at rest (home, no contact), once per run: what a tare for another
         // medium is fitted against.
-        if let Some(reason) = self.take_rest_frames().await? {
-            return Ok((Outcome::SafeStop { reason }, index));
-        }
+        self.take_rest_frames().await?;
         // A run resumed within a block starts where the uninterrupted run was: at the
         // retreat point of the sample before it in the plan (checked against the
         // workspace as every sample's is; one outside it is never sent).

@@ -9,9 +9,10 @@ pub const REST_FRAMES: usize = 8;
 
 impl Job<'_> {
     /// Takes [`REST_FRAMES`] frames and stores them with the run (a resumed run keeps
-    /// those of its first start). `Some(reason)`: the camera did not answer, a safe
-    /// stop.
-    pub(super) async fn take_rest_frames(&mut self) -> Result<Option<String>, CollectError> {
+    /// those of its first start). A camera that does not answer is logged (a warning:
+    /// the samples need no rest frame, only a tare of this run does) and the run goes
+    /// on; a store that fails stops it.
+    pub(super) async fn take_rest_frames(&mut self) -> Result<(), CollectError> {
         let timeout_ms = (self.plan.rig.procedure.frame_timeout_s * 1000.0).ceil() as u64;
         let mut frames = Vec::with_capacity(REST_FRAMES);
         for _ in 0..REST_FRAMES {
@@ -22,11 +23,19 @@ impl Job<'_> {
             match self.camera.frame_after(after, timeout_ms).await {
                 Ok(frame) => frames.push(crate::store::encode_for_store(&frame)?),
                 Err(e) => {
-                    return Ok(Some(format!("no rest frame from the camera at home: {e}")));
+                    self.events.log(
+                        EventKind::FrameTimeout,
+                        EventLevel::Warn,
+                        None,
+                        &format!(
+                            "no rest frame from the camera at home ({e}): the run goes on without them (`transfer --tare` cannot use it)"
+                        ),
+                    )?;
+                    return Ok(());
                 }
             }
         }
         self.store.insert_rest_frames(self.plan.run_id, frames)?;
-        Ok(None)
+        Ok(())
     }
 }
