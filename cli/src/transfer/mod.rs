@@ -379,6 +379,7 @@ pub async fn run_transfer(
         .setting("permutations", args.permutations)
         .setting("seed", args.seed)
         .setting("tare", args.tare)
+        .setting("no_gain_map", args.no_gain_map)
         .table(&args.out)
         .table(&cos_path)
         .store(

@@ -20,6 +20,13 @@ pub(super) fn land_to_water_section(c: &Content) -> Result<Markup, ReportError> 
     let transfer = c.results.latest("transfer");
     let finetune = c.results.latest("sweep finetune");
     let latent = c.results.latest("latent");
+    // The water dataset the hints name: the stored comparison's, else one to create.
+    let water = transfer
+        .and_then(|r| serde_json::from_str::<serde_json::Value>(&r.row.settings_json).ok())
+        .and_then(|v| v.get("water").and_then(|w| w.as_str()).map(str::to_owned))
+        .unwrap_or_else(|| "water-v1".to_owned());
+    let finetune_hint = format!("softtouch sweep finetune --init {{model}} --dataset {water}");
+    let latent_hint = format!("softtouch latent {{model}} --dataset {{dataset}} --water {water}");
     Ok(html! {
         section #land-to-water {
             h2 { "Land to water" }
@@ -35,12 +42,12 @@ pub(super) fn land_to_water_section(c: &Content) -> Result<Markup, ReportError> 
             h3 { "Fine-tuning on water" }
             @match finetune {
                 Some(r) => (finetune_part(r)?),
-                None => (todo_in(c, "No fine-tuning curve stored:", &["softtouch sweep finetune --init {model} --dataset water-v1"])),
+                None => (todo_in(c, "No fine-tuning curve stored:", &[&finetune_hint])),
             }
             h3 { "Latent correlation maps (Figure 3)" }
             @match latent {
                 Some(r) => (latent_part(r)),
-                None => (todo_in(c, "No latent maps stored:", &["softtouch latent {model} --dataset {dataset} --water water-v1"])),
+                None => (todo_in(c, "No latent maps stored:", &[&latent_hint])),
             }
         }
     })
