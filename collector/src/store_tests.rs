@@ -358,3 +358,55 @@ async fn two_processes_opening_a_new_database_at_once_both_succeed() -> Result<(
     }
     Ok(())
 }
+
+/// A run's rest frames: stored once (a second store, as a resumed run makes, keeps
+/// the first), read back by the datasets that hold the run, gone with the run.
+#[tokio::test]
+async fn rest_frames_are_kept_once_per_run_and_read_by_dataset() -> Result<(), StoreError> {
+    let (_dir, store) = temp_store("rest.db").await;
+    let run = RunPlan::new(3, 2).create(&store).await;
+    for i in 0..2 {
+        let frame = FrameRecord {
+            meta: meta(),
+            data: &[7; 6],
+        };
+        store
+            .append_sample(run, &sample(i), Some(frame), &window())
+            .await?;
+    }
+    let first = [FrameRecord {
+        meta: meta(),
+        data: &[1, 2, 3, 4, 5, 6],
+    }; 2];
+    assert_eq!(store.insert_rest_frames(run, &first).await?, 2);
+    let again = [FrameRecord {
+        meta: meta(),
+        data: &[9, 9, 9, 9, 9, 9],
+    }; 3];
+    // The first two keep their place; a third index is new.
+    assert_eq!(store.insert_rest_frames(run, &again).await?, 1);
+    let dataset = crate::dataset::create(
+        &store,
+        &crate::dataset::NewDataset {
+            name: "both".into(),
+            runs: vec![run],
+            filters: crate::dataset::Filters::default(),
+            ratio: crate::dataset::SplitRatio { parts: [1, 0, 0] },
+            seed: 0,
+        },
+    )
+    .await
+    .map_err(|e| StoreError::Invalid {
+        what: "dataset",
+        why: e.to_string(),
+    })?;
+    let rows = store.dataset_rest_frames(dataset.dataset_id).await?;
+    assert_eq!(rows.len(), 3);
+    assert_eq!(rows[0].data, vec![1, 2, 3, 4, 5, 6]);
+    assert_eq!(rows[2].data, vec![9, 9, 9, 9, 9, 9]);
+    assert_eq!(
+        (rows[0].width, rows[0].height, rows[0].format.as_str()),
+        (2, 1, "rgb8")
+    );
+    Ok(())
+}
