@@ -490,6 +490,11 @@ fn stored_results_match_the_exports_and_the_report(d: &std::path::Path) {
         html.html().contains("τz RMS from the first turn on"),
         "the report says how τz RMS is counted"
     );
+    // Each run in its own panel, on one scale: neither curve hides the other.
+    for state in ["off", "on"] {
+        let title = format!("Twist: τz, wrist loop {state}");
+        assert_eq!(html.html().matches(&title).count(), 1, "{title}");
+    }
     let section: String = html
         .select(&scraper::Selector::parse("#figure-5").expect("selector"))
         .map(|e| e.text().collect::<String>())

@@ -182,6 +182,38 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
     ] {
         assert!(csv.contains(needle), "expected `{needle}` in:\n{csv}");
     }
+    // Water grasp trials through the tare: fitted against the model's dataset's rest
+    // frames, said in the session's header, stored with the session.
+    let grasp_water = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/grasp-water.toml");
+    let grasp_water = grasp_water.to_str().unwrap_or_default();
+    let trials = |extra: &[&str]| {
+        let mut args = vec![
+            "grasp",
+            "trials",
+            "--model",
+            "land-svae",
+            "--scene",
+            grasp_water,
+            "--objects",
+            "cylinder",
+            "--modes",
+            "open",
+            "--trials",
+            "1",
+            "--accept-calibration",
+            "--out-dir",
+            "gt",
+        ];
+        args.extend(extra);
+        softtouch(d, &args)
+    };
+    // The tiny model finds no touch in water, so the calibration stops the session;
+    // its error says the tare it read the frames through, fitted from the rest frames.
+    fails_with(
+        &trials(&["--tare"]),
+        2,
+        "calibrating `cylinder` (reading the frames through the image tare from 8 rest frames of the finger camera against 8 of dataset `land`: scale 1.33",
+    );
     // A dataset whose runs kept no rest frame (collected before they were kept).
     runtime().block_on(async {
         let store = common::open_store(&d.join("softtouch.db")).await;
@@ -207,6 +239,11 @@ fn transfer_compares_a_land_model_on_paired_land_and_water_samples() {
         ),
         2,
         "dataset `land` has no rest frames",
+    );
+    fails_with(
+        &trials(&["--tare"]),
+        2,
+        "--tare: model `land-svae`'s dataset: dataset `land` has no rest frames",
     );
 
     // No pairs, unknown names, bad options: exit 2.

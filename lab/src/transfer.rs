@@ -218,7 +218,10 @@ pub async fn paired_test(
 }
 
 /// Dataset `name`'s rest frames (every run with a sample in it), decoded.
-async fn rest_frames(store: &Store, name: &str) -> Result<Vec<RestFrame>, TransferError> {
+pub(crate) async fn rest_frames(
+    store: &Store,
+    name: &str,
+) -> Result<Vec<RestFrame>, TransferError> {
     let info = dataset::get(store, name).await.map_err(ModelError::from)?;
     let rows = store.dataset_rest_frames(info.dataset_id).await?;
     if rows.is_empty() {

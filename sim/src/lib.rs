@@ -110,7 +110,7 @@ pub use grasp::{
     check_scene_objects, default_drag_coefficient, default_drag_coefficients, soft_grasp,
     spheroid_added_mass,
 };
-pub use grasp::{HoldState, WRIST_MAX_RAD_S};
+pub use grasp::{GripCap, GripWindow, HoldState, WRIST_MAX_RAD_S, grip_window};
 pub use gripper::{
     ACTIVATION, FORCE_N, G_M_S2, SPEED_MM_S, SimGripper, SimObject, grasp_holds, grip_force_n,
 };

@@ -1,14 +1,17 @@
 //! Single-image inference on one core (a rayon pool of one thread, as the grasp
 //! controller would run it beside the camera): the default model on a preprocessed
-//! image, the preprocessing of a raw 640×480 frame, the two together, and building
-//! the colour lookup table that preprocessing uses.
+//! image, the preprocessing of a raw 640×480 frame, the two together, a medium's
+//! image tare on the frame (laid out once, and laid out every frame as it was), and
+//! building the colour lookup table that preprocessing uses.
 //!
 //! `cargo bench -p softtouch-trainer --bench inference`
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use softtouch_schemas::ContactPose;
 use softtouch_sim::SceneSim;
-use softtouch_trainer::{FingerTable, ModelArtifact, ModelConfig, Predictor};
+use softtouch_trainer::{
+    FingerTable, GainMap, ImageTare, ModelArtifact, ModelConfig, Predictor, PreparedTare,
+};
 
 fn frame() -> (usize, usize, Vec<u8>) {
     let scene = softtouch_schemas::defaults::scene();
@@ -55,6 +58,31 @@ fn inference(c: &mut Criterion) {
     group.bench_function("640×480 frame → wrench", |b| {
         pool.install(|| b.iter(|| predictor.predict_rgb(w, h, &rgb).expect("predict")));
     });
+    // A water tare as `grasp trials --tare` fits it: the port's 1.333, a colour per
+    // channel and a gain map.
+    let tare = water_tare(w, h);
+    let prepared = PreparedTare::new(&tare, w, h).expect("tare");
+    let mut tared = Vec::new();
+    group.bench_function("tare, laid out once", |b| {
+        pool.install(|| {
+            b.iter(|| prepared.apply_into(w, h, &rgb, &mut tared).expect("tare"));
+        });
+    });
+    group.bench_function("tare, laid out once, two cores", |b| {
+        let fork = softtouch_trainer::ScopedThread;
+        b.iter(|| {
+            prepared
+                .apply_on(w, h, &rgb, &mut tared, Some(&fork))
+                .expect("tare");
+        });
+    });
+    group.bench_function("tare, laid out per frame", |b| {
+        pool.install(|| b.iter(|| tare.apply(w, h, &rgb).expect("tare")));
+    });
+    predictor.set_tare(Some(tare));
+    group.bench_function("frame → wrench via tare", |b| {
+        pool.install(|| b.iter(|| predictor.predict_rgb(w, h, &rgb).expect("predict")));
+    });
     group.finish();
 
     // Paid once per Predictor and per dataset load, not per frame.
@@ -64,6 +92,23 @@ fn inference(c: &mut Criterion) {
         pool.install(|| b.iter(|| FingerTable::new(&config.preprocess)));
     });
     group.finish();
+}
+
+fn water_tare(w: usize, h: usize) -> ImageTare {
+    let mut tare = ImageTare::identity(w, h);
+    tare.scale = 1.333;
+    tare.gain = [1.445, 0.962, 0.833];
+    tare.offset = [24.8, 10.8, -4.0];
+    let (mw, mh) = (w / 4, h / 4);
+    tare.gain_map = Some(GainMap {
+        shrink: 4,
+        width: mw,
+        height: mh,
+        gains: (0..mw * mh * 3)
+            .map(|i| 0.8 + (i % 7) as f32 * 0.05)
+            .collect(),
+    });
+    tare
 }
 
 criterion_group!(benches, inference);

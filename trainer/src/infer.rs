@@ -11,6 +11,7 @@ use crate::TrainError;
 use crate::artifact::{ArtifactHeader, ModelArtifact};
 use crate::labels::{WrenchLabel, wrench_from_label};
 use crate::model::{FlatNet, InferenceNet};
+use crate::preprocess::tare::{ImageTare, PreparedTare};
 use crate::preprocess::{FingerTable, Fork};
 
 /// One inference.
@@ -46,6 +47,12 @@ pub struct Predictor {
     /// Preprocess a frame's halves, and run the larger convolutions' halves,
     /// through this ([`Self::split_frames`]).
     split: Option<Arc<dyn Fork>>,
+    /// A medium's image tare, applied to each raw frame before preprocessing (the
+    /// model then reads frames of another medium as the ones it learned from).
+    tare: Option<ImageTare>,
+    /// The tare laid out for the last frame size, and the corrected frame's buffer.
+    prepared: Option<PreparedTare>,
+    tared: Vec<u8>,
 }
 
 impl Predictor {
@@ -68,7 +75,23 @@ impl Predictor {
             device,
             input,
             split: None,
+            tare: None,
+            prepared: None,
+            tared: Vec::new(),
         }
+    }
+
+    /// Reads every raw frame through `tare` first (`None`, the default: as it comes).
+    pub fn set_tare(&mut self, tare: Option<ImageTare>) {
+        if tare != self.tare {
+            self.prepared = None;
+        }
+        self.tare = tare;
+    }
+
+    /// The image tare frames are read through, if any.
+    pub fn tare(&self) -> Option<&ImageTare> {
+        self.tare.as_ref()
     }
 
     /// Preprocess each frame's halves, and run the halves of the model's larger
@@ -103,13 +126,40 @@ impl Predictor {
         height: usize,
         rgb: &[u8],
     ) -> Result<Prediction, TrainError> {
+        let mut tared = std::mem::take(&mut self.tared);
+        if let Err(e) = self.tare_into(width, height, rgb, &mut tared) {
+            self.tared = tared;
+            return Err(TrainError::Input(format!("the image tare: {e}")));
+        }
+        let rgb = if self.tare.is_some() { &tared[..] } else { rgb };
         let mut input = std::mem::take(&mut self.input);
         let result = self
             .table
             .apply_into_on(width, height, rgb, &mut input, self.split.as_deref())
             .and_then(|()| self.predict_preprocessed(&input));
         self.input = input;
+        self.tared = tared;
         result
+    }
+
+    /// With a tare, `rgb` corrected into `out` (laid out again for a new frame size).
+    fn tare_into(
+        &mut self,
+        width: usize,
+        height: usize,
+        rgb: &[u8],
+        out: &mut Vec<u8>,
+    ) -> Result<(), crate::TareError> {
+        let Some(tare) = &self.tare else {
+            return Ok(());
+        };
+        let prepared = match self.prepared.take() {
+            Some(p) if p.size() == (width, height) => p,
+            _ => PreparedTare::new(tare, width, height)?,
+        };
+        let done = prepared.apply_on(width, height, rgb, out, self.split.as_deref());
+        self.prepared = Some(prepared);
+        done
     }
 
     /// An already preprocessed image (`channels × size × size`) → prediction.

@@ -31,7 +31,9 @@ pub use labels::{AXES, LabelNorm, UNITS, WrenchLabel};
 pub use metrics::Metrics;
 pub use model::{ModelConfig, ModelKind};
 pub use preprocess::augment::MediaAugment;
-pub use preprocess::tare::{ImageTare, RestFrame, TareError, TareFit, fit_image_tare};
+pub use preprocess::tare::{
+    GainMap, ImageTare, PreparedTare, RestFrame, TareError, TareFit, fit_image_tare,
+};
 pub use preprocess::{FingerTable, Fork, Preprocess, ScopedThread};
 pub use train::{
     EpochReport, Example, InitFrom, Observer, Quiet, Splits, TrainConfig, Trained, evaluate,

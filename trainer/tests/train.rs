@@ -368,6 +368,29 @@ fn artifacts_round_trip_and_black_and_white_images_give_finite_wrenches() {
     }
     assert!(b.predict_rgb(640, 480, &[0; 10]).is_err());
     assert!(b.predict_preprocessed(&[0.0; 3]).is_err());
+    // Through a tare: the identity reads as no tare; a magnifying one reads the frame
+    // it makes; a broken one is an error, not a panic.
+    let rgb: Vec<u8> = (0..640 * 480 * 3).map(|i| (i * 7 % 251) as u8).collect();
+    let plain = b.predict_rgb(640, 480, &rgb).expect("predicts");
+    b.set_tare(Some(softtouch_trainer::ImageTare::identity(640, 480)));
+    assert_eq!(b.predict_rgb(640, 480, &rgb).expect("predicts"), plain);
+    let mut zoom = softtouch_trainer::ImageTare::identity(640, 480);
+    zoom.scale = 1.333;
+    let zoomed = zoom.apply(640, 480, &rgb).expect("applies");
+    b.set_tare(Some(zoom.clone()));
+    assert_eq!(
+        b.predict_rgb(640, 480, &rgb).expect("predicts"),
+        a.predict_rgb(640, 480, &zoomed).expect("predicts")
+    );
+    assert_eq!(b.tare(), Some(&zoom));
+    zoom.scale = f64::NAN;
+    b.set_tare(Some(zoom));
+    let err = b.predict_rgb(640, 480, &rgb).err().map(|e| e.to_string());
+    assert!(
+        err.as_deref().is_some_and(|e| e.contains("image tare")),
+        "{err:?}"
+    );
+    b.set_tare(None);
     // Damaged artifacts are errors, not panics.
     let device = burn::prelude::Device::flex();
     for damaged in [

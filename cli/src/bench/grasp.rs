@@ -126,6 +126,7 @@ pub(super) async fn run(
             args.seed,
             softtouch_lab::grasp::calibration::top_for(args.target),
             args.accept_calibration,
+            None,
         )
         .await?;
         if let Some(refusal) = &cal.accepted_against {

@@ -161,6 +161,7 @@ pub(super) async fn run(
             args.fps,
             args.seed,
             top_n,
+            None,
         )
         .await?;
         let evidence =

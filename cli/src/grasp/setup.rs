@@ -131,6 +131,7 @@ pub(super) async fn load_model_calibrate_and_pause(
         c.seed,
         softtouch_lab::grasp::calibration::top_for(largest_target_n),
         c.accept_calibration,
+        None,
     )
     .await?;
     store.close().await;

@@ -113,6 +113,13 @@ pub struct TrialsArgs {
     /// every closed loop.
     #[arg(long, conflicts_with = "resume")]
     pub accept_calibration: bool,
+    /// Read each water scene's frames through an image tare: at the session's start,
+    /// rest frames of the finger camera (gripper open, nothing held) are matched to
+    /// the rest frames of the model's dataset (scale, gain and offset per channel, a
+    /// gain map; no water label). Stored with the session and said in its header:
+    /// `grasp trials --model land-aug4 --scene scenes/grasp-water.toml --tare`.
+    #[arg(long, conflicts_with_all = ["resume", "rig"])]
+    pub tare: bool,
     /// Folder for `grasp-trials.csv`, `grasp-trials-rows.csv`, `grasp-trials.png`,
     /// with --sweep-sigma `grasp-trials-sigma.png`, and with --sweep
     /// `grasp-trials-sweep.csv` and `grasp-trials-sweep.png`.
@@ -159,6 +166,7 @@ impl TrialsArgs {
             hold_s: self.hold_s,
             open_width_mm: self.open_width_mm,
             accept_calibration: self.accept_calibration,
+            tare: self.tare,
             ..TrialPlan::default()
         };
         Ok(TrialsRequest {

@@ -3,7 +3,7 @@
 //! position and estimate ([`RigJudge`]), and an operator confirming or correcting
 //! another judge ([`OperatorJudge`]).
 
-use super::{FailReason, Judge, Observation, Verdict};
+use super::{FailReason, Judge, Mode, Observation, Verdict};
 use crate::GraspError;
 use softtouch_drivers::ObjectStatus;
 
@@ -30,14 +30,20 @@ pub enum ObjectState {
 /// trial saw: an object the fingers never touched (true force at most [`TOUCH_N`]) is
 /// a miss, whatever else happened (a closed loop that closed on nothing never confirms
 /// either, but what failed is the reach, not the loop); one touched and never lifted is
-/// a timeout of the loop.
+/// a timeout of the loop. A closed loop that lifted (it confirmed its force) with the
+/// object between the fingers but never touched is a false confirmation: the
+/// estimate read a grip that was not there.
 #[must_use]
 pub fn physics_verdict(state: ObjectState, seen: &Observation) -> Verdict {
     let touched = seen.peak_true_n.is_some_and(|f| f > TOUCH_N);
+    let confirmed_on_nothing = seen.mode == Mode::Closed && seen.lifted && !touched;
     match state {
         ObjectState::Held => Verdict::Held,
         ObjectState::Crushed => Verdict::Failed(FailReason::Crush),
         ObjectState::Absent => Verdict::Failed(FailReason::Miss),
+        ObjectState::Slipped | ObjectState::Resting if confirmed_on_nothing => {
+            Verdict::Failed(FailReason::FalseConfirm)
+        }
         ObjectState::Slipped if !touched => Verdict::Failed(FailReason::Miss),
         ObjectState::Slipped => Verdict::Failed(FailReason::Slip),
         ObjectState::Resting if !touched => Verdict::Failed(FailReason::Miss),
@@ -153,7 +159,6 @@ impl<J: Judge, R: std::io::BufRead + Send, W: std::io::Write + Send> Judge
 
 #[cfg(test)]
 mod tests {
-    use super::super::Mode;
     use super::*;
     use softtouch_drivers::GripperStatus;
     use softtouch_schemas::TimestampNs;
@@ -200,6 +205,46 @@ mod tests {
             let expected = Verdict::Failed(FailReason::Timeout);
             assert_eq!(physics_verdict(ObjectState::Resting, &touched), expected);
         }
+    }
+
+    /// A closed loop that confirmed on a phantom estimate (it lifted while the true
+    /// force never passed the touch threshold) failed by its estimate, not its reach;
+    /// an open loop lifts whatever it feels, and an object not between the fingers is
+    /// still a miss.
+    #[test]
+    fn a_closed_loop_that_lifts_on_a_force_it_never_felt_is_a_false_confirmation() {
+        for state in [ObjectState::Resting, ObjectState::Slipped] {
+            let mut phantom = seen(true, 200, Some(1.5), Some(1.5));
+            phantom.mode = Mode::Closed;
+            phantom.peak_true_n = Some(0.01);
+            assert_eq!(
+                physics_verdict(state, &phantom),
+                Verdict::Failed(FailReason::FalseConfirm),
+                "{state:?}"
+            );
+            let mut open = phantom;
+            open.mode = Mode::Open;
+            assert_eq!(
+                physics_verdict(state, &open),
+                Verdict::Failed(FailReason::Miss)
+            );
+            let mut felt = phantom;
+            felt.peak_true_n = Some(0.5);
+            assert_ne!(
+                physics_verdict(state, &felt),
+                Verdict::Failed(FailReason::FalseConfirm)
+            );
+        }
+        let mut phantom = seen(true, 200, Some(1.5), Some(1.5));
+        phantom.mode = Mode::Closed;
+        assert_eq!(
+            physics_verdict(ObjectState::Absent, &phantom),
+            Verdict::Failed(FailReason::Miss)
+        );
+        assert_eq!(
+            FailReason::parse("false_confirm"),
+            Ok(FailReason::FalseConfirm)
+        );
     }
 
     #[tokio::test]

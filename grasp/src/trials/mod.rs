@@ -159,6 +159,10 @@ pub enum FailReason {
     /// The closed loop reached its squeeze bound with the estimate below the target
     /// ([`crate::GraspError::EstimateStalled`]): it stopped there instead of closing on.
     EstimateStalled,
+    /// The closed loop confirmed its force on an estimate the fingers never felt (the
+    /// true force stayed at most [`TOUCH_N`]) and lifted without the object: the
+    /// estimate failed, not the reach (a `miss` is a grasp that never met the object).
+    FalseConfirm,
     /// The perturbed grasp pose lay outside the workspace: nothing moved. Stored and
     /// shown, never counted as a trial of the success rate.
     Refused,
@@ -166,18 +170,19 @@ pub enum FailReason {
 
 impl FailReason {
     /// Every reason, in the order tables list them.
-    pub const ALL: [Self; 7] = [
+    pub const ALL: [Self; 8] = [
         Self::Slip,
         Self::Crush,
         Self::Miss,
         Self::Timeout,
         Self::DeviceFault,
         Self::EstimateStalled,
+        Self::FalseConfirm,
         Self::Refused,
     ];
 
     /// As stored: `slip`, `crush`, `miss`, `timeout`, `device_fault`,
-    /// `estimate_stalled`, `refused`.
+    /// `estimate_stalled`, `false_confirm`, `refused`.
     #[must_use]
     pub const fn as_str(self) -> &'static str {
         match self {
@@ -187,6 +192,7 @@ impl FailReason {
             Self::Timeout => "timeout",
             Self::DeviceFault => "device_fault",
             Self::EstimateStalled => "estimate_stalled",
+            Self::FalseConfirm => "false_confirm",
             Self::Refused => "refused",
         }
     }
@@ -200,7 +206,7 @@ impl FailReason {
             .into_iter()
             .find(|r| r.as_str() == s)
             .ok_or_else(|| {
-                format!("unknown failure reason `{s}`: expected slip, crush, miss, timeout, device_fault, estimate_stalled or refused")
+                format!("unknown failure reason `{s}`: expected slip, crush, miss, timeout, device_fault, estimate_stalled, false_confirm or refused")
             })
     }
 }

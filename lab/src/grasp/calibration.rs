@@ -18,7 +18,7 @@ use softtouch_grasp::{
 };
 use softtouch_schemas::SceneSpec;
 use softtouch_sim::{GraspObject, soft_grasp};
-use softtouch_trainer::Predictor;
+use softtouch_trainer::{ImageTare, Predictor};
 
 use super::sim::{measure_stiffness, projection, sim_err};
 use super::soft::GraspRunError;
@@ -87,8 +87,27 @@ pub fn squeeze_of_row(row: &GraspCalibrationRow) -> Result<SqueezeBound, GraspRu
 /// # Errors
 /// The scene does not serialise (never for a parsed one).
 pub fn scene_setup_hash(scene: &SceneSpec, fps: f64, seed: u64) -> Result<String, GraspRunError> {
-    let json = serde_json::to_string(&(scene, fps.to_bits(), seed))
-        .map_err(|e| GraspRunError::Failed(format!("cannot fingerprint the scene: {e}")))?;
+    tared_setup_hash(scene, fps, seed, None)
+}
+
+/// [`scene_setup_hash`] of a setup whose frames the model reads through `tare`: a
+/// calibration made through one tare is not one made through another, or none
+/// (`None` gives [`scene_setup_hash`]'s value, so calibrations stored before tares
+/// keep their key).
+///
+/// # Errors
+/// The scene does not serialise (never for a parsed one).
+pub fn tared_setup_hash(
+    scene: &SceneSpec,
+    fps: f64,
+    seed: u64,
+    tare: Option<&ImageTare>,
+) -> Result<String, GraspRunError> {
+    let json = match tare {
+        None => serde_json::to_string(&(scene, fps.to_bits(), seed)),
+        Some(t) => serde_json::to_string(&(scene, fps.to_bits(), seed, t)),
+    }
+    .map_err(|e| GraspRunError::Failed(format!("cannot fingerprint the scene: {e}")))?;
     Ok(sha256_hex(json.as_bytes()))
 }
 
@@ -429,11 +448,13 @@ pub fn to_row(
 }
 
 /// A new calibration of `object` on the simulator (on a blocking thread, its own paused
-/// clock), as a row ready to store: keyed by the scene's fingerprint and the model's
-/// artifact, with the simulator's true Λ_max beside it.
+/// clock), as a row ready to store: keyed by the scene's fingerprint (with `tare`, the
+/// image tare the model reads the frames through) and the model's artifact, with the
+/// simulator's true Λ_max beside it.
 ///
 /// # Errors
 /// The model, or a calibration that finds no touch.
+#[allow(clippy::too_many_arguments)] // what identifies a calibration, and what makes one
 pub async fn calibrate_sim_row(
     model: &str,
     model_bytes: &[u8],
@@ -442,9 +463,11 @@ pub async fn calibrate_sim_row(
     fps: f64,
     seed: u64,
     top_n: f64,
+    tare: Option<&ImageTare>,
 ) -> Result<GraspCalibrationRow, GraspRunError> {
-    let setup_hash = scene_setup_hash(scene, fps, seed)?;
-    let predictor = Predictor::from_bytes(model_bytes)?;
+    let setup_hash = tared_setup_hash(scene, fps, seed, tare)?;
+    let mut predictor = Predictor::from_bytes(model_bytes)?;
+    predictor.set_tare(tare.cloned());
     let (scene2, object2) = (scene.clone(), object.clone());
     let (_, made) = tokio::task::spawn_blocking(move || {
         calibrate_on_sim(&scene2, &object2, fps, seed, top_n, predictor)
@@ -465,7 +488,8 @@ pub async fn calibrate_sim_row(
 /// else a new one made on the simulator (on a blocking thread) and stored; either is
 /// first held to [`check_calibration`]: a refused one is neither stored nor used,
 /// unless `accept` (`--accept-calibration`), which keeps the refusal in
-/// [`Calibrated::accepted_against`] for the caller to say.
+/// [`Calibrated::accepted_against`] for the caller to say. With `tare`, the model
+/// reads every frame through it, and the calibration is that setup's.
 ///
 /// # Errors
 /// The store, the model, or a calibration that finds no touch.
@@ -480,9 +504,10 @@ pub async fn calibration_for(
     seed: u64,
     top_n: f64,
     accept: bool,
+    tare: Option<&ImageTare>,
 ) -> Result<Calibrated, GraspRunError> {
     let model_sha256 = sha256_hex(model_bytes);
-    let setup_hash = scene_setup_hash(scene, fps, seed)?;
+    let setup_hash = tared_setup_hash(scene, fps, seed, tare)?;
     let stored = store
         .latest_grasp_calibration(&setup_hash, &model_sha256, &object.name)
         .await
@@ -501,7 +526,8 @@ pub async fn calibration_for(
             accepted_against,
         });
     }
-    let mut row = calibrate_sim_row(model, model_bytes, scene, object, fps, seed, top_n).await?;
+    let mut row =
+        calibrate_sim_row(model, model_bytes, scene, object, fps, seed, top_n, tare).await?;
     let accepted_against = checked(&row)?;
     row.calibration_id = store
         .insert_grasp_calibration(&row)

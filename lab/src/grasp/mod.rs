@@ -29,5 +29,6 @@ pub mod follow;
 pub mod settings;
 pub mod sim;
 pub mod soft;
+pub mod tare;
 pub mod trials;
 pub mod twist;

@@ -25,6 +25,8 @@ pub(crate) struct GraspData {
     pub cells: Vec<Cell>,
     /// The trials the viewer draws, with their traces.
     pub viewed: Vec<(GraspTrialRow, Option<GraspTrace>)>,
+    /// Each scene's physics cap (a simulated session whose scenes read back).
+    pub caps: Vec<crate::grasp::trials::cap::SceneCap>,
     /// What could not be read.
     pub problems: Vec<String>,
 }
@@ -68,10 +70,20 @@ pub(crate) async fn gather(db: &ReadOnly) -> Result<Vec<GraspData>, ReportError>
         let plan = serde_json::from_str::<TrialPlan>(&session.config_json)
             .map_err(|e| problems.push(format!("stored settings: {e}")))
             .ok();
+        let mut caps = Vec::new();
         let media: Vec<Medium> = match plan.as_ref().and_then(|p| p.rig.as_ref()) {
             Some(rig) => vec![rig.grasp.medium],
             None => serde_json::from_str::<Vec<SceneSpec>>(&session.scenes_json)
-                .map(|scenes| scenes.iter().map(|s| s.medium).collect())
+                .map(|scenes| {
+                    if let Some(p) = &plan {
+                        caps =
+                            crate::grasp::trials::cap::scene_caps(p, &scenes).unwrap_or_else(|e| {
+                                problems.push(format!("the physics cap: {e}"));
+                                Vec::new()
+                            });
+                    }
+                    scenes.iter().map(|s| s.medium).collect()
+                })
                 .unwrap_or_else(|e| {
                     problems.push(format!("stored scenes: {e}"));
                     Vec::new()
@@ -106,6 +118,7 @@ pub(crate) async fn gather(db: &ReadOnly) -> Result<Vec<GraspData>, ReportError>
             rows,
             cells,
             viewed,
+            caps,
             problems,
         });
     }

@@ -58,10 +58,13 @@
 //! record, and [`SoftGraspHandle::grip_force_curve`] measures the contact stiffness
 //! Λ = ∂F/∂P from the same physics.
 
+mod cap;
 mod object;
 #[cfg(test)]
 mod tests;
 mod touch;
+
+pub use cap::{GripCap, GripWindow, grip_window};
 
 pub use object::{
     GraspObject, default_drag_coefficient, default_drag_coefficients, spheroid_added_mass,

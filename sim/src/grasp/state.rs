@@ -35,6 +35,35 @@ impl Lift {
     }
 }
 
+/// The fluid `obj` carries along as it accelerates along G's x (`axis` 0) or z (1),
+/// kg (0 unless the scene lists `object_added_mass`).
+pub(super) fn added_mass_kg(effects: &Effects, obj: &GraspObject, axis: usize) -> f64 {
+    effects.object_added_mass_kg_m3.map_or(0.0, |rho| {
+        rho * obj.added_mass_xz[axis.min(1)] * obj.volume_m3
+    })
+}
+
+/// The vertical load the fingers' friction must carry while `obj` rises at `v_m_s`
+/// with acceleration `a_m_s2` (both up), N: its weight and inertia, the inertia of
+/// the fluid it carries along, less what the fluid buoys, plus the drag that opposes
+/// a rising object (each only where the scene declares it).
+pub(super) fn lift_load_n(effects: &Effects, obj: &GraspObject, v_m_s: f64, a_m_s2: f64) -> f64 {
+    let drag_n = effects.object_drag_kg_m3.map_or(0.0, |rho| {
+        0.5 * rho * obj.lift_drag_coefficient * obj.drag_area_m2 * v_m_s * v_m_s.abs()
+    });
+    obj.mass_kg * (G_M_S2 + a_m_s2) + added_mass_kg(effects, obj, 1) * a_m_s2
+        - buoyancy_n(effects, obj)
+        + drag_n
+}
+
+/// What the fluid carries of `obj`'s weight, N (0 unless the scene lists
+/// `object_buoyancy`).
+pub(super) fn buoyancy_n(effects: &Effects, obj: &GraspObject) -> f64 {
+    effects
+        .object_buoyancy_kg_m3
+        .map_or(0.0, |rho| rho * G_M_S2 * obj.volume_m3)
+}
+
 /// A scheduled turn of the object about z.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct YawMove {
@@ -359,20 +388,10 @@ impl State {
         Ok(())
     }
 
-    /// What the fluid carries of `obj`'s weight, N (0 unless the scene lists
-    /// `object_buoyancy`).
-    fn buoyancy_n(&self, obj: &GraspObject) -> f64 {
-        self.effects
-            .object_buoyancy_kg_m3
-            .map_or(0.0, |rho| rho * G_M_S2 * obj.volume_m3)
-    }
-
     /// The fluid `obj` carries along as it accelerates along G's x (`axis` 0) or z
     /// (1), kg (0 unless the scene lists `object_added_mass`).
     fn added_mass_kg(&self, obj: &GraspObject, axis: usize) -> f64 {
-        self.effects.object_added_mass_kg_m3.map_or(0.0, |rho| {
-            rho * obj.added_mass_xz[axis.min(1)] * obj.volume_m3
-        })
+        added_mass_kg(&self.effects, obj, axis)
     }
 
     /// Each finger's squeeze along the object's shift at the present opening, turn and
@@ -439,7 +458,7 @@ impl State {
         };
         let (s0, w0) = (self.shift_m, self.slide_m_s);
         let mu = obj.support_friction.unwrap_or(mu);
-        let hold_n = mu * (obj.mass_kg * G_M_S2 - self.buoyancy_n(&obj)).max(0.0);
+        let hold_n = mu * (obj.mass_kg * G_M_S2 - buoyancy_n(&self.effects, &obj)).max(0.0);
         let mass_kg = obj.mass_kg + self.added_mass_kg(&obj, 0);
         let drag = self.flow.as_ref().map_or(0.0, |f| f.side_drag(&obj));
         // The accelerating current's inertia force along +x (Morison).
@@ -679,14 +698,7 @@ impl State {
             && t >= lift.t0
         {
             let (v, a) = lift.motion((t.0 - lift.t0.0) as f64 * 1e-9);
-            let buoyancy_n = self.buoyancy_n(&obj);
-            // Drag opposes the motion: a rising object is pulled down.
-            let drag_n = self.effects.object_drag_kg_m3.map_or(0.0, |rho| {
-                0.5 * rho * obj.lift_drag_coefficient * obj.drag_area_m2 * v * v.abs()
-            });
-            // The fluid the object carries along adds to the inertia, not the weight.
-            let added_kg = self.added_mass_kg(&obj, 1);
-            let load = obj.mass_kg * (G_M_S2 + a) + added_kg * a - buoyancy_n + drag_n;
+            let load = lift_load_n(&self.effects, &obj, v, a);
             // A load or a grip that is not a number is a fault of the inputs, not a
             // slip (nor a hold: NaN compares false).
             if !(load.is_finite() && capacity_n.is_finite()) {

@@ -255,6 +255,16 @@ async fn run_sim(
     let media: Vec<Medium> = session.scenes.iter().map(|s| s.medium).collect();
     let table = summarise(&session.plan, &media, &rows)?;
     print_table(&table, &session.plan, out).map_err(written)?;
+    // What a perfect force reading could hold at most, beside the paper's rate.
+    // (A cap that cannot be worked out is said, not a failure of the trials.)
+    match super::cap::scene_caps(&session.plan, &session.scenes) {
+        Ok(caps) => {
+            for cap in caps {
+                writeln!(out, "{}", cap.describe(session.plan.target_n)).map_err(written)?;
+            }
+        }
+        Err(e) => writeln!(out, "physics cap: not worked out: {e}").map_err(written)?,
+    }
     print_sweep(&table, &session.plan, out).map_err(written)?;
     print_paired(&paired(&session.plan, &media, &rows), &session.plan, out).map_err(written)?;
     let files = write_outputs(&request.out_dir, &table, &rows, &session.plan)?;

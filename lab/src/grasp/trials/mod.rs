@@ -12,6 +12,7 @@
 //! whole `grasp trials` request, printing [`text`]'s tables. Nothing here parses
 //! arguments.
 
+pub mod cap;
 pub mod experiment;
 pub mod rig;
 mod run;

@@ -60,6 +60,14 @@ pub struct TrialPlan {
     /// its results, which they changed. Absent: none (or a session stored before).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub sets: Vec<String>,
+    /// Read each water scene's frames through an image tare fitted at the session's
+    /// start (`--tare`, [`crate::grasp::tare`]). Absent: no tare.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub tare: bool,
+    /// The tare fitted for each scene (by index; `None`: read as it comes), stored so
+    /// that a resume reads through the same one. Empty without `tare`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub scene_tares: Vec<Option<crate::grasp::tare::SceneTare>>,
 }
 
 /// What a rig session runs on, stored with it: the fingerprint of the rig's gripper
@@ -101,6 +109,8 @@ impl Default for TrialPlan {
             rig: None,
             sweep: None,
             sets: Vec::new(),
+            tare: false,
+            scene_tares: Vec::new(),
         }
     }
 }
@@ -117,6 +127,15 @@ pub(super) const fn above_zero(what: &'static str, hi: f64, unit: &'static str) 
 }
 
 impl TrialPlan {
+    /// The image tare scene `index`'s frames are read through, if any.
+    #[must_use]
+    pub fn tare_of(&self, index: usize) -> Option<&softtouch_trainer::ImageTare> {
+        self.scene_tares
+            .get(index)
+            .and_then(Option::as_ref)
+            .map(|t| &t.tare)
+    }
+
     /// The plan checked (each setting in its range, named by its flag) and
     /// normalised: each mode and object once, in the order first given (a repeated
     /// object would run its trials twice, the second time as already stored).

@@ -154,11 +154,12 @@ pub async fn run_trials(
             trial,
         };
         let t0 = Instant::now();
-        let Some(pred) = predictor.take() else {
+        let Some(mut pred) = predictor.take() else {
             return Err(TrialsError::Failed(
                 "the model was lost by a failed trial".into(),
             ));
         };
+        pred.set_tare(plan.tare_of(si).cloned());
         let pool = Arc::clone(&inference_pool);
         let handle = tokio::task::spawn_blocking(move || pool.install(|| run_job(job, pred)));
         let at_once = async {
@@ -272,11 +273,25 @@ pub(super) async fn calibrate_all(
             seed,
             top_for(plan.target_n),
             plan.accept_calibration,
+            plan.tare_of(si),
         )
         .await
-        .map_err(|e| match e {
-            GraspRunError::Invalid(m) => invalid(format!("calibrating `{}`: {m}", object.name)),
-            e => TrialsError::Failed(format!("calibrating `{}`: {e}", object.name)),
+        .map_err(|e| {
+            // A calibration read through a tare says which: a lab then knows what the
+            // model saw.
+            let through = plan
+                .scene_tares
+                .get(si)
+                .and_then(Option::as_ref)
+                .map_or_else(String::new, |t| {
+                    format!(" (reading the frames through the {})", t.describe())
+                });
+            match e {
+                GraspRunError::Invalid(m) => {
+                    invalid(format!("calibrating `{}`{through}: {m}", object.name))
+                }
+                e => TrialsError::Failed(format!("calibrating `{}`{through}: {e}", object.name)),
+            }
         })?;
         let count_n = one_count_force_n(calibration.lambda_max(), &Stroke::default());
         out.insert(

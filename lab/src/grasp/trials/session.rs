@@ -36,7 +36,20 @@ impl Session {
         // The scene values set for the session first: every result below is theirs.
         let sets = (!self.plan.sets.is_empty())
             .then(|| format!("scene values set: {}", self.plan.sets.join(", ")));
+        // How each scene's frames are read: the tare, or a warning that water frames
+        // go to a model as they come.
+        let tares = self.scenes.iter().enumerate().filter_map(|(i, scene)| {
+            match self.plan.scene_tares.get(i).and_then(Option::as_ref) {
+                Some(t) => Some(format!("`{}`: {}", scene.name, t.describe())),
+                None if scene.medium == softtouch_schemas::Medium::Water => Some(format!(
+                    "`{}`: no image tare: the model reads the water frames as they come (--tare fits one from rest frames)",
+                    scene.name
+                )),
+                None => None,
+            }
+        });
         sets.into_iter()
+            .chain(tares)
             .chain(keys.into_iter()
             .filter_map(|k| {
                 let o = self.calibrations.get(k)?;
@@ -132,6 +145,28 @@ pub async fn start_session(
     let objects = objects_of(&plan, &scenes)?; // checked before anything is stored
     // The model must exist before a session names it.
     let model_bytes = crate::models::force_artifact(store, model).await?;
+    plan.scene_tares.clear();
+    if plan.tare {
+        // Each water scene's tare, fitted once and stored with the session.
+        for scene in &scenes {
+            plan.scene_tares
+                .push(if scene.medium == softtouch_schemas::Medium::Water {
+                    Some(
+                        crate::grasp::tare::fit_scene_tare(
+                            store,
+                            model,
+                            &model_bytes,
+                            scene,
+                            plan.fps,
+                            seed,
+                        )
+                        .await?,
+                    )
+                } else {
+                    None
+                });
+        }
+    }
     // Every object calibrated (or its stored calibration found) before the session is
     // stored: an object the fingers never touch leaves no empty session.
     let pairs = (0..scenes.len()).flat_map(|si| {

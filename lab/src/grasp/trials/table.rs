@@ -278,7 +278,7 @@ pub fn write_value_sweep_csv(
     sweep: &SceneSweep,
 ) -> Result<(), TrialsError> {
     let mut text = String::from(
-        "path,value,sigma_mm,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,slip,crush,miss,timeout,device_fault,estimate_stalled,refused\n",
+        "path,value,sigma_mm,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,slip,crush,miss,timeout,device_fault,estimate_stalled,false_confirm,refused\n",
     );
     let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
     for c in cells {
@@ -287,7 +287,7 @@ pub fn write_value_sweep_csv(
         };
         let r = |k: &str| c.reasons.get(k).copied().unwrap_or(0);
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             csv_field(&sweep.path),
             csv_field(value),
             plan.sigmas_mm
@@ -307,6 +307,7 @@ pub fn write_value_sweep_csv(
             r("timeout"),
             r("device_fault"),
             r("estimate_stalled"),
+            r("false_confirm"),
             r("refused"),
         ));
     }
@@ -413,13 +414,13 @@ pub fn write_summary_csv(
     sweep: Option<&SceneSweep>,
 ) -> Result<(), TrialsError> {
     let mut text = String::from(
-        "sigma_index,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,paper_rate,slip,crush,miss,timeout,device_fault,estimate_stalled,refused,peak_true_max_n,past_touch_max_mm,scene_index,scene_value\n",
+        "sigma_index,medium,object,mode,trials,held,rate,wilson_lo,wilson_hi,paper_rate,slip,crush,miss,timeout,device_fault,estimate_stalled,false_confirm,refused,peak_true_max_n,past_touch_max_mm,scene_index,scene_value\n",
     );
     let opt = |v: Option<f64>| v.map_or_else(String::new, |f| format!("{f}"));
     for c in cells {
         let r = |k: &str| c.reasons.get(k).copied().unwrap_or(0);
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             c.sigma_index,
             medium_name(c.medium),
             csv_field(c.object.as_deref().unwrap_or("all")),
@@ -436,6 +437,7 @@ pub fn write_summary_csv(
             r("timeout"),
             r("device_fault"),
             r("estimate_stalled"),
+            r("false_confirm"),
             r("refused"),
             opt(c.peak_true_max_n),
             opt(c.past_touch_max_mm),

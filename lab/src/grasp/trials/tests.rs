@@ -128,6 +128,49 @@ fn objects_that_close_alike_are_said_to() {
         !line("`cylinder` (land)").contains("the same closing"),
         "{lines:?}"
     );
+    // Without a tare the water scene's frames go to the model as they come, and the
+    // header says so; with one it says the tare (and the land scene, none).
+    assert!(
+        line("`grasp-underwater`: no image tare").contains("as they come"),
+        "{lines:?}"
+    );
+    assert!(
+        !lines.iter().any(|l| l.starts_with("`grasp-land`")),
+        "{lines:?}"
+    );
+    let mut tared = session;
+    let mut tare = softtouch_trainer::ImageTare::identity(640, 480);
+    tare.scale = 1.333;
+    tared.plan.tare = true;
+    tared.plan.scene_tares = vec![
+        None,
+        Some(crate::grasp::tare::SceneTare {
+            against: "land".into(),
+            tare,
+            rms_before: 47.9,
+            rms_after: 6.5,
+            land_frames: 8,
+            scene_frames: 8,
+        }),
+    ];
+    let lines = tared.setup_lines();
+    assert!(
+        lines.iter().any(|l| l.starts_with(
+            "`grasp-underwater`: image tare from 8 rest frames of the finger camera against 8 of dataset `land`: scale 1.3330"
+        )),
+        "{lines:?}"
+    );
+    // Stored and read back with the session; a session stored before tares reads
+    // back with none.
+    let json = serde_json::to_string(&tared.plan).unwrap_or_else(|e| panic!("{e}"));
+    let back: TrialPlan = serde_json::from_str(&json).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(back, tared.plan);
+    assert_eq!(back.tare_of(1).map(|t| t.scale), Some(1.333));
+    assert_eq!(back.tare_of(0), None);
+    let old = serde_json::to_string(&TrialPlan::default()).unwrap_or_else(|e| panic!("{e}"));
+    assert!(!old.contains("tare"), "{old}");
+    let old: TrialPlan = serde_json::from_str(&old).unwrap_or_else(|e| panic!("{e}"));
+    assert!(!old.tare && old.scene_tares.is_empty());
 }
 
 #[test]

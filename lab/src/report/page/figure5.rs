@@ -20,6 +20,16 @@ fn line(label: &str, t: &[f64], v: &[f64]) -> Series {
 }
 
 fn time_figure(title: &str, y_label: &str, series: &[Series]) -> Result<Markup, ReportError> {
+    time_figure_in(title, y_label, series, None, (560, 320))
+}
+
+fn time_figure_in(
+    title: &str,
+    y_label: &str,
+    series: &[Series],
+    y_range: Option<(f64, f64)>,
+    size: svg::Size,
+) -> Result<Markup, ReportError> {
     Ok(figure(svg::xy(
         &Xy {
             title,
@@ -27,10 +37,10 @@ fn time_figure(title: &str, y_label: &str, series: &[Series]) -> Result<Markup, 
             y_label,
             series,
             diagonal: false,
-            y_range: None,
+            y_range,
             marker_px: 2,
         },
-        (560, 320),
+        size,
     )?))
 }
 
@@ -208,13 +218,16 @@ fn twist_part(r: &StoredResult) -> Result<Markup, ReportError> {
             let ts: Vec<f64> = idx.iter().map(|&i| t[i]).collect();
             let pick = |v: &[f64]| idx.iter().map(|&i| v[i]).collect::<Vec<f64>>();
             let shown = truth.as_deref().unwrap_or(&est);
-            series.push(line(
-                &format!(
-                    "{} τz, wrist loop {state}",
-                    if truth.is_some() { "true" } else { "estimated" }
+            series.push((
+                state,
+                line(
+                    &format!(
+                        "{} τz, wrist loop {state}",
+                        if truth.is_some() { "true" } else { "estimated" }
+                    ),
+                    &ts,
+                    &pick(shown),
                 ),
-                &ts,
-                &pick(shown),
             ));
             if metrics.is_none() {
                 rows.push((
@@ -233,6 +246,9 @@ fn twist_part(r: &StoredResult) -> Result<Markup, ReportError> {
         Ok(x) => x,
         Err(e) => return Ok(html! { (prov(r)) (unreadable("the twist", &e)) }),
     };
+    let all: Vec<Series> = series.iter().map(|(_, s)| s.clone()).collect();
+    let y_range = softtouch_collector::plot::finite_bounds(&all)
+        .map(|(_, _, lo, hi)| softtouch_collector::plot::pad(lo, hi));
     Ok(html! {
         (prov(r))
         // The stored summary says each run's grip at its firmest (peak true force, or
@@ -245,7 +261,19 @@ fn twist_part(r: &StoredResult) -> Result<Markup, ReportError> {
                 tr { td.l { (state) } td { (n) } td { (f(*e, 3)) } td data-k=(format!("twist-{id}-{state}-true-rms")) { (f(*t, 3)) } }
             }
         }
-        div.figs { (time_figure("Twist: τz with and without the wrist loop", "τz, N·mm", &series)?) }
+        // One panel per run on one τz scale: on one axis the curve drawn last hid the
+        // other wherever they met (the same turn, the same settle).
+        div.figs {
+            @for (state, s) in &series {
+                (time_figure_in(
+                    &format!("Twist: τz, wrist loop {state}"),
+                    "τz, N·mm",
+                    std::slice::from_ref(s),
+                    y_range,
+                    (420, 300),
+                )?)
+            }
+        }
     })
 }
 

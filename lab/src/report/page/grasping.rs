@@ -44,6 +44,22 @@ fn pct(v: Option<f64>) -> String {
     v.map_or_else(|| "–".to_owned(), |v| format!("{:.0} %", 100.0 * v))
 }
 
+/// The image tares a session read its scenes through, for people (`None`: none).
+fn tare_text(p: &crate::grasp::trials::TrialPlan) -> Option<String> {
+    let tares: Vec<String> = p
+        .scene_tares
+        .iter()
+        .flatten()
+        .map(|t| {
+            format!(
+                "scale {:.3} against the rest frames of dataset `{}`",
+                t.tare.scale, t.against
+            )
+        })
+        .collect();
+    (!tares.is_empty()).then(|| tares.join("; "))
+}
+
 fn session(g: &GraspData) -> Result<Markup, ReportError> {
     let id = g.session.session_id;
     let planned = g.plan.as_ref().map_or(0, |p| {
@@ -73,6 +89,12 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
                     "; scene values set: "
                     span data-k=(format!("grasp-{id}-sets")) { (p.sets.join(", ")) }
                 }
+                @if let Some(tare) = tare_text(p) {
+                    "; water frames read through an image tare: "
+                    span data-k=(format!("grasp-{id}-tare")) { (tare) }
+                } @else if g.media.contains(&softtouch_schemas::Medium::Water) {
+                    "; water frames read as they come (no image tare)"
+                }
             }
             "."
         }
@@ -93,6 +115,11 @@ fn session(g: &GraspData) -> Result<Markup, ReportError> {
                     td data-k=(format!("grasp-{id}-{}-{}-{}-{}-grip", c.sigma_index, c.scene_index, object, c.mode.as_str())) { (c.grip_text()) }
                     td.l { (c.failures_text()) }
                 }
+            }
+        }
+        @for (i, cap) in g.caps.iter().enumerate() {
+            @if let Some(p) = &g.plan {
+                p.note data-k=(format!("grasp-{id}-cap-{i}")) { (cap.describe(p.target_n)) ". The paper's closed loop: " (format!("{:.0} %", 100.0 * crate::grasp::trials::paper_rate(cap.medium, softtouch_grasp::Mode::Closed))) "." }
             }
         }
         p.note { "Grip max: the largest true grip force of the cell's trials where the simulator knows it (N); on a rig, where no true force is known, the deepest closing past the calibrated first touch (mm). Every closed loop is bounded by its calibration's squeeze (docs/grasping.md)." }

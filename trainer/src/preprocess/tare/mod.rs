@@ -14,6 +14,9 @@
 
 use serde::{Deserialize, Serialize};
 
+mod prepared;
+pub use prepared::PreparedTare;
+
 /// The scales tried: from a frame shrunk 2× to one magnified 2×.
 pub const SCALE_RANGE: (f64, f64) = (0.5, 2.0);
 /// Grid step of the first search over the scale.
@@ -103,30 +106,8 @@ impl ImageTare {
     /// numbers are not finite.
     pub fn apply(&self, width: usize, height: usize, rgb: &[u8]) -> Result<Vec<u8>, TareError> {
         check_frame(width, height, rgb.len())?;
-        self.check()?;
-        let src = Plane {
-            width,
-            height,
-            data: rgb.iter().map(|&v| f32::from(v)).collect(),
-        };
-        let map = match &self.gain_map {
-            Some(m) => Some(m.plane(width, height)?),
-            None => None,
-        };
-        let mut out = vec![0u8; rgb.len()];
-        for y in 0..height {
-            for x in 0..width {
-                let (sx, sy) = self.source(x, y, 1.0);
-                let v = src.bilinear(sx, sy);
-                let m = map.as_ref().map_or([1.0; 3], |(p, k)| {
-                    p.bilinear((x as f64 + 0.5) / k - 0.5, (y as f64 + 0.5) / k - 0.5)
-                });
-                for c in 0..3 {
-                    let w = (self.gain[c] * f64::from(v[c]) + self.offset[c]) * f64::from(m[c]);
-                    out[(y * width + x) * 3 + c] = w.round().clamp(0.0, 255.0) as u8;
-                }
-            }
-        }
+        let mut out = Vec::new();
+        PreparedTare::new(self, width, height)?.apply_into(width, height, rgb, &mut out)?;
         Ok(out)
     }
 
