@@ -12,7 +12,7 @@ use softtouch_collector::collect::REST_FRAMES;
 use softtouch_drivers::{Camera as _, Clock as _, TokioClock};
 use softtouch_schemas::SceneSpec;
 use softtouch_sim::{GraspObject, soft_grasp};
-use softtouch_trainer::{ImageTare, Predictor, RestFrame};
+use softtouch_trainer::{ImageTare, ModelArtifact, RestFrame};
 
 use super::soft::GraspRunError;
 use crate::store::Store;
@@ -123,8 +123,9 @@ pub async fn fit_scene_tare(
             }
             e => GraspRunError::Failed(e.to_string()),
         })?;
-    let preprocess = Predictor::from_bytes(model_bytes)?
-        .header()
+    // The header alone: no weights decoded, no colour table built.
+    let preprocess = ModelArtifact::header_from_bytes(model_bytes)?
+        .0
         .config
         .preprocess;
     let (scene2, scene_name) = (scene.clone(), scene.name.clone());

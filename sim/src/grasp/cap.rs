@@ -61,16 +61,7 @@ pub fn grip_window(
         }
     }
     let effects = Effects::from_scene(scene);
-    let friction = if effects.wet_contact {
-        object.wet_friction.ok_or_else(|| {
-            SimError::InvalidParameter(format!(
-                "object `{}`: the scene declares wet_contact but the object has no wet_friction",
-                object.name
-            ))
-        })?
-    } else {
-        object.friction
-    };
+    let friction = grip_friction(&effects, object)?;
     if !(friction.is_finite() && friction >= 0.0) {
         return Err(SimError::InvalidParameter(format!(
             "object `{}`: friction {friction}: expected a number ≥ 0",
@@ -83,10 +74,8 @@ pub fn grip_window(
         speed_m_s,
         accel_m_s2,
     };
-    // The load's extremes lie at the phases' ends: sampled at 0.5 ms over the lift
-    // (its duration is the distance over the speed plus one ramp).
-    let v_peak = speed_m_s.min((accel_m_s2 * height_m).sqrt());
-    let duration_s = height_m / v_peak + v_peak / accel_m_s2;
+    // The load's extremes lie at the phases' ends: sampled at 0.5 ms over the lift.
+    let duration_s = lift.duration_s();
     let steps = ((duration_s / 5e-4).ceil() as usize).clamp(2, 2_000_000);
     let mut peak_load_n = f64::NEG_INFINITY;
     for i in 0..=steps {

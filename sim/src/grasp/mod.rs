@@ -234,6 +234,24 @@ pub fn check_scene_objects(scene: &SceneSpec) -> Result<(), SimError> {
     Ok(())
 }
 
+/// The friction `object` grips with in the scene whose effects are `effects`: its wet
+/// one where the scene declares wet contact (and only then), else its dry one.
+///
+/// # Errors
+/// Wet contact on an object that declares no wet friction.
+pub(super) fn grip_friction(effects: &Effects, object: &GraspObject) -> Result<f64, SimError> {
+    if effects.wet_contact {
+        object.wet_friction.ok_or_else(|| {
+            SimError::InvalidParameter(format!(
+                "object `{}`: the scene declares wet_contact but the object has no wet_friction",
+                object.name
+            ))
+        })
+    } else {
+        Ok(object.friction)
+    }
+}
+
 /// Builds a soft grasp of `object` in `scene` (its medium and effects), the cameras at
 /// `fps`, seeded by `seed`, on `clock`. The object starts between the open fingers,
 /// resting on its support.
@@ -267,16 +285,8 @@ pub fn soft_grasp(
     let first = Scene::new(&spec, seed, Arc::clone(&model));
     let effects = first.effects.clone();
     object.sinks_in(effects.object_buoyancy_kg_m3)?;
-    // Wet contact: the object grips with its friction in water (and only then).
     let mut object = object;
-    if effects.wet_contact {
-        object.friction = object.wet_friction.ok_or_else(|| {
-            SimError::InvalidParameter(format!(
-                "object `{}`: the scene declares wet_contact but the object has no wet_friction",
-                object.name
-            ))
-        })?;
-    }
+    object.friction = grip_friction(&effects, &object)?;
     let second_spec = (spec, seed ^ 0x5eed_f1a6_e201_0001);
     let flow = effects
         .object_flow

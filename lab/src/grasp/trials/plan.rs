@@ -127,13 +127,16 @@ pub(super) const fn above_zero(what: &'static str, hi: f64, unit: &'static str) 
 }
 
 impl TrialPlan {
+    /// The tare fitted for scene `index`, if any.
+    #[must_use]
+    pub fn scene_tare(&self, index: usize) -> Option<&crate::grasp::tare::SceneTare> {
+        self.scene_tares.get(index).and_then(Option::as_ref)
+    }
+
     /// The image tare scene `index`'s frames are read through, if any.
     #[must_use]
     pub fn tare_of(&self, index: usize) -> Option<&softtouch_trainer::ImageTare> {
-        self.scene_tares
-            .get(index)
-            .and_then(Option::as_ref)
-            .map(|t| &t.tare)
+        self.scene_tare(index).map(|t| &t.tare)
     }
 
     /// The plan checked (each setting in its range, named by its flag) and

@@ -279,13 +279,9 @@ pub(super) async fn calibrate_all(
         .map_err(|e| {
             // A calibration read through a tare says which: a lab then knows what the
             // model saw.
-            let through = plan
-                .scene_tares
-                .get(si)
-                .and_then(Option::as_ref)
-                .map_or_else(String::new, |t| {
-                    format!(" (reading the frames through the {})", t.describe())
-                });
+            let through = plan.scene_tare(si).map_or_else(String::new, |t| {
+                format!(" (reading the frames through the {})", t.describe())
+            });
             match e {
                 GraspRunError::Invalid(m) => {
                     invalid(format!("calibrating `{}`{through}: {m}", object.name))

@@ -39,7 +39,7 @@ impl Session {
         // How each scene's frames are read: the tare, or a warning that water frames
         // go to a model as they come.
         let tares = self.scenes.iter().enumerate().filter_map(|(i, scene)| {
-            match self.plan.scene_tares.get(i).and_then(Option::as_ref) {
+            match self.plan.scene_tare(i) {
                 Some(t) => Some(format!("`{}`: {}", scene.name, t.describe())),
                 None if scene.medium == softtouch_schemas::Medium::Water => Some(format!(
                     "`{}`: no image tare: the model reads the water frames as they come (--tare fits one from rest frames)",
