@@ -8,7 +8,7 @@ use softtouch_collector::progress::{TrainProgress, progress_bar};
 use softtouch_lab::models;
 use softtouch_store::Store;
 use softtouch_trainer::{
-    InitFrom, ModelConfig, ModelKind, Preprocess, Splits, TrainConfig, Trained,
+    InitFrom, ModelConfig, ModelKind, Preprocess, Signal, Splits, TrainConfig, Trained,
 };
 use std::io::Write;
 use std::path::PathBuf;
@@ -38,6 +38,11 @@ pub struct ModelArgs {
     /// Input channels: 1 (brightness of the finger's pixels) or 3 (RGB).
     #[arg(long, default_value_t = Preprocess::default().channels)]
     pub channels: usize,
+    /// What one channel carries of the finger's pixels: brightness, or chroma
+    /// (max − min of R, G, B), which white light added alike to every channel, as
+    /// underwater caustics are, leaves as it is (docs/land-to-water.md).
+    #[arg(long, default_value_t = Preprocess::default().signal)]
+    pub signal: Signal,
     /// Maximum epochs.
     #[arg(long, default_value_t = TrainConfig::default().epochs)]
     pub epochs: usize,
@@ -75,7 +80,7 @@ impl ModelArgs {
         }
         Err(Failure::BadInput(anyhow!(
             "--init {name}: that model is a {}, the flags ask for a {}; \
-             leave out --model, --alpha, --beta, --latent, --width, --size and --channels \
+             leave out --model, --alpha, --beta, --latent, --width, --size, --channels and --signal \
              (the settings come from the starting model)",
             init.describe(),
             model.describe()
@@ -92,6 +97,7 @@ impl ModelArgs {
             preprocess: Preprocess {
                 size_px: self.size,
                 channels: self.channels,
+                signal: self.signal,
                 ..Preprocess::default()
             },
         };

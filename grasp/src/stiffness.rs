@@ -6,8 +6,9 @@
 //! after that read: its estimate, projected on the grip axis (Method S3), is recorded
 //! against the measured position P_m. From the curve:
 //! - **first touch**: the first of [`StiffnessConfig::touch_run`] counts in a row whose
-//!   estimate rises [`StiffnessConfig::touch_n`] above the no-contact baseline (the
-//!   median of the estimates before it);
+//!   estimate rises [`StiffnessConfig::touch_n`], and 4 robust σ of the estimates
+//!   before it, above the no-contact baseline (the median of at least `touch_run`
+//!   estimates before it);
 //! - **Λ(P) = ΔF_est/ΔP**, N/mm, by a Theil–Sen fit (the median of the pairwise slopes)
 //!   over a window of [`StiffnessConfig::window_counts`] counts sliding from the touch
 //!   to the top of the range the loop will use: one count's estimate noise, or a frame
@@ -179,6 +180,21 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
     a + (b - a) * (pos - lo as f64)
 }
 
+/// A rise counts as a touch only past this many robust σ of the no-contact estimates
+/// as well as past `touch_n`. At rest a land model reads water frames with a wander
+/// (the caustics drift across the finger): ±0.1 N over a closing through the tare,
+/// where 0.05 N alone fired 10 mm before the object. On land the wander is a few
+/// mN, so `touch_n` decides as before.
+const TOUCH_SIGMAS: f64 = 4.0;
+
+/// 1.4826 × the median absolute deviation from `median` of `sorted`: σ for Gaussian
+/// values, and one misread count moves it little.
+fn robust_sigma(sorted: &[f64], median: f64) -> f64 {
+    let mut dev: Vec<f64> = sorted.iter().map(|v| (v - median).abs()).collect();
+    dev.sort_by(f64::total_cmp);
+    1.4826 * quantile(&dev, 0.5)
+}
+
 /// The pairwise slopes ΔF/ΔP (N per mm) of `points` (P in counts, F in N), sorted;
 /// pairs at the same P are skipped.
 fn pairwise_slopes(points: &[(f64, f64)], mm_per_count: f64) -> Vec<f64> {
@@ -232,15 +248,19 @@ pub fn fit(
                 .map(|f| (p.measured, f))
         })
         .collect();
-    // The touch: `touch_run` counts in a row above the baseline of those before.
+    // The touch: `touch_run` counts in a row above the baseline of at least as many
+    // before, by `touch_n` and by the wander of those before.
     let mut touch = None;
-    for i in 1..usable.len() {
+    for i in config.touch_run..usable.len() {
         let mut before: Vec<f64> = usable.get(..i).unwrap_or(&[]).iter().map(|p| p.1).collect();
         before.sort_by(f64::total_cmp);
         let baseline = quantile(&before, 0.5);
+        let rise = config
+            .touch_n
+            .max(TOUCH_SIGMAS * robust_sigma(&before, baseline));
         let run = usable.get(i..i + config.touch_run);
         if run.is_some_and(|r| {
-            r.len() == config.touch_run && r.iter().all(|p| p.1 - baseline >= config.touch_n)
+            r.len() == config.touch_run && r.iter().all(|p| p.1 - baseline >= rise)
         }) {
             touch = Some((i, baseline));
             break;
@@ -538,6 +558,35 @@ mod tests {
         )
         .expect("fit");
         assert_eq!(cal.touch_count, 101);
+    }
+
+    /// The closing a land model read through the tare in water (cylinder, counts
+    /// 51–124): the estimate wanders by 0.17 N with no contact, then rises at 98.
+    /// A fixed 0.05 N rise took count 52 for the touch; the wander's σ does not.
+    #[test]
+    fn a_wandering_no_contact_estimate_is_not_a_touch() {
+        let wander = [
+            -0.177, -0.107, -0.100, -0.099, -0.078, -0.064, -0.079, -0.087, -0.071, -0.077, -0.090,
+            -0.077, -0.089, -0.062, -0.060, -0.038, -0.058, -0.050, -0.050, -0.012, -0.041, -0.030,
+            -0.004, -0.020, -0.019, -0.024, -0.006, -0.026, -0.018, -0.002, -0.022, 0.010, -0.013,
+            -0.012, -0.018, -0.012, -0.021, -0.044, -0.067, -0.073, -0.083, -0.076, -0.076, -0.076,
+            -0.070, -0.063, -0.027, -0.005,
+        ];
+        let curve = |c: u8| match usize::from(c).checked_sub(51) {
+            Some(i) if i < wander.len() => Some(wander[i]),
+            _ => Some(0.148 + 0.16 * f64::from(c - 98)),
+        };
+        let cal = fit(
+            &points(curve, 51..=124),
+            &StiffnessConfig::default(),
+            &stroke(),
+            CalibrationEnd::ReachedTop,
+        )
+        .expect("fit");
+        assert_eq!(cal.touch_count, 99, "{cal:?}");
+        // On a quiet curve the wander's σ is 0 and `touch_n` alone decides, as before.
+        assert!(robust_sigma(&[0.02; 5], 0.02).abs() < 1e-15);
+        assert!(robust_sigma(&[], 0.0).is_nan());
     }
 
     #[test]

@@ -244,7 +244,9 @@ pub(crate) async fn rest_frames(
 
 /// The image tare that maps the rest frames of dataset `water`'s runs onto those of
 /// dataset `land`'s (no label of either is read), its gain and offset fitted on the
-/// pixels `preprocess` keeps as the finger's.
+/// pixels `preprocess` keeps as the finger's, as its signal needs ([`TareGains`]).
+///
+/// [`TareGains`]: softtouch_trainer::TareGains
 ///
 /// # Errors
 /// A dataset without rest frames, frames that cannot be decoded or compared.
@@ -259,7 +261,13 @@ pub async fn fit_tare(
         rest_frames(store, water).await?,
     );
     let keep = |r, g, b| preprocess.is_finger(r, g, b);
-    softtouch_trainer::fit_image_tare(&l, &w, Some(&keep)).map_err(|error| TransferError::Tare {
+    softtouch_trainer::fit_image_tare(
+        &l,
+        &w,
+        Some(&keep),
+        softtouch_trainer::TareGains::for_signal(preprocess.signal),
+    )
+    .map_err(|error| TransferError::Tare {
         land: land.to_owned(),
         water: water.to_owned(),
         error,

@@ -32,9 +32,9 @@ pub use metrics::Metrics;
 pub use model::{ModelConfig, ModelKind};
 pub use preprocess::augment::MediaAugment;
 pub use preprocess::tare::{
-    GainMap, ImageTare, PreparedTare, RestFrame, TareError, TareFit, fit_image_tare,
+    GainMap, ImageTare, PreparedTare, RestFrame, TareError, TareFit, TareGains, fit_image_tare,
 };
-pub use preprocess::{FingerTable, Fork, Preprocess, ScopedThread};
+pub use preprocess::{FingerTable, Fork, Preprocess, ScopedThread, Signal};
 pub use train::{
     EpochReport, Example, InitFrom, Observer, Quiet, Splits, TrainConfig, Trained, evaluate,
     latent_means, train, train_from,

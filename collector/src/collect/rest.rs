@@ -7,8 +7,16 @@ use super::*;
 /// Rest frames a run keeps: their mean cancels the camera's noise (σ/√8).
 pub const REST_FRAMES: usize = 8;
 
+/// Time between rest frames, s: 8 of them span 3.5 s, so light that moves across
+/// the finger (underwater caustics, bubbles) is averaged over its course instead of
+/// caught at one place. Eight frames in a row at 30 Hz saw one pattern of the
+/// shipped water's caustics (a 2 s cycle), which the tare then took for the
+/// finger's colour: a land model read water at R² 0.647 through that tare and
+/// 0.934 through one fitted on frames without the caustics (docs/land-to-water.md).
+pub const REST_SPACING_S: f64 = 0.5;
+
 impl Job<'_> {
-    /// Takes [`REST_FRAMES`] frames and stores them with the run (a resumed run keeps
+    /// Takes [`REST_FRAMES`] frames, [`REST_SPACING_S`] apart, and stores them with the run (a resumed run keeps
     /// those of its first start). A camera that does not answer is logged (a warning:
     /// the samples need no rest frame, only a tare of this run does) and the run goes
     /// on; a store that fails stops it.
@@ -18,7 +26,12 @@ impl Job<'_> {
         for _ in 0..REST_FRAMES {
             let after = frames.last().map_or_else(
                 || self.clock.now(),
-                |(meta, _): &(softtouch_schemas::FrameMeta, _)| meta.t,
+                |(meta, _): &(softtouch_schemas::FrameMeta, _)| {
+                    meta.t
+                        .saturating_add(softtouch_schemas::DurationNs::from_secs_f64(
+                            REST_SPACING_S,
+                        ))
+                },
             );
             match self.camera.frame_after(after, timeout_ms).await {
                 Ok(frame) => frames.push(crate::store::encode_for_store(&frame)?),

@@ -8,11 +8,11 @@
 //! of the scene's medium is read.
 
 use serde::{Deserialize, Serialize};
-use softtouch_collector::collect::REST_FRAMES;
+use softtouch_collector::collect::{REST_FRAMES, REST_SPACING_S};
 use softtouch_drivers::{Camera as _, Clock as _, TokioClock};
-use softtouch_schemas::SceneSpec;
+use softtouch_schemas::{DurationNs, SceneSpec};
 use softtouch_sim::{GraspObject, soft_grasp};
-use softtouch_trainer::{ImageTare, ModelArtifact, RestFrame};
+use softtouch_trainer::{ImageTare, ModelArtifact, RestFrame, TareGains};
 
 use super::soft::GraspRunError;
 use crate::store::Store;
@@ -51,7 +51,7 @@ impl SceneTare {
     }
 }
 
-/// [`REST_FRAMES`] frames of finger 0's camera in `scene` with the gripper open and
+/// [`REST_FRAMES`] frames, [`REST_SPACING_S`] apart, of finger 0's camera in `scene` with the gripper open and
 /// no object between the fingers, on this thread with its own paused clock.
 ///
 /// # Errors
@@ -81,7 +81,10 @@ pub fn sim_rest_frames(
                 .frame_after(after, 1000)
                 .await
                 .map_err(|e| GraspRunError::Failed(format!("a rest frame: {e}")))?;
-            after = softtouch_schemas::TimestampNs(frame.meta.t.0 + 1);
+            after = frame
+                .meta
+                .t
+                .saturating_add(DurationNs::from_secs_f64(REST_SPACING_S));
             let (width, height, rgb) = crate::models::decode_stored(
                 frame.meta.format.as_str(),
                 i64::from(frame.meta.width),
@@ -133,7 +136,13 @@ pub async fn fit_scene_tare(
         .await
         .map_err(|e| GraspRunError::Failed(format!("the rest frames' thread failed: {e}")))??;
     let keep = |r, g, b| preprocess.is_finger(r, g, b);
-    let fit = softtouch_trainer::fit_image_tare(&land, &water, Some(&keep)).map_err(|e| {
+    let fit = softtouch_trainer::fit_image_tare(
+        &land,
+        &water,
+        Some(&keep),
+        TareGains::for_signal(preprocess.signal),
+    )
+    .map_err(|e| {
         GraspRunError::Invalid(format!(
             "--tare: scene `{scene_name}` against dataset `{}`: {e}",
             info.dataset_name
@@ -161,7 +170,7 @@ mod tests {
         let land = sim_rest_frames(&scenes[0], 120.0, 3).unwrap_or_else(|e| panic!("{e}"));
         let water = sim_rest_frames(&scenes[1], 120.0, 3).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!((land.len(), water.len()), (REST_FRAMES, REST_FRAMES));
-        let fit = softtouch_trainer::fit_image_tare(&land, &water, None)
+        let fit = softtouch_trainer::fit_image_tare(&land, &water, None, TareGains::PerChannel)
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(
             (fit.tare.scale - 1.333).abs() < 0.01,
@@ -170,8 +179,8 @@ mod tests {
         );
         assert!(fit.rms_after_map < fit.rms_before / 3.0, "{fit:?}");
         // The land scene against itself: no correction to speak of.
-        let same =
-            softtouch_trainer::fit_image_tare(&land, &land, None).unwrap_or_else(|e| panic!("{e}"));
+        let same = softtouch_trainer::fit_image_tare(&land, &land, None, TareGains::PerChannel)
+            .unwrap_or_else(|e| panic!("{e}"));
         assert!(
             (same.tare.scale - 1.0).abs() < 0.005,
             "{}",

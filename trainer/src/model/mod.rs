@@ -121,10 +121,15 @@ impl ModelConfig {
         out
     }
 
-    /// One line naming the settings, e.g. `svae width 16 latent 32 input 1×32×32 α 1 β 0.1`.
+    /// One line naming the settings, e.g. `svae width 16 latent 32 input 1×32×32 α 1 β 0.1`
+    /// (the input's signal named where it is not brightness: `input 1×32×32 chroma`).
     pub fn describe(&self) -> String {
+        let signal = match self.preprocess.signal {
+            crate::Signal::Brightness => String::new(),
+            other => format!(" {other}"),
+        };
         format!(
-            "{} width {} latent {} input {}×{}×{} α {} β {}",
+            "{} width {} latent {} input {}×{}×{}{signal} α {} β {}",
             self.kind,
             self.width,
             self.latent,

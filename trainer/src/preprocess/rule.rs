@@ -82,6 +82,8 @@ pub(super) struct IntegerRule {
     hue_lo: Bound,
     hue_hi: Bound,
     hue_inside: bool,
+    /// One channel carries chroma (`3·delta` summed), not brightness (`r + g + b`).
+    chroma: bool,
 }
 
 /// A fraction no `n / delta` reaches (`n < 6·delta`), the lower end of an empty
@@ -182,6 +184,7 @@ impl IntegerRule {
             hue_lo: Bound::new(hue_lo)?,
             hue_hi: Bound::new(hue_hi)?,
             hue_inside,
+            chroma: p.signal == super::Signal::Chroma,
         })
     }
 
@@ -231,7 +234,7 @@ impl IntegerRule {
         (max >= self.value_min) & coloured
     }
 
-    /// Adds one row's kept pixels into per-column sums: `r + g + b` per pixel
+    /// Adds one row's kept pixels into per-column sums: three times the signal per pixel
     /// (`grey`), or the three channels, interleaved as the row is. The caller keeps
     /// the sums below `u16::MAX` (at most [`super::ROWS_PER_FLUSH`] rows).
     pub(super) fn add_row(&self, row: &[u8], grey: bool, sums: &mut [u16]) {
@@ -313,7 +316,12 @@ impl pulp::WithSimd for AddRow<'_> {
                     u16::from(row[3 * i + 1]),
                     u16::from(row[3 * i + 2]),
                 );
-                let kept = u16::from(rule.keep(r, g, b)) * (r + g + b);
+                let signal = if rule.chroma {
+                    super::Signal::Chroma
+                } else {
+                    super::Signal::Brightness
+                };
+                let kept = u16::from(rule.keep(r, g, b)) * signal.times_three(r, g, b);
                 sums[i] = sums[i].wrapping_add(kept);
             }
         } else {
@@ -347,7 +355,7 @@ mod v4 {
 
     use super::IntegerRule;
 
-    /// Adds the kept pixels' `r + g + b` of whole steps of 32 pixels into `sums`;
+    /// Adds the kept pixels' `r + g + b` (or `3·delta`) of whole steps of 32 pixels into `sums`;
     /// returns how many pixels it did (the caller does the rest).
     #[inline(always)]
     pub(super) fn grey_row(simd: V4, rule: &IntegerRule, row: &[u8], sums: &mut [u16]) -> usize {
@@ -447,7 +455,11 @@ mod v4 {
             let grey = bw._mm512_cmpeq_epi16_mask(delta, zero);
             let keep = bw._mm512_cmpge_epu16_mask(max, value_min)
                 & ((grey & grey_kept) | (!grey & hue & saturated));
-            let all = bw._mm512_add_epi16(bw._mm512_add_epi16(r, g), b);
+            let all = if rule.chroma {
+                bw._mm512_add_epi16(bw._mm512_add_epi16(delta, delta), delta)
+            } else {
+                bw._mm512_add_epi16(bw._mm512_add_epi16(r, g), b)
+            };
             let before: __m512i = cast(*sum);
             *sum = cast(bw._mm512_mask_add_epi16(before, keep, before, all));
         }
@@ -467,7 +479,7 @@ mod v3 {
 
     use super::IntegerRule;
 
-    /// Adds the kept pixels' `r + g + b` of whole steps of 16 pixels into `sums`;
+    /// Adds the kept pixels' `r + g + b` (or `3·delta`) of whole steps of 16 pixels into `sums`;
     /// returns how many pixels it did (the caller does the rest).
     #[inline(always)]
     pub(super) fn grey_row(simd: V3, rule: &IntegerRule, row: &[u8], sums: &mut [u16]) -> usize {
@@ -571,7 +583,11 @@ mod v3 {
                 x2._mm256_andnot_si256(grey, x2._mm256_and_si256(hue, saturated)),
             );
             let keep = x2._mm256_and_si256(x2._mm256_cmpgt_epi16(max, value_above), coloured);
-            let all = x2._mm256_add_epi16(x2._mm256_add_epi16(r, g), b);
+            let all = if rule.chroma {
+                x2._mm256_add_epi16(x2._mm256_add_epi16(delta, delta), delta)
+            } else {
+                x2._mm256_add_epi16(x2._mm256_add_epi16(r, g), b)
+            };
             let before: __m256i = cast(*sum);
             *sum = cast(x2._mm256_add_epi16(before, x2._mm256_and_si256(all, keep)));
         }

@@ -27,6 +27,32 @@ const FIT_SHRINK: usize = 4;
 /// share of them, or the scale is not considered.
 const MIN_INSIDE: f64 = 0.25;
 
+/// How the tare's gains are fitted: what it must leave unchanged decides it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TareGains {
+    /// A gain per channel and a gain map per channel: the closest colours, for a
+    /// model that reads brightness.
+    #[default]
+    PerChannel,
+    /// One gain for the three channels and one map value per pixel, the map fitted
+    /// on chroma (max − min), for a model that reads chroma: white light added in
+    /// the water (caustics) stays white, so chroma stays blind to it. Gains that
+    /// differ per channel would tint it (R 1.44 against B 0.81 for the shipped
+    /// water: 0.6 of the light's crest in chroma).
+    White,
+}
+
+impl TareGains {
+    /// The gains a model whose input carries `signal` needs.
+    #[must_use]
+    pub fn for_signal(signal: super::Signal) -> Self {
+        match signal {
+            super::Signal::Brightness => Self::PerChannel,
+            super::Signal::Chroma => Self::White,
+        }
+    }
+}
+
 /// A correction of raw RGB8 frames: output pixel `p` takes the input at
 /// `principal_px + (p − principal_px) · scale` (bilinear; black outside the frame),
 /// then `gain[c] · v + offset[c]` per channel, rounded and clamped to 0..=255.
@@ -313,6 +339,7 @@ fn fit_at(
     water: &Plane,
     scale: f64,
     mask: Option<&[bool]>,
+    gains: TareGains,
 ) -> Option<([f64; 3], [f64; 3], f64, f64)> {
     let mut t = ImageTare::identity(land.width * FIT_SHRINK, land.height * FIT_SHRINK);
     t.scale = scale;
@@ -351,10 +378,16 @@ fn fit_at(
         return None;
     }
     let (mut gain, mut offset, mut sse) = ([1.0; 3], [0.0; 3], 0.0);
+    // One gain for all: the pooled line of the three channels, each its own offset.
+    let pooled = |f: fn(&[f64; 6]) -> f64| s.iter().map(f).sum::<f64>();
+    let var_all = pooled(|e| e[3] - e[1] * e[1] / e[0]);
+    let cov_all = pooled(|e| e[4] - e[1] * e[2] / e[0]);
     for c in 0..3 {
         let [n, sx, sy, sxx, sxy, syy] = s[c];
-        let var_x = sxx - sx * sx / n;
-        let cov = sxy - sx * sy / n;
+        let (var_x, cov) = match gains {
+            TareGains::PerChannel => (sxx - sx * sx / n, sxy - sx * sy / n),
+            TareGains::White => (var_all / 3.0, cov_all / 3.0),
+        };
         // A channel with no spread in the water frame (flat at this scale): an offset
         // alone.
         let g = if var_x > 1e-9 * n { cov / var_x } else { 0.0 };
@@ -387,6 +420,7 @@ pub fn fit_image_tare(
     land: &[RestFrame],
     water: &[RestFrame],
     keep: Option<Keep<'_>>,
+    gains: TareGains,
 ) -> Result<TareFit, TareError> {
     if land.is_empty() {
         return Err(TareError::NoFrames("land"));
@@ -417,7 +451,7 @@ pub fn fit_image_tare(
     if m.is_flat() {
         return Err(TareError::Flat("water"));
     }
-    let cost = |s: f64| fit_at(&l, &m, s, None).map_or(f64::INFINITY, |f| f.2);
+    let cost = |s: f64| fit_at(&l, &m, s, None, gains).map_or(f64::INFINITY, |f| f.2);
     let steps = ((SCALE_RANGE.1 - SCALE_RANGE.0) / SCALE_STEP).round() as usize;
     let grid = (0..=steps).map(|i| SCALE_RANGE.0 + i as f64 * SCALE_STEP);
     let best = grid.fold((1.0, f64::INFINITY), |b, s| {
@@ -448,12 +482,12 @@ pub fn fit_image_tare(
                 .collect::<Vec<bool>>()
         })
         .filter(|m| m.iter().filter(|&&k| k).count() * 100 >= m.len());
-    let (gain, offset, rms_after, rms_before) = fit_at(&l, &m, scale, mask.as_deref())
-        .or_else(|| fit_at(&l, &m, scale, None))
+    let (gain, offset, rms_after, rms_before) = fit_at(&l, &m, scale, mask.as_deref(), gains)
+        .or_else(|| fit_at(&l, &m, scale, None, gains))
         .ok_or(TareError::Flat("water"))?;
     let mut tare = ImageTare::identity(w, h);
     (tare.scale, tare.gain, tare.offset) = (scale, gain, offset);
-    let map = gain_map(&l, &m, &tare, k, mask.as_deref());
+    let map = gain_map(&l, &m, &tare, k, mask.as_deref(), gains);
     tare.gain_map = Some(map);
     let rms_after_map = residual(&l, &m, &tare, k, mask.as_deref());
     Ok(TareFit {
@@ -484,13 +518,15 @@ fn corrected(water: &Plane, tare: &ImageTare, k: usize, x: usize, y: usize) -> O
 /// The gain map: per shrunk pixel and channel, land over the globally corrected water
 /// where the finger is (and both are brighter than [`MAP_FLOOR`]), else 1; clamped to
 /// [`MAP_RANGE`] and smoothed over 3×3 pixels (the camera's noise, the edge's
-/// rounding).
+/// rounding). With [`TareGains::White`], one ratio per pixel for its three channels:
+/// land's chroma over the corrected water's.
 fn gain_map(
     land: &Plane,
     water: &Plane,
     tare: &ImageTare,
     k: usize,
     mask: Option<&[bool]>,
+    gains: TareGains,
 ) -> GainMap {
     let (w, h) = (land.width, land.height);
     let mut raw = vec![1f32; w * h * 3];
@@ -502,9 +538,16 @@ fn gain_map(
             let Some(v) = corrected(water, tare, k, x, y) else {
                 continue;
             };
-            let l = land.at(x, y);
+            let l = land.at(x, y).map(f64::from);
+            let chroma = |p: [f64; 3]| {
+                p.iter().copied().fold(f64::MIN, f64::max)
+                    - p.iter().copied().fold(f64::MAX, f64::min)
+            };
             for c in 0..3 {
-                let (a, b) = (v[c], f64::from(l[c]));
+                let (a, b) = match gains {
+                    TareGains::PerChannel => (v[c], l[c]),
+                    TareGains::White => (chroma(v), chroma(l)),
+                };
                 if a > MAP_FLOOR && b > MAP_FLOOR {
                     raw[(y * w + x) * 3 + c] = (b / a).clamp(MAP_RANGE.0, MAP_RANGE.1) as f32;
                 }

@@ -49,7 +49,13 @@ fn the_fit_undoes_a_flat_ports_magnification_and_the_waters_colour() {
     let l = land();
     let (g, o) = ([0.7, 0.75, 0.9], [4.0, 8.0, 20.0]);
     let w = through_water(&l, 1.333, g, o);
-    let fit = fit_image_tare(std::slice::from_ref(&l), &[w.clone(), w], None).expect("fit");
+    let fit = fit_image_tare(
+        std::slice::from_ref(&l),
+        &[w.clone(), w],
+        None,
+        TareGains::PerChannel,
+    )
+    .expect("fit");
     let t = &fit.tare;
     assert!((t.scale - 1.333).abs() < 0.01, "{t:?}");
     for c in 0..3 {
@@ -69,8 +75,13 @@ fn the_fit_undoes_a_flat_ports_magnification_and_the_waters_colour() {
 #[test]
 fn the_same_medium_fits_the_identity() {
     let l = land();
-    let fit =
-        fit_image_tare(std::slice::from_ref(&l), std::slice::from_ref(&l), None).expect("fit");
+    let fit = fit_image_tare(
+        std::slice::from_ref(&l),
+        std::slice::from_ref(&l),
+        None,
+        TareGains::PerChannel,
+    )
+    .expect("fit");
     let t = &fit.tare;
     assert!((t.scale - 1.0).abs() < 0.005, "{t:?}");
     for c in 0..3 {
@@ -125,11 +136,11 @@ fn a_magnified_frame_corrected_matches_land_inside_the_field_it_still_sees() {
 fn bad_inputs_are_named_not_panicked_on() {
     let l = land();
     assert_eq!(
-        fit_image_tare(&[], std::slice::from_ref(&l), None),
+        fit_image_tare(&[], std::slice::from_ref(&l), None, TareGains::PerChannel),
         Err(TareError::NoFrames("land"))
     );
     assert_eq!(
-        fit_image_tare(std::slice::from_ref(&l), &[], None),
+        fit_image_tare(std::slice::from_ref(&l), &[], None, TareGains::PerChannel),
         Err(TareError::NoFrames("water"))
     );
     let small = RestFrame {
@@ -137,13 +148,25 @@ fn bad_inputs_are_named_not_panicked_on() {
         height: 60,
         rgb: vec![9; 80 * 60 * 3],
     };
-    let e = fit_image_tare(std::slice::from_ref(&l), &[small], None).expect_err("sizes");
+    let e = fit_image_tare(
+        std::slice::from_ref(&l),
+        &[small],
+        None,
+        TareGains::PerChannel,
+    )
+    .expect_err("sizes");
     assert!(e.to_string().contains("water rest frame 1 is 80×60"), "{e}");
     let short = RestFrame {
         rgb: vec![0; 10],
         ..l.clone()
     };
-    let e = fit_image_tare(std::slice::from_ref(&l), &[short], None).expect_err("buffer");
+    let e = fit_image_tare(
+        std::slice::from_ref(&l),
+        &[short],
+        None,
+        TareGains::PerChannel,
+    )
+    .expect_err("buffer");
     assert!(e.to_string().contains("10 bytes"), "{e}");
     // A capped camera: every pixel alike.
     let flat = RestFrame {
@@ -151,11 +174,21 @@ fn bad_inputs_are_named_not_panicked_on() {
         ..l.clone()
     };
     assert_eq!(
-        fit_image_tare(std::slice::from_ref(&l), std::slice::from_ref(&flat), None),
+        fit_image_tare(
+            std::slice::from_ref(&l),
+            std::slice::from_ref(&flat),
+            None,
+            TareGains::PerChannel
+        ),
         Err(TareError::Flat("water"))
     );
     assert_eq!(
-        fit_image_tare(std::slice::from_ref(&flat), std::slice::from_ref(&l), None),
+        fit_image_tare(
+            std::slice::from_ref(&flat),
+            std::slice::from_ref(&l),
+            None,
+            TareGains::PerChannel
+        ),
         Err(TareError::Flat("land"))
     );
     // A one-pixel frame: flat, named.
@@ -164,7 +197,15 @@ fn bad_inputs_are_named_not_panicked_on() {
         height: 1,
         rgb: vec![1, 2, 3],
     };
-    assert!(fit_image_tare(std::slice::from_ref(&one), std::slice::from_ref(&one), None).is_err());
+    assert!(
+        fit_image_tare(
+            std::slice::from_ref(&one),
+            std::slice::from_ref(&one),
+            None,
+            TareGains::PerChannel
+        )
+        .is_err()
+    );
     // A tare with a NaN or a zero scale is refused, and a wrong buffer.
     let mut t = ImageTare::identity(W, H);
     t.gain[1] = f64::NAN;
@@ -196,4 +237,71 @@ fn saturated_and_extreme_corrections_stay_in_range() {
     let out = t.apply(W, H, &l.rgb).expect("apply");
     assert_eq!(out.len(), l.rgb.len());
     assert!(out.chunks_exact(3).all(|p| p[2] == 255));
+}
+
+/// For a chroma model: one gain for the three channels, one map value per pixel, so
+/// white light added to a water frame is still white after the tare, and the
+/// finger's chroma is the same with and without it (per channel gains would tint
+/// it: the light's crest times the gains' spread, in chroma).
+#[test]
+fn a_white_tare_keeps_added_white_light_white() {
+    let l = land();
+    let (g, o) = ([0.7, 0.75, 0.9], [4.0, 8.0, 20.0]);
+    let w = through_water(&l, 1.333, g, o);
+    let white = fit_image_tare(
+        std::slice::from_ref(&l),
+        std::slice::from_ref(&w),
+        None,
+        TareGains::for_signal(crate::Signal::Chroma),
+    )
+    .expect("fit");
+    let t = &white.tare;
+    assert!((t.scale - 1.333).abs() < 0.01, "{t:?}");
+    let bits = t.gain.map(f64::to_bits);
+    assert!(bits[0] == bits[1] && bits[1] == bits[2], "{t:?}");
+    let map = t.gain_map.as_ref().expect("a map");
+    assert!(
+        map.gains
+            .chunks_exact(3)
+            .all(|p| p[0].to_bits() == p[1].to_bits() && p[1].to_bits() == p[2].to_bits()),
+        "one map value per pixel"
+    );
+    // 20 units of white light over the water frame, read through each tare.
+    let lit = RestFrame {
+        rgb: w.rgb.iter().map(|&v| v.saturating_add(20)).collect(),
+        ..w.clone()
+    };
+    let per_channel = fit_image_tare(
+        std::slice::from_ref(&l),
+        std::slice::from_ref(&w),
+        None,
+        TareGains::for_signal(crate::Signal::Brightness),
+    )
+    .expect("fit");
+    let chroma_shift = |tare: &ImageTare| {
+        let (a, b) = (
+            tare.apply(W, H, &w.rgb).expect("apply"),
+            tare.apply(W, H, &lit.rgb).expect("apply"),
+        );
+        let chroma = |p: &[u8]| {
+            i32::from(*p.iter().max().unwrap_or(&0)) - i32::from(*p.iter().min().unwrap_or(&0))
+        };
+        // The finger's middle, away from the frame's edge and the clamp.
+        let at = |f: &[u8], x: usize, y: usize| chroma(&f[(y * W + x) * 3..(y * W + x) * 3 + 3]);
+        (55..85)
+            .flat_map(|y| (55..85).map(move |x| (x, y)))
+            .map(|(x, y)| (at(&b, x, y) - at(&a, x, y)).abs())
+            .max()
+            .unwrap_or(0)
+    };
+    assert!(
+        chroma_shift(&white.tare) <= 1,
+        "{}",
+        chroma_shift(&white.tare)
+    );
+    assert!(
+        chroma_shift(&per_channel.tare) >= 4,
+        "{}",
+        chroma_shift(&per_channel.tare)
+    );
 }
