@@ -6,8 +6,8 @@ use softtouch_drivers::gripper::position_for_opening;
 use softtouch_drivers::{Clock, Frame, TokioClock};
 use softtouch_grasp::{
     ControllerConfig, FailReason, ForceEstimator, GraspError, Judge, Lift, LiftPlan, Mode, Moment,
-    ObjectState, Observation, Projection, SNAPSHOT_WIDTH_PX, TrialConfig, TrialDevices,
-    TrialResult, TrueForce, Verdict, physics_verdict, run_trial,
+    ObjectState, Observation, Projection, SNAPSHOT_WIDTH_PX, SqueezeBound, TrialConfig,
+    TrialDevices, TrialResult, TrueForce, Verdict, physics_verdict, run_trial,
 };
 use softtouch_schemas::scene::ObjectProfile;
 use softtouch_schemas::{ArmPose, RodShape, TimestampNs, Wrench};
@@ -102,6 +102,18 @@ async fn trial(
     grasp_opening_mm: f64,
     target_n: f64,
 ) -> TrialResult {
+    trial_bounded(object, mode, grasp_opening_mm, target_n, false).await
+}
+
+/// [`trial`], with `bounded`: the loop's squeeze bound from the true closing (1.5 ×
+/// the squeeze the target needs past the touch, plus 2 counts).
+async fn trial_bounded(
+    object: GraspObject,
+    mode: Mode,
+    grasp_opening_mm: f64,
+    target_n: f64,
+    bounded: bool,
+) -> TrialResult {
     let scene = softtouch_schemas::defaults::scene();
     let clock = TokioClock::new();
     let (gripper, camera, handle) =
@@ -110,6 +122,25 @@ async fn trial(
     let lambda = handle.max_stiffness_n_per_mm(touch, 255).unwrap_or(1.0);
     let mut config = ControllerConfig::new(projection());
     config.stepper.gain_n_per_mm = 0.75 * lambda.max(0.1);
+    if bounded {
+        let counts: Vec<u8> = (touch..=touch.saturating_add(40)).collect();
+        let closing: Vec<(u8, Option<f64>)> = handle
+            .grip_force_curve(&counts)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .into_iter()
+            .map(|(p, f)| (p, Some(f)))
+            .collect();
+        let mut bound = SqueezeBound::from_points(
+            touch,
+            0.0,
+            &closing,
+            lambda,
+            config.stepper.stroke.mm_per_count,
+        );
+        // Tight, so that a loop closing on nothing meets it within the short hold.
+        (bound.factor, bound.floor_counts) = (1.5, 2);
+        config.squeeze = Some(bound);
+    }
     let shared: Arc<dyn Clock> = Arc::new(clock);
     let mut estimator = Perfect(handle.clone());
     let devices = TrialDevices {
@@ -223,4 +254,44 @@ async fn a_delicate_object_squeezed_past_its_limit_is_crushed() {
         "{:?}",
         r.verdict
     );
+}
+
+/// An object too heavy for its friction slips on the lift; the loop, reading a
+/// perfect estimate, then closes on the space it left until its squeeze bound stops
+/// it. The trial is the physics' failure, a slip, with the stall as its detail: the
+/// estimate did not stall, the object was gone.
+#[tokio::test(start_paused = true)]
+async fn a_loop_that_stalls_after_the_object_slipped_is_a_slip() {
+    let mut heavy = cylinder();
+    heavy.name = "heavy".into();
+    heavy.friction = 0.05;
+    heavy.mass_kg = 0.2;
+    let r = trial_bounded(heavy, Mode::Closed, 28.0, 1.5, true).await;
+    assert!(
+        r.confirmed_after_ns.is_some(),
+        "{:?} {:?} {:?}",
+        r.verdict,
+        r.detail,
+        r.peak_true_n
+    );
+    assert_eq!(
+        r.verdict,
+        Verdict::Failed(FailReason::Slip),
+        "{:?}",
+        r.detail
+    );
+    assert!(
+        r.detail.as_deref().is_some_and(
+            |d| d.contains("after the object was lost") && d.contains("estimate stalled")
+        ),
+        "{:?}",
+        r.detail
+    );
+    // The same object held by the same bounded loop at the same target, light enough
+    // for its friction: held, no stall.
+    let mut light = cylinder();
+    light.friction = 0.6;
+    light.mass_kg = 0.02;
+    let r = trial_bounded(light, Mode::Closed, 28.0, 1.5, true).await;
+    assert_eq!(r.verdict, Verdict::Held, "{:?}", r.detail);
 }

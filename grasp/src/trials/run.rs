@@ -101,6 +101,7 @@ where
         latest,
         taken: Vec::new(),
         first_estimate_n: None,
+        stalled_in_hold: None,
     };
     let outcome = match config.mode {
         Mode::Open => run.open_loop(ctl, &mut lift, &controller, config).await,
@@ -130,7 +131,23 @@ where
                 peak_estimate_n,
                 peak_true_n,
             };
-            (judge.judge(&seen).await?, None)
+            let verdict = judge.judge(&seen).await?;
+            match run.stalled_in_hold.take() {
+                None => (verdict, None),
+                // The loop gave up on an object it still holds: the loop's failure.
+                Some(stall) if verdict == Verdict::Held => (
+                    Verdict::Failed(FailReason::EstimateStalled),
+                    Some(stall.to_string()),
+                ),
+                // The object went first (a slip, a crush) and the loop then closed on
+                // the space it left: the physics' failure, the stall its detail.
+                Some(stall) => (
+                    verdict,
+                    Some(format!(
+                        "the loop stalled during the hold, after the object was lost: {stall}"
+                    )),
+                ),
+            }
         }
         Err(GraspError::Device(DeviceError::Timeout { device, timeout_ms })) => (
             Verdict::Failed(FailReason::Timeout),
@@ -173,6 +190,9 @@ pub(super) struct Run {
     pub(super) taken: Vec<(Moment, Frame)>,
     /// The trial's first usable estimate, N (contact without a truth is 0.1 N above).
     pub(super) first_estimate_n: Option<f64>,
+    /// The loop's stall after the lift began ([`GraspError::EstimateStalled`]): the
+    /// judge then says whether the object was still held or lost first.
+    pub(super) stalled_in_hold: Option<GraspError>,
 }
 
 impl Run {
@@ -395,7 +415,16 @@ impl Run {
         let end = self.clock.now().0 + hold.as_nanos() as u64;
         let mut last = None;
         while self.clock.now().0 < end {
-            let c = ctl.cycle(trial.target_n).await?;
+            let c = match ctl.cycle(trial.target_n).await {
+                Ok(c) => c,
+                // The fingers hold where they stand (the controller's exit); what became
+                // of the object is the judge's to say.
+                Err(stall @ GraspError::EstimateStalled { .. }) => {
+                    self.stalled_in_hold = Some(stall);
+                    break;
+                }
+                Err(e) => return Err(e),
+            };
             self.record(&c);
             last = Some(c);
         }
