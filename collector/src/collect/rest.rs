@@ -9,15 +9,16 @@ pub const REST_FRAMES: usize = 8;
 
 /// Time between rest frames, s: 8 of them span 3.5 s, so light that moves across
 /// the finger (underwater caustics, bubbles) is averaged over its course instead of
-/// caught at one place. Eight frames in a row at 30 Hz saw one pattern of the
-/// shipped water's caustics (a 2 s cycle), which the tare then took for the
-/// finger's colour: a land model read water at R² 0.647 through that tare and
-/// 0.934 through one fitted on frames without the caustics (docs/land-to-water.md).
+/// caught at one place. Eight frames in a row (1/120 s apart on the default rig) saw
+/// one pattern of the shipped water's caustics (a 2 s cycle), which the tare then
+/// took for the finger's colour: a land model read water at R² 0.647 through that
+/// tare and 0.934 through one fitted on frames without the caustics
+/// (docs/land-to-water.md).
 pub const REST_SPACING_S: f64 = 0.5;
 
 impl Job<'_> {
-    /// Takes [`REST_FRAMES`] frames, [`REST_SPACING_S`] apart, and stores them with the run (a resumed run keeps
-    /// those of its first start). A camera that does not answer is logged (a warning:
+    /// Takes [`REST_FRAMES`] frames, [`REST_SPACING_S`] apart, and stores them with
+    /// the run (a resumed run keeps those of its first start). A camera that does not answer is logged (a warning:
     /// the samples need no rest frame, only a tare of this run does) and the run goes
     /// on; a store that fails stops it.
     pub(super) async fn take_rest_frames(&mut self) -> Result<(), CollectError> {

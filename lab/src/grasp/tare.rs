@@ -51,8 +51,9 @@ impl SceneTare {
     }
 }
 
-/// [`REST_FRAMES`] frames, [`REST_SPACING_S`] apart, of finger 0's camera in `scene` with the gripper open and
-/// no object between the fingers, on this thread with its own paused clock.
+/// [`REST_FRAMES`] frames, [`REST_SPACING_S`] apart, of finger 0's camera in `scene`
+/// with the gripper open and no object between the fingers, on this thread with its
+/// own paused clock.
 ///
 /// # Errors
 /// A scene without objects, the simulator, a frame that does not decode.

@@ -12,7 +12,7 @@
 //! uses the rule only after it has decided all 2²⁴ colours exactly as the float
 //! tests do; any other parameters keep the lookup.
 
-use super::Preprocess;
+use super::{Preprocess, Signal};
 
 /// `num / den`, both small and non-negative; compared by cross-multiplication.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -82,8 +82,8 @@ pub(super) struct IntegerRule {
     hue_lo: Bound,
     hue_hi: Bound,
     hue_inside: bool,
-    /// One channel carries chroma (`3·delta` summed), not brightness (`r + g + b`).
-    chroma: bool,
+    /// What one channel sums: `r + g + b`, or `3·delta` for chroma.
+    signal: Signal,
 }
 
 /// A fraction no `n / delta` reaches (`n < 6·delta`), the lower end of an empty
@@ -184,7 +184,7 @@ impl IntegerRule {
             hue_lo: Bound::new(hue_lo)?,
             hue_hi: Bound::new(hue_hi)?,
             hue_inside,
-            chroma: p.signal == super::Signal::Chroma,
+            signal: p.signal,
         })
     }
 
@@ -316,12 +316,7 @@ impl pulp::WithSimd for AddRow<'_> {
                     u16::from(row[3 * i + 1]),
                     u16::from(row[3 * i + 2]),
                 );
-                let signal = if rule.chroma {
-                    super::Signal::Chroma
-                } else {
-                    super::Signal::Brightness
-                };
-                let kept = u16::from(rule.keep(r, g, b)) * signal.times_three(r, g, b);
+                let kept = u16::from(rule.keep(r, g, b)) * rule.signal.times_three(r, g, b);
                 sums[i] = sums[i].wrapping_add(kept);
             }
         } else {
@@ -455,7 +450,7 @@ mod v4 {
             let grey = bw._mm512_cmpeq_epi16_mask(delta, zero);
             let keep = bw._mm512_cmpge_epu16_mask(max, value_min)
                 & ((grey & grey_kept) | (!grey & hue & saturated));
-            let all = if rule.chroma {
+            let all = if rule.signal == super::Signal::Chroma {
                 bw._mm512_add_epi16(bw._mm512_add_epi16(delta, delta), delta)
             } else {
                 bw._mm512_add_epi16(bw._mm512_add_epi16(r, g), b)
@@ -583,7 +578,7 @@ mod v3 {
                 x2._mm256_andnot_si256(grey, x2._mm256_and_si256(hue, saturated)),
             );
             let keep = x2._mm256_and_si256(x2._mm256_cmpgt_epi16(max, value_above), coloured);
-            let all = if rule.chroma {
+            let all = if rule.signal == super::Signal::Chroma {
                 x2._mm256_add_epi16(x2._mm256_add_epi16(delta, delta), delta)
             } else {
                 x2._mm256_add_epi16(x2._mm256_add_epi16(r, g), b)

@@ -3,8 +3,10 @@
 //! rest (no contact) in the new medium are compared with the rest frames of the runs
 //! the model learned from, and a correction is fitted: a scale about the principal
 //! point (a flat port's refraction magnifies the image by the water's index, about
-//! 1.33) and a gain and offset per channel (the water's attenuation and veiling
-//! light). The correction is applied to each raw frame before preprocessing.
+//! 1.33), a gain and offset per channel (the water's attenuation and veiling light)
+//! and a gain per pixel. A model that reads chroma gets one gain for the three
+//! channels ([`TareGains::White`]), so white light added in the water stays white.
+//! The correction is applied to each raw frame before preprocessing.
 //!
 //! The fit: the rest frames of each side are averaged (the camera's noise cancels);
 //! for each scale on a grid from [`SCALE_RANGE`] the best gain and offset per channel
