@@ -48,7 +48,18 @@ impl Session {
                 None => None,
             }
         });
+        // `--tare` with no water scene: nothing to fit, said rather than silent.
+        let no_water = (self.plan.tare
+            && !self
+                .scenes
+                .iter()
+                .any(|s| s.medium == softtouch_schemas::Medium::Water))
+        .then(|| {
+            "--tare: no water scene in this session, so no image tare was fitted (land frames are read as the model learned them)"
+                .to_owned()
+        });
         sets.into_iter()
+            .chain(no_water)
             .chain(tares)
             .chain(keys.into_iter()
             .filter_map(|k| {

@@ -160,6 +160,8 @@ fn objects_that_close_alike_are_said_to() {
         )),
         "{lines:?}"
     );
+    assert!(!lines.iter().any(|l| l.starts_with("--tare:")), "{lines:?}");
+
     // Stored and read back with the session; a session stored before tares reads
     // back with none.
     let json = serde_json::to_string(&tared.plan).unwrap_or_else(|e| panic!("{e}"));
@@ -171,6 +173,17 @@ fn objects_that_close_alike_are_said_to() {
     assert!(!old.contains("tare"), "{old}");
     let old: TrialPlan = serde_json::from_str(&old).unwrap_or_else(|e| panic!("{e}"));
     assert!(!old.tare && old.scene_tares.is_empty());
+    // `--tare` on land alone fits nothing, and says so.
+    let mut land_only = tared;
+    land_only.scenes.truncate(1);
+    land_only.plan.scene_tares = vec![None];
+    let lines = land_only.setup_lines();
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.starts_with("--tare: no water scene in this session")),
+        "{lines:?}"
+    );
 }
 
 #[test]
