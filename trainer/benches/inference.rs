@@ -1,8 +1,8 @@
 //! Single-image inference on one core (a rayon pool of one thread, as the grasp
 //! controller would run it beside the camera): the default model on a preprocessed
-//! image, the preprocessing of a raw 640×480 frame, the two together, a medium's
-//! image tare on the frame (laid out once, and laid out every frame as it was), and
-//! building the colour lookup table that preprocessing uses.
+//! image, the preprocessing of a raw 640×480 frame (brightness, and chroma), the two
+//! together, a medium's image tare on the frame (laid out once, and laid out every
+//! frame as it was), and building the colour lookup table that preprocessing uses.
 //!
 //! `cargo bench -p softtouch-trainer --bench inference`
 
@@ -54,6 +54,14 @@ fn inference(c: &mut Criterion) {
     let mut out = vec![0.0; config.preprocess.input_len()];
     group.bench_function("preprocess a 640×480 frame", |b| {
         pool.install(|| b.iter(|| table.apply_into(w, h, &rgb, &mut out).expect("frame")));
+    });
+    // The same frame for a model that reads chroma (`train --signal chroma`).
+    let chroma = FingerTable::new(&softtouch_trainer::Preprocess {
+        signal: softtouch_trainer::Signal::Chroma,
+        ..config.preprocess
+    });
+    group.bench_function("preprocess a 640×480 frame, chroma", |b| {
+        pool.install(|| b.iter(|| chroma.apply_into(w, h, &rgb, &mut out).expect("frame")));
     });
     group.bench_function("640×480 frame → wrench", |b| {
         pool.install(|| b.iter(|| predictor.predict_rgb(w, h, &rgb).expect("predict")));
