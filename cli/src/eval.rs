@@ -117,13 +117,9 @@ pub async fn run_eval(
     let (metrics, predictions) = evaluate(&artifact.net, &h.config, &h.norm, &examples, &device)?;
     writeln!(
         out,
-        "model {} ({} width {} latent {} input {}×{}), {dataset} {} split",
+        "model {} ({}), {dataset} {} split",
         args.model,
-        h.config.kind,
-        h.config.width,
-        h.config.latent,
-        h.config.preprocess.size_px,
-        h.config.preprocess.size_px,
+        h.config.describe(),
         split.as_str()
     )
     .map_err(io_failure)?;
