@@ -37,7 +37,7 @@ pub(super) fn land_to_water_section(c: &Content) -> Result<Markup, ReportError> 
                 None => (todo_in(c, "No land-to-water comparison stored. Collect the water run with the land run's poses, then:",
                               &["softtouch collect --scene water --poses-from 1",
                                 "softtouch dataset create water-v1 --runs 2",
-                                "softtouch transfer --model {model} --land {dataset} --water water-v1"])),
+                                "softtouch transfer --model {model} --land {dataset} --water water-v1 --tare"])),
             }
             h3 { "Fine-tuning on water" }
             @match finetune {
