@@ -211,6 +211,12 @@ const CHANGED: &[(&str, &str, &str)] = &[
         "--model land-v1-svae",
         "docs/RIG.md's placeholder: the group's model",
     ),
+    (
+        "trials --model land-svae ",
+        "trials --model land-svae --accept-calibration ",
+        "the group's model learned 300 samples, and the calibration check refuses its \
+         closings (the estimate stops short of 3 N): the friction sweeps run past it",
+    ),
 ];
 
 /// Examples not run here: (pieces the example holds, all of them; why, and where it is

@@ -35,7 +35,7 @@ pub struct ModelArgs {
     /// Input size in pixels (square, a power of two in 16..=256).
     #[arg(long, default_value_t = Preprocess::default().size_px)]
     pub size: usize,
-    /// Input channels: 1 (brightness of the finger's pixels) or 3 (RGB).
+    /// Input channels: 1 (one value per finger pixel, see --signal) or 3 (RGB).
     #[arg(long, default_value_t = Preprocess::default().channels)]
     pub channels: usize,
     /// What one channel carries of the finger's pixels: brightness, or chroma
