@@ -73,19 +73,21 @@ const LAND_AND_WATER: &[&str] = &[
 const RESULTS_STORED: &[&str] = &[
     "dataset create land-v1 --runs 1,2",
     "train --dataset land-v1",
-    "grasp trials --model land-v1-svae --objects ball --trials 3",
+    "grasp trials --model land-v1-svae --objects ball --trials 3 --accept-calibration",
     "latent land-v1-svae --dataset land-v1",
     "grasp disturb --model land-v1-svae",
     "grasp twist --model land-v1-svae",
     "grasp follow --model land-v1-svae",
 ];
-/// Sessions 1 to 3 on the simulator, as the example's `--resume 3` names them.
+/// Sessions 1 to 3 on the simulator, as the example's `--resume 3` names them. The
+/// walk's model learned 400 samples, too few for the calibration check in water
+/// (`--accept-calibration` runs past it; the setups here store sessions, not rates).
 const SESSIONS_1_TO_3: &[&str] = &[
     "dataset create land-v1 --runs 1,2",
     "train --dataset land-v1",
-    "grasp trials --model land-v1-svae --objects ball --trials 1",
-    "grasp trials --model land-v1-svae --objects ball --trials 1",
-    "grasp trials --model land-v1-svae --objects ball --trials 1",
+    "grasp trials --model land-v1-svae --objects ball --trials 1 --accept-calibration",
+    "grasp trials --model land-v1-svae --objects ball --trials 1 --accept-calibration",
+    "grasp trials --model land-v1-svae --objects ball --trials 1 --accept-calibration",
 ];
 const SWEEPS_STORED: &[&str] = &[
     "dataset create land-v1 --runs 1,2",
@@ -216,6 +218,16 @@ const CHANGED: &[(&str, &str, &str)] = &[
         "trials --model land-svae --accept-calibration ",
         "the group's model learned 300 samples, and the calibration check refuses its \
          closings (the estimate stops short of 3 N): the friction sweeps run past it",
+    ),
+    (
+        "trials --model land-v1-svae --trials 10 --sigma-mm",
+        "trials --model land-v1-svae --accept-calibration --trials 10 --sigma-mm",
+        "the group's 400-sample model, refused in water by the calibration check",
+    ),
+    (
+        "trials --model land-v1-svae --sweep-sigma",
+        "trials --model land-v1-svae --accept-calibration --sweep-sigma",
+        "the group's 400-sample model, refused in water by the calibration check",
     ),
 ];
 
