@@ -40,8 +40,9 @@ impl GripWindow {
 /// `speed_m_s`, accelerating and braking at `accel_m_s2`.
 ///
 /// # Errors
-/// A lift that is not positive and finite, wet contact on an object without a wet
-/// friction, an object whose friction is not positive, a load that is not finite.
+/// A lift the simulator would refuse (`start_lift`'s bounds), wet contact on an
+/// object without a wet friction, an object whose friction is not positive, a load
+/// that is not finite.
 pub fn grip_window(
     scene: &SceneSpec,
     object: &GraspObject,
@@ -49,17 +50,8 @@ pub fn grip_window(
     speed_m_s: f64,
     accel_m_s2: f64,
 ) -> Result<GripWindow, SimError> {
-    for (name, v) in [
-        ("height_m", height_m),
-        ("speed_m_s", speed_m_s),
-        ("accel_m_s2", accel_m_s2),
-    ] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(SimError::InvalidParameter(format!(
-                "lift {name} = {v}: expected a positive number"
-            )));
-        }
-    }
+    // The lift the simulator would run, checked as `start_lift` checks it.
+    let lift = Lift::checked(TimestampNs::ZERO, height_m, speed_m_s, accel_m_s2)?;
     let effects = Effects::from_scene(scene);
     let friction = grip_friction(&effects, object)?;
     if !(friction.is_finite() && friction >= 0.0) {
@@ -68,12 +60,6 @@ pub fn grip_window(
             object.name
         )));
     }
-    let lift = Lift {
-        t0: TimestampNs::ZERO,
-        height_m,
-        speed_m_s,
-        accel_m_s2,
-    };
     // The load's extremes lie at the phases' ends: sampled at 0.5 ms over the lift.
     let duration_s = lift.duration_s();
     let steps = ((duration_s / 5e-4).ceil() as usize).clamp(2, 2_000_000);

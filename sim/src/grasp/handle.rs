@@ -128,17 +128,7 @@ impl SoftGraspHandle {
         speed_m_s: f64,
         accel_m_s2: f64,
     ) -> Result<(), SimError> {
-        for (field, v, hi) in [
-            ("height_m", height_m, 2.0),
-            ("speed_m_s", speed_m_s, 5.0),
-            ("accel_m_s2", accel_m_s2, 100.0),
-        ] {
-            if !(v.is_finite() && v > 0.0 && v <= hi) {
-                return Err(SimError::InvalidParameter(format!(
-                    "lift {field} = {v}: expected a value in (0, {hi}]"
-                )));
-            }
-        }
+        let lift = Lift::checked(t, height_m, speed_m_s, accel_m_s2)?;
         let mut s = self.lock()?;
         if s.lift.is_some() {
             return Err(SimError::InvalidParameter(
@@ -151,12 +141,7 @@ impl SoftGraspHandle {
                 t.0, s.last_t.0
             )));
         }
-        s.lift = Some(Lift {
-            t0: t,
-            height_m,
-            speed_m_s,
-            accel_m_s2,
-        });
+        s.lift = Some(lift);
         Ok(())
     }
 

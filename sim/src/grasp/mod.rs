@@ -95,6 +95,8 @@ mod arm;
 mod devices;
 mod handle;
 pub use arm::SoftGraspArm;
+mod lift;
+use lift::*;
 mod state;
 use state::*;
 
