@@ -63,7 +63,7 @@ pub mod plan;
 mod procedure;
 mod rest;
 pub use procedure::retreat_x_m;
-pub use rest::{REST_FRAMES, REST_SPACING_S};
+pub use rest::{REST_FRAMES, REST_SPACING_S, rest_frames};
 pub mod rods;
 pub mod route;
 pub mod sampler;

@@ -16,40 +16,56 @@ pub const REST_FRAMES: usize = 8;
 /// (docs/land-to-water.md).
 pub const REST_SPACING_S: f64 = 0.5;
 
+/// [`REST_FRAMES`] frames of `camera`, the first at or after `start`, each
+/// [`REST_SPACING_S`] after the one before: the one way rest frames are taken, for a
+/// run and for a grasp scene's tare alike.
+///
+/// # Errors
+/// The camera's, for the first frame it does not give.
+pub async fn rest_frames<C: softtouch_drivers::Camera + ?Sized>(
+    camera: &mut C,
+    start: softtouch_schemas::TimestampNs,
+    timeout_ms: u64,
+) -> Result<Vec<softtouch_drivers::Frame>, softtouch_drivers::DeviceError> {
+    let mut frames: Vec<softtouch_drivers::Frame> = Vec::with_capacity(REST_FRAMES);
+    for _ in 0..REST_FRAMES {
+        let after = frames.last().map_or(start, |f| {
+            f.meta
+                .t
+                .saturating_add(softtouch_schemas::DurationNs::from_secs_f64(REST_SPACING_S))
+        });
+        frames.push(camera.frame_after(after, timeout_ms).await?);
+    }
+    Ok(frames)
+}
+
 impl Job<'_> {
-    /// Takes [`REST_FRAMES`] frames, [`REST_SPACING_S`] apart, and stores them with
-    /// the run (a resumed run keeps those of its first start). A camera that does not answer is logged (a warning:
+    /// Takes the [`rest_frames`] and stores them with the run (a resumed run keeps
+    /// those of its first start). A camera that does not answer is logged (a warning:
     /// the samples need no rest frame, only a tare of this run does) and the run goes
     /// on; a store that fails stops it.
     pub(super) async fn take_rest_frames(&mut self) -> Result<(), CollectError> {
         let timeout_ms = (self.plan.rig.procedure.frame_timeout_s * 1000.0).ceil() as u64;
-        let mut frames = Vec::with_capacity(REST_FRAMES);
-        for _ in 0..REST_FRAMES {
-            let after = frames.last().map_or_else(
-                || self.clock.now(),
-                |(meta, _): &(softtouch_schemas::FrameMeta, _)| {
-                    meta.t
-                        .saturating_add(softtouch_schemas::DurationNs::from_secs_f64(
-                            REST_SPACING_S,
-                        ))
-                },
-            );
-            match self.camera.frame_after(after, timeout_ms).await {
-                Ok(frame) => frames.push(crate::store::encode_for_store(&frame)?),
-                Err(e) => {
-                    self.events.log(
-                        EventKind::FrameTimeout,
-                        EventLevel::Warn,
-                        None,
-                        &format!(
-                            "no rest frame from the camera at home ({e}): the run goes on without them (`transfer --tare` cannot use it)"
-                        ),
-                    )?;
-                    return Ok(());
-                }
+        let start = self.clock.now();
+        let frames = match rest_frames(&mut *self.camera, start, timeout_ms).await {
+            Ok(frames) => frames,
+            Err(e) => {
+                self.events.log(
+                    EventKind::FrameTimeout,
+                    EventLevel::Warn,
+                    None,
+                    &format!(
+                        "no rest frame from the camera at home ({e}): the run goes on without them (`transfer --tare` cannot use it)"
+                    ),
+                )?;
+                return Ok(());
             }
-        }
-        self.store.insert_rest_frames(self.plan.run_id, frames)?;
+        };
+        let encoded = frames
+            .iter()
+            .map(crate::store::encode_for_store)
+            .collect::<Result<Vec<_>, _>>()?;
+        self.store.insert_rest_frames(self.plan.run_id, encoded)?;
         Ok(())
     }
 }

@@ -1,16 +1,16 @@
 //! The image tare of a grasp scene (issue 68): what a lab does at the start of a
 //! water session with a model trained on land. With the gripper open and nothing
-//! between the fingers, finger 0's camera gives [`REST_FRAMES`] frames at rest; the
-//! tare that maps them onto the rest frames of the runs the model learned from is
-//! fitted ([`softtouch_trainer::fit_image_tare`]: scale about the principal point,
-//! gain and offset per channel, a gain map), and every frame the calibrations and the
-//! trials read goes through it ([`softtouch_trainer::Predictor::set_tare`]). No label
+//! between the fingers, finger 0's camera gives its [`rest_frames`]; the tare that
+//! maps them onto the rest frames of the runs the model learned from is fitted
+//! ([`softtouch_trainer::fit_image_tare`]: scale about the principal point, gain and
+//! offset per channel, a gain map), and every frame the calibrations and the trials
+//! read goes through it ([`softtouch_trainer::Predictor::set_tare`]). No label
 //! of the scene's medium is read.
 
 use serde::{Deserialize, Serialize};
-use softtouch_collector::collect::{REST_FRAMES, REST_SPACING_S};
-use softtouch_drivers::{Camera as _, Clock as _, TokioClock};
-use softtouch_schemas::{DurationNs, SceneSpec};
+use softtouch_collector::collect::rest_frames;
+use softtouch_drivers::{Clock as _, TokioClock};
+use softtouch_schemas::SceneSpec;
 use softtouch_sim::{GraspObject, soft_grasp};
 use softtouch_trainer::{ImageTare, ModelArtifact, RestFrame, TareGains};
 
@@ -51,9 +51,8 @@ impl SceneTare {
     }
 }
 
-/// [`REST_FRAMES`] frames, [`REST_SPACING_S`] apart, of finger 0's camera in `scene`
-/// with the gripper open and no object between the fingers, on this thread with its
-/// own paused clock.
+/// The [`rest_frames`] of finger 0's camera in `scene` with the gripper open and no
+/// object between the fingers, on this thread with its own paused clock.
 ///
 /// # Errors
 /// A scene without objects, the simulator, a frame that does not decode.
@@ -75,27 +74,22 @@ pub fn sim_rest_frames(
         let clock = TokioClock::new();
         let (_gripper, mut camera, handle) = soft_grasp(scene, object, fps, seed, clock)?;
         handle.set_object(false)?;
-        let mut frames = Vec::with_capacity(REST_FRAMES);
-        let mut after = clock.now();
-        while frames.len() < REST_FRAMES {
-            let frame = camera
-                .frame_after(after, 1000)
-                .await
-                .map_err(|e| GraspRunError::Failed(format!("a rest frame: {e}")))?;
-            after = frame
-                .meta
-                .t
-                .saturating_add(DurationNs::from_secs_f64(REST_SPACING_S));
-            let (width, height, rgb) = crate::models::decode_stored(
-                frame.meta.format.as_str(),
-                i64::from(frame.meta.width),
-                i64::from(frame.meta.height),
-                &frame.data,
-            )
-            .map_err(|why| GraspRunError::Failed(format!("a rest frame: {why}")))?;
-            frames.push(RestFrame { width, height, rgb });
-        }
-        Ok(frames)
+        let frames = rest_frames(&mut camera, clock.now(), 1000)
+            .await
+            .map_err(|e| GraspRunError::Failed(format!("a rest frame: {e}")))?;
+        frames
+            .iter()
+            .map(|frame| {
+                let (width, height, rgb) = crate::models::decode_stored(
+                    frame.meta.format.as_str(),
+                    i64::from(frame.meta.width),
+                    i64::from(frame.meta.height),
+                    &frame.data,
+                )
+                .map_err(|why| GraspRunError::Failed(format!("a rest frame: {why}")))?;
+                Ok(RestFrame { width, height, rgb })
+            })
+            .collect()
     })
 }
 
@@ -170,7 +164,8 @@ mod tests {
         let scenes = crate::grasp::trials::load_scenes(&[], &[]).unwrap_or_else(|e| panic!("{e}"));
         let land = sim_rest_frames(&scenes[0], 120.0, 3).unwrap_or_else(|e| panic!("{e}"));
         let water = sim_rest_frames(&scenes[1], 120.0, 3).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!((land.len(), water.len()), (REST_FRAMES, REST_FRAMES));
+        let n = softtouch_collector::collect::REST_FRAMES;
+        assert_eq!((land.len(), water.len()), (n, n));
         let fit = softtouch_trainer::fit_image_tare(&land, &water, None, TareGains::PerChannel)
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(
